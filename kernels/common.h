@@ -1,0 +1,27 @@
+/* pyclray: types and helpers shared by every shape and kernel.
+ *
+ * Precision: `real` is float (fp32) or double (fp64, -D PYCLRAY_FP64).
+ * Frames: the render kernel works in the camera's frame (origin at the eye, axes u, v, w), the cast
+ * kernel in the world's axes around a reference point. The host subtracts that origin in float64
+ * before packing, so no large coordinate ever reaches the device: far or translated scenes keep
+ * float32's full relative precision.
+ */
+#ifdef PYCLRAY_FP64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real;
+typedef double3 real3;
+typedef double4 real4;
+#else
+typedef float real;
+typedef float3 real3;
+typedef float4 real4;
+#endif
+
+#define MISS ((real)INFINITY)
+
+/* A ray s -> origin + s * dir in the current frame; dir need not be unit, a = dot(dir, dir). */
+typedef struct {
+    real3 origin;
+    real3 dir;
+    real a;
+} Ray;

@@ -1,0 +1,240 @@
+"""OpenCL devices, contexts and the program cache (in-process and on disk)."""
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import threading
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import pyopencl as cl
+
+from .errors import BuildError, DeviceError
+from .layout import CAMERA, c_header
+from .shapes import REGISTRY
+
+AOVS = ("depth", "normal", "id")
+# Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
+BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
+
+# counters of program builds, for tests and the curious
+stats = {"compiled": 0, "from_disk": 0, "from_memory": 0}
+_lock = threading.Lock()
+_programs: dict = {}
+_contexts: dict = {}
+
+
+# -- devices ---------------------------------------------------------------------------------
+def _platforms():
+    try:
+        return cl.get_platforms()
+    except cl.LogicError:  # no ICD loader platform at all
+        return []
+
+
+def all_devices() -> list[tuple[str, cl.Device]]:
+    """Every device as ("platform:device" index, device)."""
+    out = []
+    for p, platform in enumerate(_platforms()):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        out += [(f"{p}:{d}", device) for d, device in enumerate(devices)]
+    return out
+
+
+def has_fp64(device: cl.Device) -> bool:
+    return "cl_khr_fp64" in device.extensions.split() or bool(getattr(device, "double_fp_config", 0))
+
+
+def describe(device: cl.Device) -> str:
+    return f"{device.platform.name.strip()} / {device.name.strip()}"
+
+
+def select_device(spec: str | None = None) -> cl.Device:
+    """The device to use: ``spec`` ("P:D" indices as in PYOPENCL_CTX, "P", or part of the
+    platform or device name), else $PYOPENCL_CTX, else PoCL's CPU device, else the first device."""
+    devices = all_devices()
+    if not devices:
+        raise DeviceError(f"no OpenCL platform or device found: {INSTALL_HINT}")
+    if spec is None:
+        spec = os.environ.get("PYOPENCL_CTX") or None
+        if spec is None:
+            for _, device in devices:
+                if "portable computing language" in device.platform.name.lower():
+                    return device
+            return devices[0][1]
+    spec = str(spec).strip()
+    if ":" in spec or spec.isdigit():
+        p, _, d = spec.partition(":")
+        for index, device in devices:
+            ip, idev = index.split(":")
+            if ip == p and (d in ("", idev)):
+                return device
+    else:
+        for _, device in devices:
+            if spec.lower() in describe(device).lower():
+                return device
+    known = "; ".join(f"{index} = {describe(device)}" for index, device in devices)
+    raise DeviceError(f"no OpenCL device matches {spec!r} (devices: {known})")
+
+
+@dataclass
+class DeviceContext:
+    device: cl.Device
+    context: cl.Context
+    queue: cl.CommandQueue
+
+
+def context_for(device: cl.Device | str | None = None) -> DeviceContext:
+    if not isinstance(device, cl.Device):
+        device = select_device(device)
+    key = device.int_ptr
+    with _lock:
+        if key not in _contexts:
+            context = cl.Context([device])
+            _contexts[key] = DeviceContext(device, context, cl.CommandQueue(context, device))
+        return _contexts[key]
+
+
+# -- sources and programs --------------------------------------------------------------------
+def kernel_dir():
+    """The kernels/ folder: package data in an installed pyclray, the repo's kernels/ in a checkout."""
+    try:
+        folder = resources.files("pyclray.kernels")
+        if folder.joinpath("pyclray.cl").is_file():
+            return folder
+    except ModuleNotFoundError:
+        pass
+    folder = Path(__file__).resolve().parent.parent / "kernels"
+    if (folder / "pyclray.cl").is_file():
+        return folder
+    raise FileNotFoundError("pyclray's kernels/ folder is missing from this installation")
+
+
+def _read(name: str) -> str:
+    return kernel_dir().joinpath(name).read_text(encoding="utf-8")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """What selects a program: kernel kind, shape types present, images asked for, precision."""
+
+    kind: str  # "render" or "cast"
+    shape_types: tuple[str, ...]
+    aovs: tuple[str, ...]
+    precision: str
+
+    def defines(self) -> list[str]:
+        """The #defines that select this variant in kernels/pyclray.cl."""
+        listed = " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in self.shape_types)
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed}"]
+        lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
+        if self.precision == "fp64":
+            lines.append("#define PYCLRAY_FP64 1")
+        if self.kind == "cast":
+            lines.append("#define PYCLRAY_CAST 1")
+        return lines
+
+    def source(self) -> str:
+        """The whole program: only the shape types present and the images asked for."""
+        shapes = [REGISTRY[t] for t in self.shape_types]
+        parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
+        parts += [_read("common.h"), c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        parts.append(_read("pyclray.cl"))
+        return "\n".join(parts)
+
+    def options(self) -> list[str]:
+        return list(BUILD_OPTIONS)
+
+
+def cache_dir() -> Path | None:
+    """$PYCLRAY_CACHE_DIR ("" or "off" disables the disk cache), else ~/.cache/pyclray."""
+    value = os.environ.get("PYCLRAY_CACHE_DIR")
+    if value is not None:
+        return None if value.strip().lower() in ("", "off", "0", "none") else Path(value)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "pyclray"
+
+
+def _disk_key(source: str, options: list[str], device: cl.Device) -> str:
+    h = hashlib.sha256()
+    for part in (
+        source,
+        "\0".join(options),
+        device.platform.name,
+        device.platform.version,
+        device.name,
+        device.version,
+        device.driver_version,
+        cl.VERSION_TEXT,
+    ):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
+    source, options = variant.source(), variant.options()
+    folder = cache_dir()
+    path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
+    if path is not None and path.is_file():
+        try:
+            program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
+            stats["from_disk"] += 1
+            return program
+        except (cl.Error, OSError):
+            pass  # a stale or foreign binary: build from source below
+    try:
+        program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
+    except cl.RuntimeError as error:
+        raise BuildError(f"the OpenCL compiler rejected pyclray's kernel for {variant}:\n{error}") from None
+    stats["compiled"] += 1
+    if path is not None:
+        try:
+            binary = program.get_info(cl.program_info.BINARIES)[0]
+            path.parent.mkdir(parents=True, exist_ok=True)
+            handle, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+            with os.fdopen(handle, "wb") as out:
+                out.write(binary)
+            os.replace(tmp, path)
+        except OSError:
+            pass  # an unwritable cache only costs time
+    return program
+
+
+def kernel_for(ctx: DeviceContext, variant: Variant) -> cl.Kernel:
+    """The kernel of this variant on this device: built once, cached in memory and on disk."""
+    key = (ctx.device.int_ptr, variant)
+    with _lock:
+        kernel = _programs.get(key)
+        if kernel is not None:
+            stats["from_memory"] += 1
+            return kernel
+        kernel = _programs[key] = cl.Kernel(_build(ctx, variant), variant.kind)
+        return kernel
+
+
+def list_devices() -> list[dict]:
+    """Every OpenCL device: its selector, names, type, compute units, fp64 support, and whether it is the default."""
+    try:
+        default = select_device().int_ptr
+    except DeviceError:
+        default = None
+    return [
+        {
+            "selector": index,
+            "platform": device.platform.name.strip(),
+            "device": device.name.strip(),
+            "type": cl.device_type.to_string(device.type),
+            "compute_units": device.max_compute_units,
+            "fp64": has_fp64(device),
+            "default": device.int_ptr == default,
+        }
+        for index, device in all_devices()
+    ]

@@ -1,0 +1,109 @@
+"""Errors and the value checks shared by the scene model and the shapes."""
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+
+class PyclrayError(Exception):
+    """Base class of pyclray's own errors."""
+
+
+class SceneError(PyclrayError, ValueError):
+    """A scene that cannot be rendered: says which file, which table, which key, what was expected."""
+
+    def __init__(self, message: str, *, file=None, table=None, key=None):
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.table = table
+        self.key = key
+        super().__init__(str(self))
+
+    def within(self, *, file=None, table=None) -> "SceneError":
+        """The same error with the file or table filled in where it was not known yet."""
+        return SceneError(
+            self.message,
+            file=self.file if self.file is not None else file,
+            table=self.table if self.table is not None else table,
+            key=self.key,
+        )
+
+    def __str__(self) -> str:
+        where = []
+        if self.file is not None:
+            where.append(self.file)
+        if self.table is not None:
+            where.append(f"table {self.table}")
+        if self.key is not None:
+            where.append(f"key '{self.key}'")
+        return ": ".join(where + [self.message])
+
+
+class DeviceError(PyclrayError, RuntimeError):
+    """No usable OpenCL device, or a device that lacks what the request needs."""
+
+
+class BuildError(PyclrayError, RuntimeError):
+    """The OpenCL compiler rejected a kernel; the message holds its log."""
+
+
+def _shown(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def number(key: str, value, *, positive: bool = False) -> float:
+    """A finite real number (an int is accepted; a bool or a string is not)."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise SceneError(f"expected a number, got {_shown(value)}", key=key)
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"expected a finite number, got {value}", key=key)
+    if positive and not value > 0:
+        raise SceneError(f"expected a number > 0, got {value!r}", key=key)
+    return value
+
+
+def vector3(key: str, value) -> tuple[float, float, float]:
+    """Three finite numbers."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
+        raise SceneError(f"expected 3 numbers [x, y, z], got {_shown(value)}", key=key)
+    out = []
+    for component in value:
+        if isinstance(component, bool) or not isinstance(component, Real):
+            raise SceneError(f"expected 3 numbers [x, y, z], got {_shown(value)}", key=key)
+        component = float(component)
+        if not math.isfinite(component):
+            raise SceneError(f"expected 3 finite numbers, got {_shown(value)}", key=key)
+        out.append(component)
+    return tuple(out)
+
+
+def integer(key: str, value, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise SceneError(f"expected a whole number, got {_shown(value)}", key=key)
+    if minimum is not None and value < minimum:
+        raise SceneError(f"expected a whole number >= {minimum}, got {value}", key=key)
+    if maximum is not None and value > maximum:
+        raise SceneError(f"expected a whole number <= {maximum}, got {value}", key=key)
+    return int(value)
+
+
+def text(key: str, value) -> str:
+    if not isinstance(value, str):
+        raise SceneError(f"expected a string, got {_shown(value)}", key=key)
+    return value
+
+
+def no_unknown_keys(table: dict, known, *, required=()) -> None:
+    for key in table:
+        if key not in known:
+            expected = ", ".join(sorted(known))
+            raise SceneError(f"unknown key (expected one of: {expected})", key=key)
+    for key in required:
+        if key not in table:
+            raise SceneError("missing required key", key=key)
+
+
+def norm3(v) -> float:
+    return math.hypot(*v)

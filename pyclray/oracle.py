@@ -1,0 +1,68 @@
+"""The float64 numpy reference: the same camera rays and shapes as the kernels, computed in the
+world frame with plain formulas, as the oracle that exactness tests compare against.
+
+It is slow (a numpy pass per shape) and meant for tests, checks and benchmarks.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .device import AOVS
+from .scene import Scene
+
+
+def camera_rays(scene: Scene):
+    """(origins, directions) of the pixel-centre rays, each (height, width, 3) float64, unit directions.
+
+    Pixel (row j, column i) looks through sx = tan_x (1 - 2 (i + 0.5) / width),
+    sy = tan_y (1 - 2 (j + 0.5) / height): d = normalize(w + sx u + sy v).
+    """
+    width, height = scene.image.width, scene.image.height
+    u, v, w = scene.camera.basis()
+    tan_x, tan_y = scene.camera.tangents(width, height)
+    sx = tan_x * (width - 2.0 * np.arange(width) - 1.0) / width
+    sy = tan_y * (height - 2.0 * np.arange(height) - 1.0) / height
+    d = w + sx[None, :, None] * u + sy[:, None, None] * v
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    origins = np.broadcast_to(np.array(scene.camera.eye), d.shape)
+    return origins, d
+
+
+def trace(scene: Scene, origins, directions, aovs=AOVS) -> dict:
+    """Nearest hit with t > 0 of every ray (unit directions), lowest id on an exact tie."""
+    shape = directions.shape[:-1]
+    O = np.asarray(origins, np.float64).reshape(-1, 3)
+    D = np.asarray(directions, np.float64).reshape(-1, 3)
+    best = np.full(len(D), np.inf)
+    best_id = np.full(len(D), -1, np.int32)
+    for index, item in enumerate(scene.shapes):
+        t = item.oracle_distance(O, D)
+        closer = t < best  # strict: an exact tie keeps the lower id, visited first
+        best = np.where(closer, t, best)
+        best_id = np.where(closer, index, best_id)
+    out = {}
+    if "depth" in aovs:
+        out["depth"] = best.reshape(shape)
+    if "normal" in aovs:
+        normal = np.zeros_like(D)
+        points = O + np.where(np.isfinite(best), best, 0)[:, None] * D
+        for index, item in enumerate(scene.shapes):
+            mine = best_id == index
+            if mine.any():
+                normal[mine] = item.oracle_normal(points[mine])
+        out["normal"] = normal.reshape(shape + (3,))
+    if "id" in aovs:
+        out["id"] = best_id.reshape(shape)
+    return out
+
+
+def render(scene: Scene, aovs=AOVS) -> dict:
+    """The reference images of the scene, float64 (int32 ids)."""
+    origins, directions = camera_rays(scene)
+    return trace(scene, origins, directions, aovs)
+
+
+def incidence_cosine(scene: Scene, directions, ids, normals) -> np.ndarray:
+    """|cos| of the angle between each ray and the surface it hit (1 on a miss)."""
+    cos = np.abs(np.einsum("...k,...k", directions, normals))
+    return np.where(ids >= 0, cos, 1.0)

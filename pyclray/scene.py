@@ -1,0 +1,183 @@
+"""The scene model (frozen, validated dataclasses) and the TOML loader."""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SceneError, integer, no_unknown_keys, norm3, number, text, vector3
+from .shapes import REGISTRY
+from .shapes.base import Shape
+
+# Below this sine of the angle between up and the view direction the image's roll is decided by
+# rounding noise: a degenerate camera, reported as an error rather than rendered.
+MIN_UP_SINE = 1e-6
+# The smallest half-width of a pixel on the image plane (tan(fov/2) / size): below it the rays of
+# neighbouring pixels are no longer distinct in float32, so such a fov is an error.
+MIN_PIXEL_TAN = 1e-30
+MAX_IMAGE_SIDE = 1 << 16
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective camera looking from ``eye`` at ``target``; ``fov`` in degrees along ``fov_axis``."""
+
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov: float = 45.0
+    fov_axis: str = "x"
+
+    def __post_init__(self):
+        object.__setattr__(self, "eye", vector3("eye", self.eye))
+        object.__setattr__(self, "target", vector3("target", self.target))
+        object.__setattr__(self, "up", vector3("up", self.up))
+        fov = number("fov", self.fov)
+        if not 0 < fov < 180:
+            raise SceneError(f"expected 0 < fov < 180 (degrees), got {fov!r}", key="fov")
+        object.__setattr__(self, "fov", fov)
+        if self.fov_axis not in ("x", "y"):
+            raise SceneError(f'expected "x" or "y", got {self.fov_axis!r}', key="fov_axis")
+        self.basis()  # a degenerate basis is an error now, not a NaN image later
+
+    def basis(self) -> np.ndarray:
+        """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64."""
+        forward = np.subtract(self.target, self.eye)
+        length = norm3(forward)
+        if length == 0:
+            raise SceneError("expected target != eye (the view direction is undefined)", key="target")
+        w = forward / length
+        up_length = norm3(self.up)
+        if up_length == 0:
+            raise SceneError("expected a non-zero up vector, got [0, 0, 0]", key="up")
+        left = np.cross(np.array(self.up) / up_length, w)
+        sine = norm3(left)
+        if sine < MIN_UP_SINE:
+            raise SceneError(
+                f"expected up not parallel to the view direction (target - eye); the sine of "
+                f"their angle is {sine:.3g}, below {MIN_UP_SINE:g}",
+                key="up",
+            )
+        u = left / sine
+        v = np.cross(w, u)
+        return np.stack([u, v, w])
+
+    def tangents(self, width: int, height: int) -> tuple[float, float]:
+        """tan of the half opening angles along x and y (square pixels)."""
+        t = math.tan(math.radians(self.fov) / 2)
+        if self.fov_axis == "x":
+            return t, t * height / width
+        return t * width / height, t
+
+
+@dataclass(frozen=True)
+class Image:
+    width: int = 512
+    height: int = 512
+
+    def __post_init__(self):
+        integer("width", self.width, minimum=1, maximum=MAX_IMAGE_SIDE)
+        integer("height", self.height, minimum=1, maximum=MAX_IMAGE_SIDE)
+
+
+@dataclass(frozen=True)
+class Scene:
+    camera: Camera
+    image: Image = field(default_factory=Image)
+    shapes: tuple[Shape, ...] = ()
+    source: str | None = None  # the file it was read from, for messages
+
+    def __post_init__(self):
+        object.__setattr__(self, "shapes", tuple(self.shapes))
+        for index, shape in enumerate(self.shapes):
+            if not isinstance(shape, Shape):
+                raise SceneError(
+                    f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
+                    table=f"[[shapes]] #{index}",
+                    file=self.source,
+                )
+        tan_x, tan_y = self.camera.tangents(self.image.width, self.image.height)
+        if min(tan_x / self.image.width, tan_y / self.image.height) < MIN_PIXEL_TAN:
+            raise SceneError(
+                f"fov {self.camera.fov!r} is too small: neighbouring pixels' rays are not distinct "
+                "in float32",
+                table="[camera]",
+                key="fov",
+                file=self.source,
+            )
+
+    def with_size(self, width: int, height: int) -> "Scene":
+        return replace(self, image=Image(width, height))
+
+    def shape_types(self) -> tuple[str, ...]:
+        """The shape types present, in the registry's order."""
+        present = {shape.type for shape in self.shapes}
+        return tuple(t for t in REGISTRY if t in present)
+
+
+def _table(data: dict, key: str, *, required: bool) -> dict:
+    if key not in data:
+        if required:
+            raise SceneError(f"missing required table [{key}]")
+        return {}
+    if not isinstance(data[key], dict):
+        raise SceneError(f"expected a table [{key}], got {type(data[key]).__name__}", key=key)
+    return data[key]
+
+
+def scene_from_dict(data: dict, source: str | None = None) -> Scene:
+    """A Scene from the parsed contents of a scene file (see scene-format.md)."""
+    try:
+        no_unknown_keys(data, ("camera", "image", "shapes"), required=())
+    except SceneError as error:
+        raise error.within(file=source, table="(top level)") from None
+    try:
+        table = _table(data, "camera", required=True)
+        no_unknown_keys(table, ("eye", "target", "up", "fov", "fov_axis"), required=("eye", "target", "fov"))
+        camera = Camera(**table)
+    except SceneError as error:
+        raise error.within(file=source, table="[camera]") from None
+    try:
+        table = _table(data, "image", required=False)
+        no_unknown_keys(table, ("width", "height"))
+        image = Image(**table)
+    except SceneError as error:
+        raise error.within(file=source, table="[image]") from None
+
+    entries = data.get("shapes", [])
+    if not isinstance(entries, list):
+        raise SceneError("expected an array of tables [[shapes]]", key="shapes", file=source)
+    shapes = []
+    for index, entry in enumerate(entries):
+        where = f"[[shapes]] #{index}"
+        try:
+            if not isinstance(entry, dict):
+                raise SceneError(f"expected a table, got {type(entry).__name__}")
+            if "type" not in entry:
+                raise SceneError(f"missing required key (one of: {', '.join(REGISTRY)})", key="type")
+            kind = text("type", entry["type"])
+            if kind not in REGISTRY:
+                raise SceneError(f"unknown shape type {kind!r} (expected one of: {', '.join(REGISTRY)})", key="type")
+            where = f"[[shapes]] #{index} ({kind})"
+            shapes.append(REGISTRY[kind].from_table(entry, index))
+        except SceneError as error:
+            raise error.within(file=source, table=where) from None
+    return Scene(camera, image, tuple(shapes), source)
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene file; raises SceneError naming the file, table and key."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except OSError as error:
+        raise SceneError(f"cannot read the scene file: {error.strerror or error}", file=path) from None
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"not valid TOML: {error}", file=path) from None
+    except UnicodeDecodeError as error:
+        raise SceneError(f"not valid UTF-8 text: {error}", file=path) from None
+    return scene_from_dict(data, source=str(path))

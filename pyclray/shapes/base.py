@@ -1,0 +1,45 @@
+"""What every shape type provides (see pyclray/shapes/__init__.py)."""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from ..errors import no_unknown_keys, text
+from ..layout import Struct, layout
+
+
+class Shape:
+    """Base of the shape dataclasses.
+
+    Each subclass sets ``type`` (its name in scene files), ``c_type`` (its struct in OpenCL C; the
+    kernel functions are ``<type>_hit`` and ``<type>_normal`` in ``kernels/<type>.cl``), ``struct``
+    (its packed layout, declared once) and ``keys`` (the keys of its scene table besides type and
+    name), and implements ``_from_table``, ``_pack`` and the float64 oracle.
+    """
+
+    type: ClassVar[str]
+    c_type: ClassVar[str]
+    struct: ClassVar[Struct]
+    keys: ClassVar[tuple[str, ...]]
+    required: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def from_table(cls, table: dict, index: int):
+        no_unknown_keys(table, ("type", "name") + cls.keys, required=cls.required)
+        name = text("name", table.get("name", f"{cls.type}{index}"))
+        return cls._from_table(table, name)
+
+    @classmethod
+    def pack(cls, shapes, ids, origin, rotation, precision: str) -> np.ndarray:
+        """The packed array of these shapes in a frame: origin (world, float64) and rotation
+        (rows: the frame's axes in world coordinates)."""
+        out = np.zeros(len(shapes), dtype=layout(cls.struct, precision).dtype)
+        out["id"] = ids
+        if len(shapes):
+            cls._pack(out, shapes, np.asarray(origin, np.float64), np.asarray(rotation, np.float64))
+        return out
+
+    def describe(self) -> str:
+        return f"{self.type} '{self.name}'"
+

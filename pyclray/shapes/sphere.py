@@ -1,0 +1,73 @@
+"""The sphere: the points p with |p - center| = radius."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import number, vector3
+from ..exact import dot2
+from ..layout import Struct
+from .base import Shape
+
+
+@dataclass(frozen=True)
+class Sphere(Shape):
+    center: tuple[float, float, float]
+    radius: float
+    name: str = "sphere"
+
+    type = "sphere"
+    c_type = "Sphere"
+    keys = ("center", "radius")
+    required = ("center", "radius")
+    struct = Struct(
+        "Sphere",
+        (
+            ("center", "real4"),  # centre in the frame; w: radius squared
+            ("c", "real"),  # |centre - frame origin|^2 - radius^2, from float64 error-free sums
+            ("id", "int"),
+        ),
+        "Sphere: center.xyz in the frame, center.w = r^2, c = |center|^2 - r^2.",
+    )
+
+    def __post_init__(self):
+        object.__setattr__(self, "center", vector3("center", self.center))
+        object.__setattr__(self, "radius", number("radius", self.radius, positive=True))
+
+    @classmethod
+    def _from_table(cls, table, name):
+        return cls(table["center"], table["radius"], name)
+
+    @classmethod
+    def _pack(cls, out, spheres, origin, rotation):
+        center = np.array([s.center for s in spheres])
+        radius = np.array([s.radius for s in spheres])
+        F = center - origin
+        out["center"][:, :3] = F @ rotation.T
+        out["center"][:, 3] = radius * radius
+        F_r = np.concatenate([F, radius[:, None]], axis=1)
+        out["c"] = dot2(F_r, F_r * np.array([1.0, 1.0, 1.0, -1.0]))
+
+    # -- float64 oracle ----------------------------------------------------------------------
+    def oracle_distance(self, origins, directions):
+        """Distance t > 0 along unit directions to the nearest crossing, inf where there is none."""
+        C = np.array(self.center)
+        r = self.radius
+        F = C - origins  # origin to centre
+        b = np.einsum("...k,...k", F, directions)
+        F_r = np.concatenate([F, np.broadcast_to(r, F.shape[:-1])[..., None]], axis=-1)
+        c = dot2(F_r, F_r * np.array([1.0, 1.0, 1.0, -1.0]))  # |F|^2 - r^2 without cancellation
+        perp = F - b[..., None] * directions  # from the ray's closest point to the centre
+        perp2 = np.einsum("...k,...k", perp, perp)
+        # the better conditioned of b^2 - c and r^2 - |perp|^2 (equal in exact arithmetic)
+        disc = np.where(b * b + np.abs(c) < r * r + perp2, b * b - c, r * r - perp2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q = b + np.copysign(np.sqrt(disc), b)
+            roots = np.stack([q, c / q])
+        roots = np.where(np.isfinite(roots) & (roots > 0), roots, np.inf)
+        return np.where(disc >= 0, roots.min(axis=0), np.inf)
+
+    def oracle_normal(self, points):
+        n = points - np.array(self.center)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
