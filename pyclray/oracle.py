@@ -34,13 +34,15 @@ def trace(scene: Scene, origins, directions, aovs=AOVS) -> dict:
     O = np.asarray(origins, np.float64).reshape(-1, 3)
     D = np.asarray(directions, np.float64).reshape(-1, 3)
     best = np.full(len(D), np.inf)
+    second = np.full(len(D), np.inf)  # the nearest hit of any other shape, to find near-ties
     best_id = np.full(len(D), -1, np.int32)
     for index, item in enumerate(scene.shapes):
         t = item.oracle_distance(O, D)
         closer = t < best  # strict: an exact tie keeps the lower id, visited first
+        second = np.where(closer, best, np.minimum(second, t))
         best = np.where(closer, t, best)
         best_id = np.where(closer, index, best_id)
-    out = {}
+    out = {"second": second.reshape(shape)} if "second" in aovs else {}
     if "depth" in aovs:
         out["depth"] = best.reshape(shape)
     if "normal" in aovs:

@@ -1,0 +1,169 @@
+"""The scene loader: good files load, every bad input raises one SceneError naming file, table and key."""
+import math
+
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray import SceneError
+
+GOOD = """
+[camera]
+eye = [0.0, 2.0, 6.0]
+target = [0.0, 0.5, 0.0]
+up = [0.0, 1.0, 0.0]
+fov = 45.0
+
+[image]
+width = 64
+height = 48
+
+[[shapes]]
+type = "plane"
+name = "floor"
+normal = [0.0, 2.0, 0.0]
+offset = 0.0
+
+[[shapes]]
+type = "sphere"
+center = [0.0, 1.0, 0.0]
+radius = 1.0
+"""
+
+
+def write(tmp_path, text, name="scene.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_good_scene_loads(tmp_path):
+    scene = pyclray.load_scene(write(tmp_path, GOOD))
+    assert scene.image.width == 64 and scene.image.height == 48
+    assert [s.type for s in scene.shapes] == ["plane", "sphere"]
+    assert scene.shapes[0].name == "floor"
+    assert scene.shapes[1].name == "sphere1"  # default "<type><index>"
+    assert scene.camera.fov_axis == "x"
+    assert scene.shape_types() == ("plane", "sphere")
+
+
+def test_every_shipped_scene_loads(scenes_dir):
+    paths = sorted(scenes_dir.glob("*.toml"))
+    assert any(p.name == "tp02.toml" for p in paths)
+    for path in paths:
+        scene = pyclray.load_scene(path)
+        assert scene.shapes, path
+
+
+def test_plane_point_form_equals_offset_form(tmp_path):
+    text = GOOD.replace("offset = 0.0", "point = [3.0, 0.5, -2.0]")
+    plane = pyclray.load_scene(write(tmp_path, text)).shapes[0]
+    n, h = plane.unit()
+    assert np.allclose(n, [0, 1, 0]) and h == pytest.approx(-0.5)
+
+
+def test_camera_basis_is_orthonormal_and_left_handed_as_the_contract():
+    camera = pyclray.Camera((0, 2, 6), (0, 0.5, 0), (0, 3, 0.1), 45)
+    u, v, w = camera.basis()
+    assert np.allclose(np.stack([u, v, w]) @ np.stack([u, v, w]).T, np.eye(3), atol=1e-15)
+    assert np.allclose(w, np.subtract(camera.target, camera.eye) / np.linalg.norm(np.subtract(camera.target, camera.eye)))
+    assert np.allclose(u, np.cross(camera.up, w) / np.linalg.norm(np.cross(camera.up, w)))
+    assert np.allclose(v, np.cross(w, u))
+
+
+def test_fov_axis_tangents():
+    camera_x = pyclray.Camera((0, 0, 0), (0, 0, -1), (0, 1, 0), 90, "x")
+    camera_y = pyclray.Camera((0, 0, 0), (0, 0, -1), (0, 1, 0), 90, "y")
+    assert camera_x.tangents(200, 100) == pytest.approx((1.0, 0.5))
+    assert camera_y.tangents(200, 100) == pytest.approx((2.0, 1.0))
+
+
+# (what to change in GOOD, table named in the message, key named in the message)
+BAD = [
+    ("fov = 45.0", "fov = 45.0\nfocus = 1.0", "[camera]", "focus"),  # unknown key
+    ('type = "sphere"', 'type = "cube"', "[[shapes]] #1", "type"),  # unknown shape type
+    ("radius = 1.0", "radius = 1.0\nradiuss = 2.0", "[[shapes]] #1 (sphere)", "radiuss"),
+    ("eye = [0.0, 2.0, 6.0]", "eye = [0.0, 2.0]", "[camera]", "eye"),  # wrong length
+    ("eye = [0.0, 2.0, 6.0]", 'eye = [0.0, "2", 6.0]', "[camera]", "eye"),  # wrong type
+    ("eye = [0.0, 2.0, 6.0]", "eye = [0.0, nan, 6.0]", "[camera]", "eye"),  # NaN
+    ("target = [0.0, 0.5, 0.0]", "target = [0.0, inf, 0.0]", "[camera]", "target"),  # inf
+    ("center = [0.0, 1.0, 0.0]", "center = 1.0", "[[shapes]] #1 (sphere)", "center"),
+    ("radius = 1.0", "radius = 0.0", "[[shapes]] #1 (sphere)", "radius"),
+    ("radius = 1.0", "radius = -2.0", "[[shapes]] #1 (sphere)", "radius"),
+    ("radius = 1.0", 'radius = "big"', "[[shapes]] #1 (sphere)", "radius"),
+    ("radius = 1.0", "radius = true", "[[shapes]] #1 (sphere)", "radius"),
+    ("radius = 1.0\n", "", "[[shapes]] #1 (sphere)", "radius"),  # missing
+    ("normal = [0.0, 2.0, 0.0]", "normal = [0.0, 0.0, 0.0]", "[[shapes]] #0 (plane)", "normal"),
+    ("offset = 0.0", "offset = 0.0\npoint = [0.0, 0.0, 0.0]", "[[shapes]] #0 (plane)", "offset"),  # both
+    ("offset = 0.0\n", "", "[[shapes]] #0 (plane)", "offset"),  # neither
+    ("fov = 45.0", "fov = 0.0", "[camera]", "fov"),
+    ("fov = 45.0", "fov = 180.0", "[camera]", "fov"),
+    ("fov = 45.0", "fov = -10.0", "[camera]", "fov"),
+    ("fov = 45.0", 'fov = 45.0\nfov_axis = "z"', "[camera]", "fov_axis"),
+    ("width = 64", "width = 0", "[image]", "width"),
+    ("height = 48", "height = -3", "[image]", "height"),
+    ("width = 64", "width = 64.0", "[image]", "width"),
+    ("target = [0.0, 0.5, 0.0]", "target = [0.0, 2.0, 6.0]", "[camera]", "target"),  # eye == target
+    ("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 0.0]", "[camera]", "up"),  # zero up
+    ("up = [0.0, 1.0, 0.0]", "up = [0.0, -1.5, -6.0]", "[camera]", "up"),  # up parallel to view
+    ("fov = 45.0\n", "", "[camera]", "fov"),  # missing
+    ("[image]", "[imgae]", "(top level)", "imgae"),
+    ('name = "floor"', "name = 3", "[[shapes]] #0 (plane)", "name"),
+]
+
+
+@pytest.mark.parametrize("old,new,table,key", BAD, ids=[f"{k}:{n[:24]}" for _, n, _, k in BAD])
+def test_bad_input_names_file_table_and_key(tmp_path, old, new, table, key):
+    assert old in GOOD
+    path = write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(SceneError) as caught:
+        pyclray.load_scene(path)
+    error = caught.value
+    assert error.file == str(path)
+    assert error.table == table
+    assert error.key == key
+    message = str(error)
+    assert str(path) in message and table in message and f"'{key}'" in message
+    assert "\n" not in message
+    assert "expected" in message or "missing" in message or "unknown" in message
+
+
+def test_camera_table_missing(tmp_path):
+    with pytest.raises(SceneError, match=r"missing required table \[camera\]"):
+        pyclray.load_scene(write(tmp_path, "[image]\nwidth = 4\nheight = 4\n"))
+
+
+def test_shapes_not_an_array_of_tables(tmp_path):
+    text = GOOD.split("[[shapes]]")[0] + "shapes = 3\n"
+    with pytest.raises(SceneError, match="shapes"):
+        pyclray.load_scene(write(tmp_path, text))
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    with pytest.raises(SceneError, match="not valid TOML"):
+        pyclray.load_scene(write(tmp_path, "[camera\neye = 1"))
+    with pytest.raises(SceneError, match="cannot read"):
+        pyclray.load_scene(tmp_path / "nope.toml")
+
+
+def test_up_nearly_parallel_is_a_clear_error_only_below_the_threshold():
+    w = np.array([0.0, -1.0, -1.0]) / math.sqrt(2)
+    side = np.array([1.0, 0.0, 0.0])
+    with pytest.raises(SceneError, match="parallel"):
+        pyclray.Camera((0, 4, 4), (0, 0, 0), tuple(w + 1e-8 * side), 50)
+    u, v, _ = pyclray.Camera((0, 4, 4), (0, 0, 0), tuple(w + 1e-4 * side), 50).basis()
+    assert np.allclose(np.cross(u, v), w)
+
+
+def test_a_fov_whose_rays_collapse_in_float32_is_an_error():
+    with pytest.raises(SceneError, match="fov"):
+        pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1), (0, 1, 0), 1e-30), pyclray.Image(64, 64))
+    pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1), (0, 1, 0), 1e-20), pyclray.Image(64, 64))
+
+
+def test_scenes_built_in_code_are_validated_too():
+    with pytest.raises(SceneError) as caught:
+        pyclray.Sphere((0, 0, 0), -1)
+    assert caught.value.key == "radius"
+    with pytest.raises(SceneError):
+        pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), shapes=("not a shape",))
