@@ -1,0 +1,62 @@
+"""What the exact sphere formulation costs: tp02 rendered with kernels/sphere.cl against the
+textbook one (b^2 - a c discriminant, roots (b -+ sqrt)/a, normal from p - C), in the same run.
+
+    pytest bench/test_exact_cost.py --benchmark-only
+"""
+from pathlib import Path
+
+import pytest
+
+import pyclray
+from pyclray import device
+
+SIMPLE_SPHERE = """
+/* The textbook sphere, for the cost comparison only. */
+inline real sphere_solve(__global const Sphere* sphere, const Ray* ray, real* root_sign, real* discriminant)
+{
+    const real3 F = sphere->center.xyz - ray->origin;
+    const real c = dot(F, F) - sphere->center.w;
+    const real b = dot(F, ray->dir);
+    const real disc = b * b - ray->a * c;
+    *discriminant = disc;
+    if (!(disc >= 0)) return MISS;
+    const real root = sqrt(disc);
+    const real near = (b - root) / ray->a, far = (b + root) / ray->a;
+    if (near > 0) { *root_sign = -1; return near; }
+    if (far > 0) { *root_sign = 1; return far; }
+    return MISS;
+}
+
+inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
+{
+    real side, disc;
+    return sphere_solve(sphere, ray, &side, &disc);
+}
+
+inline real3 sphere_normal(__global const Sphere* sphere, const Ray* ray, __global const Camera* camera)
+{
+    const real s = sphere_hit(sphere, ray);
+    return world_from_frame(camera, normalize(s * ray->dir - (sphere->center.xyz - ray->origin)));
+}
+"""
+
+SCENE = Path(__file__).resolve().parent.parent / "scenes" / "tp02.toml"
+
+
+@pytest.fixture
+def simple_sphere(monkeypatch):
+    read = device._read
+    monkeypatch.setattr(device, "_read", lambda name: SIMPLE_SPHERE if name == "sphere.cl" else read(name))
+    monkeypatch.setattr(device, "_programs", {})
+    monkeypatch.setenv("PYCLRAY_CACHE_DIR", "off")
+
+
+@pytest.mark.parametrize("aovs", [("depth",), ("depth", "normal", "id")], ids=["depth", "all"])
+@pytest.mark.parametrize("formulation", ["exact", "simple"])
+def test_tp02_sphere_formulation(benchmark, request, formulation, aovs):
+    if formulation == "simple":
+        request.getfixturevalue("simple_sphere")
+    scene = pyclray.load_scene(SCENE)
+    pyclray.render(scene, aovs=aovs)  # build and warm
+    benchmark.group = f"exact vs simple sphere, tp02 512x512, {'+'.join(aovs)}"
+    benchmark.pedantic(pyclray.render, args=(scene,), kwargs={"aovs": aovs}, rounds=60, iterations=1, warmup_rounds=5)
