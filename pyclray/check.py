@@ -31,6 +31,14 @@ scenes) and 5.6 (moved scenes); pyclray's own error against the float64 oracle s
 t / cos and Mitsuba's below 5.5 eps (t + L) / cos. k = 10 for images is their sum rounded up.
 On identical rays (ray level) the camera's part goes and k = 6 holds (measured below 4.4).
 
+Mitsuba's camera rays: its sensor's to_world is a float32 look_at matrix, built from target - eye
+rounded in float32, so its ray directions differ from pyclray's float64 pixel rays by about
+eps max(|eye|, |target|) / |target - eye| plus the roundings of the matrix product and the
+normalization: angle <= 3 eps (1 + max(|eye|, |target|) / |target - eye|) (measured: 3.3 eps on
+tp02, where the bound is 6 eps; 6.1 eps on a scene 300 units off the origin, bound 85 eps). Its
+origin is the eye rounded to float32 and moved to the near-clip plane: off pyclray's ray line by at
+most 2 eps max(|eye|, 1) (measured 0.42).
+
 Where the model ends: at silhouettes (|cos incidence| < 0.02 per the oracle) the 1/cos growth
 turns into a square-root law at exact tangency and a ray may graze either shape; pixels next to
 an id change may see a different shape through a few-ulp move of their ray; and where the
@@ -51,6 +59,8 @@ import numpy as np
 EPSILON = 2.0**-24  # float32 unit roundoff: half an ulp of 1
 IMAGE_K = 10.0  # images: the error model's k (see the module's docstring)
 RAY_K = 6.0  # identical rays: the error model's k
+CAMERA_K = 3.0  # camera rays: angle <= CAMERA_K eps (1 + max(|eye|, |target|) / |target - eye|)
+ORIGIN_K = 2.0  # camera rays: origin off our ray <= ORIGIN_K eps max(|eye|, 1)
 SILHOUETTE_COS = 0.02  # |cos incidence| below this is a silhouette pixel
 VARIANTS = ("scalar_rgb", "llvm_ad_rgb")
 DEFAULT_RAYS = 1024
@@ -342,6 +352,7 @@ class RayCheck:
     rays: int
     camera_angle: Summary  # radians between Mitsuba's ray direction and pyclray's pixel ray
     camera_origin: Summary  # distance of Mitsuba's ray origin from pyclray's ray line, / (eps max(|eye|, 1))
+    camera_tolerance: float  # radians, for camera_angle
     counts: dict
     depth_relative: Summary
     depth_ratio: Summary
@@ -382,6 +393,10 @@ def ray_level(
     sideways = offset - np.einsum("nk,nk->n", offset, ours_directions)[:, None] * ours_directions
     camera_angle = angle_between(directions, ours_directions)
     camera_origin = np.linalg.norm(sideways, axis=1) / (EPSILON * max(np.linalg.norm(eye), 1.0))
+    target = np.array(scene.camera.target)
+    camera_tolerance = CAMERA_K * EPSILON * (
+        1 + max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye)
+    )
 
     # the same rays through both
     theirs = mitsuba.intersect(mi_scene, ids, origins, directions)
@@ -415,6 +430,7 @@ def ray_level(
         rays=len(flat),
         camera_angle=Summary.of(camera_angle),
         camera_origin=Summary.of(camera_origin),
+        camera_tolerance=camera_tolerance,
         counts={
             "rays": len(flat),
             "both hit the same shape": int(same.sum()),
@@ -429,6 +445,10 @@ def ray_level(
         normal_ratio=Summary.of((angle / normal_tolerance)[judged]),
         ids=kinds,
     )
+    if result.camera_angle.max > camera_tolerance:
+        result.failures.append(f"ray level: Mitsuba's camera rays off ours by up to {result.camera_angle.max:.3g} radians")
+    if result.camera_origin.max > ORIGIN_K:
+        result.failures.append("ray level: Mitsuba's camera ray origins off the eye")
     if result.depth_ratio.count and result.depth_ratio.max > 1:
         result.failures.append(f"ray level: depth outside the tolerance on {int((judged & (depth_ratio > 1)).sum())} rays")
     if result.normal_ratio.count and result.normal_ratio.max > 1:
@@ -442,6 +462,7 @@ def format_ray_check(result: RayCheck) -> str:
     camera = [
         ("direction angle (radians)", result.camera_angle),
         ("direction angle / 2^-24", _scaled(result.camera_angle, 1 / EPSILON)),
+        ("direction angle / tolerance", _scaled(result.camera_angle, 1 / result.camera_tolerance)),
         ("origin off our ray / (2^-24 max(|eye|, 1))", result.camera_origin),
     ]
     hits = [
@@ -551,7 +572,10 @@ def run(args) -> int:
         f"against Mitsuba {mi.__version__} {args.variant}"
     )
     print(f"images: {tolerance_text(IMAGE_K)}")
-    print(f"ray level: the same with k = {RAY_K:g}, L also >= |ray origin|")
+    print(
+        f"ray level: the same with k = {RAY_K:g} (L also >= |ray origin|); camera rays: direction angle <= "
+        f"{CAMERA_K:g} eps (1 + max(|eye|, |target|) / |target - eye|), origin off our ray <= {ORIGIN_K:g} eps max(|eye|, 1)"
+    )
     print()
     print(format_image_check(images))
     print()
