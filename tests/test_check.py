@@ -128,13 +128,14 @@ def test_tables_are_printed_and_exit_0_on_tp02(capsys):
     out = capsys.readouterr().out
     assert status == 0, out
     for title in ("depth: distance from the eye", "normal: angle", "id: ", "misses: ", "ray level, cameras",
-                  "ray level, intersections", "10 eps (t + L) / cos", "passed: within the tolerance"):
+                  "ray level, intersections", "6 eps (t + L) / cos", "passed: within the tolerance"):
         assert title in out, title
 
 
 def test_exit_1_outside_the_tolerance(capsys, monkeypatch):
     """With a tolerance a thousand times too tight the same check fails with status 1 and says why."""
-    monkeypatch.setattr(check, "IMAGE_K", check.IMAGE_K / 1000)
+    monkeypatch.setattr(check, "K", check.K / 1000)
+    monkeypatch.setattr(check, "CAMERA_K", check.CAMERA_K / 1000)
     status = cli.main(["check", str(SCENES / "tp02.toml"), "--size", "48x48", "--rays", "64"])
     out = capsys.readouterr().out
     assert status == 1
