@@ -57,7 +57,6 @@ out of everything and counted.
 """
 from __future__ import annotations
 
-import argparse
 import math
 from dataclasses import dataclass, field
 from pathlib import Path

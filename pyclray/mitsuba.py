@@ -154,7 +154,7 @@ def axis_cosines(scene: Scene) -> np.ndarray:
 def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     """Mitsuba's images in pyclray's conventions: depth (distance from the eye, inf on a miss),
     normal (geo_normal), sh_normal, id (-1 on a miss), all (height, width[, 3])."""
-    mi = import_mitsuba(variant)
+    import_mitsuba(variant)
     mi_scene, ids = load(scene, variant)
     image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
     near, _ = clip_range(scene)
