@@ -119,6 +119,8 @@ def _rays(name: str, value, count: int | None = None) -> np.ndarray:
         raise PyclrayError(f"{name}: expected an (N, 3) array of numbers") from None
     if array.ndim == 1 and array.shape == (3,) and count is not None:
         array = np.broadcast_to(array, (count, 3))
+    if array.size == 0 and array.ndim == 1:  # an empty list: no rays
+        array = array.reshape(0, 3)
     if array.ndim != 2 or array.shape[1] != 3:
         raise PyclrayError(f"{name}: expected an (N, 3) array, got shape {array.shape}")
     if count is not None and array.shape[0] != count:
@@ -135,26 +137,48 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     origins: (N, 3), or one (3,) origin for every ray; directions: (N, 3), any non-zero length.
     Returns a Frame of per-ray arrays: depth (N,) is the distance from the origin along the
     normalized direction (+inf on a miss), normal (N, 3), id (N,).
+    Raises PyclrayError for arrays of another shape, rows that are not finite, zero directions,
+    and origins (or shapes) so far from the rays' mean origin that the precision overflows.
     """
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     directions = _rays("directions", directions)
     count = directions.shape[0]
     origins = _rays("origins", origins, count)
-    lengths = np.linalg.norm(directions, axis=1)
-    zero = ~(lengths > 0) | ~np.isfinite(lengths)
+    # unit directions: scaled by the largest component first, so that neither a tiny nor a huge
+    # (finite) direction under- or overflows in the length
+    largest = np.abs(directions).max(axis=1) if count else np.ones(0)
+    zero = ~(largest > 0)
     if zero.any():
-        raise PyclrayError(f"directions: row {int(np.argmax(zero))} has zero (or unrepresentable) length")
+        raise PyclrayError(f"directions: row {int(np.argmax(zero))} has zero length")
+    scaled = directions / largest[:, None]
+    unit = scaled / np.linalg.norm(scaled, axis=1, keepdims=True)
     real = _REAL[precision]
     # the frame: world axes around the rays' mean origin, subtracted in float64 on the host
     reference = origins.mean(axis=0) if count else np.zeros(3)
+    relative = origins - reference
+    # the kernel squares distances: keep them below the square root of the largest real
+    too_far = ~(np.abs(relative).max(axis=1, initial=0.0) <= np.sqrt(np.finfo(real).max) / 4)
+    if too_far.any():
+        row = int(np.argmax(too_far))
+        raise PyclrayError(
+            f"origins: row {row} ({origins[row]}) is too far from the rays' mean origin for {precision} "
+            "(cast such rays in separate batches)"
+        )
     rays = np.zeros((2, max(count, 1), 4), real)
-    rays[0, :count, :3] = origins - reference
-    rays[1, :count, :3] = directions / lengths[:, None]
+    rays[0, :count, :3] = relative
+    rays[1, :count, :3] = unit
     identity = np.eye(3)
     camera = _camera_struct(identity, 0.0, 0.0, 0, 0, precision)
     shape_types = scene.shape_types()
-    shape_args, _ = _shape_args(ctx, scene, shape_types, reference, identity, precision)
+    with np.errstate(over="ignore", invalid="ignore"):
+        shape_args, packed = _shape_args(ctx, scene, shape_types, reference, identity, precision)
+    for array in packed:
+        if not all(np.isfinite(array[name]).all() for name in array.dtype.names if array[name].dtype.kind == "f"):
+            raise PyclrayError(
+                f"the scene's shapes are too far from the rays' mean origin {reference} for {precision}: "
+                "their coordinates relative to it overflow"
+            )
     variant = Variant("cast", shape_types, aovs, precision)
     if count == 0:
         empty = {"depth": np.empty(0, real), "normal": np.empty((0, 3), real), "id": np.empty(0, np.int32)}

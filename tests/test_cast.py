@@ -1,0 +1,290 @@
+"""pyclray.cast, the batch ray API: agreement with the float64 oracle, input checks, edge cases.
+
+Error model of cast (eps = 2^-24 in fp32, 2^-53 in fp64). The host moves everything into a frame
+centred on the rays' mean origin (ref) in float64, then rounds to the kernel's precision. A
+rounded coordinate is off by eps times its size, so a hit is the exact hit of a ray moved by
+about eps (t + L), where L = |origin - ref| + |anchor - ref| is the size of the frame coordinates
+involved (anchor: a sphere's centre, or the foot of ref on a plane; in the sphere, c = |F|^2 - r^2 is
+computed in the kernel, which costs eps |F| along the ray, |F| <= L). Along the ray such a move
+becomes a distance error divided by the cosine of the incidence angle, and seen from a sphere's
+centre of radius r an angle of that distance over r:
+
+    |depth - oracle| <= K (eps (t + L) + eps64 (t + W)) / cos
+    angle(normal, oracle) <= K (eps (1 + (t + L) / (r cos)) + eps64 (1 + (t + W) / (r cos)))
+
+where the eps64 term is the oracle's own error: it works in world coordinates of size
+W = |origin| + |anchor|. Measured over 30 random scenes of 4000 rays (half of them moved 50 units
+off the world origin): K <= 2.4 for depths, 1.0 for normals (fp32). K = 4 here.
+Rays with |cos| < 0.02 (grazing: the 1/cos law turns into a square-root law at tangency) and rays
+whose two nearest shapes are within the depth tolerance (either may win) may disagree on the id;
+any other id disagreement fails.
+"""
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray import oracle
+from pyclray.device import context_for, has_fp64
+
+from conftest import SCENES
+
+EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}
+ORACLE_EPSILON = 2.0**-53
+K = 4.0
+GRAZING_COS = 0.02
+
+
+def random_scene(seed: int):
+    """Random spheres and a tilted plane (in random order), moved off the world origin for odd
+    seeds; random origins (some inside spheres) and directions of random lengths."""
+    rng = np.random.default_rng(seed)
+    shift = rng.normal(size=3) * (50.0 if seed % 2 else 0.0)
+    normal = rng.normal(size=3)
+    shapes = [pyclray.Plane(tuple(normal), float(-normal @ shift - rng.uniform(-1, 1)))]
+    for _ in range(rng.integers(1, 7)):
+        shapes.append(pyclray.Sphere(tuple(rng.uniform(-4, 4, 3) + shift), float(rng.uniform(0.1, 3.0))))
+    order = rng.permutation(len(shapes))
+    scene = pyclray.Scene(pyclray.Camera((0, 0, 10), (0, 0, 0)), pyclray.Image(8, 8), tuple(shapes[i] for i in order))
+    origins = rng.uniform(-6, 6, (2000, 3)) + shift
+    directions = rng.normal(size=(2000, 3)) * rng.uniform(0.01, 100.0, (2000, 1))
+    return scene, origins, directions
+
+
+def error_scales(scene, origins, ids):
+    """(L, W) per ray: the frame's and the world's coordinate sizes (see the module docstring)."""
+    reference = origins.mean(axis=0)
+    anchors = []
+    for shape in scene.shapes:
+        if shape.type == "sphere":
+            anchors.append(np.array(shape.center))
+        else:
+            n, h = shape.unit()
+            anchors.append(reference - (n @ reference + h) * n)
+    anchor = np.array(anchors)[np.maximum(ids, 0)]
+    frame = np.linalg.norm(origins - reference, axis=1) + np.linalg.norm(anchor - reference, axis=1)
+    world = np.linalg.norm(origins, axis=1) + np.linalg.norm(anchor, axis=1)
+    return frame, world
+
+
+def angle_between(a, b):
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...k,...k", a, b))
+
+
+def second_nearest(scene, origins, directions):
+    distances = np.sort(np.stack([shape.oracle_distance(origins, directions) for shape in scene.shapes]), axis=0)
+    return distances[1] if len(scene.shapes) > 1 else np.full(len(origins), np.inf)
+
+
+def need_precision(precision):
+    if precision == "fp64" and not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+def assert_agrees_with_oracle(scene, origins, directions, result, precision):
+    """The error model's bounds on depth, normal and id against the float64 oracle."""
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    truth = oracle.trace(scene, origins, unit)
+    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
+    frame, world = error_scales(scene, origins, truth["id"])
+    eps = EPSILON[precision]
+    t = np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0)
+    depth_tolerance = K * (eps * (t + frame) + ORACLE_EPSILON * (t + world)) / cos
+    radius = np.array([getattr(shape, "radius", np.inf) for shape in scene.shapes])[np.maximum(truth["id"], 0)]
+    normal_tolerance = K * (eps * (1 + (t + frame) / (radius * cos)) + ORACLE_EPSILON * (1 + (t + world) / (radius * cos)))
+
+    # ids: a disagreement only where grazing or where the two nearest shapes nearly tie
+    with np.errstate(invalid="ignore"):  # inf - inf where both miss
+        explained = (cos < GRAZING_COS) | (second_nearest(scene, origins, unit) - truth["depth"] <= depth_tolerance)
+        depth_error = np.abs(result["depth"].astype(np.float64) - truth["depth"])
+    wrong = (result["id"] != truth["id"]) & ~explained
+    assert not wrong.any(), f"{wrong.sum()} unexplained id disagreements, e.g. ray {np.argmax(wrong)}"
+
+    # depth and normal where both hit the same shape, not grazing
+    judged = (result["id"] == truth["id"]) & (truth["id"] >= 0) & (cos >= GRAZING_COS)
+    assert judged.sum() > len(origins) // 10, "too few hits for the test to mean anything"
+    ratio = np.where(judged, depth_error / depth_tolerance, 0.0)
+    assert ratio.max() <= 1.0, f"depth off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
+    angle = angle_between(result["normal"], truth["normal"])
+    ratio = np.where(judged, angle / normal_tolerance, 0.0)
+    assert ratio.max() <= 1.0, f"normal off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
+
+    # the miss convention: inf, (0, 0, 0) and -1 together
+    miss = result["id"] < 0
+    assert np.all(np.isinf(result["depth"][miss])) and np.all(result["normal"][miss] == 0)
+    assert np.all(np.isfinite(result["depth"][~miss])) and np.all(result["depth"][~miss] > 0)
+    assert np.allclose(np.linalg.norm(result["normal"][~miss].astype(np.float64), axis=1), 1.0, rtol=0, atol=8 * eps)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_agrees_with_oracle_fp32(seed):
+    scene, origins, directions = random_scene(seed)
+    result = pyclray.cast(scene, origins, directions)
+    assert result["depth"].dtype == np.float32 and result["normal"].dtype == np.float32 and result["id"].dtype == np.int32
+    assert_agrees_with_oracle(scene, origins, directions, result, "fp32")
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_agrees_with_oracle_fp64(seed):
+    need_precision("fp64")
+    scene, origins, directions = random_scene(100 + seed)
+    result = pyclray.cast(scene, origins, directions, precision="fp64")
+    assert result["depth"].dtype == np.float64
+    assert_agrees_with_oracle(scene, origins, directions, result, "fp64")
+
+
+def test_the_model_is_tight_enough_to_catch_a_grown_sphere():
+    """The same comparison fails against a sphere 2e-5 larger (a few hundred eps at these
+    distances): the tolerance is not so loose that a real geometric error would pass."""
+    scene, origins, directions = random_scene(3)
+    result = pyclray.cast(scene, origins, directions)
+    index = next(i for i, s in enumerate(scene.shapes) if s.type == "sphere")
+    grown = pyclray.Sphere(scene.shapes[index].center, scene.shapes[index].radius + 2e-5)
+    wrong = pyclray.Scene(scene.camera, scene.image, scene.shapes[:index] + (grown,) + scene.shapes[index + 1:])
+    with pytest.raises(AssertionError, match="off by"):
+        assert_agrees_with_oracle(wrong, origins, directions, result, "fp32")
+
+
+def test_one_origin_is_broadcast_to_every_ray():
+    scene, origins, directions = random_scene(0)
+    origin = origins[0]
+    one = pyclray.cast(scene, origin, directions)
+    every = pyclray.cast(scene, np.tile(origin, (len(directions), 1)), directions)
+    for name in pyclray.AOVS:
+        np.testing.assert_array_equal(one[name], every[name])
+    assert_agrees_with_oracle(scene, np.tile(origin, (len(directions), 1)), directions, one, "fp32")
+
+
+def test_direction_length_does_not_matter():
+    """Directions are normalized after scaling by their largest component: powers of two apart,
+    even beyond float64's square root range, give the very same bits."""
+    scene, origins, directions = random_scene(2)
+    base = pyclray.cast(scene, origins, directions)
+    for factor in (2.0**-900, 2.0**900):
+        other = pyclray.cast(scene, origins, directions * factor)
+        for name in pyclray.AOVS:
+            np.testing.assert_array_equal(base[name], other[name])
+
+
+def test_fewer_images_give_the_same_values():
+    scene, origins, directions = random_scene(4)
+    full = pyclray.cast(scene, origins, directions)
+    for aovs in (("depth",), ("normal",), ("id",), ("id", "depth")):
+        part = pyclray.cast(scene, origins, directions, aovs=aovs)
+        assert set(part) == set(aovs)
+        for name in aovs:
+            np.testing.assert_array_equal(part[name], full[name])
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("empty", [np.zeros((0, 3)), [], np.zeros((0, 3), np.float32)])
+def test_no_rays(empty, precision):
+    need_precision(precision)
+    scene = pyclray.load_scene(SCENES / "tp02.toml")
+    real = np.float32 if precision == "fp32" else np.float64
+    for origins in ((0.0, 1.0, 5.0), np.zeros((0, 3))):
+        result = pyclray.cast(scene, origins, empty, precision=precision)
+        assert result["depth"].shape == (0,) and result["depth"].dtype == real
+        assert result["normal"].shape == (0, 3) and result["normal"].dtype == real
+        assert result["id"].shape == (0,) and result["id"].dtype == np.int32
+
+
+ONE = [[0.0, 0.0, -1.0]]
+BAD = [
+    # (origins, directions, words the message must hold)
+    ((0, 1, 5), [[0.0, -1.0]], ["directions", "(N, 3)", "(1, 2)"]),
+    ((0, 1, 5), np.ones((2, 2, 3)), ["directions", "(N, 3)", "(2, 2, 3)"]),
+    ((0, 1, 5), [0.0, 0.0, -1.0], ["directions", "(N, 3)", "(3,)"]),
+    ((0, 1, 5), 5.0, ["directions", "(N, 3)"]),
+    ((0, 1, 5), "down", ["directions", "numbers"]),
+    ((0, 1, 5), None, ["directions", "(N, 3)"]),
+    ((0, 1), ONE, ["origins", "(N, 3)", "(2,)"]),
+    (np.zeros((2, 3)), np.ones((3, 3)), ["origins", "3 rows", "got 2"]),
+    (np.zeros((1, 3)), np.ones((3, 3)), ["origins", "3 rows", "got 1"]),
+    ((0, 1, 5), [[0, 0, -1], [0, 0, 0]], ["directions", "row 1", "zero length"]),
+    ((0, 1, 5), [[0, 0, -1], [0, np.nan, -1]], ["directions", "row 1", "not finite"]),
+    ((0, 1, 5), [[0, 0, -1], [np.inf, 0, -1]], ["directions", "row 1", "not finite"]),
+    ([[0, 1, 5], [0, 1, np.inf]], np.ones((2, 3)), ["origins", "row 1", "not finite"]),
+    ((np.nan, 1, 5), ONE, ["origins", "row 0", "not finite"]),
+    ([[1e30, 0, 0], [-1e30, 0, 0]], np.ones((2, 3)), ["origins", "row 0", "too far", "fp32"]),
+    ((1e39, 0, 0), ONE, ["shapes", "too far", "fp32"]),
+]
+
+
+@pytest.mark.parametrize("origins, directions, words", BAD)
+def test_bad_arrays_are_clear_errors(origins, directions, words):
+    scene = pyclray.load_scene(SCENES / "tp02.toml")
+    with pytest.raises(pyclray.PyclrayError) as error:
+        pyclray.cast(scene, origins, directions)
+    message = str(error.value)
+    assert "\n" not in message
+    for word in words:
+        assert word in message, f"{word!r} not in {message!r}"
+
+
+def test_bad_request_is_a_clear_error():
+    scene = pyclray.load_scene(SCENES / "tp02.toml")
+    with pytest.raises(pyclray.PyclrayError, match="aovs"):
+        pyclray.cast(scene, (0, 1, 5), ONE, aovs=("depth", "colour"))
+    with pytest.raises(pyclray.PyclrayError, match="precision"):
+        pyclray.cast(scene, (0, 1, 5), ONE, precision="fp16")
+
+
+def test_hits_only_ahead_and_lowest_id_on_a_tie():
+    """t > 0 only: from inside a sphere the far side; behind the origin nothing; a ray parallel to
+    the plane misses it; two identical spheres: the lower id."""
+    scene = pyclray.Scene(
+        pyclray.Camera((0, 0, 10), (0, 0, 0)),
+        pyclray.Image(4, 4),
+        (pyclray.Plane((0, 1, 0), 1.0), pyclray.Sphere((0, 0, 0), 2.0), pyclray.Sphere((0, 0, 0), 2.0)),
+    )
+    origins = [[0, 0, 0], [0, 0, 5], [0, 0, 5], [0, 3, 5]]
+    directions = [[0, 0, 1], [0, 0, 1], [0, 0, -1], [1, 0, 0]]
+    result = pyclray.cast(scene, origins, directions)
+    np.testing.assert_array_equal(result["id"], [1, -1, 1, -1])
+    np.testing.assert_allclose(result["depth"][[0, 2]], [2.0, 3.0], rtol=4 * EPSILON["fp32"])
+    np.testing.assert_allclose(result["normal"][[0, 2]], [[0, 0, 1], [0, 0, 1]], atol=4 * EPSILON["fp32"])
+
+
+def camera_scenes():
+    scenes = [pyclray.load_scene(path).with_size(48, 40) for path in sorted(SCENES.glob("*.toml"))]
+    scene, _, _ = random_scene(6)
+    camera = pyclray.Camera((1.0, 6.0, 14.0), (0.0, 0.0, 0.0), (0, 1, 0), 60.0)
+    return scenes + [pyclray.Scene(camera, pyclray.Image(48, 40), scene.shapes, source="random scene 6")]
+
+
+@pytest.mark.parametrize("scene", camera_scenes(), ids=lambda s: str(s.source).rsplit("/", 1)[-1])
+def test_camera_rays_match_render(scene):
+    """cast of the camera's own pixel rays gives render's images: both are within the error model
+    of the oracle (render works in the eye's frame, cast around the rays' mean origin, the eye), so
+    they differ by at most the sum, K eps (t + L) / cos each; ids agree except at grazing pixels
+    and next to an id change (a ray moved by an ulp may cross an edge)."""
+    image = pyclray.render(scene)
+    origins, directions = oracle.camera_rays(scene)
+    flat = directions.reshape(-1, 3)
+    result = pyclray.cast(scene, scene.camera.eye, flat)
+    truth = oracle.trace(scene, origins, directions)
+    cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"]).ravel()
+    frame, _ = error_scales(scene, origins.reshape(-1, 3), truth["id"].ravel())
+    t = np.where(np.isfinite(truth["depth"]), truth["depth"], 0).ravel()
+    eps = EPSILON["fp32"]
+
+    ids = image["id"].ravel()
+    padded = np.pad(truth["id"], 1, mode="edge")
+    edge = np.zeros(truth["id"].shape, bool)
+    for dj in (-1, 0, 1):
+        for di in (-1, 0, 1):
+            edge |= padded[1 + dj: 1 + dj + truth["id"].shape[0], 1 + di: 1 + di + truth["id"].shape[1]] != truth["id"]
+    explained = (cos < GRAZING_COS) | edge.ravel()
+    assert not ((result["id"] != ids) & ~explained).any()
+    judged = (result["id"] == ids) & (ids >= 0) & (cos >= GRAZING_COS)
+    assert judged.any()
+    depth_tolerance = 2 * K * eps * (t + frame) / cos
+    with np.errstate(invalid="ignore"):  # inf - inf where both miss
+        depth_error = np.abs(result["depth"].astype(np.float64) - image["depth"].ravel())
+    assert np.all(depth_error[judged] <= depth_tolerance[judged])
+    radius = np.array([getattr(s, "radius", np.inf) for s in scene.shapes])[np.maximum(truth["id"].ravel(), 0)]
+    angle = angle_between(result["normal"], image["normal"].reshape(-1, 3))
+    assert np.all(angle[judged] <= (2 * K * eps * (1 + (t + frame) / (radius * cos)))[judged])
+    misses = (ids < 0) & (result["id"] < 0)
+    assert np.all(np.isinf(result["depth"][misses])) and np.all(np.isinf(image["depth"].ravel()[misses]))
