@@ -1,0 +1,192 @@
+"""The benchmark matrix: pyclray (warm and cold), Mitsuba 3 (llvm_ad_rgb, scalar_rgb), the float64
+oracle and the floor (a trivial kernel that only writes the three images), on the same scenes.
+
+Errors against the oracle are computed at 512x512 and stored in ``extra_info`` for bench.report.
+Slow cases get few rounds (``rounds_for``); scalar_rgb runs at 512x512 on tp02 and grid64 only
+(grid64 takes ~15 s a render, grid1024 ~3 min, 2048x2048 16 times as long).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import pyclray
+import pyclray.device as device
+from pyclray import mitsuba as pm
+from pyclray import oracle
+
+from .metrics import compare
+
+SCENE_NAMES = ("tp02", "grid64", "grid1024")
+SIZES = (512, 2048)
+AOV_SETS = {"all": ("depth", "normal", "id"), "depth": ("depth",)}
+PRECISIONS = ("fp32", "fp64")
+ERROR_SIZE = 512
+BUDGET = 2.0  # seconds of timed rounds per case, roughly
+_references: dict = {}
+
+
+def load(scenes_dir, name: str, size: int):
+    return pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(size, size)
+
+
+def rounds_for(seconds: float, budget: float = BUDGET, most: int = 100, least: int = 3) -> int:
+    return int(max(least, min(most, budget / max(seconds, 1e-6))))
+
+
+def timed(fn):
+    start = time.perf_counter()
+    result = fn()
+    return result, time.perf_counter() - start
+
+
+def reference(scenes_dir, name: str) -> dict:
+    """The oracle's images of a scene at ERROR_SIZE (computed once, by test_oracle if it ran)."""
+    if name not in _references:
+        _references[name] = oracle.render(load(scenes_dir, name, ERROR_SIZE))
+    return _references[name]
+
+
+def info(benchmark, kind: str, name: str, size: int, aovs: str = "all", precision: str = "fp64", **more):
+    benchmark.extra_info.update(
+        {"kind": kind, "scene": name, "size": size, "aovs": aovs, "precision": precision, "rays": size * size, **more}
+    )
+
+
+# -- the float64 numpy oracle (also the reference of every error) -------------------------------
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_oracle(benchmark, scenes_dir, name):
+    scene = load(scenes_dir, name, ERROR_SIZE)
+    info(benchmark, "oracle", name, ERROR_SIZE)
+    _references[name] = benchmark.pedantic(oracle.render, args=(scene,), rounds=1, iterations=1)
+
+
+# -- the floor: a kernel that only writes the three images ----------------------------------------
+FLOOR_SOURCE = """
+__kernel void floor_kernel(__global float* depth, __global float* normal, __global int* id, const int width, const int height)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    if (i >= width || j >= height) return;
+    const size_t index = (size_t)j * (size_t)width + (size_t)i;
+    depth[index] = INFINITY;
+    vstore3((float3)(0, 0, 0), index, normal);
+    id[index] = -1;
+}
+"""
+
+
+@pytest.mark.parametrize("copies", [False, True], ids=["kernel", "kernel+copies"])
+@pytest.mark.parametrize("size", SIZES)
+def test_floor(benchmark, size, copies):
+    ctx = device.context_for(None)
+    kernel = cl.Program(ctx.context, FLOOR_SOURCE).build().floor_kernel
+    count = size * size
+    buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, count * n) for n in (4, 12, 4)]
+    kernel.set_args(*buffers, np.int32(size), np.int32(size))
+
+    def run():
+        cl.enqueue_nd_range_kernel(ctx.queue, kernel, (size, size), None)
+        if copies:
+            out = [np.empty(count, np.float32), np.empty((count, 3), np.float32), np.empty(count, np.int32)]
+            for array, buffer in zip(out, buffers):
+                cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+        ctx.queue.finish()
+
+    _, seconds = timed(run)
+    info(benchmark, "floor+copies" if copies else "floor", "floor", size, precision="fp32")
+    benchmark.pedantic(run, rounds=rounds_for(seconds, most=200), iterations=1, warmup_rounds=3)
+
+
+# -- pyclray -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("precision", PRECISIONS)
+@pytest.mark.parametrize("aovs", list(AOV_SETS))
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_pyclray_warm(benchmark, scenes_dir, name, size, aovs, precision):
+    scene = load(scenes_dir, name, size)
+    images, seconds = timed(lambda: pyclray.render(scene, AOV_SETS[aovs], precision))  # builds
+    images, seconds = timed(lambda: pyclray.render(scene, AOV_SETS[aovs], precision))
+    errors = compare(scene, images, reference(scenes_dir, name)) if size == ERROR_SIZE else {}
+    info(benchmark, "pyclray", name, size, aovs, precision, **errors)
+    benchmark.pedantic(pyclray.render, args=(scene, AOV_SETS[aovs], precision), rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+@pytest.mark.parametrize("aovs", list(AOV_SETS))
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_pyclray_cold(benchmark, scenes_dir, name, aovs, precision):
+    """First render in a process: in-memory programs cleared, an empty disk cache, PoCL's cache off."""
+    scene = load(scenes_dir, name, ERROR_SIZE)
+    folders = []
+
+    def setup():
+        device._programs.clear()
+        folders.append(tempfile.mkdtemp(prefix="pyclray-cold-"))
+        os.environ["PYCLRAY_CACHE_DIR"] = folders[-1]
+
+    previous = os.environ["PYCLRAY_CACHE_DIR"]
+    info(benchmark, "pyclray-cold", name, ERROR_SIZE, aovs, precision)
+    try:
+        benchmark.pedantic(
+            lambda: pyclray.render(scene, AOV_SETS[aovs], precision),
+            setup=setup, rounds=3, iterations=1, warmup_rounds=0,
+        )
+    finally:
+        os.environ["PYCLRAY_CACHE_DIR"] = previous
+        for folder in folders:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+# -- Mitsuba 3 ---------------------------------------------------------------------------------
+def mitsuba_images(scene, image, ids) -> dict:
+    """Mitsuba's aov image in pyclray's conventions (as pyclray.mitsuba.render converts it)."""
+    image = np.asarray(image, dtype=np.float64)
+    near, _ = pm.clip_range(scene)
+    index = np.rint(image[..., 7]).astype(np.int64)
+    hit = index > 0
+    lookup = np.vectorize(lambda k: ids.get(int(k), -1), otypes=[np.int32])
+    return {
+        "depth": np.where(hit, image[..., 0] + near / pm.axis_cosines(scene), np.inf),
+        "normal": np.where(hit[..., None], image[..., 1:4], 0.0),
+        "id": np.where(hit, lookup(np.where(hit, index, 0)) if hit.any() else -1, -1).astype(np.int32),
+    }
+
+
+def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100):
+    scene = load(scenes_dir, name, size)
+    mi = pm.import_mitsuba(variant)
+    mi_scene, ids = pm.load(scene, variant)
+    sensor = mi_scene.sensors()[0]
+    integrator = mi_scene.integrator()
+
+    def run():
+        # np.array forces the evaluation of the JIT variants' lazy result, as pyclray reads back its images
+        return np.array(integrator.render(mi_scene, sensor))
+
+    image, seconds = timed(run)  # warm: JIT kernels compiled, scene loaded
+    errors = {}
+    if size == ERROR_SIZE:
+        origins, directions = oracle.camera_rays(scene)
+        mask = pm.plane_beyond_disk(scene, origins, directions)
+        errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask)
+    info(benchmark, kind, name, size, "all", "fp32", **errors)
+    benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=1), iterations=1)
+    del mi
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_mitsuba_llvm(benchmark, scenes_dir, name, size):
+    _mitsuba(benchmark, scenes_dir, name, size, "llvm_ad_rgb", "mitsuba-llvm")
+
+
+@pytest.mark.parametrize("name", ["tp02", "grid64"])
+def test_mitsuba_scalar(benchmark, scenes_dir, name):
+    """512x512 only, and not grid1024 (~3 min a render): see the module's docstring."""
+    _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=5)
