@@ -1,0 +1,58 @@
+"""The render path's speed-ups change no bit of the results: the inline built-ins on PoCL
+(kernels/builtins.h) and the cached inputs give the same images as the plain path."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclray
+import pyclray.device as device
+from pyclray import Camera, Image, Plane, Scene, Sphere
+
+
+def random_scene(seed: int, n_spheres: int = 12, size=(61, 47)) -> Scene:
+    rng = np.random.default_rng(seed)
+    eye = rng.normal(0, 3, 3)
+    target = eye + rng.normal(0, 1, 3)
+    fov = float(rng.choice([0.05, 20.0, 60.0, 120.0]))
+    shapes = [Plane(tuple(rng.normal(0, 1, 3)), float(rng.normal(0, 2)))]
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    spread = np.tan(np.radians(fov) / 2)
+    for _ in range(n_spheres):  # mostly in view, some behind the eye or straddling it
+        distance = rng.uniform(-2, 12)
+        centre = eye + distance * forward + rng.normal(0, 1, 3) * spread * abs(distance)
+        shapes.append(Sphere(tuple(centre), float(rng.uniform(0.05, 1.5) * max(spread, 0.01) * max(abs(distance), 0.5))))
+    if seed % 3 == 0:  # the camera inside a sphere
+        shapes.append(Sphere(tuple(eye + rng.normal(0, 0.1, 3)), 0.5))
+    shapes.append(Sphere(tuple(target + rng.normal(0, 0.01, 3)), 0.02))  # a tiny one near the eye
+    return Scene(Camera(tuple(eye), tuple(target), (0.0, 1.0, 0.0), fov), Image(*size), tuple(shapes))
+
+
+def same(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        assert a[key].dtype == b[key].dtype and a[key].shape == b[key].shape, key
+        np.testing.assert_array_equal(a[key].view(np.uint8), b[key].view(np.uint8), err_msg=key)
+
+
+def with_plain_builtins(monkeypatch):
+    monkeypatch.setattr(device, "is_pocl_cpu", lambda _device: False)
+    monkeypatch.setattr(device, "_programs", {})
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("seed", range(6))
+def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
+    if not device.is_pocl_cpu(device.context_for(None).device):
+        pytest.skip("device lacks PoCL: the inline built-ins are used on PoCL's CPU device only")
+    scene = random_scene(seed)
+    rng = np.random.default_rng(100 + seed)
+    origins, directions = rng.normal(0, 3, (500, 3)), rng.normal(0, 1, (500, 3))
+    fast = [pyclray.render(scene, aovs, precision) for aovs in (("depth", "normal", "id"), ("depth",), ("normal",))]
+    fast.append(pyclray.cast(scene, origins, directions, precision=precision))
+    with monkeypatch.context() as patch:
+        with_plain_builtins(patch)
+        plain = [pyclray.render(scene, aovs, precision) for aovs in (("depth", "normal", "id"), ("depth",), ("normal",))]
+        plain.append(pyclray.cast(scene, origins, directions, precision=precision))
+    for a, b in zip(fast, plain):
+        same(a, b)
