@@ -1,9 +1,13 @@
 """Render a scene (one ray per pixel) or cast a batch of rays: pack, build, run, read back."""
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 import numpy as np
 import pyopencl as cl
 
+from . import culling
 from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for
 from .errors import DeviceError, PyclrayError
 from .layout import CAMERA, PRECISIONS, layout
@@ -72,22 +76,80 @@ def _input_buffer(ctx, array):
     return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
 
-def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix):
-    """Enqueue the kernel with output buffers for the asked images and read them back."""
+def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
+    """Device buffers for the asked images, kept per device and size and reused by every render
+    (renders are serialized by _render_lock, and each copies its images out before the next)."""
+    real = np.dtype(_REAL[precision]).itemsize
+    itemsize = {"depth": real, "normal": 3 * real, "id": 4}
+    buffers = []
+    for aov in aovs:
+        key = (ctx.device.int_ptr, aov, max(count * itemsize[aov], 1))
+        buffer = _outputs.get(key)
+        if buffer is None:
+            if len(_outputs) >= _OUTPUTS_MAX:
+                _outputs.clear()
+            buffer = _outputs[key] = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, key[2])
+        buffers.append(buffer)
+    return buffers
+
+
+def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None):
+    """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
     real = _REAL[precision]
-    outputs = {
-        "depth": np.empty(count, real),
-        "normal": np.empty((count, 3), real),
-        "id": np.empty(count, np.int32),
+    empty = {
+        "depth": lambda: np.empty(count, real),
+        "normal": lambda: np.empty((count, 3), real),
+        "id": lambda: np.empty(count, np.int32),
     }
-    outputs = {k: outputs[k] for k in aovs}
-    buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, max(a.nbytes, 1)) for a in outputs.values()]
+    outputs = {k: empty[k]() for k in aovs}
     kernel = kernel_for(ctx, variant)
-    kernel(ctx.queue, global_size, None, *args, *buffers)
-    for array, buffer in zip(outputs.values(), buffers):
-        cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
-    ctx.queue.finish()
+    with _render_lock:
+        buffers = _output_buffers(ctx, count, aovs, precision)
+        kernel(ctx.queue, global_size, local_size, *args, *buffers)
+        for array, buffer in zip(outputs.values(), buffers):
+            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+        ctx.queue.finish()
     return {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
+
+
+# -- what renders of the same scene share ------------------------------------------------------
+# Inputs are packed and uploaded once per (device, scene object, precision): a Scene is frozen, so
+# the same object always packs to the same bytes; a moved camera or shape is a new Scene, hence new
+# inputs. An entry holds its scene, so the scene's id() cannot be reused while it is cached.
+_PREPARED_MAX = 16
+_OUTPUTS_MAX = 12
+_prepared: OrderedDict = OrderedDict()
+_outputs: dict = {}
+_render_lock = threading.RLock()
+
+
+def _render_inputs(ctx, scene: Scene, precision: str) -> list:
+    """The kernel arguments before the outputs of a render of this scene: camera, tile size,
+    tiles per row, and per shape type its packed buffer and its tile lists (pyclray/culling.py)."""
+    key = (ctx.device.int_ptr, id(scene), precision)
+    with _render_lock:
+        entry = _prepared.get(key)
+        if entry is not None and entry[0] is scene:
+            _prepared.move_to_end(key)
+            return entry[1]
+    width, height = scene.image.width, scene.image.height
+    rows = scene.camera.basis()
+    tan_x, tan_y = scene.camera.tangents(width, height)
+    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
+    tiles_x = -(-width // culling.TILE)
+    args = [_input_buffer(ctx, camera), np.int32(culling.TILE), np.int32(tiles_x)]
+    for kind in scene.shape_types():
+        cls = REGISTRY[kind]
+        ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
+        shapes = [scene.shapes[i] for i in ids]
+        packed = cls.pack(shapes, ids, scene.camera.eye, rows, precision)
+        start, index = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+        args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+    with _render_lock:
+        _prepared[key] = (scene, args)
+        while len(_prepared) > _PREPARED_MAX:
+            _prepared.popitem(last=False)
+    return args
 
 
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Frame:
@@ -99,16 +161,12 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Fra
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     width, height = scene.image.width, scene.image.height
-    rows = scene.camera.basis()
-    tan_x, tan_y = scene.camera.tangents(width, height)
-    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
-    shape_types = scene.shape_types()
-    shape_args, _ = _shape_args(ctx, scene, shape_types, scene.camera.eye, rows, precision)
-    variant = Variant("render", shape_types, aovs, precision)
-    images = _run(
-        ctx, variant, [_input_buffer(ctx, camera), *shape_args],
-        (width, height), width * height, aovs, precision, (height, width),
-    )
+    args = _render_inputs(ctx, scene, precision)
+    variant = Variant("render", scene.shape_types(), aovs, precision)
+    tile = culling.TILE
+    # one work-group per tile (the kernel skips the pixels beyond the image's edges)
+    global_size = (-(-width // tile) * tile, -(-height // tile) * tile)
+    images = _run(ctx, variant, args, global_size, width * height, aovs, precision, (height, width), (tile, tile))
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 

@@ -2,11 +2,15 @@
 (kernels/builtins.h) and the cached inputs give the same images as the plain path."""
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 
 import pyclray
 import pyclray.device as device
+
+render_module = importlib.import_module("pyclray.render")  # the module (pyclray.render is the function)
 from pyclray import Camera, Image, Plane, Scene, Sphere
 
 
@@ -56,3 +60,37 @@ def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
         plain.append(pyclray.cast(scene, origins, directions, precision=precision))
     for a, b in zip(fast, plain):
         same(a, b)
+
+
+def without_culling(monkeypatch):
+    import pyclray.culling as culling
+    monkeypatch.setattr(culling, "BOUNDS", {})
+    monkeypatch.setattr(render_module, "_prepared", render_module.OrderedDict())
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("seed", range(10))
+def test_culling_is_bit_identical(monkeypatch, seed, precision):
+    """Visiting only the shapes whose screen bounds meet a tile changes nothing, for spheres in
+    view, behind the eye, around it, straddling its plane, tiny and far, and narrow or wide fields."""
+    scene = random_scene(seed, n_spheres=40, size=(203, 157))
+    culled = [pyclray.render(scene, aovs, precision) for aovs in (("depth", "normal", "id"), ("depth",))]
+    with monkeypatch.context() as patch:
+        without_culling(patch)
+        every = [pyclray.render(scene, aovs, precision) for aovs in (("depth", "normal", "id"), ("depth",))]
+    for a, b in zip(culled, every):
+        same(a, b)
+
+
+def test_a_moved_camera_is_a_new_render():
+    """The cached inputs of one scene are never used for another (here: the same shapes, another eye)."""
+    import dataclasses
+
+    first = random_scene(3)
+    moved = dataclasses.replace(first, camera=dataclasses.replace(first.camera, eye=tuple(np.add(first.camera.eye, 0.5))))
+    a = pyclray.render(first)
+    b = pyclray.render(moved)
+    render_module._prepared.clear()
+    same(pyclray.render(moved), b)
+    same(pyclray.render(first), a)
+    assert not np.array_equal(a["depth"], b["depth"])
