@@ -2,6 +2,7 @@
  * camera.h and the file of each shape type present, and selects what is compiled with -D options:
  *   PYCLRAY_FP64                        double precision
  *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel
+ *   PYCLRAY_RAYS                        the kernel of the camera's rays (no shapes, no images)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
@@ -90,16 +91,12 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_OUTPUT_ARGS PYCLRAY_DEPTH_ARG PYCLRAY_NORMAL_ARG PYCLRAY_ID_ARG
 #define PYCLRAY_WRITE(index) PYCLRAY_WRITE_DEPTH(index) PYCLRAY_WRITE_NORMAL(index) PYCLRAY_WRITE_ID(index)
 
-#ifndef PYCLRAY_CAST
+#ifdef PYCLRAY_RAYS
 
-/* One work-item per pixel: i is the column from the left, j the row from the top. */
-__kernel void render(__global const Camera* camera, const int tile_size, const int tiles_x
-                     PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+/* The camera ray of pixel (column i from the left, row j from the top), in the camera frame. */
+inline Ray camera_ray(__global const Camera* camera, const int i, const int j)
 {
-    const int i = get_global_id(0), j = get_global_id(1);
     const int width = camera->width, height = camera->height;
-    if (i >= width || j >= height) return;
-    const int tile = (j / tile_size) * tiles_x + i / tile_size;
     /* pixel centre on the image plane at distance 1: the integer numerators are exact, so each
      * coordinate carries two roundings and keeps its relative precision even for a tiny fov */
     const real sx = camera->tan_x * ((real)(width - 2 * i - 1) / (real)width);
@@ -111,9 +108,40 @@ __kernel void render(__global const Camera* camera, const int tile_size, const i
     ray.origin = (real3)(0, 0, 0);
     ray.dir = D / sqrt(dot(D, D));
     ray.a = dot(ray.dir, ray.dir);
+    return ray;
+}
+
+/* Every pixel's ray (dir.xyz, a), once per camera and image size: renders of the same view share
+ * them (the host keeps the buffer), so the divisions and the square root are not on every render's
+ * path. */
+__kernel void rays(__global const Camera* camera, __global real4* rays)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    const int width = camera->width, height = camera->height;
+    if (i >= width || j >= height) return;
+    const Ray ray = camera_ray(camera, i, j);
+    rays[(size_t)j * (size_t)width + (size_t)i] = (real4)(ray.dir, ray.a);
+}
+
+#elif !defined(PYCLRAY_CAST)
+
+/* One work-item per pixel: i is the column from the left, j the row from the top; its ray from the
+ * rays kernel. Work-groups are the host's tiles (tile_size square, tiles_x per row). */
+__kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_size, const int tiles_x
+                     PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    const int width = camera->width, height = camera->height;
+    if (i >= width || j >= height) return;
+    const int tile = (j / tile_size) * tiles_x + i / tile_size;
+    const size_t index = (size_t)j * (size_t)width + (size_t)i;
+    const real4 packed = rays[index];
+    Ray ray;
+    ray.origin = (real3)(0, 0, 0);
+    ray.dir = packed.xyz;
+    ray.a = packed.w;
 
     PYCLRAY_FIND_NEAREST
-    const size_t index = (size_t)j * (size_t)width + (size_t)i;
     PYCLRAY_WRITE(index)
 }
 

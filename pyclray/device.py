@@ -124,7 +124,7 @@ def _read(name: str) -> str:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision."""
 
-    kind: str  # "render" or "cast"
+    kind: str  # "render", "cast" or "rays" (the camera's rays, for render)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
@@ -138,6 +138,8 @@ class Variant:
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind == "cast":
             lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "rays":
+            lines.append("#define PYCLRAY_RAYS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:

@@ -117,6 +117,7 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
 # the same object always packs to the same bytes; a moved camera or shape is a new Scene, hence new
 # inputs. An entry holds its scene, so the scene's id() cannot be reused while it is cached.
 _PREPARED_MAX = 16
+_PREPARED_BYTES = 256 << 20
 _OUTPUTS_MAX = 12
 _prepared: OrderedDict = OrderedDict()
 _outputs: dict = {}
@@ -124,20 +125,26 @@ _render_lock = threading.RLock()
 
 
 def _render_inputs(ctx, scene: Scene, precision: str) -> list:
-    """The kernel arguments before the outputs of a render of this scene: camera, tile size,
-    tiles per row, and per shape type its packed buffer and its tile lists (pyclray/culling.py)."""
+    """The kernel arguments before the outputs of a render of this scene: camera, the pixels' rays
+    (computed once by the rays kernel), tile size, tiles per row, and per shape type its packed
+    buffer and its tile lists (pyclray/culling.py)."""
     key = (ctx.device.int_ptr, id(scene), precision)
     with _render_lock:
         entry = _prepared.get(key)
-        if entry is not None and entry[0] is scene:
+        if entry is not None and entry[0] is scene:  # the same object, not an equal one
             _prepared.move_to_end(key)
             return entry[1]
     width, height = scene.image.width, scene.image.height
     rows = scene.camera.basis()
     tan_x, tan_y = scene.camera.tangents(width, height)
     camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
+    camera_buffer = _input_buffer(ctx, camera)
+    real = np.dtype(_REAL[precision]).itemsize
+    rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
+    rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
+    rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
     tiles_x = -(-width // culling.TILE)
-    args = [_input_buffer(ctx, camera), np.int32(culling.TILE), np.int32(tiles_x)]
+    args = [camera_buffer, rays, np.int32(culling.TILE), np.int32(tiles_x)]
     for kind in scene.shape_types():
         cls = REGISTRY[kind]
         ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
@@ -146,10 +153,19 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
         start, index = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
         args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
     with _render_lock:
-        _prepared[key] = (scene, args)
-        while len(_prepared) > _PREPARED_MAX:
+        _prepared[key] = (scene, args, rays.size)
+        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of rays (the newest always stays)
+        while len(_prepared) > 1 and (
+            len(_prepared) > _PREPARED_MAX or sum(e[2] for e in _prepared.values()) > _PREPARED_BYTES
+        ):
             _prepared.popitem(last=False)
     return args
+
+
+def _global_size(width: int, height: int) -> tuple[int, int]:
+    """The image rounded up to whole tiles (the kernels skip the pixels beyond the edges)."""
+    tile = culling.TILE
+    return (-(-width // tile) * tile, -(-height // tile) * tile)
 
 
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Frame:
@@ -163,10 +179,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Fra
     width, height = scene.image.width, scene.image.height
     args = _render_inputs(ctx, scene, precision)
     variant = Variant("render", scene.shape_types(), aovs, precision)
-    tile = culling.TILE
-    # one work-group per tile (the kernel skips the pixels beyond the image's edges)
-    global_size = (-(-width // tile) * tile, -(-height // tile) * tile)
-    images = _run(ctx, variant, args, global_size, width * height, aovs, precision, (height, width), (tile, tile))
+    tile = culling.TILE  # one work-group per tile
+    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), (tile, tile))
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 
