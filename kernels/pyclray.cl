@@ -126,14 +126,14 @@ __kernel void rays(__global const Camera* camera, __global real4* rays)
 #elif !defined(PYCLRAY_CAST)
 
 /* One work-item per pixel: i is the column from the left, j the row from the top; its ray from the
- * rays kernel. Work-groups are the host's tiles (tile_size square, tiles_x per row). */
-__kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_size, const int tiles_x
+ * rays kernel. Work-groups are the host's tiles (1 << tile_shift pixels square, tiles_x per row). */
+__kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_shift, const int tiles_x
                      PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
     const int i = get_global_id(0), j = get_global_id(1);
     const int width = camera->width, height = camera->height;
     if (i >= width || j >= height) return;
-    const int tile = (j / tile_size) * tiles_x + i / tile_size;
+    const int tile = (j >> tile_shift) * tiles_x + (i >> tile_shift);  /* shifts: no division per pixel */
     const size_t index = (size_t)j * (size_t)width + (size_t)i;
     const real4 packed = rays[index];
     Ray ray;

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-TILE = 16  # pixels per tile side (and the render kernel's work-group size)
+TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-group size)
 
 # The kernel's float32 test accepts a ray whose true squared distance to the centre exceeds r^2
 # by at most a few dozen ulps of |F|^2 (F: centre in the camera frame); 256 float32 ulps bound

@@ -144,7 +144,7 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
     rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
     rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
     tiles_x = -(-width // culling.TILE)
-    args = [camera_buffer, rays, np.int32(culling.TILE), np.int32(tiles_x)]
+    args = [camera_buffer, rays, np.int32(culling.TILE.bit_length() - 1), np.int32(tiles_x)]
     for kind in scene.shape_types():
         cls = REGISTRY[kind]
         ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
