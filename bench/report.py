@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-KIND_ORDER = ["pyclray", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies"]
+KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies"]
 SCENE_ORDER = ["tp02", "grid64", "grid1024", "floor"]
 TARGETS = {"tp02_speedup": 8.0, "depth_share": 0.60, "grid64_speedup": 2.0}
 
@@ -199,6 +199,10 @@ def main(argv=None) -> None:
         "  call to spend about 2 s per case (3 to 100 rounds; the oracle and scalar_rgb's grid64 one round).",
         "- **pyclray (warm)**: `pyclray.render(scene, aovs, precision)` after a first render that built the",
         "  program; everything per call is included (packing, upload, kernel, copies back into new numpy arrays).",
+        "  Renders of the same `Scene` object share their packed inputs, tile lists and the pixels' rays",
+        "  (kept by pyclray, see `pyclray/render.py`), as repeated renders of one view do.",
+        "- **pyclray-new-scene**: the same, but a new (equal) `Scene` object each call, as a moved camera",
+        "  would be: the per-scene inputs, tile lists and rays are rebuilt every time (program warm).",
         "- **pyclray-cold**: the first render with a build: `pyclray.device._programs` cleared and",
         "  `PYCLRAY_CACHE_DIR` an empty temporary directory before each round, and PoCL's own kernel cache",
         "  off (`POCL_KERNEL_CACHE=0`, set by `bench/conftest.py`), so each round compiles from source",

@@ -7,6 +7,7 @@ Slow cases get few rounds (``rounds_for``); scalar_rgb runs at 512x512 on tp02 a
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import tempfile
@@ -115,6 +116,19 @@ def test_pyclray_warm(benchmark, scenes_dir, name, size, aovs, precision):
     errors = compare(scene, images, reference(scenes_dir, name)) if size == ERROR_SIZE else {}
     info(benchmark, "pyclray", name, size, aovs, precision, **errors)
     benchmark.pedantic(pyclray.render, args=(scene, AOV_SETS[aovs], precision), rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_pyclray_new_scene(benchmark, scenes_dir, name, size):
+    """Warm program, but a new (equal) Scene object every call, as a moved camera would be: the
+    inputs, tile lists and rays that renders of one Scene object share are rebuilt each time."""
+    scene = load(scenes_dir, name, size)
+    fresh = lambda: pyclray.render(dataclasses.replace(scene))  # noqa: E731
+    _, seconds = timed(fresh)
+    _, seconds = timed(fresh)
+    info(benchmark, "pyclray-new-scene", name, size, "all", "fp32")
+    benchmark.pedantic(fresh, rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
