@@ -19,6 +19,7 @@ import pytest
 
 import pyclray
 import pyclray.device as device
+from pyclray import culling
 from pyclray import mitsuba as pm
 from pyclray import oracle
 
@@ -204,3 +205,53 @@ def test_mitsuba_llvm(benchmark, scenes_dir, name, size):
 def test_mitsuba_scalar(benchmark, scenes_dir, name):
     """512x512 only, and not grid1024 (~3 min a render): see the module's docstring."""
     _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=5)
+
+
+# -- where the time of a tp02 render goes ------------------------------------------------------
+BREAKDOWN = {
+    "render, all AOVs": "the whole warm render (as test_pyclray_warm)",
+    "kernel only, all AOVs": "the render kernel alone: enqueue and wait, inputs and outputs in place",
+    "kernel only, depth": "the depth-only render kernel alone",
+    "kernel only, all AOVs, plane only": "the kernel on tp02 without its spheres (the ground plane alone)",
+    "copies of the images": "copying the three images into new numpy arrays (enqueue_copy, wait)",
+    "render 16x16, all AOVs": "a 16x16 render: Python, argument checks and one kernel launch",
+}
+
+
+@pytest.mark.parametrize("part", list(BREAKDOWN))
+def test_breakdown(benchmark, scenes_dir, part):
+    import importlib
+
+    render_module = importlib.import_module("pyclray.render")
+    scene = load(scenes_dir, "tp02", ERROR_SIZE)
+    if part == "kernel only, all AOVs, plane only":
+        scene = dataclasses.replace(scene, shapes=scene.shapes[:1])
+    aovs = AOV_SETS["depth"] if part.endswith("depth") else AOV_SETS["all"]
+    ctx = device.context_for(None)
+    width = height = ERROR_SIZE
+    pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
+    args = render_module._render_inputs(ctx, scene, "fp32")
+    kernel = device.kernel_for(ctx, device.Variant("render", scene.shape_types(), aovs, "fp32"))
+    buffers = render_module._output_buffers(ctx, width * height, aovs, "fp32")
+    tile = culling.TILE
+    global_size = render_module._global_size(width, height)
+
+    def kernel_only():
+        kernel(ctx.queue, global_size, (tile, tile), *args, *buffers)
+        ctx.queue.finish()
+
+    def copies():
+        out = [np.empty(b.size, np.uint8) for b in buffers]
+        for array, buffer in zip(out, buffers):
+            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+        ctx.queue.finish()
+
+    small = scene.with_size(16, 16)
+    run = {
+        "render, all AOVs": lambda: pyclray.render(scene, aovs),
+        "copies of the images": copies,
+        "render 16x16, all AOVs": lambda: pyclray.render(small, aovs),
+    }.get(part, kernel_only)
+    _, seconds = timed(run)
+    info(benchmark, "breakdown", "tp02", ERROR_SIZE, "depth" if part.endswith("depth") else "all", "fp32", part=part)
+    benchmark.pedantic(run, rounds=rounds_for(seconds, most=200), iterations=1, warmup_rounds=3)

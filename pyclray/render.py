@@ -93,6 +93,11 @@ def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
     return buffers
 
 
+def _zero_copy(ctx) -> bool:
+    """Whether the kernel writes the images straight into the returned arrays (CPU devices)."""
+    return bool(ctx.device.type & cl.device_type.CPU)
+
+
 def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None):
     """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
     real = _REAL[precision]
@@ -103,12 +108,27 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
     }
     outputs = {k: empty[k]() for k in aovs}
     kernel = kernel_for(ctx, variant)
-    with _render_lock:
-        buffers = _output_buffers(ctx, count, aovs, precision)
+    if _zero_copy(ctx):
+        # a CPU device writes straight into the new arrays (USE_HOST_PTR: PoCL uses them as the
+        # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
+        flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
+        buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
         kernel(ctx.queue, global_size, local_size, *args, *buffers)
-        for array, buffer in zip(outputs.values(), buffers):
-            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+        maps = [
+            cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
+            for array, buffer in zip(outputs.values(), buffers)
+        ]
         ctx.queue.finish()
+        for mapped in maps:
+            mapped.base.release()  # unmap
+        ctx.queue.finish()
+    else:  # other devices: device buffers kept and reused, and a copy of each image
+        with _render_lock:
+            buffers = _output_buffers(ctx, count, aovs, precision)
+            kernel(ctx.queue, global_size, local_size, *args, *buffers)
+            for array, buffer in zip(outputs.values(), buffers):
+                cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+            ctx.queue.finish()
     return {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
 
 

@@ -94,3 +94,23 @@ def test_a_moved_camera_is_a_new_render():
     same(pyclray.render(moved), b)
     same(pyclray.render(first), a)
     assert not np.array_equal(a["depth"], b["depth"])
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_output_paths_agree(monkeypatch, precision):
+    """Images written straight into the arrays (CPU devices) or copied from kept device buffers
+    (other devices) are the same, for renders and casts."""
+    scene = random_scene(7, size=(97, 41))
+    rng = np.random.default_rng(7)
+    origins, directions = rng.normal(0, 3, (300, 3)), rng.normal(0, 1, (300, 3))
+    runs = {}
+    for zero_copy in (True, False):
+        with monkeypatch.context() as patch:
+            patch.setattr(render_module, "_zero_copy", lambda _ctx, value=zero_copy: value)
+            runs[zero_copy] = [
+                pyclray.render(scene, ("depth", "normal", "id"), precision),
+                pyclray.render(scene, ("normal",), precision),
+                pyclray.cast(scene, origins, directions, precision=precision),
+            ]
+    for a, b in zip(runs[True], runs[False]):
+        same(a, b)
