@@ -146,12 +146,18 @@ class Variant:
         """The whole program: only the shape types present and the images asked for.
 
         inline_builtins: replace the OpenCL built-ins by the bit-identical inline copies of
-        kernels/builtins.h (on PoCL's CPU device, see there)."""
+        kernels/builtins.h, and have the camera's and the shapes' functions always inlined (PoCL's
+        inliner leaves sphere_normal out of the kernel, just above its threshold): on PoCL's CPU
+        device, see kernels/builtins.h. Inlining changes no result."""
         shapes = [REGISTRY[t] for t in self.shape_types]
         parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
         parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
         parts += [c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        if inline_builtins:
+            parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if inline_builtins:
+            parts.append("#pragma clang attribute pop")
         parts.append(_read("pyclray.cl"))
         return "\n".join(parts)
 
