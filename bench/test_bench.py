@@ -83,25 +83,41 @@ __kernel void floor_kernel(__global float* depth, __global float* normal, __glob
 """
 
 
-@pytest.mark.parametrize("copies", [False, True], ids=["kernel", "kernel+copies"])
+@pytest.mark.parametrize("mode", ["kernel", "copies", "in-place"])
 @pytest.mark.parametrize("size", SIZES)
-def test_floor(benchmark, size, copies):
+def test_floor(benchmark, size, mode):
+    """kernel: enqueue and wait; copies: plus enqueue_copy into new numpy arrays; in-place: the
+    kernel writes into new numpy arrays (USE_HOST_PTR buffers, then map), as pyclray does on a CPU."""
     ctx = device.context_for(None)
     kernel = cl.Program(ctx.context, FLOOR_SOURCE).build().floor_kernel
     count = size * size
     buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, count * n) for n in (4, 12, 4)]
     kernel.set_args(*buffers, np.int32(size), np.int32(size))
 
+    def new_arrays():
+        return [np.empty(count, np.float32), np.empty((count, 3), np.float32), np.empty(count, np.int32)]
+
     def run():
+        if mode == "in-place":
+            out = new_arrays()
+            flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
+            own = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in out]
+            kernel(ctx.queue, (size, size), None, *own, np.int32(size), np.int32(size))
+            maps = [cl.enqueue_map_buffer(ctx.queue, b, cl.map_flags.READ, 0, a.shape, a.dtype, is_blocking=False)[0]
+                    for a, b in zip(out, own)]
+            ctx.queue.finish()
+            for mapped in maps:
+                mapped.base.release()
+            ctx.queue.finish()
+            return
         cl.enqueue_nd_range_kernel(ctx.queue, kernel, (size, size), None)
-        if copies:
-            out = [np.empty(count, np.float32), np.empty((count, 3), np.float32), np.empty(count, np.int32)]
-            for array, buffer in zip(out, buffers):
+        if mode == "copies":
+            for array, buffer in zip(new_arrays(), buffers):
                 cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
         ctx.queue.finish()
 
     _, seconds = timed(run)
-    info(benchmark, "floor+copies" if copies else "floor", "floor", size, precision="fp32")
+    info(benchmark, {"kernel": "floor", "copies": "floor+copies", "in-place": "floor-in-place"}[mode], "floor", size, precision="fp32")
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=200), iterations=1, warmup_rounds=3)
 
 
@@ -210,10 +226,9 @@ def test_mitsuba_scalar(benchmark, scenes_dir, name):
 # -- where the time of a tp02 render goes ------------------------------------------------------
 BREAKDOWN = {
     "render, all AOVs": "the whole warm render (as test_pyclray_warm)",
-    "kernel only, all AOVs": "the render kernel alone: enqueue and wait, inputs and outputs in place",
+    "kernel only, all AOVs": "the render kernel alone: enqueue and wait, inputs and (device) outputs in place",
     "kernel only, depth": "the depth-only render kernel alone",
     "kernel only, all AOVs, plane only": "the kernel on tp02 without its spheres (the ground plane alone)",
-    "copies of the images": "copying the three images into new numpy arrays (enqueue_copy, wait)",
     "render 16x16, all AOVs": "a 16x16 render: Python, argument checks and one kernel launch",
 }
 
@@ -240,16 +255,9 @@ def test_breakdown(benchmark, scenes_dir, part):
         kernel(ctx.queue, global_size, (tile, tile), *args, *buffers)
         ctx.queue.finish()
 
-    def copies():
-        out = [np.empty(b.size, np.uint8) for b in buffers]
-        for array, buffer in zip(out, buffers):
-            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
-        ctx.queue.finish()
-
     small = scene.with_size(16, 16)
     run = {
         "render, all AOVs": lambda: pyclray.render(scene, aovs),
-        "copies of the images": copies,
         "render 16x16, all AOVs": lambda: pyclray.render(small, aovs),
     }.get(part, kernel_only)
     _, seconds = timed(run)
