@@ -20,12 +20,11 @@ BREAKDOWN_ORDER = [
 ]
 # What the profiling showed (see the breakdown table, and the commits on branch bench).
 WHERE_THE_TIME_GOES = [
-    "The render is now almost all kernel time: Python, argument checks and the launch cost about",
-    "0.2 ms (the 16×16 render); on a CPU device the kernel writes the images straight into the",
-    "returned numpy arrays (no copies; the floor's copies cost about 0.5 ms). The kernel runs scalar",
-    "code, one pixel after the other on each of the two cores (both are busy: one PoCL thread takes twice",
-    "as long): PoCL does not vectorize its work-item",
-    "loop, because the shape functions (`kernels/sphere.cl`, `plane.cl`) work on `float3` values and",
+    "The render is now almost all kernel time: Python, argument checks and one launch are the 16×16",
+    "render's row; on a CPU device the kernel writes the images straight into the returned numpy",
+    "arrays (no copies: compare the floor's rows). The kernel runs scalar code, one pixel after the",
+    "other on each of the two cores (both are busy: with one PoCL thread it takes twice as long).",
+    "PoCL does not vectorize its work-item loop, because the shape functions (`kernels/sphere.cl`, `plane.cl`) work on `float3` values and",
     "LLVM 14's loop vectorizer rejects vector-typed instructions (`POCL_VECTORIZER_REMARKS=1`: \"instruction",
     "return type cannot be vectorized\"; the shape loops: \"value that could not be identified as",
     "reduction\"). Each pixel is then a chain of dependent divisions and square roots (plane: one",
@@ -84,12 +83,13 @@ def table(rows) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        llvm = llvm_of(rows, r)
+        llvm = llvm_of(rows, r) if r["kind"] != "breakdown" else None
         ratio = f"{llvm['median'] / r['median']:.2f}x" if llvm and r["kind"] != "mitsuba-llvm" else ("1" if llvm else "")
+        kind = f"breakdown: {r['part']}" if r["kind"] == "breakdown" else r["kind"]
         depth = f"{fmt(r['depth_ulps_max'])} / {fmt(r['depth_ulps_p99'])}" if "depth_ulps_max" in r else ""
         normal = f"{fmt(r['normal_err_max'])} / {fmt(r['normal_err_p99'])}" if "normal_err_max" in r else ""
         out.append(
-            f"| {r['kind']} | {r['scene']} | {r['size']} | {r['aovs']} | {r['precision']} | {ms(r['median'])} | "
+            f"| {kind} | {r['scene']} | {r['size']} | {r['aovs']} | {r['precision']} | {ms(r['median'])} | "
             f"{ms(r['q1'])}–{ms(r['q3'])} | {ms(r['min'])}–{ms(r['max'])} | {r['rounds']} | {ratio} | "
             f"{r['rays'] / r['median'] / 1e6:.1f} | {depth} | {normal} | {fmt(r.get('id_mismatches'))} |"
         )
@@ -246,7 +246,7 @@ def main(argv=None) -> None:
         "",
         "- **Times**: pytest-benchmark, `benchmark.pedantic` with one call per round; the median and the",
         "  interquartile range (q1–q3) and min–max of the rounds. Rounds are chosen from a first timed",
-        "  call to spend about 2 s per case (3 to 100 rounds; the oracle and scalar_rgb's grid64 one round).",
+        "  call to spend about 2 s per case (3 to 100 rounds; 3 for scalar_rgb, 1 for the oracle).",
         "- **pyclray (warm)**: `pyclray.render(scene, aovs, precision)` after a first render that built the",
         "  program; everything per call is included (checks, kernel, images in new numpy arrays).",
         "  Renders of the same `Scene` object share their packed inputs, tile lists and the pixels' rays",
@@ -262,7 +262,7 @@ def main(argv=None) -> None:
         "  `integrator.render(scene, sensor)` plus the conversion of its result to numpy (which forces the JIT's",
         "  evaluation) is timed, after one untimed render. **scalar_rgb is capped**: it takes ~1 s a render",
         "  on tp02, ~15 s on grid64 and ~3 min on grid1024, so it runs at 512×512 on tp02 and grid64 only",
-        "  (at most 5 rounds, grid64 one round), not on grid1024 nor at 2048×2048.",
+        "  (3 rounds), not on grid1024 nor at 2048×2048.",
         "- **oracle**: `pyclray.oracle.render` (float64 numpy), 512×512, one round; it is also the reference",
         "  of every error.",
         "- **floor**: a trivial OpenCL kernel that writes depth = inf, normal = 0, id = -1 for every pixel",

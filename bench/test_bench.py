@@ -2,8 +2,9 @@
 oracle and the floor (a trivial kernel that only writes the three images), on the same scenes.
 
 Errors against the oracle are computed at 512x512 and stored in ``extra_info`` for bench.report.
-Slow cases get few rounds (``rounds_for``); scalar_rgb runs at 512x512 on tp02 and grid64 only
-(grid64 takes ~15 s a render, grid1024 ~3 min, 2048x2048 16 times as long).
+Slow cases get few rounds (``rounds_for``, at least 3; the oracle 1); scalar_rgb runs at 512x512
+on tp02 and grid64 only, 3 rounds (grid64 takes ~15 s a render, grid1024 ~3 min, 2048x2048 16
+times as long).
 """
 from __future__ import annotations
 
@@ -189,7 +190,7 @@ def mitsuba_images(scene, image, ids) -> dict:
     }
 
 
-def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100):
+def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, least_rounds=3):
     scene = load(scenes_dir, name, size)
     mi = pm.import_mitsuba(variant)
     mi_scene, ids = pm.load(scene, variant)
@@ -207,7 +208,7 @@ def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100):
         mask = pm.plane_beyond_disk(scene, origins, directions)
         errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask)
     info(benchmark, kind, name, size, "all", "fp32", **errors)
-    benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=1), iterations=1)
+    benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
     del mi
 
 
@@ -220,7 +221,7 @@ def test_mitsuba_llvm(benchmark, scenes_dir, name, size):
 @pytest.mark.parametrize("name", ["tp02", "grid64"])
 def test_mitsuba_scalar(benchmark, scenes_dir, name):
     """512x512 only, and not grid1024 (~3 min a render): see the module's docstring."""
-    _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=5)
+    _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=3)
 
 
 # -- where the time of a tp02 render goes ------------------------------------------------------
