@@ -131,9 +131,11 @@ def test_pyclray_warm(benchmark, scenes_dir, name, size, aovs, precision):
     scene = load(scenes_dir, name, size)
     images, seconds = timed(lambda: pyclray.render(scene, AOV_SETS[aovs], precision))  # builds
     images, seconds = timed(lambda: pyclray.render(scene, AOV_SETS[aovs], precision))
-    errors = compare(scene, images, reference(scenes_dir, name)) if size == ERROR_SIZE else {}
-    info(benchmark, "pyclray", name, size, aovs, precision, **errors)
+    info(benchmark, "pyclray", name, size, aovs, precision)
     benchmark.pedantic(pyclray.render, args=(scene, AOV_SETS[aovs], precision), rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
+    # errors after the timing: numpy's BLAS threads keep spinning for a while after use
+    if size == ERROR_SIZE:
+        benchmark.extra_info.update(compare(scene, images, reference(scenes_dir, name)))
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -202,13 +204,13 @@ def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, 
         return np.array(integrator.render(mi_scene, sensor))
 
     image, seconds = timed(run)  # warm: JIT kernels compiled, scene loaded
-    errors = {}
-    if size == ERROR_SIZE:
+    info(benchmark, kind, name, size, "all", "fp32")
+    benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
+    if size == ERROR_SIZE:  # after the timing, as for pyclray
         origins, directions = oracle.camera_rays(scene)
         mask = pm.plane_beyond_disk(scene, origins, directions)
         errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask)
-    info(benchmark, kind, name, size, "all", "fp32", **errors)
-    benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
+        benchmark.extra_info.update(errors)
     del mi
 
 
@@ -264,3 +266,59 @@ def test_breakdown(benchmark, scenes_dir, part):
     _, seconds = timed(run)
     info(benchmark, "breakdown", "tp02", ERROR_SIZE, "depth" if part.endswith("depth") else "all", "fp32", part=part)
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=200), iterations=1, warmup_rounds=3)
+
+
+# -- the speed targets, measured interleaved ---------------------------------------------------
+TARGET_CASES = {
+    "tp02 pyclray all": ("tp02", "pyclray", AOV_SETS["all"]),
+    "tp02 pyclray depth": ("tp02", "pyclray", AOV_SETS["depth"]),
+    "tp02 mitsuba-llvm": ("tp02", "mitsuba-llvm", None),
+    "grid64 pyclray all": ("grid64", "pyclray", AOV_SETS["all"]),
+    "grid64 mitsuba-llvm": ("grid64", "mitsuba-llvm", None),
+}
+TARGET_ROUNDS = 20
+TARGET_CALLS = 3  # timed calls of a case per round, after SETTLE_CALLS untimed ones
+SETTLE_CALLS = 2
+
+
+def test_targets_interleaved(benchmark, scenes_dir):
+    """The cases of the speed targets timed round-robin (each round: a few calls of each case, the
+    order rotating), so that the machine's load over the run weighs on all of them alike and their
+    ratios are robust to other processes. The first calls after a switch are not timed: Dr.Jit's
+    worker threads are still busy for a few milliseconds after a Mitsuba render and would slow the
+    next case down (measured: tp02 takes ~1.7x as long right after an llvm render).
+    Per-case statistics go to extra_info["cases"]."""
+    scenes = {name: load(scenes_dir, name, ERROR_SIZE) for name in ("tp02", "grid64")}
+    pm.import_mitsuba("llvm_ad_rgb")
+    calls = {}
+    for label, (name, kind, aovs) in TARGET_CASES.items():
+        if kind == "pyclray":
+            calls[label] = lambda scene=scenes[name], aovs=aovs: pyclray.render(scene, aovs)
+        else:
+            mi_scene, _ = pm.load(scenes[name], "llvm_ad_rgb")
+            sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
+            calls[label] = lambda s=mi_scene, c=sensor, i=integrator: np.array(i.render(s, c))
+    for call in calls.values():  # warm: builds, JIT
+        call(), call()
+    labels = list(calls)
+    times = {label: [] for label in labels}
+
+    def rounds():
+        for r in range(TARGET_ROUNDS):
+            for label in labels[r % len(labels):] + labels[:r % len(labels)]:
+                for _ in range(SETTLE_CALLS):
+                    calls[label]()
+                for _ in range(TARGET_CALLS):
+                    start = time.perf_counter()
+                    calls[label]()
+                    times[label].append(time.perf_counter() - start)
+
+    info(benchmark, "targets-interleaved", "tp02", ERROR_SIZE, "all", "fp32")
+    benchmark.pedantic(rounds, rounds=1, iterations=1)
+    benchmark.extra_info["cases"] = {
+        label: {
+            "median": float(np.median(t)), "q1": float(np.percentile(t, 25)), "q3": float(np.percentile(t, 75)),
+            "min": float(np.min(t)), "max": float(np.max(t)), "rounds": len(t),
+        }
+        for label, t in times.items()
+    }
