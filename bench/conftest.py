@@ -4,11 +4,14 @@
 
 PoCL's own kernel cache is switched off here (before PoCL is loaded), so that a "cold" render
 really compiles: cold = pyclray's in-memory programs cleared, PYCLRAY_CACHE_DIR an empty temp dir
-and no PoCL cache. Warm renders are not affected (programs stay in memory).
+and no PoCL cache. Warm renders are not affected (programs stay in memory). OpenBLAS runs one
+thread (unless OPENBLAS_NUM_THREADS is set), so that no BLAS thread spins during a timing.
 """
 import os
 
 os.environ.setdefault("POCL_KERNEL_CACHE", "0")
+# numpy's BLAS threads (the oracle, the error metrics) would keep spinning into the next timing
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402

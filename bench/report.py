@@ -314,6 +314,10 @@ def main(argv=None) -> None:
         "  left out: pixels whose ray meets the oracle's surface at |cos incidence| < 0.02 (column `excluded`",
         "  in the JSON). For Mitsuba, the pixels where the plane lies beyond its stand-in disk",
         "  (`pyclray.mitsuba.plane_beyond_disk`) are left out too.",
+        "- Before each case's timing the benchmark sleeps 0.3 s, and OpenBLAS runs one thread",
+        "  (`bench/conftest.py`), so that threads left busy by the previous case (numpy's BLAS, Dr.Jit's",
+        "  pool) do not run into the timing. The machine has 2 cores, and other people's test runs shared",
+        "  them during these runs: spreads are wide, hence also the round-robin measurement of the targets.",
         "- Mrays/s = width × height / median time.",
         "",
     ]

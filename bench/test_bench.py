@@ -56,7 +56,12 @@ def reference(scenes_dir, name: str) -> dict:
     return _references[name]
 
 
+SETTLE = 0.3  # seconds of quiet before each timing: other threads (BLAS, Dr.Jit) go idle
+
+
 def info(benchmark, kind: str, name: str, size: int, aovs: str = "all", precision: str = "fp64", **more):
+    """Record what a case is, then let the machine settle before its timing starts."""
+    time.sleep(SETTLE)
     benchmark.extra_info.update(
         {"kind": kind, "scene": name, "size": size, "aovs": aovs, "precision": precision, "rays": size * size, **more}
     )
