@@ -274,35 +274,32 @@ def test_breakdown(benchmark, scenes_dir, part):
 
 
 # -- the speed targets, measured interleaved ---------------------------------------------------
-TARGET_CASES = {
-    "tp02 pyclray all": ("tp02", "pyclray", AOV_SETS["all"]),
-    "tp02 pyclray depth": ("tp02", "pyclray", AOV_SETS["depth"]),
-    "tp02 mitsuba-llvm": ("tp02", "mitsuba-llvm", None),
-    "grid64 pyclray all": ("grid64", "pyclray", AOV_SETS["all"]),
-    "grid64 mitsuba-llvm": ("grid64", "mitsuba-llvm", None),
-}
+# round-robin groups: Mitsuba scenes of one group live together (with grid1024's alive beside the
+# others, Dr.Jit's llvm renders of every scene slow down several times, so it gets its own group)
+TARGET_GROUPS = {"tp02+grid64": ("tp02", "grid64"), "grid1024": ("grid1024",)}
 TARGET_ROUNDS = 20
 TARGET_CALLS = 3  # timed calls of a case per round, after SETTLE_CALLS untimed ones
 SETTLE_CALLS = 2
+SWITCH_PAUSE = 0.05  # seconds of quiet at each switch, for the other case's threads to go idle
 
 
-def test_targets_interleaved(benchmark, scenes_dir):
+@pytest.mark.parametrize("group", list(TARGET_GROUPS))
+def test_targets_interleaved(benchmark, scenes_dir, group):
     """The cases of the speed targets timed round-robin (each round: a few calls of each case, the
     order rotating), so that the machine's load over the run weighs on all of them alike and their
-    ratios are robust to other processes. The first calls after a switch are not timed: Dr.Jit's
-    worker threads are still busy for a few milliseconds after a Mitsuba render and would slow the
-    next case down (measured: tp02 takes ~1.7x as long right after an llvm render).
+    ratios are robust to other processes. At each switch a pause and two untimed calls: Dr.Jit's
+    worker threads are still busy for a while after a Mitsuba render and would slow the next case
+    down (measured: a tp02 render takes ~1.7x as long right after an llvm render).
     Per-case statistics go to extra_info["cases"]."""
-    scenes = {name: load(scenes_dir, name, ERROR_SIZE) for name in ("tp02", "grid64")}
     pm.import_mitsuba("llvm_ad_rgb")
     calls = {}
-    for label, (name, kind, aovs) in TARGET_CASES.items():
-        if kind == "pyclray":
-            calls[label] = lambda scene=scenes[name], aovs=aovs: pyclray.render(scene, aovs)
-        else:
-            mi_scene, _ = pm.load(scenes[name], "llvm_ad_rgb")
-            sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
-            calls[label] = lambda s=mi_scene, c=sensor, i=integrator: np.array(i.render(s, c))
+    for name in TARGET_GROUPS[group]:
+        scene = load(scenes_dir, name, ERROR_SIZE)
+        for aovs in ("all", "depth"):
+            calls[f"{name} pyclray {aovs}"] = lambda scene=scene, aovs=AOV_SETS[aovs]: pyclray.render(scene, aovs)
+        mi_scene, _ = pm.load(scene, "llvm_ad_rgb")
+        sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
+        calls[f"{name} mitsuba-llvm"] = lambda s=mi_scene, c=sensor, i=integrator: np.array(i.render(s, c))
     for call in calls.values():  # warm: builds, JIT
         call(), call()
     labels = list(calls)
@@ -311,6 +308,7 @@ def test_targets_interleaved(benchmark, scenes_dir):
     def rounds():
         for r in range(TARGET_ROUNDS):
             for label in labels[r % len(labels):] + labels[:r % len(labels)]:
+                time.sleep(SWITCH_PAUSE)
                 for _ in range(SETTLE_CALLS):
                     calls[label]()
                 for _ in range(TARGET_CALLS):
@@ -318,7 +316,7 @@ def test_targets_interleaved(benchmark, scenes_dir):
                     calls[label]()
                     times[label].append(time.perf_counter() - start)
 
-    info(benchmark, "targets-interleaved", "tp02", ERROR_SIZE, "all", "fp32")
+    info(benchmark, "targets-interleaved", TARGET_GROUPS[group][0], ERROR_SIZE, "all", "fp32", group=group)
     benchmark.pedantic(rounds, rounds=1, iterations=1)
     benchmark.extra_info["cases"] = {
         label: {
