@@ -199,8 +199,9 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Fra
     width, height = scene.image.width, scene.image.height
     args = _render_inputs(ctx, scene, precision)
     variant = Variant("render", scene.shape_types(), aovs, precision)
-    tile = culling.TILE  # one work-group per tile
-    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), (tile, tile))
+    tile = culling.TILE  # one work-group per tile where the device allows it (the kernel needs none)
+    local_size = (tile, tile) if ctx.device.max_work_group_size >= tile * tile else None
+    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), local_size)
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 
