@@ -126,7 +126,8 @@ __kernel void rays(__global const Camera* camera, __global real4* rays)
 #elif !defined(PYCLRAY_CAST)
 
 /* One work-item per pixel: i is the column from the left, j the row from the top; its ray from the
- * rays kernel. Work-groups are the host's tiles (1 << tile_shift pixels square, tiles_x per row). */
+ * rays kernel. Tiles are 1 << tile_shift pixels square, tiles_x per row (and the work-groups where the
+ * device allows). */
 __kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_shift, const int tiles_x
                      PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
