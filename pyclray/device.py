@@ -124,7 +124,7 @@ def _read(name: str) -> str:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision."""
 
-    kind: str  # "render" or "cast"
+    kind: str  # "render", "cast" or "rays" (the camera's rays, for render)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
@@ -138,14 +138,26 @@ class Variant:
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind == "cast":
             lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "rays":
+            lines.append("#define PYCLRAY_RAYS 1")
         return lines
 
-    def source(self) -> str:
-        """The whole program: only the shape types present and the images asked for."""
+    def source(self, inline_builtins: bool = False) -> str:
+        """The whole program: only the shape types present and the images asked for.
+
+        inline_builtins: replace the OpenCL built-ins by the bit-identical inline copies of
+        kernels/builtins.h, and have the camera's and the shapes' functions always inlined (PoCL's
+        inliner leaves sphere_normal out of the kernel, just above its threshold): on PoCL's CPU
+        device, see kernels/builtins.h. Inlining changes no result."""
         shapes = [REGISTRY[t] for t in self.shape_types]
         parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
-        parts += [_read("common.h"), c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
+        parts += [c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        if inline_builtins:
+            parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if inline_builtins:
+            parts.append("#pragma clang attribute pop")
         parts.append(_read("pyclray.cl"))
         return "\n".join(parts)
 
@@ -179,8 +191,13 @@ def _disk_key(source: str, options: list[str], device: cl.Device) -> str:
     return h.hexdigest()
 
 
+def is_pocl_cpu(device: cl.Device) -> bool:
+    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/builtins.h)."""
+    return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
+
+
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
-    source, options = variant.source(), variant.options()
+    source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
     folder = cache_dir()
     path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
     if path is not None and path.is_file():

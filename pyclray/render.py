@@ -1,9 +1,13 @@
 """Render a scene (one ray per pixel) or cast a batch of rays: pack, build, run, read back."""
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 import numpy as np
 import pyopencl as cl
 
+from . import culling
 from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for
 from .errors import DeviceError, PyclrayError
 from .layout import CAMERA, PRECISIONS, layout
@@ -72,22 +76,116 @@ def _input_buffer(ctx, array):
     return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
 
-def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix):
-    """Enqueue the kernel with output buffers for the asked images and read them back."""
+def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
+    """Device buffers for the asked images, kept per device and size and reused by every render
+    (renders are serialized by _render_lock, and each copies its images out before the next)."""
+    real = np.dtype(_REAL[precision]).itemsize
+    itemsize = {"depth": real, "normal": 3 * real, "id": 4}
+    buffers = []
+    for aov in aovs:
+        key = (ctx.device.int_ptr, aov, max(count * itemsize[aov], 1))
+        buffer = _outputs.get(key)
+        if buffer is None:
+            if len(_outputs) >= _OUTPUTS_MAX:
+                _outputs.clear()
+            buffer = _outputs[key] = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, key[2])
+        buffers.append(buffer)
+    return buffers
+
+
+def _zero_copy(ctx) -> bool:
+    """Whether the kernel writes the images straight into the returned arrays (CPU devices)."""
+    return bool(ctx.device.type & cl.device_type.CPU)
+
+
+def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None):
+    """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
     real = _REAL[precision]
-    outputs = {
-        "depth": np.empty(count, real),
-        "normal": np.empty((count, 3), real),
-        "id": np.empty(count, np.int32),
+    empty = {
+        "depth": lambda: np.empty(count, real),
+        "normal": lambda: np.empty((count, 3), real),
+        "id": lambda: np.empty(count, np.int32),
     }
-    outputs = {k: outputs[k] for k in aovs}
-    buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, max(a.nbytes, 1)) for a in outputs.values()]
+    outputs = {k: empty[k]() for k in aovs}
     kernel = kernel_for(ctx, variant)
-    kernel(ctx.queue, global_size, None, *args, *buffers)
-    for array, buffer in zip(outputs.values(), buffers):
-        cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
-    ctx.queue.finish()
+    if _zero_copy(ctx):
+        # a CPU device writes straight into the new arrays (USE_HOST_PTR: PoCL uses them as the
+        # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
+        flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
+        buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
+        kernel(ctx.queue, global_size, local_size, *args, *buffers)
+        maps = [
+            cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
+            for array, buffer in zip(outputs.values(), buffers)
+        ]
+        ctx.queue.finish()
+        for mapped in maps:
+            mapped.base.release()  # unmap
+        ctx.queue.finish()
+    else:  # other devices: device buffers kept and reused, and a copy of each image
+        with _render_lock:
+            buffers = _output_buffers(ctx, count, aovs, precision)
+            kernel(ctx.queue, global_size, local_size, *args, *buffers)
+            for array, buffer in zip(outputs.values(), buffers):
+                cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+            ctx.queue.finish()
     return {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
+
+
+# -- what renders of the same scene share ------------------------------------------------------
+# Inputs are packed and uploaded once per (device, scene object, precision): a Scene is frozen, so
+# the same object always packs to the same bytes; a moved camera or shape is a new Scene, hence new
+# inputs. An entry holds its scene, so the scene's id() cannot be reused while it is cached.
+_PREPARED_MAX = 16
+_PREPARED_BYTES = 256 << 20
+_OUTPUTS_MAX = 12
+_prepared: OrderedDict = OrderedDict()
+_outputs: dict = {}
+_render_lock = threading.RLock()
+
+
+def _render_inputs(ctx, scene: Scene, precision: str) -> list:
+    """The kernel arguments before the outputs of a render of this scene: camera, the pixels' rays
+    (computed once by the rays kernel), tile size, tiles per row, and per shape type its packed
+    buffer and its tile lists (pyclray/culling.py)."""
+    key = (ctx.device.int_ptr, id(scene), precision)
+    with _render_lock:
+        entry = _prepared.get(key)
+        if entry is not None and entry[0] is scene:  # the same object, not an equal one
+            _prepared.move_to_end(key)
+            return entry[1]
+    width, height = scene.image.width, scene.image.height
+    rows = scene.camera.basis()
+    tan_x, tan_y = scene.camera.tangents(width, height)
+    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
+    camera_buffer = _input_buffer(ctx, camera)
+    real = np.dtype(_REAL[precision]).itemsize
+    rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
+    rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
+    rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
+    tiles_x = -(-width // culling.TILE)
+    args = [camera_buffer, rays, np.int32(culling.TILE.bit_length() - 1), np.int32(tiles_x)]
+    for kind in scene.shape_types():
+        cls = REGISTRY[kind]
+        ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
+        shapes = [scene.shapes[i] for i in ids]
+        packed = cls.pack(shapes, ids, scene.camera.eye, rows, precision)
+        start, index = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+        args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+    with _render_lock:
+        _prepared[key] = (scene, args, rays.size)
+        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of rays (the newest always stays)
+        while len(_prepared) > 1 and (
+            len(_prepared) > _PREPARED_MAX or sum(e[2] for e in _prepared.values()) > _PREPARED_BYTES
+        ):
+            _prepared.popitem(last=False)
+    return args
+
+
+def _global_size(width: int, height: int) -> tuple[int, int]:
+    """The image rounded up to whole tiles (the kernels skip the pixels beyond the edges)."""
+    tile = culling.TILE
+    return (-(-width // tile) * tile, -(-height // tile) * tile)
 
 
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Frame:
@@ -99,16 +197,11 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Fra
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     width, height = scene.image.width, scene.image.height
-    rows = scene.camera.basis()
-    tan_x, tan_y = scene.camera.tangents(width, height)
-    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
-    shape_types = scene.shape_types()
-    shape_args, _ = _shape_args(ctx, scene, shape_types, scene.camera.eye, rows, precision)
-    variant = Variant("render", shape_types, aovs, precision)
-    images = _run(
-        ctx, variant, [_input_buffer(ctx, camera), *shape_args],
-        (width, height), width * height, aovs, precision, (height, width),
-    )
+    args = _render_inputs(ctx, scene, precision)
+    variant = Variant("render", scene.shape_types(), aovs, precision)
+    tile = culling.TILE  # one work-group per tile where the device allows it (the kernel needs none)
+    local_size = (tile, tile) if ctx.device.max_work_group_size >= tile * tile else None
+    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), local_size)
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 

@@ -1,0 +1,92 @@
+"""Screen-space culling for the render kernel: for each tile of TILE x TILE pixels, the shapes of
+each type whose conservative screen bounds meet it. The kernel visits only those and tests each
+exactly as before, so the images do not change: a shape is left out of a tile only when no ray of
+the tile can hit it, with a wide margin over every float rounding of the kernel.
+
+A shape type without a bounds function here (the plane) is visited in every tile.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-group size)
+
+# The kernel's float32 test accepts a ray whose true squared distance to the centre exceeds r^2
+# by at most a few dozen ulps of |F|^2 (F: centre in the camera frame); 256 float32 ulps bound
+# that with room to spare, so the radius is widened by sqrt(256 eps) |F| = 3.9e-3 |F| (an angle
+# of 3.9e-3 radians, a couple of pixels at usual fields of view), plus rounding of the centre.
+_WIDEN = 16.0 * np.sqrt(np.finfo(np.float32).eps)
+
+
+def sphere_bounds(spheres, origin, rotation):
+    """(N, 4) bounds (sx_lo, sx_hi, sy_lo, sy_hi) of the image-plane coordinates (x/z, y/z in the
+    camera frame) of the rays that can meet each sphere; NaN rows: anywhere (the sphere reaches the
+    eye's plane); +inf lo rows: nowhere (wholly behind the eye)."""
+    center = np.array([s.center for s in spheres], np.float64) - origin
+    F = center @ np.asarray(rotation, np.float64).T  # camera frame: x left, y up, z forward
+    r = np.array([s.radius for s in spheres], np.float64)
+    distance = np.linalg.norm(F, axis=1)
+    r = r * (1 + 1e-6) + _WIDEN * distance
+    x, y, z = F[:, 0], F[:, 1], F[:, 2]
+    out = np.full((len(spheres), 4), np.nan)
+    ahead = z - r > 1e-6 * r  # wholly in front of the eye's plane, with a margin
+    behind = z + r < 0
+    out[behind] = (np.inf, -np.inf, np.inf, -np.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        denominator = z * z - r * r
+        for axis, (a, col) in enumerate(((x, 0), (y, 2))):
+            # planes a = t z through the eye tangent to the sphere: t = (a z -+ r sqrt(a^2 + z^2 - r^2)) / (z^2 - r^2)
+            root = r * np.sqrt(a * a + z * z - r * r)
+            lo = (a * z - root) / denominator
+            hi = (a * z + root) / denominator
+            out[ahead, col] = lo[ahead]
+            out[ahead, col + 1] = hi[ahead]
+    return out
+
+
+BOUNDS = {"sphere": sphere_bounds}
+
+
+def _pixel_range(lo, hi, tangent, size):
+    """First and last pixel index whose centre coordinate tangent (size - 2 i - 1) / size lies in
+    [lo, hi] (the coordinate decreases with i), widened by one pixel and clamped."""
+    first = np.floor((size * (1 - hi / tangent) - 1) / 2) - 1
+    last = np.ceil((size * (1 - lo / tangent) - 1) / 2) + 1
+    return np.clip(first, 0, size - 1), np.clip(last, -1, size - 1), (last >= 0) & (first <= size - 1)
+
+
+def tile_lists(kind: str, shapes, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
+    """(start, index) int32 arrays: the shapes (positions in the packed array) that tile t visits
+    are index[start[t]:start[t+1]], in increasing order; tiles are numbered row by row."""
+    tiles_x, tiles_y = -(-width // tile), -(-height // tile)
+    n = len(shapes)
+    if kind in BOUNDS and n:
+        bounds = BOUNDS[kind](shapes, np.asarray(origin, np.float64), rotation)
+        everywhere = np.isnan(bounds).any(axis=1)
+        c0, c1, ok_x = _pixel_range(bounds[:, 0], bounds[:, 1], tan_x, width)
+        r0, r1, ok_y = _pixel_range(bounds[:, 2], bounds[:, 3], tan_y, height)
+        ok = ok_x & ok_y & (c0 <= c1) & (r0 <= r1)
+        tx0, tx1 = np.where(ok, c0 // tile, 0), np.where(ok, c1 // tile, -1)
+        ty0, ty1 = np.where(ok, r0 // tile, 0), np.where(ok, r1 // tile, -1)
+        tx0[everywhere], tx1[everywhere] = 0, tiles_x - 1
+        ty0[everywhere], ty1[everywhere] = 0, tiles_y - 1
+    else:
+        tx0, tx1 = np.zeros(n), np.full(n, tiles_x - 1)
+        ty0, ty1 = np.zeros(n), np.full(n, tiles_y - 1)
+    nx = np.maximum(tx1 - tx0 + 1, 0).astype(np.int64)
+    ny = np.maximum(ty1 - ty0 + 1, 0).astype(np.int64)
+    counts = nx * ny
+    shape = np.repeat(np.arange(n), counts)
+    # position of each pair within its shape's rectangle of tiles
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    nx_r = np.repeat(nx, counts)
+    tx = np.repeat(tx0.astype(np.int64), counts) + local % np.maximum(nx_r, 1)
+    ty = np.repeat(ty0.astype(np.int64), counts) + local // np.maximum(nx_r, 1)
+    tiles = ty * tiles_x + tx
+    order = np.argsort(tiles, kind="stable")  # stable: shapes stay in increasing order in a tile
+    start = np.zeros(tiles_x * tiles_y + 1, np.int32)
+    start[1:] = np.cumsum(np.bincount(tiles, minlength=tiles_x * tiles_y))
+    index = shape[order].astype(np.int32)
+    if index.size == 0:
+        index = np.zeros(1, np.int32)  # no zero-size buffers
+    return start, index
