@@ -229,9 +229,10 @@ def test_a_second_process_loads_the_program_from_the_disk_cache(tmp_path):
     env = dict(os.environ, PYCLRAY_CACHE_DIR=str(tmp_path / "cache"))
     runs = [json.loads(subprocess.run([sys.executable, "-c", CROSS_PROCESS], env=env, check=True,
                                       capture_output=True, text=True).stdout) for _ in range(2)]
-    assert runs[0]["compiled"] == 1 and runs[0]["from_disk"] == 0
-    assert runs[1]["compiled"] == 0 and runs[1]["from_disk"] == 1
-    assert len(list((tmp_path / "cache").glob("*.bin"))) == 1
+    programs = runs[0]["compiled"]  # the rays kernel and the render kernel
+    assert programs >= 1 and runs[0]["from_disk"] == 0
+    assert runs[1]["compiled"] == 0 and runs[1]["from_disk"] == programs
+    assert len(list((tmp_path / "cache").glob("*.bin"))) == programs
 
 
 def test_fp64_unavailable_is_a_clear_error(monkeypatch):
