@@ -11,26 +11,17 @@ import pyclray
 from pyclray import device
 
 SIMPLE_SPHERE = """
-/* The textbook sphere, for the cost comparison only. */
-inline real sphere_solve(__global const Sphere* sphere, const Ray* ray, real* root_sign, real* discriminant)
+/* The textbook sphere, for the cost comparison only: b^2 - a c, (b -+ sqrt) / a, p - C. */
+inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
 {
     const real3 F = sphere->center.xyz - ray->origin;
     const real c = dot(F, F) - sphere->center.w;
     const real b = dot(F, ray->dir);
     const real disc = b * b - ray->a * c;
-    *discriminant = disc;
     if (!(disc >= 0)) return MISS;
     const real root = sqrt(disc);
     const real near = (b - root) / ray->a, far = (b + root) / ray->a;
-    if (near > 0) { *root_sign = -1; return near; }
-    if (far > 0) { *root_sign = 1; return far; }
-    return MISS;
-}
-
-inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
-{
-    real side, disc;
-    return sphere_solve(sphere, ray, &side, &disc);
+    return near > 0 ? near : (far > 0 ? far : MISS);
 }
 
 inline real3 sphere_normal(__global const Sphere* sphere, const Ray* ray, __global const Camera* camera)
