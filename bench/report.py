@@ -28,8 +28,8 @@ WHERE_THE_TIME_GOES = [
     "LLVM 14's loop vectorizer rejects vector-typed instructions (`POCL_VECTORIZER_REMARKS=1`: \"instruction",
     "return type cannot be vectorized\"; the shape loops: \"value that could not be identified as",
     "reduction\"). Each pixel is then a chain of dependent divisions and square roots (plane: one",
-    "division; sphere: a square root and two divisions; a sphere's normal: the solve again, then a",
-    "square root and a normalization), whose latencies the cores mostly wait on. On tp02 the tile culling already leaves",
+    "division; sphere: a square root and two divisions; a sphere's normal: its discriminant again, then",
+    "square roots and a normalization), whose latencies the cores mostly wait on. On tp02 the tile culling already leaves",
     "0.38 sphere tests per pixel (22% of the pixels hit a sphere), so what remains is the exact",
     "arithmetic itself: the ground plane alone with all three images costs about as much as the",
     "depth-only render of the whole scene, and the spheres' hits and normals the rest.",
@@ -40,6 +40,8 @@ def load(path: Path) -> list[dict]:
     data = json.loads(path.read_text())
     rows = []
     for bench in data["benchmarks"]:
+        if "scene" not in bench["extra_info"]:
+            continue  # not a case of the matrix (see exact_cost)
         row = dict(bench["extra_info"])
         stats = bench["stats"]
         row.update(
@@ -49,6 +51,23 @@ def load(path: Path) -> list[dict]:
         rows.append(row)
     rows.sort(key=lambda r: (SCENE_ORDER.index(r["scene"]), r["size"], KIND_ORDER.index(r["kind"]), r["aovs"], r["precision"], r.get("part", "")))
     return rows, data.get("machine_info", {}), data.get("datetime", "")
+
+
+def exact_cost(path: Path) -> list[str]:
+    """The table of bench/test_exact_cost.py: kernels/sphere.cl against the textbook sphere."""
+    data = json.loads(path.read_text())
+    cases = [b for b in data["benchmarks"] if b["name"].startswith("test_tp02_sphere_formulation")]
+    if not cases:
+        return ["(not in this run: `pytest bench/test_exact_cost.py --benchmark-only`)"]
+    lines = ["| formulation, images (tp02 512×512 fp32, warm) | median ms | min ms |", "|---|---|---|"]
+    for b in sorted(cases, key=lambda b: b["name"]):
+        lines.append(f"| {b['param']} | {ms(b['stats']['median'])} | {ms(b['stats']['min'])} |")
+    by = {b["param"]: b["stats"]["median"] for b in cases}
+    for aovs in ("depth", "all"):
+        if f"exact-{aovs}" in by and f"simple-{aovs}" in by:
+            lines.append("")
+            lines.append(f"exact / simple, {aovs}: {by[f'exact-{aovs}'] / by[f'simple-{aovs}']:.2f}x (medians)")
+    return lines
 
 
 def find(rows, **keys):
@@ -299,6 +318,14 @@ def main(argv=None) -> None:
         "## All configurations",
         "",
         *table(rows),
+        "",
+        "## Cost of the exact sphere formulation",
+        "",
+        "The exact sphere (`kernels/sphere.cl`: the better-conditioned of two discriminants, stable roots,",
+        "the normal from the perpendicular) against the textbook one (b^2 - a c, (b -+ sqrt) / a, p - C),",
+        "both with the host's camera-relative packing (`bench/test_exact_cost.py`):",
+        "",
+        *exact_cost(args.results),
         "",
         "## How it is measured",
         "",
