@@ -1,48 +1,26 @@
-"""Errors of a render against the float64 oracle (used by the benchmarks, stored in extra_info)."""
+"""Errors of a render against the float64 oracle (used by the benchmarks, stored in extra_info):
+pyclray's own error model (pyclray.accuracy), so the benchmarks and the tests judge alike."""
 from __future__ import annotations
 
-import numpy as np
-
-from pyclray import oracle
-
-GRAZING_COS = 0.02  # silhouettes: |cos incidence| below this are left out of every error
-
-
-def _ulps(value, reference):
-    """|value - reference| in units of float32's spacing at the reference."""
-    spacing = np.spacing(np.abs(reference).astype(np.float32)).astype(np.float64)
-    return np.abs(np.asarray(value, np.float64) - reference) / spacing
-
-
-def _stats(values) -> dict:
-    if values.size == 0:
-        return {"max": 0.0, "p99": 0.0}
-    return {"max": float(values.max()), "p99": float(np.percentile(values, 99))}
+from pyclray import accuracy
 
 
 def compare(scene, images: dict, reference: dict, exclude=None) -> dict:
-    """Depth error in float32 ulps, normal error (|n - n_ref|, ~ the angle in radians) and id
-    mismatches, over the pixels that are not grazing (|cos incidence| >= GRAZING_COS by the oracle)
-    and not in ``exclude`` (e.g. Mitsuba's plane beyond its stand-in disk)."""
-    _, directions = oracle.camera_rays(scene)
-    cos = oracle.incidence_cosine(scene, directions, reference["id"], reference["normal"])
-    valid = cos >= GRAZING_COS
-    if exclude is not None:
-        valid &= ~exclude
-    ref_hit = reference["id"] >= 0
-    out = {"pixels": int(valid.sum()), "excluded": int((~valid).sum())}
-    if "id" in images:
-        same = images["id"] == reference["id"]
-        out["id_mismatches"] = int((valid & ~same).sum())
-    else:  # depth only: agree on hit or miss
-        same = np.isfinite(images["depth"]) == ref_hit
-        out["id_mismatches"] = int((valid & ~same).sum())
-    both = valid & same & ref_hit
-    if "depth" in images:
-        d = _stats(_ulps(images["depth"][both], reference["depth"][both]))
-        out["depth_ulps_max"], out["depth_ulps_p99"] = d["max"], d["p99"]
-    if "normal" in images:
-        diff = np.linalg.norm(np.asarray(images["normal"], np.float64)[both] - reference["normal"][both], axis=-1)
-        n = _stats(diff)
-        out["normal_err_max"], out["normal_err_p99"] = n["max"], n["p99"]
+    """Depth error in float32 ulps of t times |cos incidence| (max, p99; and the raw max), normal
+    error |n - n_ref| times |cos| (max) and id mismatches (depth only: hit/miss disagreements),
+    over the pixels that are neither silhouettes (|cos| < 0.02) nor near-ties by the oracle, nor
+    in ``exclude`` (e.g. Mitsuba's plane beyond its stand-in disk). ``reference`` comes from
+    pyclray.accuracy.reference(scene)."""
+    result = accuracy.compare(images, reference, exclude=exclude)
+    out = {
+        "pixels": result["pixels"],
+        "excluded": int(reference["id"].size) - result["pixels"],
+        "id_mismatches": result["id_mismatch"] + result.get("miss_mismatch", 0),
+    }
+    if "depth_ulps_max" in result:
+        out["depth_ulps_max"], out["depth_ulps_p99"] = result["depth_ulps_max"], result["depth_ulps_p99"]
+        out["depth_ulps_raw_max"] = result["depth_ulps_raw_max"]
+    if "normal_cos_max" in result:
+        out["normal_err_max"] = result["normal_cos_max"]
+        out["normal_err_p99"] = result["normal_cos_p99"]
     return out

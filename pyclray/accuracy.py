@@ -63,8 +63,10 @@ def compare(images: dict, ref: dict, exclude=None) -> dict:
     if "id" in images:
         out["id_mismatch"] = int(((images["id"] != ref["id"]) & judged).sum())
         same = judged & (images["id"] == ref["id"]) & (ref["id"] >= 0)
-    else:
-        same = judged & (ref["id"] >= 0)
+    else:  # no id image: a hit where the reference misses, or the reverse, is the mismatch
+        hits = np.isfinite(np.asarray(images["depth"], np.float64))
+        out["id_mismatch"] = int(((hits != (ref["id"] >= 0)) & judged).sum())
+        same = judged & (ref["id"] >= 0) & hits
     cos = ref["cos"][same]
     if "depth" in images:
         test = np.asarray(images["depth"], np.float64)
@@ -73,6 +75,8 @@ def compare(images: dict, ref: dict, exclude=None) -> dict:
         error = np.abs(test[same] - ref["depth"][same])
         ulps = error / ulp32(ref["depth"][same]) * cos
         relative = error / ref["depth"][same]
+        raw = error / ulp32(ref["depth"][same])
+        out["depth_ulps_raw_max"] = float(raw.max()) if raw.size else 0.0
         out["depth_ulps_max"] = float(ulps.max()) if ulps.size else 0.0
         out["depth_ulps_p99"] = float(np.percentile(ulps, 99)) if ulps.size else 0.0
         out["depth_rel_max"] = float(relative.max()) if relative.size else 0.0
@@ -82,6 +86,7 @@ def compare(images: dict, ref: dict, exclude=None) -> dict:
         error = np.linalg.norm(test[same] - ref["normal"][same], axis=-1)
         out["normal_max"] = float(error.max()) if error.size else 0.0
         out["normal_cos_max"] = float((error * cos).max()) if error.size else 0.0
+        out["normal_cos_p99"] = float(np.percentile(error * cos, 99)) if error.size else 0.0
         # scaled by the normal's conditioning max(1, (t + |origin|) / r): what the float64
         # reference's own rounding moves a far or far-off sphere's normal by
         scaled = error * cos / np.maximum(1.0, ref["normal_condition"][same])
