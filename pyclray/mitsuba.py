@@ -144,10 +144,9 @@ def shape_index_value(mi, shape, position: int) -> int:
 
 def axis_cosines(scene: Scene) -> np.ndarray:
     """cos of each pixel-centre ray's angle to the optical axis, (height, width) float64."""
-    width, height = scene.image.width, scene.image.height
-    tan_x, tan_y = scene.camera.tangents(width, height)
-    sx = tan_x * (width - 2.0 * np.arange(width) - 1.0) / width
-    sy = tan_y * (height - 2.0 * np.arange(height) - 1.0) / height
+    from .oracle import image_plane
+
+    sx, sy = image_plane(scene)
     return 1.0 / np.sqrt(1.0 + sx[None, :] ** 2 + sy[:, None] ** 2)
 
 

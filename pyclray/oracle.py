@@ -11,17 +11,24 @@ from .device import AOVS
 from .scene import Scene
 
 
+def image_plane(scene: Scene):
+    """(sx, sy): the pixel centres' coordinates on the image plane at distance 1, per column and
+    per row, float64: sx = tan_x (width - 2 i - 1) / width, sy = tan_y (height - 2 j - 1) / height."""
+    width, height = scene.image.width, scene.image.height
+    tan_x, tan_y = scene.camera.tangents(width, height)
+    sx = tan_x * (width - 2.0 * np.arange(width) - 1.0) / width
+    sy = tan_y * (height - 2.0 * np.arange(height) - 1.0) / height
+    return sx, sy
+
+
 def camera_rays(scene: Scene):
     """(origins, directions) of the pixel-centre rays, each (height, width, 3) float64, unit directions.
 
     Pixel (row j, column i) looks through sx = tan_x (1 - 2 (i + 0.5) / width),
     sy = tan_y (1 - 2 (j + 0.5) / height): d = normalize(w + sx u + sy v).
     """
-    width, height = scene.image.width, scene.image.height
     u, v, w = scene.camera.basis()
-    tan_x, tan_y = scene.camera.tangents(width, height)
-    sx = tan_x * (width - 2.0 * np.arange(width) - 1.0) / width
-    sy = tan_y * (height - 2.0 * np.arange(height) - 1.0) / height
+    sx, sy = image_plane(scene)
     d = w + sx[None, :, None] * u + sy[:, None, None] * v
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     origins = np.broadcast_to(np.array(scene.camera.eye), d.shape)

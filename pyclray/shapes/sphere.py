@@ -11,6 +11,13 @@ from ..layout import Struct
 from .base import Shape
 
 
+def eye_term(F, radius):
+    """c = |F|^2 - r^2 (F: centre minus ray origin) from error-free products and sums: the eye's
+    squared distance to the surface, without the cancellation of a plain float64 formula."""
+    F_r = np.concatenate([F, np.broadcast_to(radius, F.shape[:-1])[..., None]], axis=-1)
+    return dot2(F_r, F_r * np.array([1.0, 1.0, 1.0, -1.0]))
+
+
 @dataclass(frozen=True)
 class Sphere(Shape):
     center: tuple[float, float, float]
@@ -46,8 +53,7 @@ class Sphere(Shape):
         F = center - origin
         out["center"][:, :3] = F @ rotation.T
         out["center"][:, 3] = radius * radius
-        F_r = np.concatenate([F, radius[:, None]], axis=1)
-        out["c"] = dot2(F_r, F_r * np.array([1.0, 1.0, 1.0, -1.0]))
+        out["c"] = eye_term(F, radius)
 
     # -- float64 oracle ----------------------------------------------------------------------
     def oracle_distance(self, origins, directions):
@@ -56,8 +62,7 @@ class Sphere(Shape):
         r = self.radius
         F = C - origins  # origin to centre
         b = np.einsum("...k,...k", F, directions)
-        F_r = np.concatenate([F, np.broadcast_to(r, F.shape[:-1])[..., None]], axis=-1)
-        c = dot2(F_r, F_r * np.array([1.0, 1.0, 1.0, -1.0]))  # |F|^2 - r^2 without cancellation
+        c = eye_term(F, r)  # |F|^2 - r^2 without cancellation
         perp = F - b[..., None] * directions  # from the ray's closest point to the centre
         perp2 = np.einsum("...k,...k", perp, perp)
         # the better conditioned of b^2 - c and r^2 - |perp|^2 (equal in exact arithmetic)
