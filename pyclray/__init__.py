@@ -4,6 +4,8 @@
     scene = pyclray.load_scene("scenes/tp02.toml")
     frame = pyclray.render(scene, aovs=("depth", "normal", "id"))   # AOV name -> numpy array
 """
+from .animate import render_animation
+from .animation import Animation, Key
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, PyclrayError, SceneError
 from .render import Frame, cast, render
@@ -13,7 +15,7 @@ from .shapes import Plane, Sphere
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "BuildError", "Camera", "DeviceError", "Frame", "Image", "Plane", "PyclrayError",
-    "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render",
+    "AOVS", "Animation", "BuildError", "Camera", "DeviceError", "Frame", "Image", "Key", "Plane", "PyclrayError",
+    "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render", "render_animation",
     "scene_from_dict", "select_device",
 ]

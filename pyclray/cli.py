@@ -24,6 +24,16 @@ def _size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def _time(text: str) -> float:
+    try:
+        value = float(text)
+        if not value >= 0 or value == float("inf"):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a time in seconds >= 0, got {text!r}") from None
+    return value
+
+
 def _aovs(text: str) -> tuple[str, ...]:
     from .device import AOVS
 
@@ -34,11 +44,12 @@ def _aovs(text: str) -> tuple[str, ...]:
     return names
 
 
-def _load(path: str, size=None):
+def _load(path: str, size=None, t=None):
     from .scene import load_scene
 
     scene = load_scene(path)
-    return scene.with_size(*size) if size else scene
+    scene = scene.with_size(*size) if size else scene
+    return scene if t is None else scene.at(t)  # the static scene at that time of its animation
 
 
 def _writable(path: Path, what: str) -> None:
@@ -55,7 +66,7 @@ def cmd_render(args) -> int:
 
     out = Path(args.output)
     _writable(out, "-o")
-    scene = _load(args.scene, args.size)
+    scene = _load(args.scene, args.size, args.time)
     previews = output.preview_paths(out) if args.png else {}
     start = time.perf_counter()
     frame = render(scene, aovs=args.aov, precision=args.precision, device=args.device)
@@ -120,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     render.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")
+    render.add_argument("--time", type=_time, metavar="T", help="render the scene at time T (seconds) of its [animation]")
     render.add_argument(
         "--device", metavar="DEV",
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
@@ -136,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # modules that add a subcommand with add_command(subparsers); each imports its heavy parts lazily
-COMMAND_MODULES = ("check", "stability")
+COMMAND_MODULES = ("check", "stability", "animate")
 
 
 def _extra_commands():
