@@ -33,6 +33,9 @@ DEFAULT_AOV = "depth"
 VIDEO_SUFFIXES = (".mp4", ".gif")
 FRAME_NAME = re.compile(r"frame_\d+(\.[a-z]+)?\.(exr|png)")  # what an animate folder holds
 VIDEO_CRF = 18  # H.264 constant rate factor: 18 is visually lossless for these flat previews
+# x264's veryfast preset: about twice medium's speed here (132 against 72 frames/s at 512x512 on
+# one shared core), and no larger a file for these smooth previews (136 kB against 146 kB)
+VIDEO_PRESET = "veryfast"
 QUEUE_FRAMES = 4  # frames rendered ahead of the writer: enough to keep it busy, little memory
 
 
@@ -123,7 +126,7 @@ class _Video:
         command = [
             imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error",
             "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", repr(fps), "-i", "-",
-            "-an", "-c:v", "libx264", "-crf", str(VIDEO_CRF), "-pix_fmt", "yuv420p",
+            "-an", "-c:v", "libx264", "-preset", VIDEO_PRESET, "-crf", str(VIDEO_CRF), "-pix_fmt", "yuv420p",
             # 4:2:0 needs even sides: an odd width or height gains one black column or row
             "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-movflags", "+faststart", str(self.tmp),
         ]
@@ -167,7 +170,8 @@ class _Video:
 
 class _Gif:
     """A looping GIF through Pillow: each frame is turned into a palette image as it arrives (grey
-    previews exactly, colour ones by median-cut quantization); all are saved at the end."""
+    previews exactly; colour ones by Pillow's fast octree, 9 ms a frame at 512x512 and a mean
+    error of about one level, where median cut takes 280 ms and errs more); all are saved at the end."""
 
     def __init__(self, out: Path, aov: str, fps: float):
         self.out, self.aov = out, aov
@@ -185,7 +189,7 @@ class _Gif:
         if (rgb == rgb[..., :1]).all():
             self.images.append(Image.fromarray(rgb[..., 0], mode="L"))  # grey: 256 levels, exact
         else:
-            self.images.append(Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.MEDIANCUT))
+            self.images.append(Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE))
 
     def finish(self):
         first, *rest = self.images

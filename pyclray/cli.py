@@ -182,4 +182,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # run the package's module, not this __main__ copy: the commands raise pyclray.cli.BadInput
+    from pyclray.cli import main as package_main
+
+    sys.exit(package_main())

@@ -136,10 +136,13 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
 # Inputs are packed and uploaded once per (device, scene object, precision): a Scene is frozen, so
 # the same object always packs to the same bytes; a moved camera or shape is a new Scene, hence new
 # inputs. An entry holds its scene, so the scene's id() cannot be reused while it is cached.
+# The camera's rays are shared by every scene with the same image size and fov (_camera_rays).
 _PREPARED_MAX = 16
 _PREPARED_BYTES = 256 << 20
 _OUTPUTS_MAX = 12
+_RAYS_MAX = 4
 _prepared: OrderedDict = OrderedDict()
+_camera_rays_cache: OrderedDict = OrderedDict()  # (device, width, height, tan_x, tan_y, precision) -> rays buffer
 _outputs: dict = {}
 _render_lock = threading.RLock()
 
@@ -159,10 +162,7 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
     tan_x, tan_y = scene.camera.tangents(width, height)
     camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
     camera_buffer = _input_buffer(ctx, camera)
-    real = np.dtype(_REAL[precision]).itemsize
-    rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
-    rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
-    rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
+    rays = _camera_rays(ctx, camera_buffer, width, height, tan_x, tan_y, precision)
     tiles_x = -(-width // culling.TILE)
     args = [camera_buffer, rays, np.int32(culling.TILE.bit_length() - 1), np.int32(tiles_x)]
     for kind in scene.shape_types():
@@ -180,6 +180,25 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
         ):
             _prepared.popitem(last=False)
     return args
+
+
+def _camera_rays(ctx, camera_buffer, width, height, tan_x, tan_y, precision):
+    """The pixels' rays in the camera frame, which depend on the image size and the tangents of
+    the fov only, not on where the camera is or looks: an orbiting camera (an animation) keeps one
+    buffer for all its frames instead of running the rays kernel for each."""
+    key = (ctx.device.int_ptr, width, height, tan_x, tan_y, precision)
+    with _render_lock:
+        rays = _camera_rays_cache.get(key)
+    if rays is None:
+        real = np.dtype(_REAL[precision]).itemsize
+        rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
+        rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
+        rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
+        with _render_lock:
+            while len(_camera_rays_cache) >= _RAYS_MAX:
+                _camera_rays_cache.popitem(last=False)
+            _camera_rays_cache[key] = rays
+    return rays
 
 
 def _global_size(width: int, height: int) -> tuple[int, int]:
