@@ -101,15 +101,20 @@ class _Folder:
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
         if self.out.exists():  # checked to hold only an earlier animate's frames: swap, then delete
-            old = Path(tempfile.mkdtemp(dir=self.out.parent, prefix=f".{self.out.name}.", suffix=".old"))
-            os.replace(self.out, old / "frames")
+            self.old = Path(tempfile.mkdtemp(dir=self.out.parent, prefix=f".{self.out.name}.", suffix=".old"))
+            os.replace(self.out, self.old / "frames")
             os.replace(self.tmp, self.out)
-            shutil.rmtree(old, ignore_errors=True)
+            shutil.rmtree(self.old, ignore_errors=True)
         else:
             os.replace(self.tmp, self.out)
 
     def abort(self):
-        shutil.rmtree(self.tmp, ignore_errors=True)
+        old = getattr(self, "old", None)
+        if old is not None and (old / "frames").is_dir() and not self.out.exists():
+            os.replace(old / "frames", self.out)  # interrupted mid-swap: the earlier folder goes back
+        for folder in (self.tmp, old):
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)
 
 
 class _Video:

@@ -195,9 +195,12 @@ def _camera_rays(ctx, camera_buffer, width, height, tan_x, tan_y, precision):
         rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
         rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
         with _render_lock:
-            while len(_camera_rays_cache) >= _RAYS_MAX:
-                _camera_rays_cache.popitem(last=False)
             _camera_rays_cache[key] = rays
+            # bounded like the prepared inputs: entries and bytes (the newest always stays)
+            while len(_camera_rays_cache) > 1 and (
+                len(_camera_rays_cache) > _RAYS_MAX or sum(r.size for r in _camera_rays_cache.values()) > _PREPARED_BYTES
+            ):
+                _camera_rays_cache.popitem(last=False)
     return rays
 
 

@@ -118,6 +118,34 @@ def test_folder_holds_every_frame_as_exr_and_png(tmp_path, scene_file):
             assert np.array_equal(images[aov], expected[aov]), (k, aov)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.toml", "frames"]  # no temporaries
     assert "render" in result.stdout and "write" in result.stdout and f"{FRAMES} frames" in result.stdout
+    assert result.stderr == ""  # no progress bar when stderr is not a terminal
+
+
+def test_a_progress_bar_is_drawn_on_a_terminal(tmp_path, scene_file):
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    controller, terminal = pty.openpty()
+    fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns, as a terminal has
+    try:
+        result = subprocess.run([sys.executable, "-m", "pyclray.cli", "animate", str(scene_file), "-o", str(tmp_path / "x.gif")],
+                                stdout=subprocess.PIPE, stderr=terminal, text=True, timeout=120)
+        os.close(terminal)
+        drawn = b""
+        while True:
+            try:
+                chunk = os.read(controller, 4096)
+            except OSError:  # the terminal's other end is closed: all read
+                break
+            if not chunk:
+                break
+            drawn += chunk
+    finally:
+        os.close(controller)
+    assert result.returncode == 0
+    assert f"0/{FRAMES}".encode() in drawn and b"frame/s" in drawn, drawn
 
 
 def test_frames_option_renders_a_range_and_replaces_an_earlier_folder(tmp_path, scene_file):
