@@ -216,6 +216,7 @@ def key(target, time, **values):
         ("[animation]\nduration = 2.0\n", "[animation]", "fps", ["missing"]),
         ("[animation]\nfps = 0.0\nduration = 2.0\n", "[animation]", "fps", ["> 0"]),
         ("[animation]\nfps = 4.0\nduration = 0.1\n", "[animation]", "duration", ["no frame"]),
+        ("[animation]\nfps = 1000.0\nduration = 1e4\n", "[animation]", "duration", ["more than 1,000,000"]),
         ("[animation]\nfps = 4.0\nduration = 1.0\nloop = true\n", "[animation]", "loop", ["unknown key"]),
         ('[animation]\nfps = 4.0\nduration = 1.0\ninterpolation = "cubic"\n', "[animation]", "interpolation", ["linear", "step"]),
         ("[animation]\nfps = 4.0\nduration = 1.0\nkeys = 3\n", "[animation]", "keys", ["array of tables"]),
