@@ -210,7 +210,9 @@ class Animation:
                     "share that name (the names of animated things must be unique)",
                     table=where, key="target", file=scene.source)
             thing = _get(scene, found[0])
-            animatable = {f.name: _kind(getattr(thing, f.name)) for f in dataclasses.fields(thing)}
+            # a number or vector field; an optional one left out (None) takes the kind keyed first
+            animatable = {f.name: _kind(getattr(thing, f.name)) if getattr(thing, f.name) is not None
+                          else _kind(track.values[0]) or "a number or numbers" for f in dataclasses.fields(thing)}
             animatable = {k: kind for k, kind in animatable.items() if kind}
             if track.key not in animatable:
                 raise SceneError(
