@@ -391,7 +391,7 @@ def _animate(args, scene, frames, aovs, make_sink, out) -> int:
     total = time.perf_counter() - start
     encode = writer.busy + finish_time
     print(
-        f"animated {args.scene}: {len(frames)} frames ({frames.start}:{frames.stop}) of "
+        f"animated {args.scene}: {len(frames)} frame{'s' if len(frames) != 1 else ''} ({frames.start}:{frames.stop}) of "
         f"{scene.image.width}x{scene.image.height} {','.join(aovs)} in {total:.2f} s "
         f"({len(frames) / total:.1f} frames/s): render {render_time:.2f} s ({len(frames) / render_time:.1f} frames/s), "
         f"{'write' if isinstance(sink, _Folder) else 'encode'} {encode:.2f} s "
