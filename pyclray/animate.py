@@ -20,6 +20,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,32 @@ def _preview(aov: str):
 
 
 # -- sinks: where frames go --------------------------------------------------------------------
+# A sink writes a frame with write(k, frame). Its encoder() is a picklable function of a Frame alone
+# (the compression and previews, most of a frame's writing time), and store(k, encoder()(frame)) does
+# what write(k, frame) does: a cluster's workers encode (pyclray/cluster.py), the client stores.
+@dataclass(frozen=True)
+class _FrameFiles:
+    """A frame's files in an animate folder: FRAME.exr (every AOV asked) and FRAME.AOV.png (a preview
+    of each AOV that has one). Called on a Frame: [(suffix, bytes)] of those files, written by the same
+    writers into a scratch folder and read back, so that the stored files are the same bytes."""
+
+    aovs: tuple[str, ...]
+    comment: str
+
+    def write(self, stem: str, frame):
+        from . import output
+
+        output.write_exr(f"{stem}.exr", frame, comment=self.comment)
+        for aov in self.aovs:
+            if _preview(aov) is not None:
+                output.write_png(f"{stem}.{aov}.png", _preview(aov)(frame[aov]))
+
+    def __call__(self, frame) -> list[tuple[str, bytes]]:
+        with tempfile.TemporaryDirectory(prefix="pyclray-frame-") as scratch:
+            self.write(os.path.join(scratch, "frame"), frame)
+            return [(name[len("frame"):], Path(scratch, name).read_bytes()) for name in sorted(os.listdir(scratch))]
+
+
 class _Folder:
     """Per-frame EXR (every AOV asked) and a PNG preview of each AOV that has one, in a temporary
     folder beside OUTDIR that replaces OUTDIR at the end."""
@@ -89,14 +116,19 @@ class _Folder:
         self.out, self.aovs, self.digits, self.comment = out, aovs, digits, comment
         self.tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
 
-    def write(self, k, frame):
-        from . import output
+    def _stem(self, k) -> str:
+        return str(self.tmp / f"frame_{k:0{self.digits}d}")
 
-        stem = self.tmp / f"frame_{k:0{self.digits}d}"
-        output.write_exr(f"{stem}.exr", frame, comment=self.comment)
-        for aov in self.aovs:
-            if _preview(aov) is not None:
-                output.write_png(f"{stem}.{aov}.png", _preview(aov)(frame[aov]))
+    def encoder(self):
+        return _FrameFiles(tuple(self.aovs), self.comment)
+
+    def write(self, k, frame):
+        self.encoder().write(self._stem(k), frame)
+
+    def store(self, k, files):
+        for suffix, data in files:
+            with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writers'
+                file.write(data)
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
@@ -143,9 +175,15 @@ class _Video:
             self.tmp.unlink(missing_ok=True)
             raise
 
+    def encoder(self):
+        return _PreviewOf(self.aov)
+
     def write(self, k, frame):
+        self.store(k, self.encoder()(frame))
+
+    def store(self, k, rgb):
         try:
-            self.process.stdin.write(np.ascontiguousarray(_preview(self.aov)(frame[self.aov])).data)
+            self.process.stdin.write(rgb.data)
         except BrokenPipeError:
             raise OSError(f"ffmpeg stopped while encoding {self.out}: {self._log()}") from None
 
@@ -187,14 +225,14 @@ class _Gif:
         self.tmp = Path(tmp)
         self.images = []
 
-    def write(self, k, frame):
-        from PIL import Image
+    def encoder(self):
+        return _PaletteImageOf(self.aov)
 
-        rgb = np.ascontiguousarray(_preview(self.aov)(frame[self.aov]))
-        if (rgb == rgb[..., :1]).all():
-            self.images.append(Image.fromarray(rgb[..., 0], mode="L"))  # grey: 256 levels, exact
-        else:
-            self.images.append(Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE))
+    def write(self, k, frame):
+        self.store(k, self.encoder()(frame))
+
+    def store(self, k, image):
+        self.images.append(image)
 
     def finish(self):
         first, *rest = self.images
@@ -207,6 +245,31 @@ class _Gif:
         self.tmp.unlink(missing_ok=True)
 
 
+@dataclass(frozen=True)
+class _PreviewOf:
+    """A frame's preview of one AOV: (H, W, 3) uint8, contiguous (a video's raw frame)."""
+
+    aov: str
+
+    def __call__(self, frame) -> np.ndarray:
+        return np.ascontiguousarray(_preview(self.aov)(frame[self.aov]))
+
+
+@dataclass(frozen=True)
+class _PaletteImageOf:
+    """A frame's preview of one AOV as a GIF frame: a Pillow image of 256 grey levels, or a palette."""
+
+    aov: str
+
+    def __call__(self, frame):
+        from PIL import Image
+
+        rgb = _PreviewOf(self.aov)(frame)
+        if (rgb == rgb[..., :1]).all():
+            return Image.fromarray(rgb[..., 0], mode="L")  # grey: 256 levels, exact
+        return Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE)
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -217,9 +280,10 @@ class _Writer(threading.Thread):
     """Writes frames to a sink in its own thread, so encoding overlaps the next renders; put()
     blocks while QUEUE_FRAMES frames wait, and re-raises in the caller an error of the writer."""
 
-    def __init__(self, sink):
+    def __init__(self, sink, encoded: bool = False):
         super().__init__(name="pyclray-animate-writer", daemon=True)
         self.sink = sink
+        self.write = sink.store if encoded else sink.write  # encoded: items are the sink's encoder()'s
         self.frames = queue.Queue(maxsize=QUEUE_FRAMES)
         self.error = None
         self.busy = 0.0  # seconds spent writing
@@ -229,7 +293,7 @@ class _Writer(threading.Thread):
             if self.error is None:
                 start = time.perf_counter()
                 try:
-                    self.sink.write(*item)
+                    self.write(*item)
                 except BaseException as error:  # handed to the rendering thread
                     self.error = error
                 self.busy += time.perf_counter() - start
@@ -307,7 +371,32 @@ def add_command(subparsers) -> None:
     parser.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     parser.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--device", metavar="DEV", help="OpenCL device (as for pyclray render)")
+    add_cluster_options(parser, "the frames")
     parser.set_defaults(run=run)
+
+
+def add_cluster_options(parser, what: str) -> None:
+    """--workers N | --scheduler ADDRESS (pyclray/cluster.py; needs the cluster extra)."""
+    from .cli import _count
+
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--workers", type=_count, metavar="N",
+                       help=f"render {what} on a local Dask cluster of N worker processes (pip install 'pyclray[cluster]')")
+    group.add_argument("--scheduler", metavar="ADDRESS",
+                       help=f"render {what} on a running Dask cluster, e.g. tcp://host:8786 (see README, Clusters)")
+
+
+def cluster_module():
+    """pyclray.cluster, or a BadInput saying how to install what it needs."""
+    from .cli import BadInput
+
+    try:
+        from . import cluster
+    except ModuleNotFoundError as error:
+        if error.name not in ("distributed", "dask"):
+            raise
+        raise BadInput("--workers and --scheduler need Dask distributed: pip install 'pyclray[cluster]'") from None
+    return cluster
 
 
 def run(args) -> int:
@@ -361,21 +450,36 @@ def _animate(args, scene, frames, aovs, make_sink, out) -> int:
     stop both and remove the temporary output, so that nothing partial is left."""
     from .cli import BadInput
 
+    on_cluster = args.workers is not None or args.scheduler is not None
+    cluster = cluster_module() if on_cluster else None
     sink = writer = None
-    render_time = 0.0
+    render_time = start_time = 0.0
     start = time.perf_counter()
     try:
         sink = make_sink()
-        writer = _Writer(sink)
+        writer = _Writer(sink, encoded=on_cluster)
         writer.start()
         with _progress(len(frames)) as bar:
-            sequence = render_animation(scene, aovs, args.precision, args.device, frames)
-            for k in frames:
-                before = time.perf_counter()
-                _, frame = next(sequence)
-                render_time += time.perf_counter() - before
-                writer.put(k, frame)
-                bar.update()
+            if on_cluster:
+                # the workers render and encode each frame (sink.encoder()); this thread hands the
+                # encoded frames over in order and the writer stores them
+                with cluster.connect(args.workers, args.scheduler) as client:
+                    start_time = time.perf_counter() - start
+                    where = cluster.describe(client)
+                    before = time.perf_counter()
+                    sequence = cluster.render_animation(client, scene, aovs, args.precision, args.device, frames,
+                                                        encode=sink.encoder(), progress=bar)
+                    for k, (_, encoded) in zip(frames, sequence):
+                        writer.put(k, encoded)
+                    render_time = time.perf_counter() - before
+            else:
+                sequence = render_animation(scene, aovs, args.precision, args.device, frames)
+                for k in frames:
+                    before = time.perf_counter()
+                    _, frame = next(sequence)
+                    render_time += time.perf_counter() - before
+                    writer.put(k, frame)
+                    bar.update()
             writer.close()
             finish_start = time.perf_counter()
             sink.finish()
@@ -386,15 +490,22 @@ def _animate(args, scene, frames, aovs, make_sink, out) -> int:
             sink.abort()
         if isinstance(error, OSError) and not isinstance(error, InterruptedError):
             raise BadInput(f"-o {args.output}: cannot write: {error.strerror or error}") from None
+        if on_cluster and isinstance(error, cluster.ClusterError):
+            raise BadInput(str(error)) from None
         raise
     finish_time = time.perf_counter() - finish_start
     total = time.perf_counter() - start
     encode = writer.busy + finish_time
+    count = f"{len(frames)} frame{'s' if len(frames) != 1 else ''} ({frames.start}:{frames.stop})"
+    rate = f"{len(frames) / render_time:.1f} frames/s"
+    if on_cluster:
+        work = (f"cluster start {start_time:.2f} s ({where}), render and encode on the workers {render_time:.2f} s "
+                f"({rate}), write {encode:.2f} s ({writer.busy:.2f} s alongside, {finish_time:.2f} s at the end)")
+    else:
+        work = (f"render {render_time:.2f} s ({rate}), {'write' if isinstance(sink, _Folder) else 'encode'} "
+                f"{encode:.2f} s ({writer.busy:.2f} s alongside the renders, {finish_time:.2f} s at the end)")
     print(
-        f"animated {args.scene}: {len(frames)} frame{'s' if len(frames) != 1 else ''} ({frames.start}:{frames.stop}) of "
-        f"{scene.image.width}x{scene.image.height} {','.join(aovs)} in {total:.2f} s "
-        f"({len(frames) / total:.1f} frames/s): render {render_time:.2f} s ({len(frames) / render_time:.1f} frames/s), "
-        f"{'write' if isinstance(sink, _Folder) else 'encode'} {encode:.2f} s "
-        f"({writer.busy:.2f} s alongside the renders, {finish_time:.2f} s at the end); wrote {out}"
+        f"animated {args.scene}: {count} of {scene.image.width}x{scene.image.height} {','.join(aovs)} in "
+        f"{total:.2f} s ({len(frames) / total:.1f} frames/s): {work}; wrote {out}"
     )
     return 0

@@ -34,6 +34,16 @@ def _time(text: str) -> float:
     return value
 
 
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+        if value < 1:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    return value
+
+
 def _aovs(text: str) -> tuple[str, ...]:
     from .device import AOVS
 
@@ -69,7 +79,11 @@ def cmd_render(args) -> int:
     scene = _load(args.scene, args.size, args.time)
     previews = output.preview_paths(out) if args.png else {}
     start = time.perf_counter()
-    frame = render(scene, aovs=args.aov, precision=args.precision, device=args.device)
+    where = ""
+    if args.workers is not None or args.scheduler is not None:
+        frame, where = _render_on_cluster(args, scene)
+    else:
+        frame = render(scene, aovs=args.aov, precision=args.precision, device=args.device)
     elapsed = time.perf_counter() - start
     written = [out]
     # every file goes to a temporary name first; all are renamed only once all are written
@@ -84,9 +98,29 @@ def cmd_render(args) -> int:
     channels = ", ".join(output.exr_channels(frame))
     print(
         f"rendered {args.scene} ({scene.image.width}x{scene.image.height}, {args.precision}, "
-        f"{frame.device}) in {elapsed * 1e3:.1f} ms; wrote {', '.join(map(str, written))} [{channels}]"
+        f"{frame.device}) in {elapsed * 1e3:.1f} ms{where}; wrote {', '.join(map(str, written))} [{channels}]"
     )
     return 0
+
+
+def _render_on_cluster(args, scene):
+    """The image rendered in tiles on a Dask cluster (pyclray/cluster.py), and what to report of it."""
+    from tqdm import tqdm
+
+    from .animate import cluster_module
+
+    cluster = cluster_module()
+    windows = cluster.tiles(scene.image.width, scene.image.height, args.tile)
+    start = time.perf_counter()
+    try:
+        with cluster.connect(args.workers, args.scheduler) as client:
+            start_time = time.perf_counter() - start
+            where = cluster.describe(client)
+            with tqdm(total=len(windows), unit="tile", disable=not sys.stderr.isatty(), leave=False) as bar:
+                frame = cluster.render_tiled(client, scene, args.aov, args.precision, args.device, args.tile, bar)
+    except cluster.ClusterError as error:
+        raise BadInput(str(error)) from None
+    return frame, f" ({len(windows)} tile{'s' if len(windows) != 1 else ''} on {where}, cluster start {start_time:.2f} s)"
 
 
 def cmd_devices(args) -> int:
@@ -137,6 +171,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
         "$PYOPENCL_CTX, else PoCL's CPU device",
     )
+    render.add_argument("--tile", type=_count, default=512, metavar="PIXELS",
+                        help="with --workers or --scheduler: the side of a tile, a task (default 512)")
+    from .animate import add_cluster_options
+
+    add_cluster_options(render, "the image's tiles")
     render.set_defaults(run=cmd_render)
 
     devices = commands.add_parser("devices", help="list the OpenCL devices", description="List the OpenCL devices and their selectors.")
