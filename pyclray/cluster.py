@@ -24,7 +24,7 @@ import dataclasses
 import logging
 import os
 import uuid
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_worker
 from distributed.scheduler import KilledWorker
@@ -80,7 +80,9 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     threads = str(max(1, _cores() // workers))
     env = {name: os.environ.get(name, threads) for name in ("POCL_CPU_MAX_CU_COUNT", "POCL_MAX_PTHREAD_COUNT")}
     cluster = LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+        n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+        # no dashboard, and the scheduler's HTTP endpoints on a free port (not 8787, maybe taken)
+        dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"},
         # the command reports errors itself, one line each; the workers' own logs stay quiet
         silence_logs=logging.CRITICAL, env=env,
     )
@@ -155,9 +157,9 @@ def run(client: Client, job: Job, method: str, arguments, progress=None, what: s
     On an error, or when the caller stops early, the remaining tasks are cancelled; the job is
     removed from the workers at the end."""
     arguments = list(arguments)
-    client.register_plugin(job, name=job.name)  # raises here what the job's setup raised on a worker
     futures = []
     try:
+        client.register_plugin(job, name=job.name)  # raises here what the job's setup raised on a worker
         futures = [
             client.submit(_task, job.name, method, argument, key=f"{job.name}-{method}-{i}", pure=False)
             for i, argument in enumerate(arguments)
@@ -186,7 +188,8 @@ def run(client: Client, job: Job, method: str, arguments, progress=None, what: s
         if remaining and client.status == "running":
             client.cancel(remaining)
         if client.status == "running":
-            client.unregister_worker_plugin(job.name)
+            with suppress(ValueError):  # not registered: the scheduler had refused it
+                client.unregister_worker_plugin(job.name)
 
 
 def _raise(future, what: str):
