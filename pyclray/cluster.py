@@ -86,7 +86,8 @@ def connect(workers: int | None = None, scheduler: str | None = None):
         # the command reports errors itself, one line each; the workers' own logs stay quiet
         silence_logs=logging.CRITICAL, env=env,
     )
-    with cluster, Client(cluster, set_as_default=False) as client:
+    # the client fetches results from the workers themselves, not through the scheduler
+    with cluster, Client(cluster, set_as_default=False, direct_to_workers=True) as client:
         yield client
 
 
@@ -166,22 +167,20 @@ def run(client: Client, job: Job, method: str, arguments, progress=None, what: s
         ]
         index = {future.key: i for i, future in enumerate(futures)}
         arrived, next_i = {}, 0
-        for future in as_completed(futures, loop=client.loop):
+        # each result is fetched as its task completes (concurrently, in the client's event loop), and
+        # handed over once every earlier one has been: the client holds only the results that arrived
+        # ahead of their turn (few: the scheduler starts tasks in the order they were submitted)
+        for future, result in as_completed(futures, loop=client.loop, with_results=True, raise_errors=False):
             i = index[future.key]
             if future.status != "finished":
                 _raise(future, f"{what} {arguments[i]!r}")
+            future.release()  # the worker may drop its copy
+            futures[i] = None
             if progress is not None:
                 progress.update(1)
-            arrived[i] = future
-            while next_i in arrived:  # hand results over in order, each fetched once its turn comes
-                ready = arrived.pop(next_i)
-                try:
-                    result = ready.result()  # recomputed first if its worker died since it finished
-                except Exception:
-                    _raise(ready, f"{what} {arguments[next_i]!r}")
-                ready.release()
-                futures[next_i] = None
-                yield next_i, result
+            arrived[i] = result
+            while next_i in arrived:
+                yield next_i, arrived.pop(next_i)
                 next_i += 1
     finally:
         remaining = [f for f in futures if f is not None]
