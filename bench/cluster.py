@@ -21,6 +21,7 @@ import argparse
 import filecmp
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -30,6 +31,12 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 PAUSE_S = 2.0
+
+
+def _children_cpu() -> float:
+    """User + system seconds of the finished child processes (and theirs: the cluster's workers)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def _same_tree(left: Path, right: Path) -> bool:
@@ -58,7 +65,7 @@ def frames_phase(line: str) -> float:
 
 
 def speedups(args) -> None:
-    walls, phases = {}, {}
+    walls, phases, cpus = {}, {}, {}
     with tempfile.TemporaryDirectory(prefix="pyclray-bench-cluster-") as tmp:
         folder = Path(tmp)
         runs = commands(args, folder)
@@ -67,14 +74,17 @@ def speedups(args) -> None:
             order = names[r % 3:] + names[:r % 3]
             for name in order:
                 time.sleep(PAUSE_S)
+                before = _children_cpu()
                 start = time.perf_counter()
                 result = subprocess.run(runs[name], capture_output=True, text=True)
                 wall = time.perf_counter() - start
+                cpus.setdefault(name, []).append(_children_cpu() - before)
                 if result.returncode != 0:
                     sys.exit(f"{name}: {result.stderr.strip()}")
                 walls.setdefault(name, []).append(wall)
                 phases.setdefault(name, []).append(frames_phase(result.stdout.strip().splitlines()[-1]))
-                print(f"round {r + 1}: {name}: {wall:.2f} s wall, frames {phases[name][-1]:.2f} s", flush=True)
+                print(f"round {r + 1}: {name}: {wall:.2f} s wall, frames {phases[name][-1]:.2f} s, "
+                      f"{cpus[name][-1]:.2f} s CPU", flush=True)
             local = Path(runs["local"][runs["local"].index("-o") + 1])
             for name in names[1:]:
                 other = Path(runs[name][runs[name].index("-o") + 1])
@@ -84,11 +94,12 @@ def speedups(args) -> None:
     phase = {n: statistics.median(v) for n, v in phases.items()}
     print(f"\n{args.frames} frames of {args.size}x{args.size}, {args.output}, {args.rounds} rounds (medians; "
           f"outputs identical to the local run's):")
-    print("| run | wall s (min-max) | frames phase s | speed-up, wall | speed-up, frames phase |")
-    print("|---|---|---|---|---|")
+    cpu = {n: statistics.median(v) for n, v in cpus.items()}
+    print("| run | wall s (min-max) | frames phase s | CPU s (all processes) | speed-up, wall | speed-up, frames phase |")
+    print("|---|---|---|---|---|---|")
     for name in names:
         print(f"| {name} | {median[name]:.2f} ({min(walls[name]):.2f}-{max(walls[name]):.2f}) | {phase[name]:.2f} | "
-              f"{median['local'] / median[name]:.2f}x | {phase['local'] / phase[name]:.2f}x |")
+              f"{cpu[name]:.2f} | {median['local'] / median[name]:.2f}x | {phase['local'] / phase[name]:.2f}x |")
     print(f"2 workers over 1: {median['1 worker'] / median['2 workers']:.2f}x wall, "
           f"{phase['1 worker'] / phase['2 workers']:.2f}x frames phase")
 
