@@ -92,8 +92,7 @@ def test_frame_k_is_the_render_of_the_scene_at_k_over_fps(scene_file):
 
 def test_one_program_serves_every_frame():
     """Builds (compiled or read from the disk cache) happen for the first frame only; each later
-    frame of the orbiting camera runs one kernel, the render's, taken from memory: the camera's
-    rays (which depend on the image size and the fov only) are not recomputed."""
+    frame of the orbiting camera fetches one kernel, the render's, from memory."""
     scene = pyclray.load_scene(REPO / "scenes/tp02_orbit.toml").with_size(32, 32)
     builds = lambda: device.stats["compiled"] + device.stats["from_disk"]
     counts, fetched = [], []
