@@ -102,7 +102,10 @@ class _Folder:
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
-        if self.out.exists():  # checked to hold only an earlier animate's frames: swap, then delete
+        if self.out.exists():  # holding only an earlier animate's frames (checked again): swap, then delete
+            foreign = sorted(p.name for p in self.out.iterdir() if not FRAME_NAME.fullmatch(p.name))
+            if foreign:
+                raise FileExistsError(f"{self.out} gained files animate did not write (e.g. {foreign[0]}) while it rendered")
             self.old = Path(tempfile.mkdtemp(dir=self.out.parent, prefix=f".{self.out.name}.", suffix=".old"))
             os.replace(self.out, self.old / "frames")
             os.replace(self.tmp, self.out)
@@ -160,6 +163,7 @@ class _Video:
         self.process.stdin.close()
         if self.process.wait() != 0:
             raise OSError(f"ffmpeg could not write {self.out}: {self._log()}")
+        self.log.close()
         os.chmod(self.tmp, 0o666 & ~_umask())
         os.replace(self.tmp, self.out)
 
@@ -182,7 +186,8 @@ class _Gif:
 
     def __init__(self, out: Path, aov: str, fps: float):
         self.out, self.aov = out, aov
-        # GIF delays are whole centiseconds: 25 fps and its divisors play exactly
+        # GIF delays are whole centiseconds, and viewers slow delays below 2 to 10: an fps that
+        # divides 100 up to 50 (25, 20, 10, ...) plays exactly, others at the nearest such delay
         self.duration_ms = 10 * max(2, round(100 / fps))
         handle, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp.gif")
         os.close(handle)
