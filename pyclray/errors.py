@@ -47,6 +47,21 @@ class BuildError(PyclrayError, RuntimeError):
     """The OpenCL compiler rejected a kernel; the message holds its log."""
 
 
+class OutputError(PyclrayError, OSError):
+    """An output file that cannot be written (a missing or read-only folder, a full disk, a path
+    that is a folder): names the path and the reason. Nothing was replaced: the command's old
+    files are intact and no temporary is left behind. Exit status 2 on the command line."""
+
+
+class RequestError(PyclrayError, ValueError):
+    """A call with arguments of the wrong kind (e.g. aovs with repeats, an unknown precision, a
+    scene that is neither a Scene nor a path): says which argument and what was expected."""
+
+
+class PyclrayWarning(UserWarning):
+    """Something that renders but is probably not what was meant (e.g. a scene with no shapes)."""
+
+
 def _shown(value) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."

@@ -9,9 +9,9 @@ import pyopencl as cl
 
 from . import culling
 from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for
-from .errors import DeviceError, PyclrayError
+from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
-from .scene import Scene
+from .scene import Scene, as_scene, check_renderable
 from .shapes import REGISTRY
 
 _REAL = {"fp32": np.float32, "fp64": np.float64}
@@ -40,9 +40,9 @@ def _check_request(aovs, precision: str, ctx: DeviceContext) -> tuple[str, ...]:
     aovs = tuple(aovs)
     unknown = [a for a in aovs if a not in AOVS]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
-        raise PyclrayError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {aovs!r}")
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {', '.join(map(str, aovs)) or 'none'}")
     if precision not in PRECISIONS:
-        raise PyclrayError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "fp64" and not has_fp64(ctx.device):
         raise DeviceError(
             f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
@@ -191,11 +191,15 @@ def _global_size(width: int, height: int) -> tuple[int, int]:
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
+    scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
+    SceneError (see scene.check_renderable).
     aovs: which images (a subset of depth, normal, id: only those are computed);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default).
     """
+    scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
+    check_renderable(scene, precision)
     width, height = scene.image.width, scene.image.height
     args = _render_inputs(ctx, scene, precision)
     variant = Variant("render", scene.shape_types(), aovs, precision)
@@ -233,6 +237,7 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     Raises PyclrayError for arrays of another shape, rows that are not finite, zero directions,
     and origins (or shapes) so far from the rays' mean origin that the precision overflows.
     """
+    scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     directions = _rays("directions", directions)

@@ -97,7 +97,8 @@ def test_misses_are_inf_zero_and_minus_one():
 
 
 def test_empty_scene_renders_all_misses():
-    frame = pyclray.render(pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), pyclray.Image(5, 3)))
+    with pytest.warns(pyclray.PyclrayWarning, match="no shapes: every pixel is a miss"):
+        frame = pyclray.render(pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), pyclray.Image(5, 3)))
     assert np.all(np.isposinf(frame["depth"])) and np.all(frame["id"] == -1)
 
 
