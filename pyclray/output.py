@@ -129,7 +129,7 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
         name = error.filename if current is None and getattr(error, "filename", None) else current
         if name is not None and str(name) in temporaries:  # a temporary's name means nothing to the user
             name = targets[temporaries.index(str(name))]
-        what = f"cannot write {name}" if name is not None else "cannot write the outputs"
+        what = f"cannot write {name if name is not None else ', '.join(map(str, targets))}"
         raise OutputError(f"{what}: {_reason(error)}; nothing was replaced") from None
     finally:
         for tmp in temporaries:

@@ -37,11 +37,14 @@ class Frame(dict):
 def _check_request(aovs, precision: str, ctx: DeviceContext) -> tuple[str, ...]:
     if isinstance(aovs, str):
         aovs = tuple(a.strip() for a in aovs.split(","))
-    aovs = tuple(aovs)
-    unknown = [a for a in aovs if a not in AOVS]
+    try:
+        aovs = tuple(aovs)
+    except TypeError:
+        raise RequestError(f"aovs: expected a selection of {', '.join(AOVS)}, got {type(aovs).__name__}") from None
+    unknown = [a for a in aovs if not isinstance(a, str) or a not in AOVS]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
-        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {', '.join(map(str, aovs)) or 'none'}")
-    if precision not in PRECISIONS:
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+    if not isinstance(precision, str) or precision not in PRECISIONS:
         raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "fp64" and not has_fp64(ctx.device):
         raise DeviceError(
@@ -212,7 +215,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Fra
 def _rays(name: str, value, count: int | None = None) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise PyclrayError(f"{name}: expected an (N, 3) array of numbers") from None
     if array.ndim == 1 and array.shape == (3,) and count is not None:
         array = np.broadcast_to(array, (count, 3))
@@ -253,8 +256,9 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     unit = scaled / np.linalg.norm(scaled, axis=1, keepdims=True)
     real = _REAL[precision]
     # the frame: world axes around the rays' mean origin, subtracted in float64 on the host
-    reference = origins.mean(axis=0) if count else np.zeros(3)
-    relative = origins - reference
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, not a warning
+        reference = origins.mean(axis=0) if count else np.zeros(3)
+        relative = origins - reference
     # the kernel squares distances: keep them below the square root of the largest real
     too_far = ~(np.abs(relative).max(axis=1, initial=0.0) <= np.sqrt(np.finfo(real).max) / 4)
     if too_far.any():

@@ -171,6 +171,8 @@ def _table(data: dict, key: str, *, required: bool) -> dict:
 
 def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     """A Scene from the parsed contents of a scene file (see scene-format.md)."""
+    if not isinstance(data, dict):
+        raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
         no_unknown_keys(data, ("camera", "image", "shapes"), required=())
     except SceneError as error:
@@ -223,4 +225,6 @@ def load_scene(path) -> Scene:
         raise SceneError(f"not valid TOML: {error}", file=path) from None
     except UnicodeDecodeError as error:
         raise SceneError(f"not valid UTF-8 text: {error}", file=path) from None
+    except RecursionError:
+        raise SceneError("not a scene: arrays or tables nested too deeply", file=path) from None
     return scene_from_dict(data, source=str(path))
