@@ -67,22 +67,9 @@ def _load(path: str, size=None):
 
 def _band_renderer(scene, aovs, precision, device):
     """window (x0, y0, w, h) -> the images of that part of the image (pyclray.render's window)."""
-    import inspect
-
     from .render import render
 
-    if "window" in inspect.signature(render).parameters:
-        return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
-    whole = {}  # TEMPORARY until the packet kernel's window lands: one whole render, cut in bands
-
-    def band(window):
-        x0, y0, w, h = window
-        if not whole:
-            whole["frame"] = render(scene, aovs=aovs, precision=precision, device=device)
-        frame = whole["frame"]
-        return type(frame)({k: v[y0:y0 + h, x0:x0 + w] for k, v in frame.items()}, precision=frame.precision, device=frame.device)
-
-    return band
+    return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
 
 
 def cmd_render(args) -> int:
