@@ -26,6 +26,7 @@ import struct
 import tempfile
 import threading
 import zlib
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -250,12 +251,38 @@ def _zip_chunk(raw: np.ndarray) -> bytes:
     return packed if len(packed) < raw.size else raw.tobytes()
 
 
+class Background:
+    """A writer's work, done in order on one thread of its own while the caller renders the next
+    band: at most `depth` jobs wait (so at most that many bands are held); a job's error is raised
+    in the caller by the next submit or by finish."""
+
+    def __init__(self, depth: int = 2):
+        self.pool = ThreadPoolExecutor(max_workers=1)
+        self.pending: deque = deque()
+        self.depth = depth
+
+    def submit(self, job, *args) -> None:
+        self.pending.append(self.pool.submit(job, *args))
+        while len(self.pending) > self.depth or (self.pending and self.pending[0].done()):
+            self.pending.popleft().result()
+
+    def finish(self) -> None:
+        while self.pending:
+            self.pending.popleft().result()
+
+    def stop(self) -> None:
+        """After a failure: drop the waiting jobs and wait for the running one."""
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
 class ExrWriter:
     """Writes a single-part scanline OpenEXR file (ZIP) from bands of rows, top to bottom.
 
     channels: name -> "FLOAT" or "UINT"; write(band) takes name -> (rows, width) arrays (floats of
     any width are rounded to float32; integers are stored by their 32-bit pattern), any number of
-    rows at a time; close() finishes the file (an error if rows are missing)."""
+    rows at a time, and returns at once: the chunks are compressed (on up to 4 threads) and
+    written in the background; close() waits for them and finishes the file (an error if rows are
+    missing); stop() abandons the file after a failure."""
 
     def __init__(self, file, width: int, height: int, channels: dict, comment: str | None = None):
         self.file, self.width, self.height = file, width, height
@@ -284,10 +311,10 @@ class ExrWriter:
         self.table_at = self.file.tell()
         self.offsets: list[int] = []
         self.file.write(bytes(8 * self.chunks))  # the chunk offset table, filled in by close()
-        self.pending: list[dict] = []  # rows not yet a whole chunk
-        self.pending_rows = 0
+        self.pending: dict | None = None  # rows not yet a whole chunk
         self.rows = 0
-        self.pool = ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)))
+        self.compressors = ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)))
+        self.background = Background()
 
     def _chunk(self, band: dict) -> bytes:
         """One chunk, compressed: its bytes as OpenEXR lays them out (per scanline, each
@@ -302,35 +329,42 @@ class ExrWriter:
                 raw.view("<f4")[:, c, :] = array  # rounded to float32 (an fp64 render too)
         return _zip_chunk(raw.view(np.uint8))
 
+    def _write_chunks(self, band: dict, first_row: int, rows: int) -> None:
+        starts = range(0, rows, _ZIP_LINES)
+        chunks = [{n: a[s:s + _ZIP_LINES] for n, a in band.items()} for s in starts]
+        for start, data in zip(starts, self.compressors.map(self._chunk, chunks)):
+            self.offsets.append(self.file.tell())
+            self.file.write(struct.pack("<ii", first_row + start, len(data)))
+            self.file.write(data)
+
     def write(self, band: dict) -> None:
         band = {name: band[name] for name in self.names}  # channel name -> (rows, width)
-        rows = next(iter(band.values())).shape[0]
-        if self.pending_rows:
-            self.pending.append(band)
-            band = {n: np.concatenate([p[n] for p in self.pending]) for n in self.names}
-            rows = band[self.names[0]].shape[0]
-            self.pending, self.pending_rows = [], 0
+        if self.pending is not None:  # the rows left over from the last band come first
+            band = {n: np.concatenate([self.pending[n], a]) for n, a in band.items()}
+            self.pending = None
+        rows = band[self.names[0]].shape[0]
         if self.rows + rows > self.height:
             raise ValueError(f"ExrWriter: {self.rows + rows} rows written, the image has {self.height}")
         whole = rows if self.rows + rows == self.height else rows - rows % _ZIP_LINES
-        starts = range(0, whole, _ZIP_LINES)
-        chunks = [{n: a[s:s + _ZIP_LINES] for n, a in band.items()} for s in starts]
-        for start, data in zip(starts, self.pool.map(self._chunk, chunks)):
-            self.offsets.append(self.file.tell())
-            self.file.write(struct.pack("<ii", self.rows + start, len(data)))
-            self.file.write(data)
+        if whole:
+            self.background.submit(self._write_chunks, {n: a[:whole] for n, a in band.items()}, self.rows, whole)
         self.rows += whole
         if whole < rows:
-            self.pending, self.pending_rows = [{n: a[whole:] for n, a in band.items()}], rows - whole
+            self.pending = {n: np.array(a[whole:]) for n, a in band.items()}
 
     def close(self) -> None:
-        self.pool.shutdown()
-        if self.rows != self.height or self.pending_rows:
+        self.background.finish()
+        self.stop()
+        if self.rows != self.height or self.pending is not None:
             raise ValueError(f"ExrWriter: {self.rows} of {self.height} rows written")
         end = self.file.tell()
         self.file.seek(self.table_at)
         self.file.write(struct.pack(f"<{self.chunks}Q", *self.offsets))
         self.file.seek(end)
+
+    def stop(self) -> None:
+        self.background.stop()
+        self.compressors.shutdown(wait=True, cancel_futures=True)
 
 
 def read_exr(path) -> dict:
@@ -356,30 +390,43 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
 
 class PngWriter:
     """Writes an 8-bit RGB PNG from bands of rows ((rows, width, 3) uint8), top to bottom: one
-    zlib stream over all rows, its output in IDAT chunks as it comes."""
+    zlib stream over all rows, its output in IDAT chunks as it comes. write() returns at once: the
+    compression runs in the background (see Background); close() waits for it and ends the file;
+    stop() abandons it after a failure."""
 
     def __init__(self, file, width: int, height: int):
         self.file, self.width, self.height, self.rows = file, width, height, 0
         self.zip = zlib.compressobj(6)
+        self.background = Background()
         header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
         self.file.write(b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", header))
 
     def write(self, rgb: np.ndarray) -> None:
+        self.rows += rgb.shape[0]
+        if self.rows > self.height:
+            raise ValueError(f"PngWriter: {self.rows} rows written, the image has {self.height}")
+        self.background.submit(self._compress, rgb)
+
+    def _compress(self, rgb: np.ndarray) -> None:
         rows = rgb.shape[0]
         lines = np.zeros((rows, 1 + 3 * self.width), np.uint8)  # filter type 0 (none) per row
         lines[:, 1:] = np.asarray(rgb, np.uint8).reshape(rows, 3 * self.width)
-        self.rows += rows
-        self._emit(self.zip.compress(lines.tobytes()))
+        self._emit(self.zip.compress(lines))
 
     def _emit(self, data: bytes) -> None:
         if data:
             self.file.write(_png_chunk(b"IDAT", data))
 
     def close(self) -> None:
+        self.background.finish()
+        self.stop()
         if self.rows != self.height:
             raise ValueError(f"PngWriter: {self.rows} of {self.height} rows written")
         self._emit(self.zip.flush())
         self.file.write(_png_chunk(b"IEND", b""))
+
+    def stop(self) -> None:
+        self.background.stop()
 
 
 def _png_bytes(rgb: np.ndarray) -> bytes:
@@ -435,8 +482,10 @@ class NormalPreview:
         pass
 
     def rgb(self, normal) -> np.ndarray:
-        normal = np.asarray(normal, np.float64)
-        rgb = np.round(np.clip(normal * 0.5 + 0.5, 0, 1) * 255).astype(np.uint8)
+        normal = np.asarray(normal)
+        level = normal.astype(np.float32) * np.float32(127.5) + np.float32(127.5)  # (n * 0.5 + 0.5) * 255
+        np.minimum(np.maximum(level, 0, out=level), 255, out=level)  # a unit normal is within; rounding may not be
+        rgb = np.rint(level, out=level).astype(np.uint8)
         rgb[~np.any(normal != 0, axis=-1)] = 0
         return rgb
 
@@ -490,8 +539,10 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
     channels = {name: kind for name, (_, kind) in exr_channel_arrays(empty_images(aovs)).items()}
     with replace_together(targets) as temporaries, ExitStack() as files:
         exr = ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment)
-        files.callback(exr.pool.shutdown)
+        files.callback(exr.stop)  # after a failure: no background job writes on (closes run last first)
         writers = {name: PngWriter(files.enter_context(open(tmp, "wb")), width, height) for name, tmp in zip(pngs, temporaries[1:])}
+        for writer in writers.values():
+            files.callback(writer.stop)
         makers = {name: PREVIEWS[name]() for name in pngs}
         # a preview that needs the whole image's scale keeps its AOV in an unnamed file meanwhile
         spills = {name: files.enter_context(tempfile.TemporaryFile(dir=Path(out).parent))

@@ -270,3 +270,53 @@ def test_the_readme_command_block_lists_every_command():
     listed = {line.split()[1] for line in block.strip().splitlines() if line.startswith("pyclray ")}
     commands = next(a for a in build_parser()._actions if isinstance(a, __import__("argparse")._SubParsersAction))
     assert listed == set(commands.choices) | {"--version"}, listed
+
+
+def test_a_render_in_many_bands_is_the_whole_render(tmp_path, monkeypatch, capsys):
+    """Defect 4: pyclray render renders and writes bands of rows (bounded memory); cut into bands
+    of 16 rows here (4 Mpx in real use), the EXR holds exactly the whole image's pixels and the
+    previews are those of the whole image."""
+    from pyclray import cli as cli_module, output
+
+    from test_output import read_png
+
+    monkeypatch.setattr(output, "band_rows", lambda width: 16)
+    out = tmp_path / "b.exr"
+    assert cli_module.main(["render", str(REPO / "scenes/tp02.toml"), "-o", str(out), "--png", "--size", "40x70"]) == 0
+    whole = pyclray.render(pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(40, 70))
+    images = read_exr(out)
+    for name in ("depth", "normal", "id"):
+        assert np.array_equal(images[name], whole[name]), name
+    assert np.array_equal(read_png(tmp_path / "b.depth.png"), output.depth_preview(whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "b.normal.png"), output.normal_preview(whole["normal"]))
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_a_progress_bar_on_a_terminal_only(tmp_path):
+    """Progress: on a terminal (stderr a pty) a tqdm bar counts the rows (shown from the start
+    here: the delay of 1 s is set to 0); the stdout's last line is the same as without one."""
+    patch = "import pyclray.progress as p\np.DELAY = 0\nimport pyclray.output as o\no.band_rows = lambda width: 16\n"
+    import fcntl
+    import struct
+    import termios
+
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 columns wide
+    process = subprocess.Popen([sys.executable, "-c", WRAPPER.format(patch=patch), "render", str(REPO / "scenes/tp02.toml"),
+                                "-o", str(tmp_path / "o.exr"), "--size", "64x64"],
+                               stdout=subprocess.PIPE, stderr=slave, env=dict(os.environ))
+    os.close(slave)
+    drawn = b""
+    while True:
+        try:
+            data = os.read(master, 4096)
+        except OSError:  # EIO: the other end is closed
+            break
+        if not data:
+            break
+        drawn += data
+    os.close(master)
+    stdout = process.stdout.read().decode()
+    assert process.wait() == 0
+    assert b"pyclray render" in drawn and b"/64 [" in drawn and b"row" in drawn, drawn
+    assert stdout.strip().splitlines()[-1].startswith("rendered ")
