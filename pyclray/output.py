@@ -555,7 +555,7 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
                 if name in spills:
                     array = np.ascontiguousarray(band[name], dtype=np.float32)  # as the EXR stores it
                     layouts[name] = array.shape[1:]
-                    array.tofile(spills[name])
+                    spills[name].write(array.data)  # (numpy's tofile reports a full disk as a short write)
                 else:
                     writers[name].write(maker.rgb(band[name]))
         exr.close()
