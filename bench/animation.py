@@ -42,12 +42,13 @@ def main(argv=None) -> None:
         def run():
             with tempfile.TemporaryDirectory() as folder:
                 out = Path(folder) / f"x{suffix}"
+                tmp = str(out) + ".tmp"
                 if suffix == ".mp4":
-                    sink = animate._Video(out, "depth", scene.animation.fps, args.size, args.size)
+                    sink = animate._Video(tmp, out, "depth", scene.animation.fps, args.size, args.size)
                 elif suffix == ".gif":
-                    sink = animate._Gif(out, "depth", scene.animation.fps)
+                    sink = animate._Gif(tmp, "depth", scene.animation.fps)
                 else:
-                    sink = animate._Folder(out, ("depth",), 5, "bench")
+                    sink = animate._Folder(out, 5, "bench")
                 for k, frame in enumerate(frames):
                     sink.write(k, frame)
                 sink.finish()
