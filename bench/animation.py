@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import resource
 import statistics
 import tempfile
 import time
@@ -41,12 +42,13 @@ def main(argv=None) -> None:
         def run():
             with tempfile.TemporaryDirectory() as folder:
                 out = Path(folder) / f"x{suffix}"
+                tmp = str(out) + ".tmp"
                 if suffix == ".mp4":
-                    sink = animate._Video(out, "depth", scene.animation.fps, args.size, args.size)
+                    sink = animate._Video(tmp, out, "depth", scene.animation.fps, args.size, args.size)
                 elif suffix == ".gif":
-                    sink = animate._Gif(out, "depth", scene.animation.fps)
+                    sink = animate._Gif(tmp, "depth", scene.animation.fps)
                 else:
-                    sink = animate._Folder(out, ("depth",), 5, "bench")
+                    sink = animate._Folder(out, 5, "bench")
                 for k, frame in enumerate(frames):
                     sink.write(k, frame)
                 sink.finish()
@@ -72,20 +74,30 @@ def main(argv=None) -> None:
         "animate -o folder/ (depth)": end_to_end("/"),
     }
     seconds = {name: [] for name in cases}
+    cpu = {name: [] for name in cases}  # CPU seconds of this process and of ffmpeg: less swayed by other load
     for _ in range(args.rounds):
         for name, case in cases.items():
             time.sleep(0.3)  # settle between systems
+            cpu_start = _cpu()
             start = time.perf_counter()
             case()
             seconds[name].append(time.perf_counter() - start)
+            cpu[name].append(_cpu() - cpu_start)
     base = statistics.median(seconds["render only (depth)"])
     print(f"{Path(args.scene).name} at {args.size}x{args.size}: {count} frames, median of {args.rounds} rounds")
     for name, values in seconds.items():
         median = statistics.median(values)
-        print(f"  {name:32s} {count / median:7.1f} frames/s  ({median:6.2f} s, {base / median:4.2f} x render only)")
+        print(f"  {name:32s} {count / median:7.1f} frames/s  ({median:6.2f} s, {base / median:4.2f} x render only), "
+              f"CPU {statistics.median(cpu[name]) / count * 1e3:5.2f} ms a frame")
     for name, case in cases.items():
         if hasattr(case, "line"):
             print(f"  last {name}: {case.line}")
+
+
+def _cpu() -> float:
+    """User and system seconds of this process (all its threads) and of its waited-for children (ffmpeg)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 if __name__ == "__main__":

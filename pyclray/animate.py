@@ -16,10 +16,10 @@ import queue
 import re
 import shutil
 import subprocess
-import sys
 import tempfile
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,9 +34,11 @@ DEFAULT_AOV = "depth"
 VIDEO_SUFFIXES = (".mp4", ".gif")
 FRAME_NAME = re.compile(r"frame_\d+(\.[a-z]+)?\.(exr|png)")  # what an animate folder holds
 VIDEO_CRF = 18  # H.264 constant rate factor: 18 is visually lossless for these flat previews
-# x264's veryfast preset: about twice medium's speed here (132 against 72 frames/s at 512x512 on
-# one shared core), and no larger a file for these smooth previews (136 kB against 146 kB)
-VIDEO_PRESET = "veryfast"
+# x264's ultrafast preset: with the packet kernel a 512x512 frame renders in about 1.4 ms, and
+# ultrafast encodes one in about 2.7 ms where veryfast takes 4.7 ms and medium 14 ms (one shared
+# core); its files are larger (3.2 kB a frame for tp02_orbit against 1.4 kB) but still small,
+# since the previews of a ray caster are smooth and noiseless
+VIDEO_PRESET = "ultrafast"
 QUEUE_FRAMES = 4  # frames rendered ahead of the writer: enough to keep it busy, little memory
 
 
@@ -74,37 +76,43 @@ def frame_range(text: str, count: int) -> range:
     return range(start, stop)
 
 
-def _preview(aov: str):
-    """The preview of an AOV (an (H, W, 3) uint8 image), by the convention output.<aov>_preview."""
+def _has_preview(aov: str) -> bool:
     from . import output
 
-    return getattr(output, f"{aov}_preview", None)
+    return aov in output.PREVIEWS
+
+
+def _preview(aov: str, image) -> np.ndarray:
+    """The (H, W, 3) uint8 preview of one AOV's whole image, as `pyclray render --png` makes it."""
+    from . import output
+
+    maker = output.PREVIEWS[aov]()
+    maker.measure(image)
+    return np.ascontiguousarray(maker.rgb(image))
 
 
 # -- sinks: where frames go --------------------------------------------------------------------
 # A sink writes a frame with write(k, frame). Its encoder() is a picklable function of a Frame alone
-# (the compression and previews, most of a frame's writing time), and store(k, encoder()(frame)) does
-# what write(k, frame) does: a cluster's workers encode (pyclray/cluster.py), the client stores.
+# (the compression and the previews, most of a frame's writing time), and store(k, encoder()(frame))
+# does what write(k, frame) does: a cluster's workers encode (pyclray/cluster.py), the client stores.
 @dataclass(frozen=True)
 class _FrameFiles:
-    """A frame's files in an animate folder: FRAME.exr (every AOV asked) and FRAME.AOV.png (a preview
-    of each AOV that has one). Called on a Frame: [(suffix, bytes)] of those files, written by the same
-    writers into a scratch folder and read back, so that the stored files are the same bytes."""
+    """A frame's files in an animate folder: FRAME.exr (every AOV asked) and its previews FRAME.AOV.png,
+    as `pyclray render --png` writes them. Called on a Frame: [(suffix, bytes)] of those files,
+    written by the same writer into a scratch folder and read back: the stored files are the same bytes."""
 
-    aovs: tuple[str, ...]
     comment: str
 
-    def write(self, stem: str, frame):
+    def write(self, exr: Path, frame):
         from . import output
 
-        output.write_exr(f"{stem}.exr", frame, comment=self.comment)
-        for aov in self.aovs:
-            if _preview(aov) is not None:
-                output.write_png(f"{stem}.{aov}.png", _preview(aov)(frame[aov]))
+        height, width = next(iter(frame.values())).shape[:2]
+        output.write_images(exr, output.frame_bands(frame), width=width, height=height, aovs=tuple(frame),
+                            previews=True, comment=self.comment)
 
     def __call__(self, frame) -> list[tuple[str, bytes]]:
         with tempfile.TemporaryDirectory(prefix="pyclray-frame-") as scratch:
-            self.write(os.path.join(scratch, "frame"), frame)
+            self.write(Path(scratch, "frame.exr"), frame)
             return [(name[len("frame"):], Path(scratch, name).read_bytes()) for name in sorted(os.listdir(scratch))]
 
 
@@ -112,27 +120,31 @@ class _Folder:
     """Per-frame EXR (every AOV asked) and a PNG preview of each AOV that has one, in a temporary
     folder beside OUTDIR that replaces OUTDIR at the end."""
 
-    def __init__(self, out: Path, aovs, digits: int, comment: str):
-        self.out, self.aovs, self.digits, self.comment = out, aovs, digits, comment
+    def __init__(self, out: Path, digits: int, comment: str):
+        self.out, self.digits, self.comment = out, digits, comment
         self.tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
 
     def _stem(self, k) -> str:
         return str(self.tmp / f"frame_{k:0{self.digits}d}")
 
     def encoder(self):
-        return _FrameFiles(tuple(self.aovs), self.comment)
+        return _FrameFiles(self.comment)
 
     def write(self, k, frame):
-        self.encoder().write(self._stem(k), frame)
+        # frame_K.exr and its previews frame_K.AOV.png, as `pyclray render --png` writes them
+        self.encoder().write(Path(self._stem(k) + ".exr"), frame)
 
     def store(self, k, files):
         for suffix, data in files:
-            with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writers'
+            with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writer's
                 file.write(data)
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
-        if self.out.exists():  # checked to hold only an earlier animate's frames: swap, then delete
+        if self.out.exists():  # holding only an earlier animate's frames (checked again): swap, then delete
+            foreign = sorted(p.name for p in self.out.iterdir() if not FRAME_NAME.fullmatch(p.name))
+            if foreign:
+                raise FileExistsError(f"{self.out} gained files animate did not write (e.g. {foreign[0]}) while it rendered")
             self.old = Path(tempfile.mkdtemp(dir=self.out.parent, prefix=f".{self.out.name}.", suffix=".old"))
             os.replace(self.out, self.old / "frames")
             os.replace(self.tmp, self.out)
@@ -150,30 +162,24 @@ class _Folder:
 
 
 class _Video:
-    """An H.264 .mp4 through the ffmpeg that imageio-ffmpeg ships, fed raw RGB frames on a pipe."""
+    """An H.264 .mp4 through the ffmpeg that imageio-ffmpeg ships, fed raw RGB frames on a pipe,
+    written at ``tmp`` (a temporary beside the output, renamed by output.replace_together)."""
 
-    def __init__(self, out: Path, aov: str, fps: float, width: int, height: int):
+    def __init__(self, tmp: str, out: Path, aov: str, fps: float, width: int, height: int):
         import imageio_ffmpeg
 
         self.out, self.aov = out, aov
-        handle, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp.mp4")
-        os.close(handle)
-        self.tmp = Path(tmp)
         self.log = tempfile.TemporaryFile()
         command = [
             imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error",
             "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", repr(fps), "-i", "-",
             "-an", "-c:v", "libx264", "-preset", VIDEO_PRESET, "-crf", str(VIDEO_CRF), "-pix_fmt", "yuv420p",
             # 4:2:0 needs even sides: an odd width or height gains one black column or row
-            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-movflags", "+faststart", str(self.tmp),
+            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-movflags", "+faststart", "-f", "mp4", str(tmp),
         ]
-        # its own session: Ctrl-C reaches pyclray only, which then stops ffmpeg and removes the file
-        try:
-            self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                            stderr=self.log, start_new_session=True)
-        except BaseException:
-            self.tmp.unlink(missing_ok=True)
-            raise
+        # its own session: Ctrl-C reaches pyclray only, which then stops ffmpeg
+        self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                        stderr=self.log, start_new_session=True)
 
     def encoder(self):
         return _PreviewOf(self.aov)
@@ -185,7 +191,7 @@ class _Video:
         try:
             self.process.stdin.write(rgb.data)
         except BrokenPipeError:
-            raise OSError(f"ffmpeg stopped while encoding {self.out}: {self._log()}") from None
+            raise OSError(f"ffmpeg stopped: {self._log()}") from None
 
     def _log(self) -> str:
         self.log.seek(0)
@@ -195,9 +201,8 @@ class _Video:
     def finish(self):
         self.process.stdin.close()
         if self.process.wait() != 0:
-            raise OSError(f"ffmpeg could not write {self.out}: {self._log()}")
-        os.chmod(self.tmp, 0o666 & ~_umask())
-        os.replace(self.tmp, self.out)
+            raise OSError(f"ffmpeg failed: {self._log()}")
+        self.log.close()
 
     def abort(self):
         if self.process.poll() is None:
@@ -208,21 +213,19 @@ class _Video:
                 stream.close()
             except OSError:
                 pass
-        self.tmp.unlink(missing_ok=True)
 
 
 class _Gif:
-    """A looping GIF through Pillow: each frame is turned into a palette image as it arrives (grey
-    previews exactly; colour ones by Pillow's fast octree, 9 ms a frame at 512x512 and a mean
-    error of about one level, where median cut takes 280 ms and errs more); all are saved at the end."""
+    """A looping GIF through Pillow, written at ``tmp`` (renamed by output.replace_together): each
+    frame is turned into a palette image as it arrives (grey previews exactly; colour ones by
+    Pillow's fast octree, 9 ms a frame at 512x512 and a mean error of about one level, where
+    median cut takes 280 ms and errs more); all are saved at the end."""
 
-    def __init__(self, out: Path, aov: str, fps: float):
-        self.out, self.aov = out, aov
-        # GIF delays are whole centiseconds: 25 fps and its divisors play exactly
+    def __init__(self, tmp: str, aov: str, fps: float):
+        self.tmp, self.aov = tmp, aov
+        # GIF delays are whole centiseconds, and viewers slow delays below 2 to 10: an fps that
+        # divides 100 up to 50 (25, 20, 10, ...) plays exactly, others at the nearest such delay
         self.duration_ms = 10 * max(2, round(100 / fps))
-        handle, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp.gif")
-        os.close(handle)
-        self.tmp = Path(tmp)
         self.images = []
 
     def encoder(self):
@@ -237,12 +240,9 @@ class _Gif:
     def finish(self):
         first, *rest = self.images
         first.save(self.tmp, format="GIF", save_all=True, append_images=rest, duration=self.duration_ms, loop=0)
-        os.chmod(self.tmp, 0o666 & ~_umask())
-        os.replace(self.tmp, self.out)
 
     def abort(self):
         self.images.clear()
-        self.tmp.unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)
@@ -252,7 +252,7 @@ class _PreviewOf:
     aov: str
 
     def __call__(self, frame) -> np.ndarray:
-        return np.ascontiguousarray(_preview(self.aov)(frame[self.aov]))
+        return _preview(self.aov, frame[self.aov])
 
 
 @dataclass(frozen=True)
@@ -264,7 +264,7 @@ class _PaletteImageOf:
     def __call__(self, frame):
         from PIL import Image
 
-        rgb = _PreviewOf(self.aov)(frame)
+        rgb = _preview(self.aov, frame[self.aov])
         if (rgb == rgb[..., :1]).all():
             return Image.fromarray(rgb[..., 0], mode="L")  # grey: 256 levels, exact
         return Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE)
@@ -324,30 +324,29 @@ class _Writer(threading.Thread):
 
 # -- the command -------------------------------------------------------------------------------
 def _output_kind(out: Path, text: str) -> str:
+    """"mp4", "gif" or "folder" from -o; raises (exit status 2) for another suffix and for an
+    output that cannot be one (a missing folder; a file where a folder is meant, or the reverse;
+    a folder holding other files, which replacing it would delete)."""
+    from . import output
     from .cli import BadInput
+    from .errors import OutputError
 
     suffix = out.suffix.lower()
     if suffix in VIDEO_SUFFIXES:
-        kind = suffix[1:]
-    elif text.endswith(("/", os.sep)) or out.is_dir() or not suffix:
-        kind = "folder"
-    else:
+        output.check_target(out)
+        return suffix[1:]
+    if not (text.endswith(("/", os.sep)) or out.is_dir() or not suffix):
         raise BadInput(f"-o {text}: expected OUT.mp4, OUT.gif or a folder OUTDIR/")
-    folder = out.parent
-    if not folder.is_dir():
-        raise BadInput(f"-o {text}: the folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise BadInput(f"-o {text}: the folder {folder} is not writable")
-    if kind != "folder" and out.is_dir():
-        raise BadInput(f"-o {text}: is a folder")
-    if kind == "folder" and out.exists():
-        if not out.is_dir():
-            raise BadInput(f"-o {text}: expected a folder, and {out} is a file")
+    if not out.parent.is_dir():
+        raise OutputError(f"cannot write {out}: the folder {out.parent} does not exist; nothing was replaced")
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"cannot write the folder {out}: it is a file; nothing was replaced")
+    if out.exists():
         foreign = sorted(p.name for p in out.iterdir() if not FRAME_NAME.fullmatch(p.name))
         if foreign:
-            raise BadInput(f"-o {text}: the folder exists and holds files animate did not write (e.g. {foreign[0]}); "
-                           "give a new or empty folder")
-    return kind
+            raise OutputError(f"cannot replace the folder {out}: it holds files animate did not write (e.g. "
+                              f"{foreign[0]}); give a new or empty folder; nothing was replaced")
+    return "folder"
 
 
 def add_command(subparsers) -> None:
@@ -413,99 +412,98 @@ def run(args) -> int:
         aovs = args.aov or AOVS
     else:
         aovs = args.aov or (DEFAULT_AOV,)
-        if len(aovs) != 1 or _preview(aovs[0]) is None:
-            with_preview = [a for a in AOVS if _preview(a) is not None]
+        if len(aovs) != 1 or not _has_preview(aovs[0]):
+            with_preview = [a for a in AOVS if _has_preview(a)]
             raise BadInput(f"--aov: a {kind} shows one image with a preview ({', '.join(with_preview)}), got {','.join(aovs)}")
-    if kind == "mp4":
-        try:
+    try:
+        if kind == "mp4":
             import imageio_ffmpeg  # noqa: F401
-        except ModuleNotFoundError:
-            raise BadInput("writing .mp4 needs imageio-ffmpeg: pip install 'pyclray[video]'") from None
-    if kind == "gif":
-        try:
+        if kind == "gif":
             import PIL  # noqa: F401
-        except ModuleNotFoundError:
-            raise BadInput("writing .gif needs Pillow: pip install 'pyclray[video]'") from None
+    except ModuleNotFoundError as error:
+        raise BadInput(f"writing .{kind} needs {error.name}: pip install 'pyclray[video]'") from None
 
-    def sink():
+    def sink(tmp):
         if kind == "folder":
             digits = max(5, len(str(animation.frame_count() - 1)))
-            return _Folder(out, aovs, digits, comment=f"pyclray animate of {args.scene}")
+            return _Folder(out, digits, comment=f"pyclray animate of {args.scene}")
         if kind == "mp4":
-            return _Video(out, aovs[0], animation.fps, scene.image.width, scene.image.height)
-        return _Gif(out, aovs[0], animation.fps)
+            return _Video(tmp, out, aovs[0], animation.fps, scene.image.width, scene.image.height)
+        return _Gif(tmp, aovs[0], animation.fps)
 
-    return _animate(args, scene, frames, aovs, sink, out)
-
-
-def _progress(total: int):
-    """A tqdm bar on a terminal, nothing otherwise."""
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="frame", disable=not sys.stderr.isatty(), leave=False)
+    return _animate(args, scene, frames, aovs, sink, out, kind)
 
 
-def _animate(args, scene, frames, aovs, make_sink, out) -> int:
-    """Render the frames in this thread and write them in a writer thread; on any error or Ctrl-C
-    stop both and remove the temporary output, so that nothing partial is left."""
+def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
+    """Render the frames in this thread and write them in a writer thread. A video or GIF is
+    written at a temporary beside it that output.replace_together renames at the end; a folder
+    manages its own temporary folder (_Folder). On any error or Ctrl-C both threads stop and the
+    temporaries go: nothing partial is left, and an earlier output stays as it was."""
+    from . import output
     from .cli import BadInput
+    from .errors import OutputError
+    from .progress import progress, seconds
 
     on_cluster = args.workers is not None or args.scheduler is not None
     cluster = cluster_module() if on_cluster else None
     sink = writer = None
     render_time = start_time = 0.0
     start = time.perf_counter()
-    try:
-        sink = make_sink()
-        writer = _Writer(sink, encoded=on_cluster)
-        writer.start()
-        with _progress(len(frames)) as bar:
-            if on_cluster:
-                # the workers render and encode each frame (sink.encoder()); this thread hands the
-                # encoded frames over in order and the writer stores them
-                with cluster.connect(args.workers, args.scheduler) as client:
-                    start_time = time.perf_counter() - start
-                    where = cluster.describe(client)
-                    before = time.perf_counter()
-                    sequence = cluster.render_animation(client, scene, aovs, args.precision, args.device, frames,
-                                                        encode=sink.encoder(), progress=bar)
-                    for k, (_, encoded) in zip(frames, sequence):
-                        writer.put(k, encoded)
-                    render_time = time.perf_counter() - before
-            else:
-                sequence = render_animation(scene, aovs, args.precision, args.device, frames)
-                for k in frames:
-                    before = time.perf_counter()
-                    _, frame = next(sequence)
-                    render_time += time.perf_counter() - before
-                    writer.put(k, frame)
-                    bar.update()
-            writer.close()
-            finish_start = time.perf_counter()
-            sink.finish()
-    except BaseException as error:
-        if writer is not None:
-            writer.stop()
-        if sink is not None:
-            sink.abort()
-        if isinstance(error, OSError) and not isinstance(error, InterruptedError):
-            raise BadInput(f"-o {args.output}: cannot write: {error.strerror or error}") from None
-        if on_cluster and isinstance(error, cluster.ClusterError):
-            raise BadInput(str(error)) from None
-        raise
-    finish_time = time.perf_counter() - finish_start
+    with ExitStack() as files:
+        tmp = None if kind == "folder" else files.enter_context(output.replace_together([out]))[0]
+        try:
+            sink = make_sink(tmp)
+            writer = _Writer(sink, encoded=on_cluster)
+            writer.start()
+            with progress(len(frames), desc="pyclray animate", unit="frame") as bar:
+                if on_cluster:
+                    # the workers render and encode each frame (sink.encoder()); this thread hands
+                    # the encoded frames over in order and the writer stores them
+                    with cluster.connect(args.workers, args.scheduler) as client:
+                        start_time = time.perf_counter() - start
+                        where = cluster.describe(client)
+                        before = time.perf_counter()
+                        sequence = cluster.render_animation(client, scene, aovs, args.precision, args.device, frames,
+                                                            encode=sink.encoder(), progress=bar)
+                        for k, (_, encoded) in zip(frames, sequence):
+                            writer.put(k, encoded)
+                        render_time = time.perf_counter() - before
+                else:
+                    sequence = render_animation(scene, aovs, args.precision, args.device, frames)
+                    for k in frames:
+                        before = time.perf_counter()
+                        _, frame = next(sequence)
+                        render_time += time.perf_counter() - before
+                        writer.put(k, frame)
+                        bar.update()
+                writer.close()
+                finish_start = time.perf_counter()
+                sink.finish()
+        except BaseException as error:
+            if writer is not None:
+                writer.stop()
+            if sink is not None:
+                sink.abort()
+            if kind == "folder" and isinstance(error, OSError) and not isinstance(error, (OutputError, InterruptedError)):
+                raise OutputError(f"cannot write {out}: {output._reason(error)}; nothing was replaced") from None
+            if on_cluster and isinstance(error, cluster.ClusterError):
+                raise BadInput(str(error)) from None
+            raise
+    finish_time = time.perf_counter() - finish_start  # with the rename of a video or GIF
     total = time.perf_counter() - start
-    encode = writer.busy + finish_time
-    count = f"{len(frames)} frame{'s' if len(frames) != 1 else ''} ({frames.start}:{frames.stop})"
-    rate = f"{len(frames) / render_time:.1f} frames/s"
+    count = len(frames)
+    rate = f"{count / render_time:.1f} frames/s"
     if on_cluster:
-        work = (f"cluster start {start_time:.2f} s ({where}), render and encode on the workers {render_time:.2f} s "
-                f"({rate}), write {encode:.2f} s ({writer.busy:.2f} s alongside, {finish_time:.2f} s at the end)")
+        work = (f"cluster start {seconds(start_time)} ({where}), render and encode on the workers "
+                f"{seconds(render_time)} ({rate}), write {seconds(writer.busy + finish_time)} "
+                f"({seconds(writer.busy)} alongside, {seconds(finish_time)} at the end)")
     else:
-        work = (f"render {render_time:.2f} s ({rate}), {'write' if isinstance(sink, _Folder) else 'encode'} "
-                f"{encode:.2f} s ({writer.busy:.2f} s alongside the renders, {finish_time:.2f} s at the end)")
+        work = (f"render {seconds(render_time)} ({rate}), {'write' if kind == 'folder' else 'encode'} "
+                f"{seconds(writer.busy + finish_time)} ({seconds(writer.busy)} alongside the renders, "
+                f"{seconds(finish_time)} at the end)")
     print(
-        f"animated {args.scene}: {count} of {scene.image.width}x{scene.image.height} {','.join(aovs)} in "
-        f"{total:.2f} s ({len(frames) / total:.1f} frames/s): {work}; wrote {out}"
+        f"animated {args.scene}: {count} frame{'s' if count != 1 else ''} ({frames.start}:{frames.stop}) of "
+        f"{scene.image.width}x{scene.image.height} {','.join(aovs)} in {seconds(total)} ({count / total:.1f} frames/s): "
+        f"{work}; wrote {out}"
     )
     return 0

@@ -1,5 +1,5 @@
 """Scale-out on Dask distributed: the frames of an animation, many views of a scene (a data set), or
-the tiles of one large image, rendered by the workers of a cluster: a LocalCluster of N worker
+the bands of one large image, rendered by the workers of a cluster: a LocalCluster of N worker
 processes, or a running cluster reached by its scheduler's address. Needs the `cluster` extra
 (pip install 'pyclray[cluster]'); nothing else in pyclray imports distributed.
 
@@ -10,12 +10,13 @@ opens the worker's OpenCL context and builds the program (a one-pixel render) be
 the worker process then keeps them (pyclray.device's caches) and the packed inputs of the scenes it
 renders (pyclray.render's), so a task carries only what changes: a frame's index, a camera, a window.
 
-Results come back to the client in task order, whatever order the workers finish in: a result is
-fetched (and released on its worker) once every earlier one has been handed over, so the client holds
-only the results that arrived ahead of their turn. An error raised on a worker is raised again in
-the client, the same exception with the same one-line message. A worker that dies (a crash, a killed
-process, a lost machine) loses its tasks and the results it held; the scheduler runs them again on
-the others (up to distributed.scheduler.allowed-failures times per task).
+Results come back to the client as tasks complete and are handed over in task order, whatever order
+the workers finish in; a few tasks per worker thread are in flight, and the next is submitted as one
+is handed over, so a slow consumer (a writer) holds the cluster back instead of piling results up.
+An error raised on a worker is raised again in the client, the same exception with the same
+one-line message. A worker that dies (a crash, a killed process, a lost machine) loses its tasks;
+the scheduler runs them again on the others (up to distributed.scheduler.allowed-failures times
+per task).
 """
 from __future__ import annotations
 
@@ -37,7 +38,12 @@ from .scene import Camera, Scene
 # Seconds to wait for a scheduler to answer, and for a running cluster to have a worker.
 CONNECT_TIMEOUT_S = 10
 WORKERS_TIMEOUT_S = 60
-TILE_SIDE = 512  # pixels per side of a tile of `pyclray render --workers` (a multiple of culling.TILE)
+# Pixels a band task of `pyclray render --workers` renders: 512x512 worth (5 MB of images at most),
+# enough work to make a task's overhead (milliseconds) small, small enough to spread an image
+TASK_PIXELS = 1 << 18
+# Tasks in flight for each worker thread: one running, one waiting there, one on its way back; more
+# are submitted as results are handed over, so memory stays bounded whatever the length of the run
+AHEAD_PER_THREAD = 3
 
 
 class ClusterError(PyclrayError, ValueError):
@@ -120,7 +126,7 @@ class Job(WorkerPlugin):
 
     def warm(self):
         """The OpenCL context and the program, made before the first task (a one-pixel render of the
-        scene: the frames, views and tiles of a job all use its program); raises what a task would."""
+        scene: the frames, views and bands of a job all use its program); raises what a task would."""
         self._render(self.scene, (0, 0, 1, 1))
 
     def teardown(self, worker=None):
@@ -142,7 +148,7 @@ class Job(WorkerPlugin):
         scene = view if isinstance(view, Scene) else dataclasses.replace(self.scene, camera=view)
         return self._out(self._render(scene))
 
-    def tile(self, window):
+    def window(self, window):
         """The window (x0, y0, width, height) of the scene's image: its pixels in the whole image."""
         return self._out(self._render(self.scene, window))
 
@@ -155,37 +161,45 @@ def _task(job: str, method: str, argument):
 def run(client: Client, job: Job, method: str, arguments, progress=None, what: str = "task"):
     """Yield (i, result of job.<method>(arguments[i])) for every argument, in order, from the
     cluster's workers. progress: something with update(n) (a tqdm bar), advanced as tasks complete.
-    On an error, or when the caller stops early, the remaining tasks are cancelled; the job is
+    On an error, or when the caller stops early, the tasks in flight are cancelled; the job is
     removed from the workers at the end."""
     arguments = list(arguments)
-    futures = []
+    futures = {}
     try:
         client.register_plugin(job, name=job.name)  # raises here what the job's setup raised on a worker
-        futures = [
-            client.submit(_task, job.name, method, argument, key=f"{job.name}-{method}-{i}", pure=False)
-            for i, argument in enumerate(arguments)
-        ]
-        index = {future.key: i for i, future in enumerate(futures)}
+        threads = sum(w["nthreads"] for w in client.scheduler_info(n_workers=-1)["workers"].values())
+        ahead = AHEAD_PER_THREAD * max(threads, 1)
+        # each result is fetched as its task completes (concurrently, in the client's event loop) and
+        # handed over once every earlier one has been; a new task is submitted for each one handed
+        # over, so the client holds at most `ahead` results (back-pressure from a slow consumer)
+        completed = as_completed(loop=client.loop, with_results=True, raise_errors=False)
+        index = {}
+
+        def submit(i):
+            if i < len(arguments):
+                future = client.submit(_task, job.name, method, arguments[i], key=f"{job.name}-{method}-{i}", pure=False)
+                futures[i], index[future.key] = future, i
+                completed.add(future)
+
+        for i in range(ahead):
+            submit(i)
         arrived, next_i = {}, 0
-        # each result is fetched as its task completes (concurrently, in the client's event loop), and
-        # handed over once every earlier one has been: the client holds only the results that arrived
-        # ahead of their turn (few: the scheduler starts tasks in the order they were submitted)
-        for future, result in as_completed(futures, loop=client.loop, with_results=True, raise_errors=False):
-            i = index[future.key]
+        for future, result in completed:
+            i = index.pop(future.key)
             if future.status != "finished":
                 _raise(future, f"{what} {arguments[i]!r}")
+            del futures[i]
             future.release()  # the worker may drop its copy
-            futures[i] = None
             if progress is not None:
                 progress.update(1)
             arrived[i] = result
             while next_i in arrived:
                 yield next_i, arrived.pop(next_i)
+                submit(next_i + ahead)
                 next_i += 1
     finally:
-        remaining = [f for f in futures if f is not None]
-        if remaining and client.status == "running":
-            client.cancel(remaining)
+        if futures and client.status == "running":
+            client.cancel(list(futures.values()))
         if client.status == "running":
             with suppress(ValueError):  # not registered: the scheduler had refused it
                 client.unregister_worker_plugin(job.name)
@@ -229,34 +243,38 @@ def render_views(client: Client, scene: Scene, views, aovs=AOVS, precision: str 
     yield from run(client, Job(scene, aovs, precision, device, encode), "view", views, progress, what="view")
 
 
-def tiles(width: int, height: int, side: int = TILE_SIDE) -> list[tuple[int, int, int, int]]:
-    """Windows (x0, y0, w, h) of at most side x side pixels covering the image, row by row."""
-    if side < 1:
-        raise PyclrayError(f"tile: expected a side >= 1 pixel, got {side}")
-    return [(x, y, min(side, width - x), min(side, height - y))
-            for y in range(0, height, side) for x in range(0, width, side)]
+def band_rows(width: int, height: int) -> int:
+    """Rows of a band task: about TASK_PIXELS pixels, at least one row, at most the image."""
+    return max(1, min(height, TASK_PIXELS // width))
 
 
-def render_tiled(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32", device=None,
-                 tile: int = TILE_SIDE, progress=None) -> Frame:
-    """render(scene) with the image split into tiles of tile x tile pixels rendered on the cluster's
-    workers: the same images, bit for bit (a window's pixels are the whole image's)."""
+def render_bands(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32", device=None,
+                 rows: int | None = None, progress=None):
+    """Yield the scene's image in bands of `rows` whole rows (default band_rows), top to bottom,
+    rendered on the cluster's workers: band j is render(scene, window=(0, j * rows, width, rows)),
+    the whole image's pixels bit for bit. At most a few bands per worker thread are in flight."""
     width, height = scene.image.width, scene.image.height
-    windows = tiles(width, height, tile)
-    images, devices = {}, []
-    for i, part in run(client, Job(scene, aovs, precision, device), "tile", windows, progress, what="tile"):
-        x, y, w, h = windows[i]
-        for name, array in part.items():
-            if name not in images:
-                images[name] = _empty_like(array, height, width)
-            images[name][y:y + h, x:x + w] = array
-        if part.device not in devices:
-            devices.append(part.device)
-    return Frame(images, precision=part.precision, device=" + ".join(devices))
+    rows = band_rows(width, height) if rows is None else rows
+    if not (isinstance(rows, int) and rows >= 1):
+        raise PyclrayError(f"rows: expected a whole number of rows >= 1, got {rows!r}")
+    windows = [(0, top, width, min(rows, height - top)) for top in range(0, height, rows)]
+    for _, band in run(client, Job(scene, aovs, precision, device), "window", windows, progress, what="band"):
+        yield band
 
 
-def _empty_like(array, height: int, width: int):
+def render_image(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32", device=None,
+                 rows: int | None = None, progress=None) -> Frame:
+    """render(scene), with the image's bands (see render_bands) rendered on the cluster's workers:
+    the same images, bit for bit."""
     import numpy as np
 
-    return np.empty((height, width) + array.shape[2:], array.dtype)
-
+    images, devices, top = {}, [], 0
+    for band in render_bands(client, scene, aovs, precision, device, rows, progress):
+        for name, array in band.items():
+            if name not in images:
+                images[name] = np.empty((scene.image.height,) + array.shape[1:], array.dtype)
+            images[name][top:top + array.shape[0]] = array
+        top += next(iter(band.values())).shape[0]
+        if band.device not in devices:
+            devices.append(band.device)
+    return Frame(images, precision=band.precision, device=" + ".join(devices))

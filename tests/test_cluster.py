@@ -103,13 +103,13 @@ def test_views_cameras_and_scenes_are_the_local_renders(client):
         assert_same_images(frame, pyclray.render(expected_scene, aovs=("depth", "id"), precision="fp64"))
 
 
-@pytest.mark.parametrize("side", [7, 16])
-def test_tiles_put_together_are_the_whole_image(client, side):
-    """Tiles of 7 pixels cut packets and culling tiles in the middle; 16 matches the culling tile."""
+@pytest.mark.parametrize("rows", [7, 16])
+def test_bands_put_together_are_the_whole_image(client, rows):
+    """Bands of 7 rows cut the culling tiles (16x16) in the middle; 16 rows match them."""
     scene = pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(37, 23)
-    assert len(cluster.tiles(37, 23, side)) == -(-37 // side) * -(-23 // side)
-    frame = cluster.render_tiled(client, scene, tile=side)
-    assert_same_images(frame, pyclray.render(scene))
+    bands = list(cluster.render_bands(client, scene, aovs=("depth", "id"), rows=rows))
+    assert [b["depth"].shape for b in bands] == [(min(rows, 23 - top), 37) for top in range(0, 23, rows)]
+    assert_same_images(cluster.render_image(client, scene, rows=rows), pyclray.render(scene))
 
 
 def test_an_error_on_a_worker_is_the_local_error(client):
@@ -151,13 +151,15 @@ def test_animate_on_a_cluster_writes_the_local_files_bit_for_bit(client, tmp_pat
         ["anim.toml", "local", "remote", "local.gif", "remote.gif", "local.mp4", "remote.mp4"])  # no temporaries
 
 
-def test_render_with_workers_writes_the_local_exr_bit_for_bit(tmp_path, capsys):
-    """`pyclray render --workers 2` starts its own LocalCluster and renders the image in tiles."""
+def test_render_with_workers_writes_the_local_exr_bit_for_bit(tmp_path, capsys, monkeypatch):
+    """`pyclray render --workers 2` starts its own LocalCluster and renders the image in bands of
+    rows (of 7 rows here: tasks of 280 pixels), streamed into the files as they come."""
+    monkeypatch.setattr(cluster, "TASK_PIXELS", 40 * 7)
     scene = REPO / "scenes/tp02.toml"
     status, out, err = pyclray_cli(capsys, "render", scene, "-o", tmp_path / "tiled.exr", "--size", "40x30",
-                                   "--tile", "16", "--workers", "2", "--png")
+                                   "--workers", "2", "--png")
     assert status == 0, err
-    assert "6 tiles on 2 workers" in out
+    assert "5 bands of 7 rows on 2 workers" in out
     assert pyclray_cli(capsys, "render", scene, "-o", tmp_path / "whole.exr", "--size", "40x30", "--png")[0] == 0
     for suffix in (".exr", ".depth.png", ".normal.png"):
         assert (tmp_path / f"tiled{suffix}").read_bytes() == (tmp_path / f"whole{suffix}").read_bytes(), suffix
