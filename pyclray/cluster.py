@@ -78,7 +78,7 @@ def connect(workers: int | None = None, scheduler: str | None = None):
             except TimeoutError:
                 raise ClusterError(
                     f"--scheduler {scheduler}: the cluster has no worker (waited {WORKERS_TIMEOUT_S} s); "
-                    "start some with `dask worker {scheduler}`"
+                    f"start some with `dask worker {scheduler}`"
                 ) from None
             yield client
         return
@@ -99,7 +99,7 @@ def connect(workers: int | None = None, scheduler: str | None = None):
 
 def describe(client: Client) -> str:
     """"2 workers" (and the scheduler's address for a cluster that is not local)."""
-    count = len(client.scheduler_info(n_workers=-1)["workers"])
+    count = len(client.nthreads())
     where = "" if isinstance(client.cluster, LocalCluster) else f" at {client.scheduler.address}"
     return f"{count} worker{'s' if count != 1 else ''}{where}"
 
@@ -167,7 +167,7 @@ def run(client: Client, job: Job, method: str, arguments, progress=None, what: s
     futures = {}
     try:
         client.register_plugin(job, name=job.name)  # raises here what the job's setup raised on a worker
-        threads = sum(w["nthreads"] for w in client.scheduler_info(n_workers=-1)["workers"].values())
+        threads = sum(client.nthreads().values())
         ahead = AHEAD_PER_THREAD * max(threads, 1)
         # each result is fetched as its task completes (concurrently, in the client's event loop) and
         # handed over once every earlier one has been; a new task is submitted for each one handed
