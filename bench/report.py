@@ -361,7 +361,7 @@ def main(argv=None) -> None:
         "  |cos| factor); normal error |n - n_ref| x |cos|; id mismatches (depth only: hit/miss disagreements).",
         "  Silhouettes (|cos incidence| < 0.02) and near-ties (a second surface within 1e-5 relative) are left",
         "  out (column `excluded` in the JSON). For Mitsuba, the pixels where the plane lies beyond its",
-        "  stand-in disk (`pyclray.mitsuba.plane_beyond_disk`) are left out too.",
+        "  stand-in disk (`pyclray.mitsuba.beyond_counterparts`) are left out too.",
         "- Before each case's timing the benchmark sleeps 0.3 s, and OpenBLAS runs one thread",
         "  (`bench/conftest.py`), so that threads left busy by the previous case (numpy's BLAS, Dr.Jit's",
         "  pool) do not run into the timing. The machine has 2 cores, and other people's test runs shared",

@@ -140,7 +140,7 @@ def test_pyclray_warm(benchmark, scenes_dir, name, size, aovs, precision):
     benchmark.pedantic(pyclray.render, args=(scene, AOV_SETS[aovs], precision), rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
     # errors after the timing: numpy's BLAS threads keep spinning for a while after use
     if size == ERROR_SIZE:
-        benchmark.extra_info.update(compare(scene, images, reference(scenes_dir, name)))
+        benchmark.extra_info.update(compare(scene, images, reference(scenes_dir, name), engine=precision))
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -213,8 +213,9 @@ def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, 
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
     if size == ERROR_SIZE:  # after the timing, as for pyclray
         origins, directions = oracle.camera_rays(scene)
-        mask = pm.plane_beyond_disk(scene, origins, directions)
-        errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask)
+        mask = pm.beyond_counterparts(scene, origins, directions)
+        errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask,
+                         engine=variant)
         benchmark.extra_info.update(errors)
     del mi
 

@@ -26,6 +26,7 @@ class Sphere(Shape):
 
     type = "sphere"
     c_type = "Sphere"
+    solid = True
     keys = ("center", "radius")
     required = ("center", "radius")
     struct = Struct(
@@ -76,3 +77,32 @@ class Sphere(Shape):
     def oracle_normal(self, points):
         n = points - np.array(self.center)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def surface_distance(self, points):
+        return np.abs(np.linalg.norm(np.asarray(points, np.float64) - np.array(self.center), axis=-1) - self.radius)
+
+    # -- bounds --------------------------------------------------------------------------------
+    @classmethod
+    def world_bounds(cls, spheres):
+        centre, radius = cls.bounding_spheres(spheres)
+        return np.stack([centre - radius[:, None], centre + radius[:, None]], axis=1)
+
+    @classmethod
+    def bounding_spheres(cls, spheres):
+        centre = np.array([s.center for s in spheres], np.float64).reshape(-1, 3)
+        radius = np.array([s.radius for s in spheres], np.float64)
+        return centre, radius * (1 + 1e-12)  # rounding of lo = c - r: one float64 ulp, widened
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point):
+        return np.array(self.center)
+
+    def curvature_radius(self) -> float:
+        return self.radius
+
+    def extent_from(self, point) -> float:
+        return float(np.linalg.norm(np.subtract(self.center, point))) + self.radius
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        return [{"type": "sphere", "center": list(self.center), "radius": self.radius}]
