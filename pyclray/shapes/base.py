@@ -156,3 +156,26 @@ def to_world(columns, origin) -> np.ndarray:
 
 def dot_rows(a, b) -> np.ndarray:
     return np.einsum("...k,...k", a, b)
+
+
+def padded_bounds(lo, hi) -> np.ndarray:
+    """(N, 2, 3) bounds [lo, hi] widened by a few float64 ulps of their size, so that the rounding
+    of their own computation never leaves a point of the shape outside."""
+    lo = np.asarray(lo, np.float64).reshape(-1, 3)
+    hi = np.asarray(hi, np.float64).reshape(-1, 3)
+    pad = 1e-12 * (np.abs(lo) + np.abs(hi)) + 1e-300
+    return np.stack([lo - pad, hi + pad], axis=1)
+
+
+def unit_rows(v) -> np.ndarray:
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def flag(key: str, value) -> bool:
+    """A TOML boolean (true or false); 1, 0 and strings are not."""
+    from ..errors import SceneError, _shown
+
+    if not isinstance(value, bool):
+        raise SceneError(f"expected true or false, got {_shown(value)}", key=key)
+    return value
