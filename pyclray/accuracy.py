@@ -147,23 +147,39 @@ def mitsuba_tolerances(scene: Scene, t, ids, cos, *, cameras: bool, origin_scale
 
 
 # -- the rays not judged ---------------------------------------------------------------------------
-def silhouettes(ids, cos) -> np.ndarray:
-    return (np.asarray(ids) >= 0) & (cos < SILHOUETTE_COS)
+def silhouettes(ids, cos, depth_tolerance=None, radius=None) -> np.ndarray:
+    """Grazing hits: |cos| < SILHOUETTE_COS, and on a curved shape (radius of curvature r) also
+    where a sideways move of the ray by its position error e = D |cos| may take it off the
+    silhouette: the ray passes the rim r cos^2 / 2 inside it, so cos^2 < 2 e / r (the square-root
+    law that replaces 1/cos at tangency; for a unit sphere 1e5 away in fp32 that is cos < 0.3)."""
+    ids = np.asarray(ids)
+    out = (ids >= 0) & (cos < SILHOUETTE_COS)
+    if depth_tolerance is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out |= (ids >= 0) & (cos * cos < 2 * depth_tolerance * cos / radius)
+    return out
 
 
-def near_ties(nearest, second, depth_tolerance) -> np.ndarray:
-    """The one near-tie rule: the oracle's second-nearest surface within the depth tolerance."""
+def near_ties(truth: dict, tolerance) -> np.ndarray:
+    """The one near-tie rule: the oracle's second-nearest surface lies within the sum of both
+    surfaces' depth tolerances of the nearest (each may be off by its own, at its own incidence).
+    truth: oracle.trace's result with "second"; tolerance(t, ids, cos): the depth tolerance."""
+    nearest, second = truth["depth"], truth["second"]
+    both = tolerance(nearest, truth["id"], truth["cos"]) + tolerance(second, truth["second_id"], truth["second_cos"])
     with np.errstate(invalid="ignore"):  # inf - inf where nothing is hit
-        return np.isfinite(nearest) & (second - nearest <= depth_tolerance)
+        return np.isfinite(nearest) & (second - nearest <= both)
 
 
-def at_edges(scene: Scene, origins, directions, hits, band) -> np.ndarray:
-    """Rays whose hit point, by any of ``hits`` ((ids, depth) pairs: the oracle's, an engine's),
-    lies within ``band`` (per ray, scene units) of an edge of the shape hit: both sides of an edge
-    are looked at, so a ray that one side sees and the other misses is found from either."""
+def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
+    """Rays that one of ``hits`` ((ids, depth) pairs: the oracle's, an engine's) sees at an edge
+    or a silhouette of the shape it hits, where a ray moved by its position error ``reach`` (per
+    ray, scene units: the depth tolerance times |cos|) may go either way: the hit point within
+    reach / |cos| of an edge of its shape (a rim, a border, a box's edge), or a grazing hit by
+    the silhouette rule at its own incidence. Both sides are looked at, so a ray that one side
+    sees and the other misses is found from either."""
     origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions))
     out = np.zeros(np.shape(directions)[:-1], bool)
-    band = np.broadcast_to(band, out.shape)
+    reach = np.broadcast_to(reach, out.shape)
     for ids, depth in hits:
         ids = np.asarray(ids)
         depth = np.asarray(depth, np.float64)
@@ -171,7 +187,9 @@ def at_edges(scene: Scene, origins, directions, hits, band) -> np.ndarray:
             mine = (ids == index) & np.isfinite(depth)
             if mine.any():
                 points = origins[mine] + depth[mine][:, None] * directions[mine]
-                out[mine] |= shape.edge_distance(points) <= band[mine]
+                cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), directions[mine]))
+                grazing = silhouettes(np.zeros(len(cos)), cos, reach[mine] / cos, shape.curvature_radius())
+                out[mine] |= grazing | (shape.edge_distance(points) <= reach[mine] / np.maximum(cos, SILHOUETTE_COS))
     return out
 
 
@@ -193,27 +211,52 @@ def reference(scene: Scene) -> dict:
     return ref
 
 
+def render_reach(scene: Scene, t, ids, directions, precision: str) -> np.ndarray:
+    """The sideways position error of pyclray's render rays at their hits (scene units), which
+    decides silhouettes and edges. The render works in the camera's frame, where every coordinate
+    keeps its own relative precision (README, "Numerical design"): a ray's sideways error is eps
+    times the sideways size of the coordinates involved (the hit's and the anchor's distances from
+    the optical axis), not eps t; plus the oracle's own eps64 (t + W)."""
+    eye = np.asarray(scene.camera.eye, np.float64)
+    w = scene.camera.basis()[2]
+    t = np.where(np.isfinite(t), t, 0.0)
+    hit = t[..., None] * directions
+    anchor = anchors(scene, eye)[np.maximum(ids, 0)] - eye
+
+    def sideways(v):
+        return np.linalg.norm(v - np.einsum("...k,k", v, w)[..., None] * w, axis=-1)
+
+    world = np.linalg.norm(eye) + np.linalg.norm(anchor + eye, axis=-1)
+    return K_ORACLE * (EPSILON[precision] * (sideways(hit) + sideways(anchor)) + ORACLE_EPSILON * (t + world))
+
+
 def judged_pixels(images: dict, ref: dict, engine: str = "fp32") -> dict:
-    """The masks of pixels set apart for this engine ("fp32", "fp64": pyclray; anything else:
-    Mitsuba): silhouettes, near ties and edges, by the engine's depth tolerance. The edge band
-    is that tolerance at the farther of the two hits (the oracle's and the engine's)."""
+    """The masks of pixels set apart for this engine ("fp32", "fp64": pyclray's render; anything
+    else: Mitsuba): silhouettes (by its position error), near ties (by its depth tolerance) and
+    edges (within its position error, seen from the oracle's hit or the engine's)."""
     scene = ref["scene"]
 
-    def depth_tolerance(t):
+    def depth_tolerance(t, ids, cos):
         if engine in EPSILON:
-            return pyclray_tolerances(scene, {"depth": t, "id": ref["id"]}, ref["cos"], ref["origins"], engine,
-                                      scene.camera.eye)[0]
-        return mitsuba_tolerances(scene, t, ref["id"], ref["cos"], cameras=True)[0]
+            return pyclray_tolerances(scene, {"depth": t, "id": ids}, cos, ref["origins"], engine, scene.camera.eye)[0]
+        return mitsuba_tolerances(scene, t, ids, cos, cameras=True)[0]
 
-    near_tie = near_ties(ref["depth"], ref["second"], depth_tolerance(ref["depth"]))
-    hits = [(ref["id"], ref["depth"])]
+    near_tie = near_ties(ref, depth_tolerance)
     t = np.where(np.isfinite(ref["depth"]), ref["depth"], 0.0)
+    hits = [(ref["id"], ref["depth"])]
     if "id" in images and "depth" in images:
         ours = np.asarray(images["depth"], np.float64)
         hits.append((images["id"], ours))
         t = np.maximum(t, np.where(np.isfinite(ours), ours, 0.0))
-    edge = at_edges(scene, ref["origins"], ref["directions"], hits, depth_tolerance(t))
-    return {"silhouette": ref["silhouette"], "near_tie": near_tie, "edge": edge}
+    if engine in EPSILON:
+        reach = render_reach(scene, t, ref["id"], ref["directions"], engine)
+    else:
+        reach = depth_tolerance(t, ref["id"], ref["cos"]) * ref["cos"]
+    radius = curvature_radii(scene)[np.maximum(ref["id"], 0)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        silhouette = silhouettes(ref["id"], ref["cos"], reach / ref["cos"], radius)
+    edge = at_edges(scene, ref["origins"], ref["directions"], hits, reach)
+    return {"silhouette": silhouette, "near_tie": near_tie, "edge": edge}
 
 
 def compare(images: dict, ref: dict, exclude=None, engine: str = "fp32") -> dict:

@@ -16,9 +16,13 @@ def judge(scene, origins, directions, result, precision, reference_point=None):
         farthest = np.fmax(np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0),
                            np.where(np.isfinite(result["depth"]), result["depth"].astype(np.float64), 0.0))
     band, _ = accuracy.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision, reference_point)
-    edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])], band)
-    explained = (accuracy.silhouettes(truth["id"], cos) | accuracy.near_ties(truth["depth"], truth["second"], depth_tolerance)
-                 | edge)
+    edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])],
+                             band * cos)
+    truth["cos"] = cos
+    near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.pyclray_tolerances(
+        scene, {"depth": t, "id": ids}, c, origins, precision, reference_point)[0])
+    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    explained = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) | near_tie | edge
     judged = (result["id"] == truth["id"]) & (truth["id"] >= 0) & ~explained
     return truth, cos, judged, explained, depth_tolerance, normal_tolerance
 

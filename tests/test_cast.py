@@ -197,9 +197,11 @@ def test_camera_rays_match_render(scene):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     depth_tolerance, normal_tolerance = accuracy.pyclray_tolerances(scene, truth, cos, origins, "fp32", scene.camera.eye)
     edge = accuracy.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (image["id"], image["depth"])],
-                             2 * depth_tolerance)
-    explained = (accuracy.silhouettes(truth["id"], cos) | next_to_id_change(truth["id"]) | edge
-                 | accuracy.near_ties(truth["depth"], truth["second"], 2 * depth_tolerance)).ravel()
+                             2 * depth_tolerance * cos)
+    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    explained = (accuracy.silhouettes(truth["id"], cos, 2 * depth_tolerance, radius) | next_to_id_change(truth["id"]) | edge
+                 | accuracy.near_ties(dict(truth, cos=cos), lambda t, ids, c: 2 * accuracy.pyclray_tolerances(
+                     scene, {"depth": t, "id": ids}, c, origins, "fp32", scene.camera.eye)[0])).ravel()
     ids = image["id"].ravel()
     assert not ((result["id"] != ids) & ~explained).any()
     judged = (result["id"] == ids) & (ids >= 0) & ~explained

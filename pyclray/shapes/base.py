@@ -54,6 +54,12 @@ class Shape:
     def _from_table(cls, table: dict, name: str):
         raise NotImplementedError
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance of about unit size near ``shift`` (numpy Generator ``rng``), for the
+        generic property tests over the registry (tests/test_shapes.py)."""
+        raise NotImplementedError
+
     def describe(self) -> str:
         return f"{self.type} '{self.name}'"
 

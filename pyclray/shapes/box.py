@@ -73,6 +73,16 @@ class Box(Shape):
     def _from_table(cls, table, name):
         return cls(table["center"], table["size"], table.get("axis"), table.get("angle", 0.0), name)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py):
+        axis-aligned one time in four, else rotated."""
+        size = tuple(10 ** rng.uniform(-1, 0.4, 3))
+        centre = tuple(rng.uniform(-3, 3, 3) + shift)
+        if rng.integers(0, 4) == 0:
+            return cls(centre, size)
+        return cls(centre, size, tuple(rng.normal(size=3)), float(rng.uniform(-180, 180)))
+
     def axes(self) -> np.ndarray:
         """world_from_box: the box's unit axes as columns, float64."""
         return rotation(self.axis, self.angle)

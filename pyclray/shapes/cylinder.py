@@ -51,6 +51,14 @@ class Cylinder(Shape):
     def _from_table(cls, table, name):
         return cls(table["p0"], table["p1"], table["radius"], table.get("caps", True), name)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py):
+        short and fat to long and thin, capped or open."""
+        p0 = rng.uniform(-3, 3, 3) + shift
+        return cls(tuple(p0), tuple(p0 + rng.normal(size=3) * 10 ** rng.uniform(-0.7, 0.5)),
+                   float(10 ** rng.uniform(-1.3, 0.2)), bool(rng.integers(0, 4) > 0))
+
     @property
     def solid(self) -> bool:
         return self.caps

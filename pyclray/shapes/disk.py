@@ -45,6 +45,11 @@ class Disk(Shape):
     def _from_table(cls, table, name):
         return cls(table["center"], table["normal"], table["radius"], name)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), tuple(rng.normal(size=3)), float(10 ** rng.uniform(-1, 0.5)))
+
     def unit_normal(self) -> np.ndarray:
         return unit_rows(self.normal)
 

@@ -90,6 +90,12 @@ class Plane(Shape):
         n, _ = self.unit()
         return np.broadcast_to(n, points.shape)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        normal = rng.normal(size=3) * 10 ** rng.uniform(-1, 1)
+        return cls(tuple(normal), float(-normal @ np.broadcast_to(shift, 3) + rng.uniform(-2, 2) * np.linalg.norm(normal)))
+
     def surface_distance(self, points):
         n, h = self.unit()
         return np.abs(np.asarray(points, np.float64) @ n + h)

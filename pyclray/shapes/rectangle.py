@@ -57,6 +57,15 @@ class Rectangle(Shape):
     def _from_table(cls, table, name):
         return cls(table["center"], table["u"], table["v"], name)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        u = rng.normal(size=3)
+        v = np.cross(u, rng.normal(size=3))
+        u *= 10 ** rng.uniform(-1, 0.3) / np.linalg.norm(u)
+        v *= 10 ** rng.uniform(-1, 0.3) / np.linalg.norm(v)
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), tuple(u), tuple(v))
+
     def unit_normal(self) -> np.ndarray:
         return unit_rows(np.cross(self.u, self.v))
 

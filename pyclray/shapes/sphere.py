@@ -78,6 +78,11 @@ class Sphere(Shape):
         n = points - np.array(self.center)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), float(10 ** rng.uniform(-1.3, 0.5)))
+
     def surface_distance(self, points):
         return np.abs(np.linalg.norm(np.asarray(points, np.float64) - np.array(self.center), axis=-1) - self.radius)
 

@@ -73,11 +73,12 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
 
     # the pixels each comparison covers
     beyond = mitsuba.beyond_counterparts(scene, origins, directions)
-    silhouette = accuracy.silhouettes(truth["id"], cos) & ~beyond
+    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    silhouette = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
     band, _ = accuracy.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=True)
     edge = accuracy.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
-                                                          (theirs["id"], theirs["depth"])], band) & ~beyond
+                                                          (theirs["id"], theirs["depth"])], band * cos) & ~beyond
     same = (ours["id"] == theirs["id"]) & (ours["id"] >= 0) & ~beyond
     judged = same & ~silhouette & ~edge
     both_miss = (ours["id"] < 0) & (theirs["id"] < 0) & ~beyond
@@ -92,7 +93,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
 
     # ids and misses: explained disagreements counted apart
     disagree = (ours["id"] != theirs["id"]) & ~beyond
-    near_tie = accuracy.near_ties(truth["depth"], truth["second"], depth_tolerance)
+    truth["cos"] = cos
+    near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.mitsuba_tolerances(scene, t, ids, c, cameras=True)[0])
     adjacent = next_to_id_change(truth["id"]) | next_to_id_change(ours["id"])
     reasons = (("silhouette", silhouette), ("edge", edge), ("next to an id change", adjacent), ("near tie", near_tie))
     id_disagree = disagree & (ours["id"] >= 0) & (theirs["id"] >= 0)

@@ -78,11 +78,12 @@ def ray_level(
         scene, truth["depth"], truth["id"], cos, cameras=False, origin_scale=origin_scale
     )
     beyond = mitsuba.beyond_counterparts(scene, origins, unit)
-    silhouette = accuracy.silhouettes(truth["id"], cos) & ~beyond
+    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    silhouette = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
     band, _ = accuracy.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=False, origin_scale=origin_scale)
     edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
-                                                    (theirs["id"], theirs["depth"])], band) & ~beyond
+                                                    (theirs["id"], theirs["depth"])], band * cos) & ~beyond
     same = (ours["id"] == theirs["id"]) & (ours["id"] >= 0) & ~beyond
     judged = same & ~silhouette & ~edge
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -91,7 +92,9 @@ def ray_level(
         depth_ratio = difference / depth_tolerance
     angle = angle_between(ours["normal"], theirs["normal"])
     disagree = (ours["id"] != theirs["id"]) & ~beyond
-    near_tie = accuracy.near_ties(truth["depth"], truth["second"], depth_tolerance)
+    truth["cos"] = cos
+    near_tie = accuracy.near_ties(truth, lambda t, i, c: accuracy.mitsuba_tolerances(
+        scene, t, i, c, cameras=False, origin_scale=origin_scale)[0])
     kinds = {"agree": int((~disagree & ~beyond).sum()),
              **disagreement_kinds(disagree, (("silhouette", silhouette), ("edge", edge), ("near tie", near_tie)))}
 
