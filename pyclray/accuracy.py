@@ -176,15 +176,20 @@ def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
     ray, scene units: the depth tolerance times |cos|) may go either way: the hit point within
     reach / |cos| of an edge of its shape (a rim, a border, a box's edge), or a grazing hit by
     the silhouette rule at its own incidence. Both sides are looked at, so a ray that one side
-    sees and the other misses is found from either."""
+    sees and the other misses is found from either; the first of ``hits`` is the reference, the
+    others count where they hit another shape than it."""
     origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions))
     out = np.zeros(np.shape(directions)[:-1], bool)
     reach = np.broadcast_to(reach, out.shape)
-    for ids, depth in hits:
+    first = np.asarray(hits[0][0])
+    for k, (ids, depth) in enumerate(hits):
         ids = np.asarray(ids)
         depth = np.asarray(depth, np.float64)
+        # another side's hit point tells something only where it hits another shape (a far
+        # float32 hit point is too coarse to place on the surface: its own normal would be noise)
+        other = (ids != first) if k else np.ones(ids.shape, bool)
         for index, shape in enumerate(scene.shapes):
-            mine = (ids == index) & np.isfinite(depth)
+            mine = (ids == index) & np.isfinite(depth) & other
             if mine.any():
                 points = origins[mine] + depth[mine][:, None] * directions[mine]
                 cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), directions[mine]))
