@@ -11,17 +11,16 @@
 typedef double real;
 typedef double3 real3;
 typedef double4 real4;
+#define PYCLRAY_REAL_NAME double
+#define PYCLRAY_INT_NAME long      /* the integer type of a real's size: a vector comparison's lanes */
+#define PYCLRAY_UINT_NAME ulong
 #else
 typedef float real;
 typedef float3 real3;
 typedef float4 real4;
+#define PYCLRAY_REAL_NAME float
+#define PYCLRAY_INT_NAME int
+#define PYCLRAY_UINT_NAME uint
 #endif
 
 #define MISS ((real)INFINITY)
-
-/* A ray s -> origin + s * dir in the current frame; dir need not be unit, a = dot(dir, dir). */
-typedef struct {
-    real3 origin;
-    real3 dir;
-    real a;
-} Ray;

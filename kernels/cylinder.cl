@@ -1,5 +1,4 @@
-/* Cylinder: the points within r of the segment p0-p1 (unit axis A, length H), closed by two caps
- * or open.
+/* Cylinder: the points within r of the segment p0-p1 (unit axis A), closed by two caps or open.
  *
  * Side. With F = p0 - origin, the ray origin + s D meets the infinite tube where
  * |s D_perp - F_perp|^2 = r^2 (perp: the part across the axis), a s^2 - 2 b s + c = 0 with
@@ -9,75 +8,76 @@
  * The discriminant b^2 - a c equals a r^2 - (F . (D x A))^2 (Lagrange's identity across the axis);
  * as for the sphere, the kernel takes the form whose terms are smaller, and the stable roots c/q
  * and q/a with q = b + sign(b) sqrt(disc). A root is on the side where its axial coordinate
- * s (D . A) - d0 lies in [0, H], i.e. d0 <= s (D . A) <= d1, with d0, d1 = (p0 - o) . A, (p1 - o) . A
- * (exact from the host for camera rays).
+ * s (D . A) - d0 lies in [0, |p1 - p0|], i.e. d0 <= s (D . A) <= d1 with d0, d1 = (p0 - o) . A,
+ * (p1 - o) . A (exact from the host for camera rays).
  * Caps. The planes through p0 and p1 across the axis: s = d0 / (D . A) and d1 / (D . A); a hit
  * where the point's distance from the axis, |s (D x A) - F x A|, is at most r.
  * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
 
 typedef struct {
-    real3 FxA, DxA;
-    real a, b, c, disc, triple, near, far, cap0, cap1;
-} CylinderTerms;
+    vec3v DxA;
+    realv disc, triple;
+    realv best;
+    intv kind;  /* the winner: 0 none, 1 side (near root), 2 side (far root), 3 cap p0, 4 cap p1 */
+} CylinderHit;
 
-inline CylinderTerms cylinder_terms(__global const Cylinder* cylinder, const Ray* ray)
+/* a candidate s, kept where it is a hit ahead and nearer than the best so far (the first on a tie;
+ * NaN, of a ray along the axis or in a cap's plane, and +-inf never are) */
+inline void cylinder_candidate(CylinderHit* hit, const realv s, const intv on_surface, const int kind)
 {
-    CylinderTerms t;
-    const real3 A = cylinder->axis.xyz;
-    const real3 F = cylinder->p0.xyz - ray->origin;
-    const real3 D = ray->dir;
-    const real r2 = cylinder->p0.w;
-    t.FxA = cross(F, A);
-    t.DxA = cross(D, A);
+    const intv nearer = on_surface && s > 0 && s < hit->best;
+    hit->best = nearer ? s : hit->best;
+    hit->kind = nearer ? SPLAT_INT(kind) : hit->kind;
+}
+
+inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const RayPacket* ray)
+{
+    CylinderHit hit;
+    const vec3v A = v3_splat(cylinder->axis);
+    const vec3v D = ray->dir;
+    const realv r2 = SPLAT(cylinder->p0.w);
 #ifdef PYCLRAY_CAST
-    t.c = dot(t.FxA, t.FxA) - r2;
-    const real d0 = dot(F, A), d1 = dot(cylinder->p1.xyz - ray->origin, A);
+    const vec3v F = v3_sub(v3_splat(cylinder->p0), ray->origin);
+    const vec3v FxA = v3_cross(F, A);
+    const realv c = v3_dot(FxA, FxA) - r2;
+    const realv d0 = v3_dot(F, A), d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
 #else
-    t.c = cylinder->axis.w;
-    const real d0 = cylinder->world_axis.w, d1 = cylinder->d1;
+    const vec3v F = v3_splat(cylinder->p0);  /* the ray's origin is the frame's */
+    const vec3v FxA = v3_cross(F, A);
+    const realv c = SPLAT(cylinder->axis.w);
+    const realv d0 = SPLAT(cylinder->world_axis.w), d1 = SPLAT(cylinder->d1);
 #endif
-    t.a = dot(t.DxA, t.DxA);
-    t.b = dot(t.FxA, t.DxA);
-    t.triple = dot(F, t.DxA);
-    const real perp2 = t.triple * t.triple;
-    const real ac = t.a * t.c;
-    const bool from_b = t.b * t.b + fabs(ac) < t.a * r2 + perp2;
-    t.disc = from_b ? t.b * t.b - ac : t.a * r2 - perp2;
-    const real dA = dot(D, A);
-    /* side: the stable roots, kept where they lie between the end planes */
-    const real q = t.b + copysign(sqrt(t.disc), t.b);
-    const real s_q = q / t.a, s_c = t.c / q;
-    const real near = fmin(s_q, s_c), far = fmax(s_q, s_c);
-    const bool side = t.disc >= 0;
-    t.near = (side && d0 <= near * dA && near * dA <= d1) ? near : MISS;
-    t.far = (side && d0 <= far * dA && far * dA <= d1) ? far : MISS;
+    hit.DxA = v3_cross(D, A);
+    const realv a = v3_dot(hit.DxA, hit.DxA);
+    const realv b = v3_dot(FxA, hit.DxA);
+    hit.triple = v3_dot(F, hit.DxA);
+    const realv perp2 = hit.triple * hit.triple;
+    const realv ac = a * c;
+    const intv from_b = b * b + v_abs(ac) < a * r2 + perp2;
+    hit.disc = from_b ? b * b - ac : a * r2 - perp2;
+    const realv dA = v3_dot(D, A);
+    hit.best = SPLAT(MISS);
+    hit.kind = SPLAT_INT(0);
+    /* side: the stable roots (NaN where disc < 0), kept between the end planes */
+    const realv q = b + v_copysign(v_sqrt(hit.disc), b);
+    const realv s_q = q / a, s_c = c / q;
+    const realv near = s_q < s_c ? s_q : s_c, far = s_q < s_c ? s_c : s_q;
+    const intv tube = hit.disc >= 0;
+    cylinder_candidate(&hit, near, tube && d0 <= near * dA && near * dA <= d1, 1);
+    cylinder_candidate(&hit, far, tube && d0 <= far * dA && far * dA <= d1, 2);
     /* caps: the end planes, kept within r of the axis */
-    const real s0 = d0 / dA, s1 = d1 / dA;
-    const real3 R0 = s0 * t.DxA - t.FxA, R1 = s1 * t.DxA - t.FxA;
-    t.cap0 = (cylinder->caps && dot(R0, R0) <= r2) ? s0 : MISS;
-    t.cap1 = (cylinder->caps && dot(R1, R1) <= r2) ? s1 : MISS;
-    return t;
+    if (cylinder->caps) {
+        const realv s0 = d0 / dA, s1 = d1 / dA;
+        const vec3v R0 = v3_sub(v3_scale(hit.DxA, s0), FxA), R1 = v3_sub(v3_scale(hit.DxA, s1), FxA);
+        cylinder_candidate(&hit, s0, v3_dot(R0, R0) <= r2, 3);
+        cylinder_candidate(&hit, s1, v3_dot(R1, R1) <= r2, 4);
+    }
+    return hit;
 }
 
-/* which candidate wins: 0 none, 1 side (near root), 2 side (far root), 3 cap p0, 4 cap p1 */
-inline int cylinder_winner(const CylinderTerms* t, real* best)
+inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ray)
 {
-    int kind = 0;
-    *best = MISS;
-    /* NaN (0 / 0 of a ray along the axis, or in a cap plane) and +-inf are never below MISS */
-    if (t->near > 0 && t->near < *best) { *best = t->near; kind = 1; }
-    if (t->far > 0 && t->far < *best) { *best = t->far; kind = 2; }
-    if (t->cap0 > 0 && t->cap0 < *best) { *best = t->cap0; kind = 3; }
-    if (t->cap1 > 0 && t->cap1 < *best) { *best = t->cap1; kind = 4; }
-    return kind;
-}
-
-inline real cylinder_hit(__global const Cylinder* cylinder, const Ray* ray)
-{
-    const CylinderTerms t = cylinder_terms(cylinder, ray);
-    real best;
-    cylinder_winner(&t, &best);
-    return best;
+    return cylinder_intersect(cylinder, ray).best;
 }
 
 /* The outward unit normal in world space. On a cap: the axis out of the solid (packed in world
@@ -85,13 +85,14 @@ inline real cylinder_hit(__global const Cylinder* cylinder, const Ray* ray)
  * subtracting large nearly equal vectors, as for the sphere: a R = -+sqrt(disc) D_perp - triple (D x A)
  * (near root: -, far root: +), D_perp = A x (D x A); the open tube's inner side has the same
  * outward normal. */
-inline real3 cylinder_normal(__global const Cylinder* cylinder, const Ray* ray, __global const Camera* camera)
+inline vec3v cylinder_normal(__global const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
 {
-    const CylinderTerms t = cylinder_terms(cylinder, ray);
-    real best;
-    const int kind = cylinder_winner(&t, &best);
-    if (kind >= 3) return (kind == 3 ? (real)-1 : (real)1) * cylinder->world_axis.xyz;
-    const real side = kind == 1 ? (real)-1 : (real)1;
-    const real3 D_perp = cross(cylinder->axis.xyz, t.DxA);
-    return world_from_frame(camera, normalize(side * sqrt(t.disc) * D_perp - t.triple * t.DxA));
+    const CylinderHit hit = cylinder_intersect(cylinder, ray);
+    const realv side = hit.kind == SPLAT_INT(1) ? SPLAT(-1) : SPLAT(1);
+    const vec3v D_perp = v3_cross(v3_splat(cylinder->axis), hit.DxA);
+    const vec3v radial = v3_sub(v3_scale(D_perp, side * v_sqrt(hit.disc)), v3_scale(hit.DxA, hit.triple));
+    const vec3v outward = world_from_frame(camera, v3_normalize(radial));
+    const vec3v axis = v3_splat(cylinder->world_axis);
+    const vec3v cap = v3_scale(axis, hit.kind == SPLAT_INT(3) ? SPLAT(-1) : SPLAT(1));
+    return v3_select(outward, cap, hit.kind >= SPLAT_INT(3));
 }

@@ -1,23 +1,25 @@
 /* Disk: n . (p - C) = 0 and |p - C| <= r. In the frame, h = n . (origin - C) comes from the host in
- * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D). */
+ * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D), the hit point
+ * lies at s D - F from the centre (F = C - origin). */
 
-inline real disk_hit(__global const Disk* disk, const Ray* ray)
+inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 {
-    const real3 n = disk->normal.xyz;
-    const real3 F = disk->center.xyz - ray->origin;  /* the centre from the ray's origin */
+    const vec3v n = v3_splat(disk->normal);
 #ifdef PYCLRAY_CAST
-    const real h = disk->normal.w + dot(n, ray->origin);
+    const vec3v F = v3_sub(v3_splat(disk->center), ray->origin);
+    const realv h = SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
 #else
-    const real h = disk->normal.w;
+    const vec3v F = v3_splat(disk->center);  /* the ray's origin is the frame's */
+    const realv h = SPLAT(disk->normal.w);
 #endif
     /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit */
-    const real s = -h / dot(n, ray->dir);
-    const real3 P = s * ray->dir - F;  /* the hit point from the centre */
-    return (s > 0 && dot(P, P) <= disk->center.w) ? s : MISS;
+    const realv s = -h / v3_dot(n, ray->dir);
+    const vec3v P = v3_sub(v3_scale(ray->dir, s), F);
+    return (s > 0 && v3_dot(P, P) <= SPLAT(disk->center.w)) ? s : SPLAT(MISS);
 }
 
 /* The disk's own normalized normal in world space (packed as is), never flipped. */
-inline real3 disk_normal(__global const Disk* disk, const Ray* ray, __global const Camera* camera)
+inline vec3v disk_normal(__global const Disk* disk, const RayPacket* ray, __global const Camera* camera)
 {
-    return disk->world_normal.xyz;
+    return v3_splat(disk->world_normal);
 }

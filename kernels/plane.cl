@@ -1,22 +1,22 @@
 /* Plane: n . p + h = 0 in the frame, n unit (normal.xyz) and h (normal.w) the signed distance of the
  * frame's origin, both computed on the host in float64. */
 
-inline real plane_hit(__global const Plane* plane, const Ray* ray)
+inline realv plane_hit(__global const Plane* plane, const RayPacket* ray)
 {
-    const real3 n = plane->normal.xyz;
+    const vec3v n = v3_splat(plane->normal);
 #ifdef PYCLRAY_CAST
-    const real h = plane->normal.w + dot(n, ray->origin);
+    const realv h = SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
 #else
-    const real h = plane->normal.w;
+    const realv h = SPLAT(plane->normal.w);
 #endif
     /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit */
-    const real s = -h / dot(n, ray->dir);
-    return s > 0 ? s : MISS;
+    const realv s = -h / v3_dot(n, ray->dir);
+    return s > 0 ? s : SPLAT(MISS);
 }
 
 /* The plane's own normalized normal in world space (packed as is, not rotated back from the
  * frame, so an axis-aligned floor gives exactly (0, 1, 0)), never flipped toward the viewer. */
-inline real3 plane_normal(__global const Plane* plane, const Ray* ray, __global const Camera* camera)
+inline vec3v plane_normal(__global const Plane* plane, const RayPacket* ray, __global const Camera* camera)
 {
-    return plane->world_normal.xyz;
+    return v3_splat(plane->world_normal);
 }

@@ -1,11 +1,15 @@
-/* pyclray's kernels. The host puts before this file common.h, the generated struct header,
+/* pyclray's kernels. The host puts before this file common.h, lanes.h, the generated struct header,
  * camera.h and the file of each shape type present, and selects what is compiled with -D options:
  *   PYCLRAY_FP64                        double precision
+ *   PYCLRAY_LANES                       rays per work-item, in vector lanes (lanes.h)
  *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel
- *   PYCLRAY_RAYS                        the kernel of the camera's rays (no shapes, no images)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
+ *
+ * A shape plugs in through two functions of its kernel file, both over a packet of rays:
+ *   realv type_hit(shape, ray)             per lane, the nearest s > 0 along ray->dir, or MISS
+ *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID)
@@ -32,136 +36,221 @@
 #define PYCLRAY_KIND(Type, type) KIND_##Type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
-/* nearest hit with s > 0 over every shape of one type; on an exact tie the lowest id wins */
+/* -- the nearest hit of each lane ----------------------------------------------------------------
+ * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
+ * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit). */
 #ifdef PYCLRAY_TRACK_ID
-#define PYCLRAY_NEAREST(Type, type)                                                 \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {      \
-        const int k = PYCLRAY_SHAPE_AT(type, q);                                    \
-        const real s = type##_hit(&type##s[k], &ray);                               \
-        if (s < best || (s == best && s < MISS && type##s[k].id < best_id)) {       \
-            best = s; best_id = type##s[k].id; best_kind = KIND_##Type; best_k = k; \
-        }                                                                           \
+#define PYCLRAY_NEAREST(Type, type)                                                   \
+    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
+        const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
+        const realv s = type##_hit(&type##s[k], &ray);                                \
+        const intv id = SPLAT_INT(type##s[k].id);                                     \
+        const intv nearer = s < best || (s == best && s < MISS && id < best_id);      \
+        if (ANY(nearer)) {                                                            \
+            best = nearer ? s : best;                                                 \
+            best_id = nearer ? id : best_id;                                          \
+            best_kind = nearer ? SPLAT_INT(KIND_##Type) : best_kind;                  \
+            best_k = nearer ? SPLAT_INT(k) : best_k;                                  \
+        }                                                                             \
     }
-#define PYCLRAY_FIND_NEAREST                                                        \
-    real best = MISS;                                                               \
-    int best_id = -1, best_kind = KIND_NONE, best_k = 0;                            \
+#define PYCLRAY_FIND_NEAREST                                                          \
+    realv best = SPLAT(MISS);                                                         \
+    intv best_id = SPLAT_INT(-1), best_kind = SPLAT_INT(KIND_NONE), best_k = SPLAT_INT(0); \
     PYCLRAY_SHAPES(PYCLRAY_NEAREST)
 #else
-#define PYCLRAY_NEAREST(Type, type)                                                 \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q)        \
-        best = fmin(best, type##_hit(&type##s[PYCLRAY_SHAPE_AT(type, q)], &ray));
-#define PYCLRAY_FIND_NEAREST                                                        \
-    real best = MISS;                                                               \
+#define PYCLRAY_NEAREST(Type, type)                                                   \
+    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q)          \
+        best = v_min(type##_hit(&type##s[PYCLRAY_SHAPE_AT(type, q)], &ray), best);
+#define PYCLRAY_FIND_NEAREST                                                          \
+    realv best = SPLAT(MISS);                                                         \
     PYCLRAY_SHAPES(PYCLRAY_NEAREST)
 #endif
 
-/* the images: distance along the unit ray, world normal of the winner only, id;
- * MISS (+inf), (0, 0, 0) and -1 on a miss */
+/* -- the images: distance along the unit ray, the winner's world normal, its id -----------------
+ * MISS (+inf), (0, 0, 0) and -1 on a miss. Lane l of the packet is element index + l of the images,
+ * written for the lanes first <= l < end inside the image (or window): a whole packet with vector
+ * stores, the ends of a row lane by lane. */
 #ifdef PYCLRAY_AOV_DEPTH
 #define PYCLRAY_DEPTH_ARG , __global real* depth
-#define PYCLRAY_WRITE_DEPTH(index) depth[index] = best < MISS ? best * sqrt(ray.a) : MISS;
+#define PYCLRAY_WRITE_DEPTH(index, first, end) \
+    write_reals(best < MISS ? best * v_sqrt(ray.a) : SPLAT(MISS), index, first, end, depth);
 #else
 #define PYCLRAY_DEPTH_ARG
-#define PYCLRAY_WRITE_DEPTH(index)
+#define PYCLRAY_WRITE_DEPTH(index, first, end)
 #endif
 
 #ifdef PYCLRAY_AOV_NORMAL
 #define PYCLRAY_NORMAL_ARG , __global real* normal_out
+/* the normal of one winning shape for the whole packet, kept in the lanes it won */
 #define PYCLRAY_NORMAL(Type, type) \
-    if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
-#define PYCLRAY_WRITE_NORMAL(index)                                                 \
-    {                                                                               \
-        real3 normal = (real3)(0, 0, 0);                                            \
-        PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                              \
-        vstore3(normal, index, normal_out);                                         \
+    if (kind == KIND_##Type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
+#define PYCLRAY_WRITE_NORMAL(index, first, end)                                            \
+    {                                                                                 \
+        vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                              \
+        /* each distinct winner once, in the order of the first lane it won */        \
+        intv pending = best_kind != SPLAT_INT(KIND_NONE);                             \
+        while (ANY(pending)) {                                                        \
+            const int lane = first_lane(pending);                                     \
+            const int kind = lane_of(best_kind, lane), k = lane_of(best_k, lane);     \
+            const intv mine = pending && best_kind == SPLAT_INT(kind) && best_k == SPLAT_INT(k); \
+            PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            pending = pending && !mine;                                               \
+        }                                                                             \
+        write_vec3s(normal, index, first, end, normal_out);                                \
     }
 #else
 #define PYCLRAY_NORMAL_ARG
-#define PYCLRAY_WRITE_NORMAL(index)
+#define PYCLRAY_WRITE_NORMAL(index, first, end)
 #endif
 
 #ifdef PYCLRAY_AOV_ID
 #define PYCLRAY_ID_ARG , __global int* id_out
-#define PYCLRAY_WRITE_ID(index) id_out[index] = best_id;
+#define PYCLRAY_WRITE_ID(index, first, end) write_ints(TO_INT32V(best_id), index, first, end, id_out);
 #else
 #define PYCLRAY_ID_ARG
-#define PYCLRAY_WRITE_ID(index)
+#define PYCLRAY_WRITE_ID(index, first, end)
 #endif
 
 #define PYCLRAY_OUTPUT_ARGS PYCLRAY_DEPTH_ARG PYCLRAY_NORMAL_ARG PYCLRAY_ID_ARG
-#define PYCLRAY_WRITE(index) PYCLRAY_WRITE_DEPTH(index) PYCLRAY_WRITE_NORMAL(index) PYCLRAY_WRITE_ID(index)
+#define PYCLRAY_WRITE(index, first, end) \
+    PYCLRAY_WRITE_DEPTH(index, first, end) PYCLRAY_WRITE_NORMAL(index, first, end) PYCLRAY_WRITE_ID(index, first, end)
 
-#ifdef PYCLRAY_RAYS
+#if LANES == 1
+#define PYCLRAY_INT32V int
+#else
+#define PYCLRAY_INT32V PYCLRAY_CAT(int, LANES)
+#endif
 
-/* The camera ray of pixel (column i from the left, row j from the top), in the camera frame. */
-inline Ray camera_ray(__global const Camera* camera, const int i, const int j)
+/* the first lane whose mask is set, and one lane of an integer packet */
+inline int first_lane(const intv mask)
+{
+    intlane m[LANES];
+    VSTORE(mask, 0, m);
+    for (int l = 0; l < LANES; ++l)
+        if (m[l]) return l;
+    return 0;
+}
+
+inline int lane_of(const intv v, const int lane)
+{
+    intlane x[LANES];
+    VSTORE(v, 0, x);
+    return (int)x[lane];
+}
+
+inline void write_reals(const realv v, const size_t index, const int first, const int end, __global real* out)
+{
+    if (first == 0 && end == LANES) {
+        VSTORE(v, 0, out + index);
+        return;
+    }
+    real x[LANES];
+    VSTORE(v, 0, x);
+    for (int l = first; l < end; ++l) out[index + l] = x[l];
+}
+
+inline void write_ints(const PYCLRAY_INT32V v, const size_t index, const int first, const int end, __global int* out)
+{
+    if (first == 0 && end == LANES) {
+        VSTORE(v, 0, out + index);
+        return;
+    }
+    int x[LANES];
+    VSTORE(v, 0, x);
+    for (int l = first; l < end; ++l) out[index + l] = x[l];
+}
+
+/* interleaved x, y, z per element */
+inline void write_vec3s(const vec3v v, const size_t index, const int first, const int end, __global real* out)
+{
+#if LANES == 8
+    if (first == 0 && end == LANES) {  /* the whole packet: three vector stores */
+        const realv x = v.x, y = v.y, z = v.z;
+        __global real* p = out + 3 * index;
+        vstore8((realv)(x.s0, y.s0, z.s0, x.s1, y.s1, z.s1, x.s2, y.s2), 0, p);
+        vstore8((realv)(z.s2, x.s3, y.s3, z.s3, x.s4, y.s4, z.s4, x.s5), 1, p);
+        vstore8((realv)(y.s5, z.s5, x.s6, y.s6, z.s6, x.s7, y.s7, z.s7), 2, p);
+        return;
+    }
+#endif
+    real x[LANES], y[LANES], z[LANES];
+    VSTORE(v.x, 0, x);
+    VSTORE(v.y, 0, y);
+    VSTORE(v.z, 0, z);
+    for (int l = first; l < end; ++l) {
+        out[3 * (index + l)] = x[l];
+        out[3 * (index + l) + 1] = y[l];
+        out[3 * (index + l) + 2] = z[l];
+    }
+}
+
+/* On PoCL's CPU device every function above is always inlined (device.py), the kernels themselves not. */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define PYCLRAY_KERNELS_BEGIN _Pragma("clang attribute pop")
+#else
+#define PYCLRAY_KERNELS_BEGIN
+#endif
+
+#ifndef PYCLRAY_CAST
+
+/* The camera rays of a packet: LANES pixels of row j from column i0 on, in the camera frame. */
+inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j)
 {
     const int width = camera->width, height = camera->height;
-    /* pixel centre on the image plane at distance 1: the integer numerators are exact, so each
+    const intv i = SPLAT_INT(i0) + LANE_INDEX;
+    /* pixel centres on the image plane at distance 1: the integer numerators are exact, so each
      * coordinate carries two roundings and keeps its relative precision even for a tiny fov */
-    const real sx = camera->tan_x * ((real)(width - 2 * i - 1) / (real)width);
-    const real sy = camera->tan_y * ((real)(height - 2 * j - 1) / (real)height);
+    const realv sx = SPLAT(camera->tan_x) * (TO_REALV(SPLAT_INT(width - 1) - 2 * i) / SPLAT((real)width));
+    const realv sy = SPLAT(camera->tan_y * ((real)(height - 2 * j - 1) / (real)height));
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
-    const real3 D = (real3)(sx, sy, (real)1);
-    Ray ray;
-    ray.origin = (real3)(0, 0, 0);
-    ray.dir = D / sqrt(dot(D, D));
-    ray.a = dot(ray.dir, ray.dir);
+    const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
+    RayPacket ray;
+    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
+    ray.a = v3_dot(ray.dir, ray.dir);
     return ray;
 }
 
-/* Every pixel's ray (dir.xyz, a), once per camera and image size: renders of the same view share
- * them (the host keeps the buffer), so the divisions and the square root are not on every render's
- * path. */
-__kernel void rays(__global const Camera* camera, __global real4* rays)
-{
-    const int i = get_global_id(0), j = get_global_id(1);
-    const int width = camera->width, height = camera->height;
-    if (i >= width || j >= height) return;
-    const Ray ray = camera_ray(camera, i, j);
-    rays[(size_t)j * (size_t)width + (size_t)i] = (real4)(ray.dir, ray.a);
-}
-
-#elif !defined(PYCLRAY_CAST)
-
-/* One work-item per pixel: i is the column from the left, j the row from the top; its ray from the
- * rays kernel. Tiles are 1 << tile_shift pixels square, tiles_x per row (and the work-groups where the
- * device allows). */
-__kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_shift, const int tiles_x
+/* One work-item per packet: LANES pixels of a row, from column i0 = LANES x get_global_id(0) of row
+ * j = get_global_id(1) + row0 (a render of a window of the image starts at row row0 and column col0,
+ * and writes its own width x rows images). Tiles are 1 << tile_shift pixels square, tiles_x per
+ * image row (and the work-groups where the device allows); a packet lies in one tile. */
+PYCLRAY_KERNELS_BEGIN
+__kernel void render(__global const Camera* camera, const int col0, const int row0, const int cols, const int rows,
+                     const int tile_shift, const int tiles_x
                      PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
-    const int i = get_global_id(0), j = get_global_id(1);
-    const int width = camera->width, height = camera->height;
-    if (i >= width || j >= height) return;
-    const int tile = (j >> tile_shift) * tiles_x + (i >> tile_shift);  /* shifts: no division per pixel */
-    const size_t index = (size_t)j * (size_t)width + (size_t)i;
-    const real4 packed = rays[index];
-    Ray ray;
-    ray.origin = (real3)(0, 0, 0);
-    ray.dir = packed.xyz;
-    ray.a = packed.w;
+    /* packets start at multiples of LANES in the image, so that none straddles two tiles */
+    const int i0 = (col0 / LANES + (int)get_global_id(0)) * LANES, r = get_global_id(1), j = row0 + r;
+    if (i0 >= col0 + cols || r >= rows) return;
+    const int tile = (j >> tile_shift) * tiles_x + (i0 >> tile_shift);  /* shifts: no division per packet */
+    const int from = max(col0 - i0, 0), to = min(LANES, col0 + cols - i0);  /* the lanes in the window */
+    const RayPacket ray = camera_rays(camera, i0, j);
 
     PYCLRAY_FIND_NEAREST
-    PYCLRAY_WRITE(index)
+    /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
+    PYCLRAY_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
 }
 
 #else
 
-/* One work-item per ray: origin relative to the frame's reference point, unit direction. */
-__kernel void cast(__global const Camera* camera, const int n_rays,
-                   __global const real4* origins, __global const real4* directions
+/* One work-item per packet of LANES rays: origins relative to the frame's reference point, unit
+ * directions, in structure-of-arrays form (rays[c * stride + r] is component c of ray r: origin x, y,
+ * z, direction x, y, z; stride a multiple of LANES). */
+PYCLRAY_KERNELS_BEGIN
+__kernel void cast(__global const Camera* camera, const int n_rays, const int stride, __global const real* rays
                    PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
-    const int r = get_global_id(0);
-    if (r >= n_rays) return;
-    Ray ray;
-    ray.origin = origins[r].xyz;
-    ray.dir = directions[r].xyz;
-    ray.a = dot(ray.dir, ray.dir);
+    const int packet = get_global_id(0), r0 = packet * LANES;
+    if (r0 >= n_rays) return;
+    RayPacket ray;
+    ray.origin = v3(VLOAD(packet, rays), VLOAD(packet, rays + stride), VLOAD(packet, rays + 2 * stride));
+    ray.dir = v3(VLOAD(packet, rays + 3 * stride), VLOAD(packet, rays + 4 * stride), VLOAD(packet, rays + 5 * stride));
+    ray.a = v3_dot(ray.dir, ray.dir);
 
     PYCLRAY_FIND_NEAREST
-    PYCLRAY_WRITE((size_t)r)
+    PYCLRAY_WRITE((size_t)r0, 0, min(LANES, n_rays - r0))
 }
 
 #endif

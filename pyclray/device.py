@@ -120,45 +120,67 @@ def _read(name: str) -> str:
     return kernel_dir().joinpath(name).read_text(encoding="utf-8")
 
 
+# Rays per work-item (vector lanes) the kernels are built for: the device's preferred vector width for
+# its precision (GPUs: 1), in vectors of at most 256 bits (8 floats, 4 doubles). PoCL reports 16 floats
+# and 8 doubles on an AVX-512 CPU, but its kernel compiler targets AVX2 there: it warns that 512-bit
+# arguments change the ABI, and a kernel with 512-bit lanes is not found in the built program
+# (CL_INVALID_KERNEL_NAME), with PoCL 3.0 on this project's machines. $PYCLRAY_LANES overrides the
+# choice (1, 2, 4, 8 or 16).
+LANE_WIDTHS = (1, 2, 4, 8, 16)
+MAX_LANE_BITS = 256
+
+
+def lanes_for(device: cl.Device, precision: str) -> int:
+    """The packet width of the kernels on this device at this precision."""
+    value = os.environ.get("PYCLRAY_LANES", "").strip()
+    if value:
+        if not value.isdigit() or int(value) not in LANE_WIDTHS:
+            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, LANE_WIDTHS))}, got {value!r}")
+        return int(value)
+    if precision == "fp64":
+        preferred, bits = device.preferred_vector_width_double, 64
+    else:
+        preferred, bits = device.preferred_vector_width_float, 32
+    most = min(max(int(preferred), 1), MAX_LANE_BITS // bits)
+    return max(w for w in LANE_WIDTHS if w <= most)
+
+
 @dataclass(frozen=True)
 class Variant:
-    """What selects a program: kernel kind, shape types present, images asked for, precision."""
+    """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render", "cast" or "rays" (the camera's rays, for render)
+    kind: str  # "render" (camera rays, a packet of pixels per work-item) or "cast" (rays given)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
+    lanes: int = 1
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
         listed = " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in self.shape_types)
-        lines = [f"#define PYCLRAY_SHAPES(X) {listed}"]
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed}", f"#define PYCLRAY_LANES {self.lanes}"]
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind == "cast":
             lines.append("#define PYCLRAY_CAST 1")
-        if self.kind == "rays":
-            lines.append("#define PYCLRAY_RAYS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
 
-        inline_builtins: replace the OpenCL built-ins by the bit-identical inline copies of
-        kernels/builtins.h, and have the camera's and the shapes' functions always inlined (PoCL's
-        inliner leaves sphere_normal out of the kernel, just above its threshold): on PoCL's CPU
-        device, see kernels/builtins.h. Inlining changes no result."""
+        inline_builtins: on PoCL's CPU device, the lanes' square root as the compiler's own, and the
+        camera's and the shapes' functions always inlined (PoCL's inliner leaves some out of the
+        kernel, just above its threshold): see kernels/lanes.h. Inlining changes no result."""
         shapes = [REGISTRY[t] for t in self.shape_types]
-        parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
-        parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
-        parts += [c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
+        parts = ["\n".join(["/* pyclray program variant */"] + defines)]
+        parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
+        parts += [_read("lanes.h"), c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
         parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
-        if inline_builtins:
-            parts.append("#pragma clang attribute pop")
-        parts.append(_read("pyclray.cl"))
+        parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
     def options(self) -> list[str]:
@@ -192,7 +214,7 @@ def _disk_key(source: str, options: list[str], device: cl.Device) -> str:
 
 
 def is_pocl_cpu(device: cl.Device) -> bool:
-    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/builtins.h)."""
+    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/lanes.h)."""
     return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import culling
-from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for
+from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
 from .errors import DeviceError, PyclrayError
 from .layout import CAMERA, PRECISIONS, layout
 from .scene import Scene
@@ -145,9 +145,8 @@ _render_lock = threading.RLock()
 
 
 def _render_inputs(ctx, scene: Scene, precision: str) -> list:
-    """The kernel arguments before the outputs of a render of this scene: camera, the pixels' rays
-    (computed once by the rays kernel), tile size, tiles per row, and per shape type its packed
-    buffer and its tile lists (pyclray/culling.py)."""
+    """The kernel arguments of a render of this scene that do not depend on the window: the camera,
+    and per shape type its packed buffer and its tile lists (pyclray/culling.py)."""
     key = (ctx.device.int_ptr, id(scene), precision)
     with _render_lock:
         entry = _prepared.get(key)
@@ -157,24 +156,20 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
     width, height = scene.image.width, scene.image.height
     rows = scene.camera.basis()
     tan_x, tan_y = scene.camera.tangents(width, height)
-    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
-    camera_buffer = _input_buffer(ctx, camera)
-    real = np.dtype(_REAL[precision]).itemsize
-    rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
-    rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
-    rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
-    tiles_x = -(-width // culling.TILE)
-    args = [camera_buffer, rays, np.int32(culling.TILE.bit_length() - 1), np.int32(tiles_x)]
+    camera = _input_buffer(ctx, _camera_struct(rows, tan_x, tan_y, width, height, precision))
+    shape_args, size = [], 0
     for kind in scene.shape_types():
         cls = REGISTRY[kind]
         ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
         shapes = [scene.shapes[i] for i in ids]
         packed = cls.pack(shapes, ids, scene.camera.eye, rows, precision)
         start, index = culling.tile_lists(cls, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
-        args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+        shape_args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+        size += packed.nbytes + start.nbytes + index.nbytes
+    args = [camera, shape_args]
     with _render_lock:
-        _prepared[key] = (scene, args, rays.size)
-        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of rays (the newest always stays)
+        _prepared[key] = (scene, args, size)
+        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of inputs (the newest always stays)
         while len(_prepared) > 1 and (
             len(_prepared) > _PREPARED_MAX or sum(e[2] for e in _prepared.values()) > _PREPARED_BYTES
         ):
@@ -182,26 +177,48 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
     return args
 
 
-def _global_size(width: int, height: int) -> tuple[int, int]:
-    """The image rounded up to whole tiles (the kernels skip the pixels beyond the edges)."""
-    tile = culling.TILE
-    return (-(-width // tile) * tile, -(-height // tile) * tile)
+def _window(scene: Scene, window) -> tuple[int, int, int, int]:
+    """(col0, row0, cols, rows) of the part of the image to render: the whole image by default."""
+    width, height = scene.image.width, scene.image.height
+    if window is None:
+        return 0, 0, width, height
+    try:
+        col0, row0, cols, rows = (int(v) for v in window)
+    except (TypeError, ValueError):
+        raise PyclrayError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
+    if not (0 <= col0 and 0 <= row0 and cols >= 1 and rows >= 1 and col0 + cols <= width and row0 + rows <= height):
+        raise PyclrayError(
+            f"window: expected (x0, y0, width, height) inside the {width}x{height} image, got {tuple(window)!r}"
+        )
+    return col0, row0, cols, rows
 
 
-def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None) -> Frame:
+def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
     aovs: which images (a subset of depth, normal, id: only those are computed);
-    precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default).
+    precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
+    window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
+    rendered into images of that size, the same pixels as in the whole image; default: all of it.
     """
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
-    width, height = scene.image.width, scene.image.height
-    args = _render_inputs(ctx, scene, precision)
-    variant = Variant("render", scene.shape_types(), aovs, precision)
-    tile = culling.TILE  # one work-group per tile where the device allows it (the kernel needs none)
-    local_size = (tile, tile) if ctx.device.max_work_group_size >= tile * tile else None
-    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), local_size)
+    col0, row0, cols, rows = _window(scene, window)
+    camera, shape_args = _render_inputs(ctx, scene, precision)
+    lanes = lanes_for(ctx.device, precision)
+    variant = Variant("render", scene.shape_types(), aovs, precision, lanes)
+    tile = culling.TILE
+    tiles_x = -(-scene.image.width // tile)
+    args = [camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
+            np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
+    # one packet of `lanes` pixels per work-item, packets aligned to multiples of lanes in the image;
+    # work-groups of one tile (tile / lanes packets by tile rows) where the device allows (the kernel
+    # needs none)
+    packets = -(-(col0 + cols) // lanes) - col0 // lanes
+    group = (tile // lanes, tile)
+    global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
+    local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
+    images = _run(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size)
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 
@@ -258,9 +275,11 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
             f"origins: row {row} ({origins[row]}) is too far from the rays' mean origin for {precision} "
             "(cast such rays in separate batches)"
         )
-    rays = np.zeros((2, max(count, 1), 4), real)
-    rays[0, :count, :3] = relative
-    rays[1, :count, :3] = unit
+    lanes = lanes_for(ctx.device, precision)
+    stride = -(-max(count, 1) // lanes) * lanes  # whole packets: the padding rays are never written
+    rays = np.zeros((6, stride), real)  # structure of arrays: origin x, y, z, direction x, y, z
+    rays[:3, :count] = relative.T
+    rays[3:, :count] = unit.T
     identity = np.eye(3)
     camera = _camera_struct(identity, 0.0, 0.0, 0, 0, precision)
     shape_types = scene.shape_types()
@@ -272,10 +291,10 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
                 f"the scene's shapes are too far from the rays' mean origin {reference} for {precision}: "
                 "their coordinates relative to it overflow"
             )
-    variant = Variant("cast", shape_types, aovs, precision)
+    variant = Variant("cast", shape_types, aovs, precision, lanes)
     if count == 0:
         empty = {"depth": np.empty(0, real), "normal": np.empty((0, 3), real), "id": np.empty(0, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    args = [_input_buffer(ctx, camera), np.int32(count), _input_buffer(ctx, rays[0]), _input_buffer(ctx, rays[1]), *shape_args]
-    results = _run(ctx, variant, args, (count,), count, aovs, precision, (count,))
+    args = [_input_buffer(ctx, camera), np.int32(count), np.int32(stride), _input_buffer(ctx, rays), *shape_args]
+    results = _run(ctx, variant, args, (stride // lanes,), count, aovs, precision, (count,))
     return Frame(results, precision=precision, device=ctx.device.name.strip())

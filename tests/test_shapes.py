@@ -209,3 +209,27 @@ def test_bounds_hold_every_point_of_the_shape(kind):
         assert np.all(points >= lo) and np.all(points <= hi)
         # and tight: each side of the box is reached to within a few percent
         assert np.all(points.min(axis=0) <= lo + 0.1 * (hi - lo)) and np.all(points.max(axis=0) >= hi - 0.1 * (hi - lo))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_every_lane_width_gives_the_same_bits(monkeypatch, scenes_dir, precision):
+    """The new shapes' select-style kernels give the same bits at every packet width (a render of
+    the every-shape scene at an odd size, and a cast of rays some of which start inside solids)."""
+    from test_packets import at_width, widths
+    from test_speedups import same
+
+    need(precision)
+    scene = pyclray.load_scene(scenes_dir / "shapes.toml").with_size(45, 31)
+    rng = np.random.default_rng(3)
+    origins, directions = aimed_rays(scene, rng, 0.0, 301)
+    inner, inner_directions, _ = inside_rays(scene, rng, origins, directions)
+    origins, directions = np.concatenate([origins, inner]), np.concatenate([directions, inner_directions])
+
+    def run():
+        return [pyclray.render(scene, precision=precision), pyclray.cast(scene, origins, directions, precision=precision)]
+
+    runs = {w: at_width(monkeypatch, w, run) for w in widths(precision)}
+    scalar = runs.pop(1)
+    for frames in runs.values():
+        for a, b in zip(scalar, frames):
+            same(a, b)
