@@ -7,26 +7,27 @@
  * axis minus r^2, the same for every pixel: the host computes it once with error-free float64 sums.
  * The discriminant b^2 - a c equals a r^2 - (F . (D x A))^2 (Lagrange's identity across the axis);
  * as for the sphere, the kernel takes the form whose terms are smaller, and the stable roots c/q
- * and q/a with q = b + sign(b) sqrt(disc). A root is on the side where its axial coordinate
- * s (D . A) - d0 lies in [0, |p1 - p0|], i.e. d0 <= s (D . A) <= d1 with d0, d1 = (p0 - o) . A,
- * (p1 - o) . A (exact from the host for camera rays).
- * Caps. The planes through p0 and p1 across the axis: s = d0 / (D . A) and d1 / (D . A); a hit
- * where the point's distance from the axis, |s (D x A) - F x A|, is at most r.
+ * and q/a with q = b + sign(b) sqrt(disc). A root is on the side where its axial coordinate lies
+ * in [0, |p1 - p0|].
+ * Caps. The planes through p0 and p1 across the axis: s = d0 / (D . A) and d1 / (D . A), with
+ * d0, d1 = (p0 - o) . A, (p1 - o) . A exact from the host for camera rays; a hit where the point is
+ * within r of the cap's centre.
  * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
 
 typedef struct {
     vec3v DxA;
     realv disc, triple;
-    realv best;
+    realv best, best_key;
     intv kind;  /* the winner: 0 none, 1 side (near root), 2 side (far root), 3 cap p0, 4 cap p1 */
 } CylinderHit;
 
-/* a candidate s, kept where it is a hit ahead and nearer than the best so far (the first on a tie;
- * NaN, of a ray along the axis or in a cap's plane, and +-inf never are) */
-inline void cylinder_candidate(CylinderHit* hit, const realv s, const intv on_surface, const int kind)
+/* a candidate s, kept where it is a hit ahead and nearer than the best so far by its key (the
+ * first on a tie; NaN, of a ray along the axis or in a cap's plane, and +-inf never are) */
+inline void cylinder_candidate(CylinderHit* hit, const realv s, const realv key, const intv on_surface, const int kind)
 {
-    const intv nearer = on_surface && s > 0 && s < hit->best;
+    const intv nearer = on_surface && s > 0 && s < MISS && key < hit->best_key;
     hit->best = nearer ? s : hit->best;
+    hit->best_key = nearer ? key : hit->best_key;
     hit->kind = nearer ? SPLAT_INT(kind) : hit->kind;
 }
 
@@ -56,21 +57,42 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
     const intv from_b = b * b + v_abs(ac) < a * r2 + perp2;
     hit.disc = from_b ? b * b - ac : a * r2 - perp2;
     const realv dA = v3_dot(D, A);
-    hit.best = SPLAT(MISS);
+    hit.best = hit.best_key = SPLAT(MISS);
     hit.kind = SPLAT_INT(0);
-    /* side: the stable roots (NaN where disc < 0), kept between the end planes */
+    /* side: the stable roots (NaN where disc < 0), kept between the end planes. A root's axial
+     * coordinate from p0, s (D . A) - d0, cancels for a far cylinder (both terms large); from the
+     * ray's point nearest the axis it is z* -+ sqrt(disc) (D . A) / a, z* = -A . (D x (F x D)) / a,
+     * whose cross products keep the camera frame's digits, but which cancels for a ray along the
+     * axis (a small). Each lane takes the form whose terms are smaller. */
     const realv q = b + v_copysign(v_sqrt(hit.disc), b);
     const realv s_q = q / a, s_c = c / q;
     const realv near = s_q < s_c ? s_q : s_c, far = s_q < s_c ? s_c : s_q;
+    const realv z_star = -v3_dot(A, v3_cross(D, v3_cross(F, D))) / a;
+    const realv spread = v_sqrt(hit.disc) * dA / a;
+    const realv length = SPLAT(cylinder->p1.w);
+    const intv from_nearest = v_abs(z_star) + v_abs(spread) < v_abs(near * dA) + v_abs(d0);
+    const realv z_near = from_nearest ? z_star - spread : near * dA - d0;
+    const realv z_far = from_nearest ? z_star + spread : far * dA - d0;
     const intv tube = hit.disc >= 0;
-    cylinder_candidate(&hit, near, tube && d0 <= near * dA && near * dA <= d1, 1);
-    cylinder_candidate(&hit, far, tube && d0 <= far * dA && far * dA <= d1, 2);
-    /* caps: the end planes, kept within r of the axis */
+    /* Which candidate is nearest is decided, where z* is well conditioned, on their offsets from
+     * the ray's point nearest the axis (small numbers: -+sqrt(disc) / a for the side,
+     * -z* / (D . A) and (length - z*) / (D . A) for the caps), not on their distances, which for a
+     * far cylinder are large numbers whose rounding would mix up a cap and the side near the rim. */
+    const realv root_offset = v_sqrt(hit.disc) / a;
+    cylinder_candidate(&hit, near, from_nearest ? -root_offset : near, tube && z_near >= 0 && z_near <= length, 1);
+    cylinder_candidate(&hit, far, from_nearest ? root_offset : far, tube && z_far >= 0 && z_far <= length, 2);
+    /* caps: the end planes, kept where the hit point is within r of the cap's centre; that point
+     * is A x (D x F_end) / (A . D) from it (see kernels/disk.cl), not s D - F_end */
     if (cylinder->caps) {
+#ifdef PYCLRAY_CAST
+        const vec3v F1 = v3_sub(v3_splat(cylinder->p1), ray->origin);
+#else
+        const vec3v F1 = v3_splat(cylinder->p1);
+#endif
         const realv s0 = d0 / dA, s1 = d1 / dA;
-        const vec3v R0 = v3_sub(v3_scale(hit.DxA, s0), FxA), R1 = v3_sub(v3_scale(hit.DxA, s1), FxA);
-        cylinder_candidate(&hit, s0, v3_dot(R0, R0) <= r2, 3);
-        cylinder_candidate(&hit, s1, v3_dot(R1, R1) <= r2, 4);
+        const vec3v R0 = v3_cross(A, v3_cross(D, F)), R1 = v3_cross(A, v3_cross(D, F1));
+        cylinder_candidate(&hit, s0, from_nearest ? -z_star / dA : s0, v3_dot(R0, R0) <= r2 * dA * dA, 3);
+        cylinder_candidate(&hit, s1, from_nearest ? (length - z_star) / dA : s1, v3_dot(R1, R1) <= r2 * dA * dA, 4);
     }
     return hit;
 }

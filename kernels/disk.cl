@@ -1,6 +1,8 @@
 /* Disk: n . (p - C) = 0 and |p - C| <= r. In the frame, h = n . (origin - C) comes from the host in
- * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D), the hit point
- * lies at s D - F from the centre (F = C - origin). */
+ * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D). The hit point
+ * from the centre, s D - F (F = C - origin), cancels for a far disk (s D and F are large, their
+ * difference small); it equals n x (D x F) / (n . D), whose cross product keeps the digits of the
+ * small sideways offsets of the camera frame, so the border is as sharp far away as near. */
 
 inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 {
@@ -14,7 +16,7 @@ inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 #endif
     /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit */
     const realv s = -h / v3_dot(n, ray->dir);
-    const vec3v P = v3_sub(v3_scale(ray->dir, s), F);
+    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
     return (s > 0 && v3_dot(P, P) <= SPLAT(disk->center.w)) ? s : SPLAT(MISS);
 }
 

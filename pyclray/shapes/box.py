@@ -44,13 +44,16 @@ class Box(Shape):
             ("axis1", "real4"),
             ("axis2", "real4"),
             ("high", "real4"),  # the three slabs' high offsets
+            ("center", "real4"),  # the centre in the frame; w unused
+            ("half_size", "real4"),  # half the edge lengths
             ("world_axis0", "real4"),  # the box's axes in world space (the faces' normals)
             ("world_axis1", "real4"),
             ("world_axis2", "real4"),
             ("id", "int"),
         ),
         "Box: a ray o + s D is inside slab k where lo_k <= s (D . axis_k) <= hi_k, lo_k and hi_k = "
-        "(center - o) . axis_k -+ size_k / 2, exact for the frame origin.",
+        "(center - o) . axis_k -+ size_k / 2, exact for the frame origin; center and half for the "
+        "slab test from the ray's point nearest the centre.",
     )
 
     def __post_init__(self):
@@ -95,6 +98,8 @@ class Box(Shape):
         for k, box in enumerate(boxes):
             R = box.axes()
             F = np.array(box.center) - origin
+            out["center"][k, :3] = rotation_rows @ F
+            out["half_size"][k, :3] = box.half()
             for axis in range(3):
                 e = R[:, axis]
                 out[f"axis{axis}"][k, :3] = rotation_rows @ e
