@@ -138,11 +138,13 @@ def mitsuba_tolerances(scene: Scene, t, ids, cos, *, cameras: bool, origin_scale
     scale = world_sizes(scene, scene.camera.eye)[index]
     if origin_scale is not None:
         scale = np.maximum(scale, origin_scale)
+    # a Mitsuba counterpart less exact than the model's K (Shape.mitsuba_error_scale)
+    k = K_MITSUBA * np.array([s.mitsuba_error_scale for s in scene.shapes] or [1.0])[index]
     camera_reach = 0.0
     if cameras:
         eye = np.linalg.norm(scene.camera.eye)
         camera_reach = camera_angle_tolerance(scene) * np.where(np.isfinite(t), t, 0.0) + ORIGIN_K * EPSILON["fp32"] * max(eye, 1.0)
-    return tolerances(t, cos, curvature_radii(scene)[index], eps=EPSILON["fp32"], scale=scale, k=K_MITSUBA,
+    return tolerances(t, cos, curvature_radii(scene)[index], eps=EPSILON["fp32"], scale=scale, k=k,
                       camera_reach=camera_reach)
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from . import accuracy
 from .accuracy import ORIGIN_K, SILHOUETTE_COS
+from .shapes import REGISTRY
 from .validation.files import heat_map, save
 from .validation.images import ImageCheck, cross_check, format_image_check, next_to_id_change
 from .validation.rays import DEFAULT_RAYS, RayCheck, format_ray_check, ray_level
@@ -49,7 +50,8 @@ def tolerance_text() -> list[str]:
         f" normal angle <= {K:g} eps + D / r",
         f"  not judged: silhouettes (|cos| < {SILHOUETTE_COS:g}), hits within D of an edge, and for ids also pixels next",
         "  to an id change and near ties (the second-nearest surface within D)",
-    ]
+    ] + [f"  {kind}: K x {cls.mitsuba_error_scale:g} (its Mitsuba counterpart is less exact)"
+         for kind, cls in REGISTRY.items() if cls.mitsuba_error_scale != 1.0]
 
 
 # -- command line --------------------------------------------------------------------------------

@@ -119,6 +119,10 @@ class Shape:
         model's coordinate size is max(|point|, |anchor|, |point - anchor|)."""
         raise NotImplementedError
 
+    # how much larger than the model's K eps (t + L) its Mitsuba counterpart's error may be (the
+    # engine's own formulas are the shape's business: see the cylinder)
+    mitsuba_error_scale: ClassVar[float] = 1.0
+
     def curvature_radius(self) -> float:
         """The smallest radius of curvature (inf for flat shapes): a position error e along the
         surface turns the normal by e / radius."""
