@@ -10,7 +10,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies", "floor-in-place", "breakdown", "targets-interleaved"]
-SCENE_ORDER = ["tp02", "grid64", "grid1024", "floor"]
+SCENE_ORDER = ["tp02", "grid64", "grid1024", "shapes", "floor"]
 TARGETS = {"tp02_speedup": 8.0, "depth_share": 0.60, "grid64_speedup": 2.0}
 
 
@@ -221,7 +221,7 @@ def headline(rows) -> list[str]:
         "|---|---|---|---|---|",
     ]
     cases = round_robin(rows)
-    for name in ("tp02", "grid64", "grid1024"):
+    for name in ("tp02", "grid64", "grid1024", "shapes"):
         keys = [f"{name} pyclray all", f"{name} pyclray depth", f"{name} mitsuba-llvm"]
         if all(k in cases for k in keys):
             a, d, m = (cases[k]["median"] for k in keys)
@@ -241,7 +241,7 @@ def plot(rows, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    markers = {"tp02": "o", "grid64": "s", "grid1024": "^"}
+    markers = {"tp02": "o", "grid64": "s", "grid1024": "^", "shapes": "D"}
     colours = {("pyclray", "fp32"): "tab:blue", ("pyclray", "fp64"): "tab:cyan", ("mitsuba-llvm", "fp32"): "tab:red",
                ("mitsuba-scalar", "fp32"): "tab:orange"}
     floor_value = 1e-9  # errors of exactly 0 (or below) are drawn here
@@ -262,7 +262,7 @@ def plot(rows, path: Path) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("median render time at 512×512 [s] (warm)")
     ax.set_ylabel("max depth error vs float64 oracle [float32 ulps x |cos incidence|]")
-    ax.set_title("Error against run time (one point per configuration;\nmarkers: o tp02, □ grid64, △ grid1024; hollow: depth only)")
+    ax.set_title("Error against run time (one point per configuration;\nmarkers: o tp02, □ grid64, △ grid1024, ◇ shapes; hollow: depth only)")
     ax.grid(True, which="both", alpha=0.3)
     if seen:
         ax.legend(fontsize=8)

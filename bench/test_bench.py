@@ -26,7 +26,7 @@ from pyclray import oracle
 
 from .metrics import compare
 
-SCENE_NAMES = ("tp02", "grid64", "grid1024")
+SCENE_NAMES = ("tp02", "grid64", "grid1024", "shapes")  # shapes: every shape type (scenes/shapes.toml)
 SIZES = (512, 2048)
 AOV_SETS = {"all": ("depth", "normal", "id"), "depth": ("depth",)}
 PRECISIONS = ("fp32", "fp64")
@@ -226,7 +226,7 @@ def test_mitsuba_llvm(benchmark, scenes_dir, name, size):
     _mitsuba(benchmark, scenes_dir, name, size, "llvm_ad_rgb", "mitsuba-llvm")
 
 
-@pytest.mark.parametrize("name", ["tp02", "grid64"])
+@pytest.mark.parametrize("name", ["tp02", "grid64", "shapes"])
 def test_mitsuba_scalar(benchmark, scenes_dir, name):
     """512x512 only, and not grid1024 (~3 min a render): see the module's docstring."""
     _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=3)
@@ -277,7 +277,7 @@ def test_breakdown(benchmark, scenes_dir, part):
 # -- the speed targets, measured interleaved ---------------------------------------------------
 # round-robin groups: Mitsuba scenes of one group live together (with grid1024's alive beside the
 # others, Dr.Jit's llvm renders of every scene slow down several times, so it gets its own group)
-TARGET_GROUPS = {"tp02+grid64": ("tp02", "grid64"), "grid1024": ("grid1024",)}
+TARGET_GROUPS = {"tp02+grid64": ("tp02", "grid64", "shapes"), "grid1024": ("grid1024",)}
 TARGET_ROUNDS = 20
 TARGET_CALLS = 3  # timed calls of a case per round, after SETTLE_CALLS untimed ones
 SETTLE_CALLS = 2

@@ -6,7 +6,6 @@ import pyclray
 from pyclray import mitsuba
 from pyclray.shapes import Plane
 
-ULP = 2.0**-24
 
 
 def scene_of(*shapes):

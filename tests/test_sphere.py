@@ -7,7 +7,6 @@ import pyclray
 from pyclray import accuracy, oracle
 from pyclray.shapes import Sphere
 
-ULP = 2.0**-24
 
 
 def scene_of(*shapes):
