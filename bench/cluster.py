@@ -104,6 +104,86 @@ def speedups(args) -> None:
           f"{phase['1 worker'] / phase['2 workers']:.2f}x frames phase")
 
 
+def _start_cluster(workers: int, folder: Path):
+    """A scheduler and `workers` worker processes (one task thread each, PoCL threads as --workers
+    gives them), each started as its own command in a session of its own (see --sessions)."""
+    from distributed import Client
+
+    dask = str(Path(sys.executable).parent / "dask")
+    file = folder / f"scheduler-{workers}.json"
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    processes = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                   "--scheduler-file", str(file)], **quiet)]
+    threads = str(max(1, len(os.sched_getaffinity(0)) // workers))
+    env = dict(os.environ, POCL_CPU_MAX_CU_COUNT=threads, POCL_MAX_PTHREAD_COUNT=threads)
+    for _ in range(workers):
+        processes.append(subprocess.Popen([dask, "worker", "--scheduler-file", str(file), "--host", "127.0.0.1",
+                                           "--nthreads", "1", "--nworkers", "1", "--no-dashboard"], env=env, **quiet))
+    deadline = time.monotonic() + 120
+    while not file.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    with Client(scheduler_file=str(file), set_as_default=False) as client:
+        client.wait_for_workers(workers, timeout=120)
+        return processes, client.scheduler.address
+
+
+def _stop(processes) -> None:
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def sessions(args) -> None:
+    """1 worker against 2, each worker (and the scheduler) in a session of its own, the commands
+    reaching them with --scheduler. Linux shares the CPU fairly between sessions (autogroups), not
+    between processes: while other sessions keep the cores busy, every process of one session
+    together gets one session's share, so `--workers 2` (whose workers are in the command's session)
+    can go no faster than `--workers 1` on a machine shared that way. A worker per session gets a
+    share per worker, as a worker gets a core of its own on an idle machine."""
+    walls, phases = {}, {}
+    with tempfile.TemporaryDirectory(prefix="pyclray-bench-cluster-") as tmp:
+        folder = Path(tmp)
+        clusters = {n: _start_cluster(n, folder) for n in (1, 2)}
+        try:
+            base = [sys.executable, "-m", "pyclray.cli", "animate", args.scene, "--frames", f"0:{args.frames}",
+                    "--size", f"{args.size}x{args.size}"] + ([] if args.output == "folder" else ["--aov", "depth"])
+            suffix = "/" if args.output == "folder" else ".mp4"
+            names = {1: "1 worker", 2: "2 workers"}
+            for r in range(args.rounds):
+                for n in ((1, 2) if r % 2 == 0 else (2, 1)):
+                    time.sleep(PAUSE_S)
+                    out = f"{folder}/s{n}{suffix}"
+                    start = time.perf_counter()
+                    result = subprocess.run(base + ["-o", out, "--scheduler", clusters[n][1]], capture_output=True, text=True)
+                    wall = time.perf_counter() - start
+                    if result.returncode != 0:
+                        sys.exit(f"{names[n]}: {result.stderr.strip()}")
+                    walls.setdefault(n, []).append(wall)
+                    phases.setdefault(n, []).append(frames_phase(result.stdout.strip().splitlines()[-1]))
+                    print(f"round {r + 1}: {names[n]} (own sessions): {wall:.2f} s wall, frames {phases[n][-1]:.2f} s", flush=True)
+            if not _same_tree(Path(f"{folder}/s1{suffix}"), Path(f"{folder}/s2{suffix}")):
+                sys.exit("the outputs of 1 and 2 workers differ")
+        finally:
+            for processes, _ in clusters.values():
+                _stop(processes)
+    wall = {n: statistics.median(v) for n, v in walls.items()}
+    phase = {n: statistics.median(v) for n, v in phases.items()}
+    print(f"\nworkers in sessions of their own, {args.frames} frames of {args.size}x{args.size}, {args.output}, "
+          f"{args.rounds} rounds (medians; clusters started beforehand):")
+    print("| run | wall s (min-max) | frames phase s |")
+    print("|---|---|---|")
+    for n in (1, 2):
+        print(f"| {n} worker{'s' if n > 1 else ''} | {wall[n]:.2f} ({min(walls[n]):.2f}-{max(walls[n]):.2f}) | {phase[n]:.2f} |")
+    pairs = [a / b for a, b in zip(walls[1], walls[2])]  # round by round: the machine's drift cancels
+    print(f"2 workers over 1: {wall[1] / wall[2]:.2f}x wall, {phase[1] / phase[2]:.2f}x frames phase (medians); "
+          f"round by round {', '.join(f'{p:.2f}x' for p in pairs)}, median {statistics.median(pairs):.2f}x")
+
+
 def overhead(args) -> None:
     import pyclray
     from pyclray import cluster
@@ -164,12 +244,14 @@ def main(argv=None) -> None:
     parser.add_argument("--output", choices=("folder", "mp4"), default="folder")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--tasks", type=int, default=100, help="tasks a run for the overhead per task")
-    parser.add_argument("--only", choices=("speedups", "overhead"))
+    parser.add_argument("--only", choices=("speedups", "sessions", "overhead"))
     args = parser.parse_args(argv)
     os.environ.setdefault("PYCLRAY_CACHE_DIR", str(Path(tempfile.gettempdir()) / "pyclray-bench-cluster-cache"))
-    if args.only != "overhead":
+    if args.only in (None, "speedups"):
         speedups(args)
-    if args.only != "speedups":
+    if args.only in (None, "sessions"):
+        sessions(args)
+    if args.only in (None, "overhead"):
         overhead(args)
 
 

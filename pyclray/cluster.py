@@ -41,9 +41,11 @@ WORKERS_TIMEOUT_S = 60
 # Pixels a band task of `pyclray render --workers` renders: 512x512 worth (5 MB of images at most),
 # enough work to make a task's overhead (milliseconds) small, small enough to spread an image
 TASK_PIXELS = 1 << 18
-# Tasks in flight for each worker thread: one running, one waiting there, one on its way back; more
-# are submitted as results are handed over, so memory stays bounded whatever the length of the run
-AHEAD_PER_THREAD = 3
+# Tasks in flight: 4 per worker thread (one running, one waiting there, results on their way back),
+# at least 8 (short tasks need a deeper pipeline to hide the round trip, 10-20 ms here); more are
+# submitted as results are handed over, so memory stays bounded whatever the length of the run
+AHEAD_PER_THREAD = 4
+AHEAD_MIN = 8
 
 
 class ClusterError(PyclrayError, ValueError):
@@ -168,7 +170,7 @@ def run(client: Client, job: Job, method: str, arguments, progress=None, what: s
     try:
         client.register_plugin(job, name=job.name)  # raises here what the job's setup raised on a worker
         threads = sum(client.nthreads().values())
-        ahead = AHEAD_PER_THREAD * max(threads, 1)
+        ahead = max(AHEAD_MIN, AHEAD_PER_THREAD * threads)
         # each result is fetched as its task completes (concurrently, in the client's event loop) and
         # handed over once every earlier one has been; a new task is submitted for each one handed
         # over, so the client holds at most `ahead` results (back-pressure from a slow consumer)
