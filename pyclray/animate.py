@@ -19,7 +19,7 @@ import subprocess
 import tempfile
 import threading
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, closing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,6 +138,8 @@ class _Folder:
         for suffix, data in files:
             with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writer's
                 file.write(data)
+                file.flush()
+                os.fsync(file.fileno())  # on disk before the folder is renamed, as write_images leaves its files
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
@@ -465,8 +467,9 @@ def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
                         before = time.perf_counter()
                         sequence = cluster.render_animation(client, scene, aovs, args.precision, args.device, frames,
                                                             encode=sink.encoder(), progress=bar)
-                        for k, (_, encoded) in zip(frames, sequence):
-                            writer.put(k, encoded)
+                        with closing(sequence):  # on an error here: the tasks in flight are cancelled
+                            for k, (_, encoded) in zip(frames, sequence):
+                                writer.put(k, encoded)
                         render_time = time.perf_counter() - before
                 else:
                     sequence = render_animation(scene, aovs, args.precision, args.device, frames)
