@@ -115,7 +115,11 @@ def _start_cluster(workers: int, folder: Path):
     processes = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                    "--scheduler-file", str(file)], **quiet)]
     threads = str(max(1, len(os.sched_getaffinity(0)) // workers))
-    env = dict(os.environ, POCL_CPU_MAX_CU_COUNT=threads, POCL_MAX_PTHREAD_COUNT=threads)
+    # the nannies leave MALLOC_TRIM_THRESHOLD_ out, as in a local cluster (README, Clusters)
+    config = folder / "dask-config"
+    config.mkdir(exist_ok=True)
+    (config / "pyclray.yaml").write_text("distributed: {nanny: {pre-spawn-environ: {MALLOC_TRIM_THRESHOLD_: null}}}\n")
+    env = dict(os.environ, POCL_CPU_MAX_CU_COUNT=threads, POCL_MAX_PTHREAD_COUNT=threads, DASK_CONFIG=str(config))
     for _ in range(workers):
         processes.append(subprocess.Popen([dask, "worker", "--scheduler-file", str(file), "--host", "127.0.0.1",
                                            "--nthreads", "1", "--nworkers", "1", "--no-dashboard"], env=env, **quiet))
@@ -124,6 +128,8 @@ def _start_cluster(workers: int, folder: Path):
         time.sleep(0.2)
     with Client(scheduler_file=str(file), set_as_default=False) as client:
         client.wait_for_workers(workers, timeout=120)
+        trims = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+        assert set(trims.values()) == {None}, trims
         return processes, client.scheduler.address
 
 
