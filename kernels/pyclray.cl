@@ -2,6 +2,10 @@
  * camera.h and the file of each shape type present, and selects what is compiled with -D options:
  *   PYCLRAY_FP64                        double precision
  *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel
+ *   PYCLRAY_OCCLUDED                    (with PYCLRAY_CAST) the any-hit kernel instead
+ *   PYCLRAY_BVH                         render: the bounded shapes through the BVH, not tile lists
+ *   PYCLRAY_BOUNDED(X), PYCLRAY_UNBOUNDED(X)  the shape types present with and without bounds
+ *   PYCLRAY_HAS_BOUNDED                 some bounded type is present (the BVH's buffers are passed)
  *   PYCLRAY_RAYS                        the kernel of the camera's rays (no shapes, no images)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
@@ -12,13 +16,24 @@
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
 
-#ifdef PYCLRAY_CAST
-/* one argument pair per shape type present: the packed array and its length */
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
+/* one argument pair per shape type present: the packed array and its length; the bounded types'
+ * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray */
 #define PYCLRAY_SHAPE_ARG(Type, type) , __global const Type* type##s, const int n_##type##s
-/* every shape of the type, in order */
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
 #define PYCLRAY_SHAPE_AT(type, q) (q)
+#define PYCLRAY_LINEAR(X) PYCLRAY_UNBOUNDED(X)
+#ifdef PYCLRAY_HAS_BOUNDED
+#ifdef PYCLRAY_CAST
+/* the BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding radius (w) */
+#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs, __global const double4* anchors
+#else
+#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs
+#endif
+#else
+#define PYCLRAY_BVH_ARGS
+#endif
 #else
 /* per shape type: the packed array, and for each tile of the image the shapes that can be seen
  * in it (type##_tile_list[type##_tile_start[tile] .. type##_tile_start[tile + 1]], increasing;
@@ -28,32 +43,49 @@
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
 #define PYCLRAY_END(type) type##_tile_start[tile + 1]
 #define PYCLRAY_SHAPE_AT(type, q) type##_tile_list[q]
+#define PYCLRAY_LINEAR(X) PYCLRAY_SHAPES(X)
+#define PYCLRAY_BVH_ARGS
 #endif
 #define PYCLRAY_KIND(Type, type) KIND_##Type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
-/* nearest hit with s > 0 over every shape of one type; on an exact tie the lowest id wins */
+/* Keep hit s of shape (id, kind, k) if it is the nearest so far; on an exact tie the lowest id
+ * wins, whatever order the shapes are visited in (tiles, BVH). */
 #ifdef PYCLRAY_TRACK_ID
+#define PYCLRAY_CONSIDER(s, id, kind, k, q)                                          \
+    if ((s) < best || ((s) == best && (s) < MISS && (id) < best_id)) {               \
+        best = (s); best_id = (id); best_kind = (kind); best_k = (k); best_q = (q);  \
+    }
+#define PYCLRAY_BEST(start)                                                          \
+    __typeof__(start) best = (start);                                                \
+    int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
+#else
+#define PYCLRAY_CONSIDER(s, id, kind, k, q) best = (s) < best ? (s) : best;
+#define PYCLRAY_BEST(start) __typeof__(start) best = (start);
+#endif
+
+/* nearest hit with s > 0 over the shapes of one type that are tested one after the other */
 #define PYCLRAY_NEAREST(Type, type)                                                 \
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {      \
         const int k = PYCLRAY_SHAPE_AT(type, q);                                    \
         const real s = type##_hit(&type##s[k], &ray);                               \
-        if (s < best || (s == best && s < MISS && type##s[k].id < best_id)) {       \
-            best = s; best_id = type##s[k].id; best_kind = KIND_##Type; best_k = k; \
-        }                                                                           \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k, -1)                      \
     }
 #define PYCLRAY_FIND_NEAREST                                                        \
-    real best = MISS;                                                               \
-    int best_id = -1, best_kind = KIND_NONE, best_k = 0;                            \
-    PYCLRAY_SHAPES(PYCLRAY_NEAREST)
-#else
-#define PYCLRAY_NEAREST(Type, type)                                                 \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q)        \
-        best = fmin(best, type##_hit(&type##s[PYCLRAY_SHAPE_AT(type, q)], &ray));
-#define PYCLRAY_FIND_NEAREST                                                        \
-    real best = MISS;                                                               \
-    PYCLRAY_SHAPES(PYCLRAY_NEAREST)
-#endif
+    PYCLRAY_BEST(MISS)                                                              \
+    PYCLRAY_LINEAR(PYCLRAY_NEAREST)
+
+/* a leaf's shape at position q of the BVH (render): refs[q] = index * 8 + kind */
+#define PYCLRAY_VISIT_KIND(Type, type)                                              \
+    if (kind == KIND_##Type) {                                                      \
+        const real s = type##_hit(&type##s[k], &ray);                               \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k, q)                       \
+    }
+#define PYCLRAY_VISIT(q)                                                            \
+    {                                                                               \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                         \
+    }
 
 /* the images: distance along the unit ray, world normal of the winner only, id;
  * MISS (+inf), (0, 0, 0) and -1 on a miss */
@@ -129,7 +161,7 @@ __kernel void rays(__global const Camera* camera, __global real4* rays)
  * rays kernel. Tiles are 1 << tile_shift pixels square, tiles_x per row (and the work-groups where the
  * device allows). */
 __kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_shift, const int tiles_x
-                     PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+                     PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
     const int i = get_global_id(0), j = get_global_id(1);
     const int width = camera->width, height = camera->height;
@@ -143,25 +175,141 @@ __kernel void render(__global const Camera* camera, __global const real4* rays, 
     ray.a = packed.w;
 
     PYCLRAY_FIND_NEAREST
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
+    const BoxRay box = box_ray((float3)(0.0f), convert_float3(world_from_frame(camera, ray.dir)), 0.0f);
+    PYCLRAY_TRAVERSE(nodes, box, best, PYCLRAY_VISIT)
+#endif
     PYCLRAY_WRITE(index)
 }
 
 #else
 
-/* One work-item per ray: origin relative to the frame's reference point, unit direction. */
-__kernel void cast(__global const Camera* camera, const int n_rays,
-                   __global const real4* origins, __global const real4* directions
-                   PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
-{
-    const int r = get_global_id(0);
-    if (r >= n_rays) return;
-    Ray ray;
-    ray.origin = origins[r].xyz;
-    ray.dir = directions[r].xyz;
-    ray.a = dot(ray.dir, ray.dir);
+/* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
+ * the largest distance that counts (float64, limits[r * limit_stride]).
+ *
+ * Exact and independent of the other rays: each shape is tested from a point of the ray just
+ * before it. For a bounded shape of anchor A and bounding radius R (its packed data is relative
+ * to A), the ray's origin O moves along the unit direction D to O + s0 D, s0 = max(0, (A - O).D - R),
+ * which no point of the shape precedes; the new origin relative to A, s0 D - (A - O), is taken in
+ * float64 and rounded once. A ray from 1e8 away thus meets a sphere of radius 1e-4 with errors
+ * relative to the sphere's size, as a camera next to it would; its distance is s0 + s (s: the
+ * shape's own, from the new origin). Unbounded shapes (planes) take the world origin in float64. */
+#define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
+    if (kind == KIND_##Type) {                                                      \
+        const real s = type##_hit(&type##s[k], &moved);                             \
+        const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
+        PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##Type, k, q)                      \
+    }
+#define PYCLRAY_CAST_VISIT(q)                                                       \
+    {                                                                               \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        double s0;                                                                  \
+        const Ray moved = moved_ray(&ray, anchors[q], &s0);                         \
+        PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                    \
+    }
+#define PYCLRAY_CAST_LINEAR(Type, type)                                             \
+    for (int q = 0; q < n_##type##s; ++q) {                                         \
+        const real s = type##_hit(&type##s[q], &ray);                               \
+        const double t = s < MISS ? (double)s * length : INFINITY;                  \
+        PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##Type, q, -1)                     \
+    }
 
-    PYCLRAY_FIND_NEAREST
-    PYCLRAY_WRITE((size_t)r)
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. */
+inline Ray moved_ray(const Ray* ray, const double4 anchor, double* s0)
+{
+    const double3 O = ray->world, D = convert_double3(ray->dir_exact);
+    const double3 F = anchor.xyz - O;
+    const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w;
+    *s0 = along > 0 ? along : 0;
+    Ray moved = *ray;
+    moved.origin = convert_real3(*s0 * D - F);
+    return moved;
 }
+
+/* the setup shared by cast and occluded: the ray, and its box ray around the scene's anchor */
+#define PYCLRAY_CAST_RAY                                                            \
+    const int r = get_global_id(0);                                                 \
+    if (r >= n_rays) return;                                                        \
+    Ray ray;                                                                        \
+    ray.world = origins[r].xyz;                                                     \
+    ray.dir_exact = directions[r].xyz;                                              \
+    ray.dir = convert_real3(ray.dir_exact);                                         \
+    ray.a = dot(ray.dir, ray.dir);                                                  \
+    ray.origin = convert_real3(ray.world);                                          \
+    const real length = sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
+    const double t_max = limits[(size_t)r * (size_t)limit_stride];
+
+#define PYCLRAY_CAST_BOX                                                            \
+    const double3 relative = ray.world - scene_anchor.xyz;                          \
+    const float3 o = convert_float3(relative);                                      \
+    /* o's rounding, with a wide margin */                                          \
+    const float margin = 0x1p-20f * (fabs(o.x) + fabs(o.y) + fabs(o.z));              \
+    const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
+
+#ifndef PYCLRAY_OCCLUDED
+
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) PYCLRAY_CONSIDER(t, id, kind, k, q)
+
+__kernel void cast(__global const Camera* camera, const int n_rays,
+                   __global const double4* origins, __global const double4* directions,
+                   __global const double* limits, const int limit_stride, const double4 scene_anchor
+                   PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+{
+    PYCLRAY_CAST_RAY
+    /* hits up to t_max count: best starts just above it */
+    PYCLRAY_BEST(nextafter(t_max, (double)INFINITY))
+    PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
+#ifdef PYCLRAY_HAS_BOUNDED
+    {
+        PYCLRAY_CAST_BOX
+        PYCLRAY_TRAVERSE(nodes, box, best, PYCLRAY_CAST_VISIT)
+    }
+#endif
+    const bool hit = best <= t_max && best < INFINITY;
+    const size_t index = (size_t)r;
+#ifdef PYCLRAY_AOV_DEPTH
+    depth[index] = hit ? (real)best : MISS;
+#endif
+#ifdef PYCLRAY_AOV_NORMAL
+    {
+#ifdef PYCLRAY_HAS_BOUNDED
+        if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
+            double s0;
+            ray = moved_ray(&ray, anchors[best_q], &s0);
+        }
+#endif
+        real3 normal = (real3)(0, 0, 0);
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_NORMAL) }
+        vstore3(normal, index, normal_out);
+    }
+#endif
+#ifdef PYCLRAY_AOV_ID
+    id_out[index] = hit ? best_id : -1;
+#endif
+}
+
+#else
+
+/* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
+
+__kernel void occluded(const int n_rays, __global const double4* origins, __global const double4* directions,
+                       __global const double* limits, const int limit_stride, const double4 scene_anchor
+                       PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG), __global char* occluded_out)
+{
+    PYCLRAY_CAST_RAY
+    bool found = false;
+    PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
+#ifdef PYCLRAY_HAS_BOUNDED
+    if (!found) {
+        PYCLRAY_CAST_BOX
+        PYCLRAY_TRAVERSE(nodes, box, (found ? -INFINITY : t_max), PYCLRAY_CAST_VISIT)
+    }
+#endif
+    occluded_out[r] = found ? 1 : 0;
+}
+
+#endif
 
 #endif

@@ -6,7 +6,7 @@
 """
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, PyclrayError, SceneError
-from .render import Frame, cast, render
+from .render import Frame, cast, occluded, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
 from .shapes import Plane, Sphere
 
@@ -15,5 +15,5 @@ __version__ = "0.1.0"
 __all__ = [
     "AOVS", "BuildError", "Camera", "DeviceError", "Frame", "Image", "Plane", "PyclrayError",
     "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render",
-    "scene_from_dict", "select_device",
+    "scene_from_dict", "select_device", "occluded",
 ]

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from .bvh import NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
 from .shapes import REGISTRY
@@ -124,20 +125,39 @@ def _read(name: str) -> str:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision."""
 
-    kind: str  # "render", "cast" or "rays" (the camera's rays, for render)
+    kind: str  # "render", "cast", "occluded" (any hit of cast's rays) or "rays" (the camera's rays, for render)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
+    bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
+
+    def bounded_types(self) -> tuple[str, ...]:
+        return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
+
+    def uses_bvh(self) -> bool:
+        return bool(self.bounded_types()) and (self.bvh or self.kind in ("cast", "occluded"))
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
-        listed = " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in self.shape_types)
-        lines = [f"#define PYCLRAY_SHAPES(X) {listed}"]
+
+        def listed(types):
+            return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
+
+        bounded = self.bounded_types()
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}"]
+        lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
+        if bounded:
+            lines.append("#define PYCLRAY_HAS_BOUNDED 1")
+        if self.bvh and self.kind == "render":
+            lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
-        if self.kind == "cast":
+        if self.kind in ("cast", "occluded"):
             lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "occluded":
+            lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.kind == "rays":
             lines.append("#define PYCLRAY_RAYS 1")
         return lines
@@ -152,10 +172,10 @@ class Variant:
         shapes = [REGISTRY[t] for t in self.shape_types]
         parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
         parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
-        parts += [c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        parts += [c_header([CAMERA, NODE] + [s.struct for s in shapes], self.precision)]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
         if inline_builtins:
             parts.append("#pragma clang attribute pop")
         parts.append(_read("pyclray.cl"))

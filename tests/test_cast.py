@@ -192,15 +192,15 @@ def test_no_rays(empty, precision):
 ONE = [[0.0, 0.0, -1.0]]
 BAD = [
     # (origins, directions, words the message must hold)
-    ((0, 1, 5), [[0.0, -1.0]], ["directions", "(N, 3)", "(1, 2)"]),
-    ((0, 1, 5), np.ones((2, 2, 3)), ["directions", "(N, 3)", "(2, 2, 3)"]),
-    ((0, 1, 5), [0.0, 0.0, -1.0], ["directions", "(N, 3)", "(3,)"]),
-    ((0, 1, 5), 5.0, ["directions", "(N, 3)"]),
+    ((0, 1, 5), [[0.0, -1.0]], ["directions", "(..., 3)", "(1, 2)"]),
+    ((0, 1, 5), np.ones((2, 3, 2)), ["directions", "(..., 3)", "(2, 3, 2)"]),
+    ((0, 1, 5), 5.0, ["directions", "(..., 3)"]),
     ((0, 1, 5), "down", ["directions", "numbers"]),
-    ((0, 1, 5), None, ["directions", "(N, 3)"]),
-    ((0, 1), ONE, ["origins", "(N, 3)", "(2,)"]),
-    (np.zeros((2, 3)), np.ones((3, 3)), ["origins", "3 rows", "got 2"]),
-    (np.zeros((1, 3)), np.ones((3, 3)), ["origins", "3 rows", "got 1"]),
+    ((0, 1, 5), None, ["directions", "(..., 3)"]),
+    ((0, 1), ONE, ["origins", "(..., 3)", "(2,)"]),
+    (np.zeros((2, 3)), np.ones((3, 3)), ["origins", "(3, 3)", "(2, 3)"]),
+    (np.zeros((1, 3)), np.ones((3, 3)), ["origins", "(3, 3)", "(1, 3)"]),
+    (np.zeros((2, 2, 3)), np.ones((2, 2, 3)) * [1, np.nan, 1], ["directions", "row (0, 0)", "not finite"]),
     ((0, 1, 5), [[0, 0, -1], [0, 0, 0]], ["directions", "row 1", "zero length"]),
     ((0, 1, 5), [[0, 0, -1], [0, np.nan, -1]], ["directions", "row 1", "not finite"]),
     ((0, 1, 5), [[0, 0, -1], [np.inf, 0, -1]], ["directions", "row 1", "not finite"]),

@@ -14,8 +14,13 @@ class Shape:
 
     Each subclass sets ``type`` (its name in scene files), ``c_type`` (its struct in OpenCL C; the
     kernel functions are ``<type>_hit`` and ``<type>_normal`` in ``kernels/<type>.cl``), ``struct``
-    (its packed layout, declared once) and ``keys`` (the keys of its scene table besides type and
-    name), and implements ``_from_table``, ``_pack`` and the float64 oracle.
+    (its packed layout, declared once), ``keys`` (the keys of its scene table besides type and
+    name) and ``bounded`` (whether it has finite world bounds: such shapes go into the BVH, the
+    others are tested by every ray), and implements ``_from_table``, ``_pack``, ``world_bounds``
+    and the float64 oracle.
+
+    ``_pack(out, shapes, origin, rotation)`` must accept ``origin`` of shape (3,) (one frame for
+    every shape: render) or (N, 3) (one frame per shape, each at its own anchor: cast).
     """
 
     type: ClassVar[str]
@@ -23,6 +28,13 @@ class Shape:
     struct: ClassVar[Struct]
     keys: ClassVar[tuple[str, ...]]
     required: ClassVar[tuple[str, ...]] = ()
+    bounded: ClassVar[bool] = True
+
+    @classmethod
+    def world_bounds(cls, shapes) -> np.ndarray:
+        """(N, 2, 3) float64: [lo, hi] world-space corners of a box holding each shape (infinite
+        for an unbounded shape)."""
+        raise NotImplementedError
 
     @classmethod
     def from_table(cls, table: dict, index: int):

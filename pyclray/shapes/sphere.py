@@ -38,6 +38,12 @@ class Sphere(Shape):
         "Sphere: center.xyz in the frame, center.w = r^2, c = |center|^2 - r^2.",
     )
 
+    @classmethod
+    def world_bounds(cls, spheres) -> np.ndarray:
+        center = np.array([s.center for s in spheres], np.float64).reshape(-1, 3)
+        radius = np.array([s.radius for s in spheres], np.float64)[:, None]
+        return np.stack([center - radius, center + radius], axis=1)
+
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
         object.__setattr__(self, "radius", number("radius", self.radius, positive=True))
