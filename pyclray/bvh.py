@@ -291,8 +291,9 @@ def outward32(lo: np.ndarray, hi: np.ndarray):
     with np.errstate(over="ignore", invalid="ignore"):
         lo32 = np.clip(lo, -_FLOAT_MAX, _FLOAT_MAX).astype(np.float32)
         hi32 = np.clip(hi, -_FLOAT_MAX, _FLOAT_MAX).astype(np.float32)
-    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
-    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
+    with np.errstate(over="ignore"):
+        lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
+        hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
     return np.maximum(lo32, -_FLOAT_MAX).astype(np.float32), np.minimum(hi32, _FLOAT_MAX).astype(np.float32)
 
 
