@@ -1,11 +1,11 @@
 /* The BVH's traversal (pyclray/bvh.py builds it, pyclray/render.py packs it).
  *
- * Node k: its box lo.xyz .. hi.xyz (float, rounded outward from float64 and kept within the float
- * range, so that no test meets inf - inf or 0 * inf) in the box frame (world
- * axes around the eye for render, around the scene's anchor for cast); first = as_int(lo.w),
- * count = as_int(hi.w): a leaf of count shapes at positions first .. first + count - 1 of refs
- * (ref = index in its type's array * 8 + kind), else an internal node with children first and
- * first + 1.
+ * A wide node holds up to 8 children's boxes (float, rounded outward from float64 and kept
+ * within the float range, so that no test meets inf - inf or 0 * inf; an empty slot has lo > hi)
+ * in the box frame (world axes around the eye for render, around the scene's anchor for cast),
+ * and their codes: a wide node's index, or ~(first * 8 + count) for a leaf of count shapes at
+ * positions first .. first + count - 1 of refs (ref = index in its type's array * 8 + kind). All
+ * eight boxes are tested at once, in float8 lanes.
  *
  * A box test must never drop a shape that the shape's own test would hit: the shape tests round,
  * so a hit may lie a little outside the exact shape. Each shape's box is widened on the host by
@@ -18,7 +18,7 @@
  */
 #define BVH_WIDEN 0x1p-12f
 #define BVH_GAMMA3_2 (1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f))
-#define BVH_STACK 64  /* the LBVH's depth is at most its keys' 63 bits */
+#define BVH_STACK 256  /* 7 entries per level of the wide tree at most: the host checks its depth */
 
 /* A ray for box tests: per axis, the entry and exit distances of a slab are
  * (face - origin -+ margin) * inverse (+ exit_add): see box_ray. */
@@ -51,53 +51,79 @@ inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
 inline float bvh_max(const float a, const float b) { return a > b ? a : b; }
 inline float bvh_min(const float a, const float b) { return a < b ? a : b; }
 
-/* Distance along the ray at which it (widened) enters node k's box, or +inf if it misses the
- * box before limit. */
-inline float box_entry(__global const BvhNode* node, const BoxRay* b, const float limit)
+/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
+inline float float_above(const real x)
 {
-    const float3 lo = node->lo.xyz, hi = node->hi.xyz;
-    const float3 near = select(lo, hi, b->negative), far = select(hi, lo, b->negative);
-    const float3 t_near = (near - b->near_origin) * b->near_inverse;
-    const float3 t_far = (far - b->far_origin) * b->far_inverse + b->far_add;
-    const float enter = bvh_max(bvh_max(t_near.x, t_near.y), bvh_max(t_near.z, 0.0f));
-    const float leave = bvh_min(bvh_min(t_far.x, t_far.y), bvh_min(t_far.z, limit)) * BVH_GAMMA3_2;
-    return enter <= leave ? enter : INFINITY;
+    const float f = (float)x;
+    return (real)f < x ? nextafter(f, (float)INFINITY) : f;
+}
+#ifdef PYCLRAY_CAST
+inline float float_above_wide(const double x)
+{
+    const float f = (float)x;
+    return (double)f < x ? nextafter(f, (float)INFINITY) : f;
+}
+#endif
+
+/* The children of a wide node the ray enters before limit: their entry distances, +inf for the
+ * others (one float8 test of all eight boxes). */
+inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const float limit)
+{
+    const float8 near_x = b->negative.x ? node->hi_x : node->lo_x, far_x = b->negative.x ? node->lo_x : node->hi_x;
+    const float8 near_y = b->negative.y ? node->hi_y : node->lo_y, far_y = b->negative.y ? node->lo_y : node->hi_y;
+    const float8 near_z = b->negative.z ? node->hi_z : node->lo_z, far_z = b->negative.z ? node->lo_z : node->hi_z;
+    const float8 enter_x = (near_x - b->near_origin.x) * b->near_inverse.x;
+    const float8 enter_y = (near_y - b->near_origin.y) * b->near_inverse.y;
+    const float8 enter_z = (near_z - b->near_origin.z) * b->near_inverse.z;
+    const float8 leave_x = (far_x - b->far_origin.x) * b->far_inverse.x + b->far_add.x;
+    const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
+    const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
+    /* max and min by comparison: no NaN reaches here (kernels/bvh.h's box frame) */
+    float8 enter = select(enter_x, enter_y, enter_y > enter_x);
+    enter = select(enter, enter_z, enter_z > enter);
+    enter = select(enter, (float8)(0.0f), enter < (float8)(0.0f));
+    float8 leave = select(leave_x, leave_y, leave_y < leave_x);
+    leave = select(leave, leave_z, leave_z < leave);
+    leave = select(leave, (float8)(limit), (float8)(limit) < leave) * BVH_GAMMA3_2;
+    return select((float8)(INFINITY), enter, enter <= leave);
 }
 
-/* Visit, nearest box first, every leaf position q whose box the ray enters before *limit (a
- * variable the visit may lower): VISIT(q) runs for each shape of each such leaf. */
+/* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
+ * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf. The stack holds
+ * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
+ * go on it farthest first, so that the nearest is visited next. */
 #define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
     {                                                                                   \
-        int stack_node[BVH_STACK];                                                      \
+        int stack_child[BVH_STACK];                                                     \
         float stack_entry[BVH_STACK];                                                   \
-        int top = 0, k = 0;                                                             \
-        bool going = box_entry(&nodes[0], &box, convert_float_rtp(limit)) < INFINITY;             \
-        while (going) {                                                                 \
-            const int first = as_int(nodes[k].lo.w), count = as_int(nodes[k].hi.w);     \
-            if (count > 0) {                                                            \
+        int top = 0;                                                                    \
+        stack_child[top] = 0;                                                           \
+        stack_entry[top++] = 0.0f;                                                      \
+        while (top > 0) {                                                               \
+            --top;                                                                      \
+            if (!(stack_entry[top] <= limit)) continue;                                 \
+            const int code = stack_child[top];                                          \
+            if (code < 0) {                                                             \
+                const int first = (~code) >> 3, count = (~code) & 7;                    \
                 for (int q = first; q < first + count; ++q) { VISIT(q) }                \
-            } else {                                                                    \
-                const float lim = convert_float_rtp(limit);                                       \
-                const float t0 = box_entry(&nodes[first], &box, lim);                   \
-                const float t1 = box_entry(&nodes[first + 1], &box, lim);               \
-                if (t0 < INFINITY || t1 < INFINITY) {                                   \
-                    const bool left = t0 <= t1;                                         \
-                    k = left ? first : first + 1;                                       \
-                    const float other = left ? t1 : t0;                                 \
-                    if (other < INFINITY) {                                             \
-                        stack_node[top] = left ? first + 1 : first;                     \
-                        stack_entry[top++] = other;                                     \
-                    }                                                                   \
-                    continue;                                                           \
-                }                                                                       \
+                continue;                                                               \
             }                                                                           \
-            going = false;                                                              \
-            while (top > 0) {                                                           \
-                --top;                                                                  \
-                if (stack_entry[top] <= convert_float_rtp(limit)) {                               \
-                    k = stack_node[top];                                                \
-                    going = true;                                                       \
-                    break;                                                              \
+            float entries[8];                                                           \
+            vstore8(wide_entries(&nodes[code], &box, limit), 0, entries);               \
+            const int bottom = top;                                                     \
+            for (int slot = 0; slot < 8; ++slot) {                                      \
+                const float entry = entries[slot];                                      \
+                if (entry < INFINITY) {                                                 \
+                    /* insert among this node's pushed children, farthest deepest */    \
+                    const int child = nodes[code].child[slot];                          \
+                    int at = top++;                                                     \
+                    while (at > bottom && stack_entry[at - 1] < entry) {                \
+                        stack_entry[at] = stack_entry[at - 1];                          \
+                        stack_child[at] = stack_child[at - 1];                          \
+                        --at;                                                           \
+                    }                                                                   \
+                    stack_entry[at] = entry;                                            \
+                    stack_child[at] = child;                                            \
                 }                                                                       \
             }                                                                           \
         }                                                                               \

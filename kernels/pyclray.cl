@@ -27,9 +27,9 @@
 #ifdef PYCLRAY_HAS_BOUNDED
 #ifdef PYCLRAY_CAST
 /* the BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding radius (w) */
-#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs, __global const double4* anchors
+#define PYCLRAY_BVH_ARGS , __global const WideNode* nodes, __global const int* refs, __global const double4* anchors
 #else
-#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs
+#define PYCLRAY_BVH_ARGS , __global const WideNode* nodes, __global const int* refs
 #endif
 #else
 #define PYCLRAY_BVH_ARGS
@@ -85,6 +85,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     {                                                                               \
         const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                         \
+        limit = float_above(best);                                                  \
     }
 
 /* the images: distance along the unit ray, world normal of the winner only, id;
@@ -178,7 +179,8 @@ __kernel void render(__global const Camera* camera, __global const real4* rays, 
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
     /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
     const BoxRay box = box_ray((float3)(0.0f), convert_float3(world_from_frame(camera, ray.dir)), 0.0f);
-    PYCLRAY_TRAVERSE(nodes, box, best, PYCLRAY_VISIT)
+    float limit = float_above(best);
+    PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_VISIT)
 #endif
     PYCLRAY_WRITE(index)
 }
@@ -207,6 +209,7 @@ __kernel void render(__global const Camera* camera, __global const real4* rays, 
         double s0;                                                                  \
         const Ray moved = moved_ray(&ray, anchors[q], &s0);                         \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                    \
+        PYCLRAY_CAST_LIMIT                                                          \
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
@@ -250,6 +253,7 @@ inline Ray moved_ray(const Ray* ray, const double4 anchor, double* s0)
 #ifndef PYCLRAY_OCCLUDED
 
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) PYCLRAY_CONSIDER(t, id, kind, k, q)
+#define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
 
 __kernel void cast(__global const Camera* camera, const int n_rays,
                    __global const double4* origins, __global const double4* directions,
@@ -263,7 +267,8 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #ifdef PYCLRAY_HAS_BOUNDED
     {
         PYCLRAY_CAST_BOX
-        PYCLRAY_TRAVERSE(nodes, box, best, PYCLRAY_CAST_VISIT)
+        float limit = float_above_wide(best);
+        PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_CAST_VISIT)
     }
 #endif
     const bool hit = best <= t_max && best < INFINITY;
@@ -293,6 +298,7 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 
 /* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
+#define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
 
 __kernel void occluded(const int n_rays, __global const double4* origins, __global const double4* directions,
                        __global const double* limits, const int limit_stride, const double4 scene_anchor
@@ -304,7 +310,8 @@ __kernel void occluded(const int n_rays, __global const double4* origins, __glob
 #ifdef PYCLRAY_HAS_BOUNDED
     if (!found) {
         PYCLRAY_CAST_BOX
-        PYCLRAY_TRAVERSE(nodes, box, (found ? -INFINITY : t_max), PYCLRAY_CAST_VISIT)
+        float limit = float_above_wide(t_max);
+        PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_CAST_VISIT)
     }
 #endif
     occluded_out[r] = found ? 1 : 0;

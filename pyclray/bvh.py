@@ -33,14 +33,6 @@ LEAF_SIZE = 4  # shapes per leaf at most: the kernel tests a leaf's shapes one a
 # drop a shape that the shape's own test would hit.
 WIDEN = 2.0**-12
 
-NODE = Struct(
-    "BvhNode",
-    (
-        ("lo", "float4"),  # xyz: the box's low corner; w: the bits of the int first
-        ("hi", "float4"),  # xyz: the box's high corner; w: the bits of the int count
-    ),
-    "A BVH node (kernels/bvh.h): count > 0: a leaf of refs[first .. first + count - 1]; else children first, first + 1.",
-)
 _FLOAT_MAX = float(np.finfo(np.float32).max)
 
 
@@ -297,19 +289,6 @@ def outward32(lo: np.ndarray, hi: np.ndarray):
     return np.maximum(lo32, -_FLOAT_MAX).astype(np.float32), np.minimum(hi32, _FLOAT_MAX).astype(np.float32)
 
 
-def pack_nodes(tree: BVH, origin) -> np.ndarray:
-    """The nodes as the kernel reads them (NODE), their boxes relative to origin (float64, taken
-    before rounding outward): the eye for render, so that a moved camera only re-expresses the
-    boxes, and the scene's anchor for cast."""
-    out = np.zeros(tree.nodes, dtype=layout(NODE, "fp32").dtype)
-    origin = np.asarray(origin, np.float64)
-    lo, hi = outward32(tree.lo - origin, tree.hi - origin)
-    out["lo"][:, :3], out["hi"][:, :3] = lo, hi
-    out["lo"][:, 3] = tree.first.astype(np.int32).view(np.float32)
-    out["hi"][:, 3] = tree.count.astype(np.int32).view(np.float32)
-    return out
-
-
 # -- the BVH of a scene's shapes ------------------------------------------------------------------
 @dataclass(frozen=True)
 class SceneBVH:
@@ -318,12 +297,17 @@ class SceneBVH:
     and the shapes' unwidened bounds in leaf order (cast's anchors)."""
 
     tree: BVH
+    wide: WideBVH
     types: tuple[str, ...]  # the bounded types present, in the registry's order
     leaf_type: np.ndarray  # (N,) index into types
     leaf_index: np.ndarray  # (N,) index in its type's array
     shapes: dict  # type -> list of its shapes in leaf order
     ids: dict  # type -> int32 array of their ids
     bounds: np.ndarray  # (N, 2, 3) in leaf order
+
+    def nodes(self, origin) -> np.ndarray:
+        """The wide nodes with their boxes relative to origin (see pack_wide)."""
+        return pack_wide(self.tree, self.wide, origin)
 
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
@@ -365,4 +349,96 @@ def scene_bvh(shapes, registry) -> SceneBVH:
         positions = within[tree.order[mine]]
         ordered[t] = [by_type[t][0][p] for p in positions]
         ids[t] = np.array(by_type[t][1], np.int64)[positions].astype(np.int32)
-    return SceneBVH(tree, types, leaf_type, leaf_index, ordered, ids, bounds[tree.order])
+    wide = collapse(tree)
+    if 7 * wide.depth + 1 > STACK:
+        raise ValueError(f"the BVH is {wide.depth} wide levels deep, more than the kernel's stack holds")
+    return SceneBVH(tree, wide, types, leaf_type, leaf_index, ordered, ids, bounds[tree.order])
+
+
+# -- the wide BVH the kernels traverse ---------------------------------------------------------------
+WIDTH = 8  # children per wide node: one float8 box test of all of them per visit
+STACK = 256  # kernels/bvh.h: BVH_STACK
+
+WIDE_NODE = Struct(
+    "WideNode",
+    (
+        ("lo_x", "float8"),  # the children's boxes, one lane per child (empty slots: lo > hi)
+        ("lo_y", "float8"),
+        ("lo_z", "float8"),
+        ("hi_x", "float8"),
+        ("hi_y", "float8"),
+        ("hi_z", "float8"),
+        ("child", "int8"),  # >= 0: a wide node; < 0: ~(first * 8 + count), a leaf of refs[first .. first + count - 1]
+    ),
+    "A node of the wide BVH (kernels/bvh.h): up to 8 children's boxes, tested at once.",
+)
+
+
+@dataclass(frozen=True)
+class WideBVH:
+    """The binary tree collapsed three levels at a time: each wide node holds the (up to 8) nodes
+    three binary levels below a binary internal node, stopping early at leaves. Boxes are the
+    binary tree's, unchanged, so its traversal tests exactly the boxes the binary one would."""
+
+    binary: np.ndarray  # (W, 8) the binary node of each child slot, -1 for an empty slot
+    child: np.ndarray  # (W, 8) int32 child codes (see WIDE_NODE)
+    depth: int  # levels of wide nodes
+
+
+def collapse(tree: BVH) -> WideBVH:
+    """The wide BVH of a binary one (root: wide node 0). Each wide node starts from a binary
+    internal node's two children and opens, up to 8 slots, the internal child of largest surface
+    area into its two children (the greedy of Wald et al.'s wide BVHs), all wide nodes of a level
+    at once."""
+    extent = np.maximum(tree.hi - tree.lo, 0.0)
+    area = extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+    inner_node = tree.count == 0
+    if not inner_node[0]:  # a single leaf: one wide node with one child
+        slots = np.full((1, WIDTH), -1, np.int64)
+        slots[0, 0] = 0
+        levels = [slots]
+    else:
+        levels, frontier = [], np.array([0])
+        while frontier.size:
+            slots = np.full((len(frontier), WIDTH), -1, np.int64)
+            slots[:, 0] = tree.first[frontier]
+            slots[:, 1] = tree.first[frontier] + 1
+            rows = np.arange(len(frontier))
+            for used in range(2, WIDTH):
+                safe = np.maximum(slots, 0)
+                opening = (slots >= 0) & inner_node[safe]
+                if not opening.any():
+                    break
+                pick = np.argmax(np.where(opening, area[safe], -1.0), axis=1)
+                can = opening[rows, pick]
+                chosen = slots[rows, pick]
+                slots[rows[can], pick[can]] = tree.first[chosen[can]]
+                slots[rows[can], used] = tree.first[chosen[can]] + 1
+            levels.append(slots)
+            frontier = slots[(slots >= 0) & inner_node[np.maximum(slots, 0)]]
+    binary = np.concatenate(levels)
+    # wide node numbers in the order made: the internal slots of level L, in order, are the wide
+    # nodes of level L + 1
+    internal = (binary >= 0) & inner_node[np.maximum(binary, 0)]
+    wide_index = np.full(binary.shape, -1, np.int64)
+    wide_index[internal] = 1 + np.arange(int(internal.sum()))
+    leaf = (binary >= 0) & ~internal
+    b = np.maximum(binary, 0)
+    code = np.where(internal, wide_index, np.where(leaf, ~(tree.first[b].astype(np.int64) * 8 + tree.count[b]), 0))
+    return WideBVH(binary, code.astype(np.int32), len(levels))
+
+
+def pack_wide(tree: BVH, wide: WideBVH, origin) -> np.ndarray:
+    """The wide nodes as the kernel reads them (WIDE_NODE), boxes relative to origin (float64,
+    before rounding outward): the eye for render, the scene's anchor for cast."""
+    out = np.zeros(len(wide.binary), dtype=layout(WIDE_NODE, "fp32").dtype)
+    origin = np.asarray(origin, np.float64)
+    b = np.maximum(wide.binary, 0)
+    lo, hi = outward32(tree.lo[b] - origin, tree.hi[b] - origin)
+    empty = wide.binary < 0
+    lo[empty], hi[empty] = _FLOAT_MAX, -_FLOAT_MAX
+    for axis, name in enumerate("xyz"):
+        out[f"lo_{name}"] = lo[..., axis]
+        out[f"hi_{name}"] = hi[..., axis]
+    out["child"] = wide.child
+    return out

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
-from .bvh import NODE
+from .bvh import WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
 from .shapes import REGISTRY
@@ -172,7 +172,7 @@ class Variant:
         shapes = [REGISTRY[t] for t in self.shape_types]
         parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
         parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
-        parts += [c_header([CAMERA, NODE] + [s.struct for s in shapes], self.precision)]
+        parts += [c_header([CAMERA, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]

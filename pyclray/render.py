@@ -194,7 +194,7 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
     if acceleration == "bvh":
         tree = scene_bvh(scene)
         if tree.types:
-            args += [_input_buffer(ctx, bvh.pack_nodes(tree.tree, eye)), _input_buffer(ctx, tree.refs(scene.shape_types()))]
+            args += [_input_buffer(ctx, tree.nodes(eye)), _input_buffer(ctx, tree.refs(scene.shape_types()))]
         for kind in scene.shape_types():
             cls = REGISTRY[kind]
             if cls.bounded:
@@ -327,7 +327,7 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
     if tree.types:
         anchors = tree.anchors()
         args += [
-            _input_buffer(ctx, bvh.pack_nodes(tree.tree, anchor)),
+            _input_buffer(ctx, tree.nodes(anchor)),
             _input_buffer(ctx, tree.refs(shape_types)),
             _input_buffer(ctx, np.ascontiguousarray(anchors)),
         ]
