@@ -1,5 +1,12 @@
 /* The BVH's traversal (pyclray/bvh.py builds it, pyclray/render.py packs it).
  *
+ * Two trees of the same boxes: render's packets of camera rays traverse the binary tree (a node's
+ * box against all the packet's lanes at once), cast's single rays the wide tree.
+ *
+ * A binary node: its box lo.xyz .. hi.xyz (float, as below); first = as_int(lo.w), count =
+ * as_int(hi.w): a leaf of count shapes at positions first .. first + count - 1 of refs, else an
+ * internal node with children first and first + 1.
+ *
  * A wide node holds up to 8 children's boxes (float, rounded outward from float64 and kept
  * within the float range, so that no test meets inf - inf or 0 * inf; an empty slot has lo > hi)
  * in the box frame (world axes around the eye for render, around the scene's anchor for cast),
@@ -19,6 +26,7 @@
 #define BVH_WIDEN 0x1p-12f
 #define BVH_GAMMA3_2 (1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f))
 #define BVH_STACK 256  /* 7 entries per level of the wide tree at most: the host checks its depth */
+#define BVH_BINARY_STACK 64  /* one per level of the binary tree, at most its keys' 63 bits deep */
 
 /* A ray for box tests: per axis, the entry and exit distances of a slab are
  * (face - origin -+ margin) * inverse (+ exit_add): see box_ray. */
@@ -51,13 +59,8 @@ inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
 inline float bvh_max(const float a, const float b) { return a > b ? a : b; }
 inline float bvh_min(const float a, const float b) { return a < b ? a : b; }
 
-/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
-inline float float_above(const real x)
-{
-    const float f = (float)x;
-    return (real)f < x ? nextafter(f, (float)INFINITY) : f;
-}
 #ifdef PYCLRAY_CAST
+/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
 inline float float_above_wide(const double x)
 {
     const float f = (float)x;
@@ -124,6 +127,121 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
                     }                                                                   \
                     stack_entry[at] = entry;                                            \
                     stack_child[at] = child;                                            \
+                }                                                                       \
+            }                                                                           \
+        }                                                                               \
+    }
+
+
+/* -- packets (render): the binary tree, one box against all the lanes ---------------------------- */
+
+/* A packet's rays from the box frame's origin (the eye), per axis: sign / (|d| + widen), sign /
+ * (|d| - widen) or 0, and +inf where |d| <= widen (see box_ray). */
+typedef struct {
+    vec3v near_inverse, far_inverse, far_add;
+    intv negative_x, negative_y, negative_z;
+} BoxPacket;
+
+inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, intv* negative)
+{
+    *negative = d < SPLAT(0);
+    const realv s = *negative ? SPLAT(-1) : SPLAT(1);
+    const realv size = v_abs(d);
+    const intv steep = size > SPLAT(BVH_WIDEN);
+    *near_inverse = s / (size + SPLAT(BVH_WIDEN));
+    *far_inverse = steep ? s / (size - SPLAT(BVH_WIDEN)) : SPLAT(0);
+    *far_add = steep ? SPLAT(0) : SPLAT(INFINITY);
+}
+
+inline BoxPacket box_packet(const vec3v d)
+{
+    BoxPacket b;
+    box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.negative_x);
+    box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.negative_y);
+    box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.negative_z);
+    return b;
+}
+
+/* Per lane, the distance at which the ray (widened, from the origin) enters node's box, or +inf
+ * where it misses the box before limit. */
+inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const realv limit)
+{
+    const float4 lo = node->lo, hi = node->hi;
+    const realv near_x = b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x), far_x = b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x);
+    const realv near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
+    const realv near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+/* the smallest and the largest lane */
+inline real lane_min(const realv v)
+{
+#if LANES == 1
+    return v;
+#else
+    real x[LANES];
+    VSTORE(v, 0, x);
+    real m = x[0];
+    for (int l = 1; l < LANES; ++l) m = x[l] < m ? x[l] : m;
+    return m;
+#endif
+}
+
+inline real lane_max(const realv v)
+{
+#if LANES == 1
+    return v;
+#else
+    real x[LANES];
+    VSTORE(v, 0, x);
+    real m = x[0];
+    for (int l = 1; l < LANES; ++l) m = x[l] > m ? x[l] : m;
+    return m;
+#endif
+}
+
+/* Visit, nearest child first (by its nearest lane), every leaf whose box some lane of the packet
+ * enters before its own best (a realv variable VISIT lowers): VISIT(q) for each shape of each such
+ * leaf, tested against the whole packet. */
+#define PYCLRAY_TRAVERSE_PACKET(nodes, box, best, VISIT)                                \
+    {                                                                                   \
+        int stack_node[BVH_BINARY_STACK];                                               \
+        real stack_entry[BVH_BINARY_STACK];                                             \
+        int top = 0, k = 0;                                                             \
+        bool going = ANY(box_entries(&nodes[0], &box, best) < SPLAT(INFINITY));         \
+        while (going) {                                                                 \
+            const int first = as_int(nodes[k].lo.w), count = as_int(nodes[k].hi.w);     \
+            if (count > 0) {                                                            \
+                for (int q = first; q < first + count; ++q) { VISIT(q) }                \
+            } else {                                                                    \
+                const realv t0 = box_entries(&nodes[first], &box, best);                \
+                const realv t1 = box_entries(&nodes[first + 1], &box, best);            \
+                const real near0 = lane_min(t0), near1 = lane_min(t1);                  \
+                if (near0 < INFINITY || near1 < INFINITY) {                             \
+                    const bool left = near0 <= near1;                                   \
+                    k = left ? first : first + 1;                                       \
+                    const real other = left ? near1 : near0;                            \
+                    if (other < INFINITY) {                                             \
+                        stack_node[top] = left ? first + 1 : first;                     \
+                        stack_entry[top++] = other;                                     \
+                    }                                                                   \
+                    continue;                                                           \
+                }                                                                       \
+            }                                                                           \
+            going = false;                                                              \
+            if (top > 0) {                                                              \
+                const real farthest = lane_max(best);                                   \
+                while (top > 0) {                                                       \
+                    --top;                                                              \
+                    if (stack_entry[top] <= farthest) {                                 \
+                        k = stack_node[top];                                            \
+                        going = true;                                                   \
+                        break;                                                          \
+                    }                                                                   \
                 }                                                                       \
             }                                                                           \
         }                                                                               \

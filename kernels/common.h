@@ -12,11 +12,17 @@
 typedef double real;
 typedef double3 real3;
 typedef double4 real4;
+#define PYCLRAY_REAL_NAME double
+#define PYCLRAY_INT_NAME long      /* the integer type of a real's size: a vector comparison's lanes */
+#define PYCLRAY_UINT_NAME ulong
 #define convert_real3 convert_double3
 #else
 typedef float real;
 typedef float3 real3;
 typedef float4 real4;
+#define PYCLRAY_REAL_NAME float
+#define PYCLRAY_INT_NAME int
+#define PYCLRAY_UINT_NAME uint
 #define convert_real3 convert_float3
 #endif
 
@@ -26,16 +32,3 @@ typedef float4 real4;
 /* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/pyclray.cl) */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif
-
-/* A ray s -> origin + s * dir in the current frame; dir need not be unit, a = dot(dir, dir).
- * In cast, the frame of each shape is its own anchor (kernels/pyclray.cl), and the float64 fields
- * hold the ray as given (unbounded shapes, which have no anchor, read its world origin). */
-typedef struct {
-    real3 origin;
-    real3 dir;
-    real a;
-#ifdef PYCLRAY_CAST
-    double3 world;      /* the ray's origin in world coordinates */
-    double3 dir_exact;  /* its unit direction, of which dir is the rounding */
-#endif
-} Ray;

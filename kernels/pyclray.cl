@@ -1,15 +1,19 @@
-/* pyclray's kernels. The host puts before this file common.h, the generated struct header,
+/* pyclray's kernels. The host puts before this file common.h, lanes.h, the generated struct header,
  * camera.h and the file of each shape type present, and selects what is compiled with -D options:
  *   PYCLRAY_FP64                        double precision
- *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel
+ *   PYCLRAY_LANES                       rays per work-item, in vector lanes (lanes.h)
+ *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel (LANES 1)
  *   PYCLRAY_OCCLUDED                    (with PYCLRAY_CAST) the any-hit kernel instead
  *   PYCLRAY_BVH                         render: the bounded shapes through the BVH, not tile lists
  *   PYCLRAY_BOUNDED(X), PYCLRAY_UNBOUNDED(X)  the shape types present with and without bounds
  *   PYCLRAY_HAS_BOUNDED                 some bounded type is present (the BVH's buffers are passed)
- *   PYCLRAY_RAYS                        the kernel of the camera's rays (no shapes, no images)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
+ *
+ * A shape plugs in through two functions of its kernel file, both over a packet of rays:
+ *   realv type_hit(shape, ray)             per lane, the nearest s > 0 along ray->dir, or MISS
+ *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID)
@@ -26,10 +30,12 @@
 #define PYCLRAY_LINEAR(X) PYCLRAY_UNBOUNDED(X)
 #ifdef PYCLRAY_HAS_BOUNDED
 #ifdef PYCLRAY_CAST
-/* the BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding radius (w) */
+/* the wide BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding
+ * radius (w) */
 #define PYCLRAY_BVH_ARGS , __global const WideNode* nodes, __global const int* refs, __global const double4* anchors
 #else
-#define PYCLRAY_BVH_ARGS , __global const WideNode* nodes, __global const int* refs
+/* the binary BVH (packets traverse it) */
+#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs
 #endif
 #else
 #define PYCLRAY_BVH_ARGS
@@ -49,143 +55,227 @@
 #define PYCLRAY_KIND(Type, type) KIND_##Type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
-/* Keep hit s of shape (id, kind, k) if it is the nearest so far; on an exact tie the lowest id
- * wins, whatever order the shapes are visited in (tiles, BVH). */
+/* -- the nearest hit of each lane ----------------------------------------------------------------
+ * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
+ * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit). */
 #ifdef PYCLRAY_TRACK_ID
-#define PYCLRAY_CONSIDER(s, id, kind, k, q)                                          \
-    if ((s) < best || ((s) == best && (s) < MISS && (id) < best_id)) {               \
-        best = (s); best_id = (id); best_kind = (kind); best_k = (k); best_q = (q);  \
+#define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
+    {                                                                                 \
+        const intv id = SPLAT_INT(shape_id);                                          \
+        const intv nearer = s < best || (s == best && s < MISS && id < best_id);      \
+        if (ANY(nearer)) {                                                            \
+            best = nearer ? s : best;                                                 \
+            best_id = nearer ? id : best_id;                                          \
+            best_kind = nearer ? SPLAT_INT(kind) : best_kind;                         \
+            best_k = nearer ? SPLAT_INT(k) : best_k;                                  \
+        }                                                                             \
     }
-#define PYCLRAY_BEST(start)                                                          \
-    __typeof__(start) best = (start);                                                \
-    int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
+#define PYCLRAY_BEST                                                                  \
+    realv best = SPLAT(MISS);                                                         \
+    intv best_id = SPLAT_INT(-1), best_kind = SPLAT_INT(KIND_NONE), best_k = SPLAT_INT(0);
 #else
-#define PYCLRAY_CONSIDER(s, id, kind, k, q) best = (s) < best ? (s) : best;
-#define PYCLRAY_BEST(start) __typeof__(start) best = (start);
+#define PYCLRAY_CONSIDER(s, shape_id, kind, k) best = v_min(s, best);
+#define PYCLRAY_BEST realv best = SPLAT(MISS);
 #endif
-
-/* nearest hit with s > 0 over the shapes of one type that are tested one after the other */
-#define PYCLRAY_NEAREST(Type, type)                                                 \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {      \
-        const int k = PYCLRAY_SHAPE_AT(type, q);                                    \
-        const real s = type##_hit(&type##s[k], &ray);                               \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k, -1)                      \
+#define PYCLRAY_NEAREST(Type, type)                                                   \
+    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
+        const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
+        const realv s = type##_hit(&type##s[k], &ray);                                \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
     }
-#define PYCLRAY_FIND_NEAREST                                                        \
-    PYCLRAY_BEST(MISS)                                                              \
+#define PYCLRAY_FIND_NEAREST                                                          \
+    PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a leaf's shape at position q of the BVH (render): refs[q] = index * 8 + kind */
-#define PYCLRAY_VISIT_KIND(Type, type)                                              \
-    if (kind == KIND_##Type) {                                                      \
-        const real s = type##_hit(&type##s[k], &ray);                               \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k, q)                       \
+/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
+#define PYCLRAY_VISIT_KIND(Type, type)                                                \
+    if (kind == KIND_##Type) {                                                        \
+        const realv s = type##_hit(&type##s[k], &ray);                                \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
     }
-#define PYCLRAY_VISIT(q)                                                            \
-    {                                                                               \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
-        PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                         \
-        limit = float_above(best);                                                  \
+#define PYCLRAY_VISIT(q)                                                              \
+    {                                                                                 \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 
-/* the images: distance along the unit ray, world normal of the winner only, id;
- * MISS (+inf), (0, 0, 0) and -1 on a miss */
+/* -- the images: distance along the unit ray, the winner's world normal, its id -----------------
+ * MISS (+inf), (0, 0, 0) and -1 on a miss. Lane l of the packet is element index + l of the images,
+ * written for the lanes first <= l < end inside the image (or window): a whole packet with vector
+ * stores, the ends of a row lane by lane. */
 #ifdef PYCLRAY_AOV_DEPTH
 #define PYCLRAY_DEPTH_ARG , __global real* depth
-#define PYCLRAY_WRITE_DEPTH(index) depth[index] = best < MISS ? best * sqrt(ray.a) : MISS;
+#define PYCLRAY_WRITE_DEPTH(index, first, end) \
+    write_reals(best < MISS ? best * v_sqrt(ray.a) : SPLAT(MISS), index, first, end, depth);
 #else
 #define PYCLRAY_DEPTH_ARG
-#define PYCLRAY_WRITE_DEPTH(index)
+#define PYCLRAY_WRITE_DEPTH(index, first, end)
 #endif
 
 #ifdef PYCLRAY_AOV_NORMAL
 #define PYCLRAY_NORMAL_ARG , __global real* normal_out
+/* the normal of one winning shape for the whole packet, kept in the lanes it won */
 #define PYCLRAY_NORMAL(Type, type) \
-    if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
-#define PYCLRAY_WRITE_NORMAL(index)                                                 \
-    {                                                                               \
-        real3 normal = (real3)(0, 0, 0);                                            \
-        PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                              \
-        vstore3(normal, index, normal_out);                                         \
+    if (kind == KIND_##Type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
+#define PYCLRAY_WRITE_NORMAL(index, first, end)                                            \
+    {                                                                                 \
+        vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                              \
+        /* each distinct winner once, in the order of the first lane it won */        \
+        intv pending = best_kind != SPLAT_INT(KIND_NONE);                             \
+        while (ANY(pending)) {                                                        \
+            const int lane = first_lane(pending);                                     \
+            const int kind = lane_of(best_kind, lane), k = lane_of(best_k, lane);     \
+            const intv mine = pending && best_kind == SPLAT_INT(kind) && best_k == SPLAT_INT(k); \
+            PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            pending = pending && !mine;                                               \
+        }                                                                             \
+        write_vec3s(normal, index, first, end, normal_out);                                \
     }
 #else
 #define PYCLRAY_NORMAL_ARG
-#define PYCLRAY_WRITE_NORMAL(index)
+#define PYCLRAY_WRITE_NORMAL(index, first, end)
 #endif
 
 #ifdef PYCLRAY_AOV_ID
 #define PYCLRAY_ID_ARG , __global int* id_out
-#define PYCLRAY_WRITE_ID(index) id_out[index] = best_id;
+#define PYCLRAY_WRITE_ID(index, first, end) write_ints(TO_INT32V(best_id), index, first, end, id_out);
 #else
 #define PYCLRAY_ID_ARG
-#define PYCLRAY_WRITE_ID(index)
+#define PYCLRAY_WRITE_ID(index, first, end)
 #endif
 
 #define PYCLRAY_OUTPUT_ARGS PYCLRAY_DEPTH_ARG PYCLRAY_NORMAL_ARG PYCLRAY_ID_ARG
-#define PYCLRAY_WRITE(index) PYCLRAY_WRITE_DEPTH(index) PYCLRAY_WRITE_NORMAL(index) PYCLRAY_WRITE_ID(index)
+#define PYCLRAY_WRITE(index, first, end) \
+    PYCLRAY_WRITE_DEPTH(index, first, end) PYCLRAY_WRITE_NORMAL(index, first, end) PYCLRAY_WRITE_ID(index, first, end)
 
-#ifdef PYCLRAY_RAYS
+#if LANES == 1
+#define PYCLRAY_INT32V int
+#else
+#define PYCLRAY_INT32V PYCLRAY_CAT(int, LANES)
+#endif
 
-/* The camera ray of pixel (column i from the left, row j from the top), in the camera frame. */
-inline Ray camera_ray(__global const Camera* camera, const int i, const int j)
+/* the first lane whose mask is set, and one lane of an integer packet */
+inline int first_lane(const intv mask)
+{
+    intlane m[LANES];
+    VSTORE(mask, 0, m);
+    for (int l = 0; l < LANES; ++l)
+        if (m[l]) return l;
+    return 0;
+}
+
+inline int lane_of(const intv v, const int lane)
+{
+    intlane x[LANES];
+    VSTORE(v, 0, x);
+    return (int)x[lane];
+}
+
+inline void write_reals(const realv v, const size_t index, const int first, const int end, __global real* out)
+{
+    if (first == 0 && end == LANES) {
+        VSTORE(v, 0, out + index);
+        return;
+    }
+    real x[LANES];
+    VSTORE(v, 0, x);
+    for (int l = first; l < end; ++l) out[index + l] = x[l];
+}
+
+inline void write_ints(const PYCLRAY_INT32V v, const size_t index, const int first, const int end, __global int* out)
+{
+    if (first == 0 && end == LANES) {
+        VSTORE(v, 0, out + index);
+        return;
+    }
+    int x[LANES];
+    VSTORE(v, 0, x);
+    for (int l = first; l < end; ++l) out[index + l] = x[l];
+}
+
+/* interleaved x, y, z per element */
+inline void write_vec3s(const vec3v v, const size_t index, const int first, const int end, __global real* out)
+{
+#if LANES == 8
+    if (first == 0 && end == LANES) {  /* the whole packet: three vector stores */
+        const realv x = v.x, y = v.y, z = v.z;
+        __global real* p = out + 3 * index;
+        vstore8((realv)(x.s0, y.s0, z.s0, x.s1, y.s1, z.s1, x.s2, y.s2), 0, p);
+        vstore8((realv)(z.s2, x.s3, y.s3, z.s3, x.s4, y.s4, z.s4, x.s5), 1, p);
+        vstore8((realv)(y.s5, z.s5, x.s6, y.s6, z.s6, x.s7, y.s7, z.s7), 2, p);
+        return;
+    }
+#endif
+    real x[LANES], y[LANES], z[LANES];
+    VSTORE(v.x, 0, x);
+    VSTORE(v.y, 0, y);
+    VSTORE(v.z, 0, z);
+    for (int l = first; l < end; ++l) {
+        out[3 * (index + l)] = x[l];
+        out[3 * (index + l) + 1] = y[l];
+        out[3 * (index + l) + 2] = z[l];
+    }
+}
+
+/* On PoCL's CPU device every function above is always inlined (device.py), the kernels themselves not. */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define PYCLRAY_KERNELS_BEGIN _Pragma("clang attribute pop")
+#else
+#define PYCLRAY_KERNELS_BEGIN
+#endif
+
+#ifndef PYCLRAY_CAST
+
+/* The camera rays of a packet: LANES pixels of row j from column i0 on, in the camera frame. */
+inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j)
 {
     const int width = camera->width, height = camera->height;
-    /* pixel centre on the image plane at distance 1: the integer numerators are exact, so each
+    const intv i = SPLAT_INT(i0) + LANE_INDEX;
+    /* pixel centres on the image plane at distance 1: the integer numerators are exact, so each
      * coordinate carries two roundings and keeps its relative precision even for a tiny fov */
-    const real sx = camera->tan_x * ((real)(width - 2 * i - 1) / (real)width);
-    const real sy = camera->tan_y * ((real)(height - 2 * j - 1) / (real)height);
+    const realv sx = SPLAT(camera->tan_x) * (TO_REALV(SPLAT_INT(width - 1) - 2 * i) / SPLAT((real)width));
+    const realv sy = SPLAT(camera->tan_y * ((real)(height - 2 * j - 1) / (real)height));
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
-    const real3 D = (real3)(sx, sy, (real)1);
-    Ray ray;
-    ray.origin = (real3)(0, 0, 0);
-    ray.dir = D / sqrt(dot(D, D));
-    ray.a = dot(ray.dir, ray.dir);
+    const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
+    RayPacket ray;
+    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
+    ray.a = v3_dot(ray.dir, ray.dir);
     return ray;
 }
 
-/* Every pixel's ray (dir.xyz, a), once per camera and image size: renders of the same view share
- * them (the host keeps the buffer), so the divisions and the square root are not on every render's
- * path. */
-__kernel void rays(__global const Camera* camera, __global real4* rays)
-{
-    const int i = get_global_id(0), j = get_global_id(1);
-    const int width = camera->width, height = camera->height;
-    if (i >= width || j >= height) return;
-    const Ray ray = camera_ray(camera, i, j);
-    rays[(size_t)j * (size_t)width + (size_t)i] = (real4)(ray.dir, ray.a);
-}
-
-#elif !defined(PYCLRAY_CAST)
-
-/* One work-item per pixel: i is the column from the left, j the row from the top; its ray from the
- * rays kernel. Tiles are 1 << tile_shift pixels square, tiles_x per row (and the work-groups where the
- * device allows). */
-__kernel void render(__global const Camera* camera, __global const real4* rays, const int tile_shift, const int tiles_x
+/* One work-item per packet: LANES pixels of a row, from column i0 = LANES x get_global_id(0) of row
+ * j = get_global_id(1) + row0 (a render of a window of the image starts at row row0 and column col0,
+ * and writes its own width x rows images). Tiles are 1 << tile_shift pixels square, tiles_x per
+ * image row (and the work-groups where the device allows); a packet lies in one tile. */
+PYCLRAY_KERNELS_BEGIN
+__kernel void render(__global const Camera* camera, const int col0, const int row0, const int cols, const int rows,
+                     const int tile_shift, const int tiles_x
                      PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
-    const int i = get_global_id(0), j = get_global_id(1);
-    const int width = camera->width, height = camera->height;
-    if (i >= width || j >= height) return;
-    const int tile = (j >> tile_shift) * tiles_x + (i >> tile_shift);  /* shifts: no division per pixel */
-    const size_t index = (size_t)j * (size_t)width + (size_t)i;
-    const real4 packed = rays[index];
-    Ray ray;
-    ray.origin = (real3)(0, 0, 0);
-    ray.dir = packed.xyz;
-    ray.a = packed.w;
+    /* packets start at multiples of LANES in the image, so that none straddles two tiles */
+    const int i0 = (col0 / LANES + (int)get_global_id(0)) * LANES, r = get_global_id(1), j = row0 + r;
+    if (i0 >= col0 + cols || r >= rows) return;
+    const int tile = (j >> tile_shift) * tiles_x + (i0 >> tile_shift);  /* shifts: no division per packet */
+    const int from = max(col0 - i0, 0), to = min(LANES, col0 + cols - i0);  /* the lanes in the window */
+    const RayPacket ray = camera_rays(camera, i0, j);
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
     /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
-    const BoxRay box = box_ray((float3)(0.0f), convert_float3(world_from_frame(camera, ray.dir)), 0.0f);
-    float limit = float_above(best);
-    PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_VISIT)
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir));
+    PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
-    PYCLRAY_WRITE(index)
+    /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
+    PYCLRAY_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
 }
 
 #else
+
+#if LANES != 1
+#error "cast traces one ray per work-item (LANES 1)"
+#endif
 
 /* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
  * the largest distance that counts (float64, limits[r * limit_stride]).
@@ -207,7 +297,7 @@ __kernel void render(__global const Camera* camera, __global const real4* rays, 
     {                                                                               \
         const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
         double s0;                                                                  \
-        const Ray moved = moved_ray(&ray, anchors[q], &s0);                         \
+        const RayPacket moved = moved_ray(&ray, anchors[q], &s0);                   \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                    \
         PYCLRAY_CAST_LIMIT                                                          \
     }
@@ -218,51 +308,65 @@ __kernel void render(__global const Camera* camera, __global const real4* rays, 
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##Type, q, -1)                     \
     }
 
+inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v.z); }
+
 /* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. */
-inline Ray moved_ray(const Ray* ray, const double4 anchor, double* s0)
+inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0)
 {
-    const double3 O = ray->world, D = convert_double3(ray->dir_exact);
+    const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
     const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w;
     *s0 = along > 0 ? along : 0;
-    Ray moved = *ray;
-    moved.origin = convert_real3(*s0 * D - F);
+    RayPacket moved = *ray;
+    moved.origin = v3_round(*s0 * D - F);
     return moved;
 }
 
-/* the setup shared by cast and occluded: the ray, and its box ray around the scene's anchor */
+/* the setup shared by cast and occluded: the ray (origins and directions: 3 doubles per ray) */
 #define PYCLRAY_CAST_RAY                                                            \
     const int r = get_global_id(0);                                                 \
     if (r >= n_rays) return;                                                        \
-    Ray ray;                                                                        \
-    ray.world = origins[r].xyz;                                                     \
-    ray.dir_exact = directions[r].xyz;                                              \
-    ray.dir = convert_real3(ray.dir_exact);                                         \
-    ray.a = dot(ray.dir, ray.dir);                                                  \
-    ray.origin = convert_real3(ray.world);                                          \
-    const real length = sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
+    RayPacket ray;                                                                  \
+    ray.world = vload3(r, origins);                                                 \
+    ray.dir_exact = vload3(r, directions);                                          \
+    ray.dir = v3_round(ray.dir_exact);                                              \
+    ray.a = v3_dot(ray.dir, ray.dir);                                               \
+    ray.origin = v3_round(ray.world);                                               \
+    const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];
 
+/* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \
-    const double3 relative = ray.world - scene_anchor.xyz;                          \
-    const float3 o = convert_float3(relative);                                      \
-    /* o's rounding, with a wide margin */                                          \
-    const float margin = 0x1p-20f * (fabs(o.x) + fabs(o.y) + fabs(o.z));              \
+    const float3 o = convert_float3(ray.world - scene_anchor.xyz);                  \
+    const float3 size = select(o, -o, o < (float3)(0.0f));                          \
+    const float margin = 0x1p-20f * ((size.x + size.y) + size.z);                   \
     const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
 
 #ifndef PYCLRAY_OCCLUDED
 
-#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) PYCLRAY_CONSIDER(t, id, kind, k, q)
+/* the nearest hit so far (float64 distance), on an exact tie the lowest id */
+#ifdef PYCLRAY_TRACK_ID
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q)                                        \
+    if ((t) < best || ((t) == best && (t) < INFINITY && (id) < best_id)) {          \
+        best = (t); best_id = (id); best_kind = (kind); best_k = (k); best_q = (q); \
+    }
+#else
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
+#endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
+#define PYCLRAY_CAST_NORMAL(Type, type) \
+    if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
 
+PYCLRAY_KERNELS_BEGIN
 __kernel void cast(__global const Camera* camera, const int n_rays,
-                   __global const double4* origins, __global const double4* directions,
+                   __global const double* origins, __global const double* directions,
                    __global const double* limits, const int limit_stride, const double4 scene_anchor
                    PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
-    PYCLRAY_BEST(nextafter(t_max, (double)INFINITY))
+    double best = nextafter(t_max, (double)INFINITY);
+    int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
     PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
 #ifdef PYCLRAY_HAS_BOUNDED
     {
@@ -284,9 +388,11 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
             ray = moved_ray(&ray, anchors[best_q], &s0);
         }
 #endif
-        real3 normal = (real3)(0, 0, 0);
-        if (hit) { PYCLRAY_SHAPES(PYCLRAY_NORMAL) }
-        vstore3(normal, index, normal_out);
+        vec3v normal = v3(0, 0, 0);
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_NORMAL) }
+        normal_out[3 * index] = normal.x;
+        normal_out[3 * index + 1] = normal.y;
+        normal_out[3 * index + 2] = normal.z;
     }
 #endif
 #ifdef PYCLRAY_AOV_ID
@@ -300,7 +406,8 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
 
-__kernel void occluded(const int n_rays, __global const double4* origins, __global const double4* directions,
+PYCLRAY_KERNELS_BEGIN
+__kernel void occluded(const int n_rays, __global const double* origins, __global const double* directions,
                        __global const double* limits, const int limit_stride, const double4 scene_anchor
                        PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG), __global char* occluded_out)
 {

@@ -8,45 +8,50 @@
 
 /* F (the centre from the ray's origin), c = |F|^2 - r^2, b = F.D and the discriminant b^2 - a c. */
 typedef struct {
-    real3 F;
-    real c, b, disc;
+    vec3v F;
+    realv c, b, disc;
 } SphereTerms;
 
-inline SphereTerms sphere_terms(__global const Sphere* sphere, const Ray* ray)
+inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* ray)
 {
     SphereTerms t;
-    t.F = sphere->center.xyz - ray->origin;
-    const real r2 = sphere->center.w;
 #ifdef PYCLRAY_CAST
-    t.c = dot(t.F, t.F) - r2;
+    t.F = v3_sub(v3_splat(sphere->center), ray->origin);
 #else
-    t.c = sphere->c;
+    t.F = v3_splat(sphere->center);  /* the ray's origin is the frame's */
 #endif
-    const real3 D = ray->dir;
-    const real a = ray->a;
-    t.b = dot(t.F, D);
-    const real3 FxD = cross(t.F, D);
-    const real perp2 = dot(FxD, FxD);
+    const realv r2 = SPLAT(sphere->center.w);
+#ifdef PYCLRAY_CAST
+    t.c = v3_dot(t.F, t.F) - r2;
+#else
+    t.c = SPLAT(sphere->c);
+#endif
+    const vec3v D = ray->dir;
+    const realv a = ray->a;
+    t.b = v3_dot(t.F, D);
+    const vec3v FxD = v3_cross(t.F, D);
+    const realv perp2 = v3_dot(FxD, FxD);
     /* b^2 - a c = a r^2 - |F x D|^2 (Lagrange's identity). The first form cancels when the sphere
      * is small and far (b^2 ~ a c), the second when it is huge and near (a r^2 ~ |F x D|^2):
      * take the one whose rounding error bound, the size of its terms, is smaller. */
-    const real ac = a * t.c;
-    const bool from_b = t.b * t.b + fabs(ac) < a * r2 + perp2;
+    const realv ac = a * t.c;
+    const intv from_b = t.b * t.b + v_abs(ac) < a * r2 + perp2;
     t.disc = from_b ? t.b * t.b - ac : a * r2 - perp2;
     return t;
 }
 
-/* Nearest root s > 0, or MISS. */
-inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
+/* Nearest root s > 0 per lane, or MISS. */
+inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
-    if (!(t.disc >= 0)) return MISS;
-    /* stable roots: q = b + sign(b) sqrt(disc) never cancels; the roots are c/q and q/a */
-    const real q = t.b + copysign(sqrt(t.disc), t.b);
-    if (q == 0) return MISS;  /* tangent ray from a point on the surface */
-    const real s_q = q / ray->a, s_c = t.c / q;
-    const real near = fmin(s_q, s_c), far = fmax(s_q, s_c);
-    return near > 0 ? near : (far > 0 ? far : MISS);
+    /* stable roots: q = b + sign(b) sqrt(disc) never cancels; the roots are c/q and q/a
+     * (NaN in the lanes with disc < 0, which miss below) */
+    const realv q = t.b + v_copysign(v_sqrt(t.disc), t.b);
+    const realv s_q = q / ray->a, s_c = t.c / q;
+    const realv near = v_min(s_q, s_c), far = v_max(s_q, s_c);
+    const realv s = near > 0 ? near : (far > 0 ? far : SPLAT(MISS));
+    /* q == 0: a tangent ray from a point on the surface */
+    return (t.disc >= 0 && q != 0) ? s : SPLAT(MISS);
 }
 
 /* Outward unit world-space normal at the hit. p - C = s D - F is computed from the
@@ -54,10 +59,11 @@ inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
  * nearly equal vectors, so a far sphere's normal keeps its digits. The sign needs no root: from
  * outside (c > 0) a ray hits the near side, b - sqrt(disc); from inside or on the surface
  * (c <= 0) only the far root is positive, b + sqrt(disc). */
-inline real3 sphere_normal(__global const Sphere* sphere, const Ray* ray, __global const Camera* camera)
+inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
-    const real3 D = ray->dir;
-    const real side = t.c > 0 ? (real)-1 : (real)1;
-    return world_from_frame(camera, normalize(side * sqrt(t.disc) * D - cross(D, cross(t.F, D))));
+    const vec3v D = ray->dir;
+    const realv side = t.c > 0 ? SPLAT(-1) : SPLAT(1);
+    const vec3v n = v3_sub(v3_scale(D, side * v_sqrt(t.disc)), v3_cross(D, v3_cross(t.F, D)));
+    return world_from_frame(camera, v3_normalize(n));
 }

@@ -33,6 +33,14 @@ LEAF_SIZE = 4  # shapes per leaf at most: the kernel tests a leaf's shapes one a
 # drop a shape that the shape's own test would hit.
 WIDEN = 2.0**-12
 
+NODE = Struct(
+    "BvhNode",
+    (
+        ("lo", "float4"),  # xyz: the box's low corner; w: the bits of the int first
+        ("hi", "float4"),  # xyz: the box's high corner; w: the bits of the int count
+    ),
+    "A binary BVH node (kernels/bvh.h): count > 0: a leaf of refs[first .. first + count - 1]; else children first, first + 1.",
+)
 _FLOAT_MAX = float(np.finfo(np.float32).max)
 
 
@@ -52,6 +60,8 @@ class BVH:
 
     def depth(self) -> int:
         """Levels from the root to the deepest leaf."""
+        if not self.order.size:
+            return 1
         level, frontier = 0, np.array([0])
         while frontier.size:
             level += 1
@@ -289,6 +299,17 @@ def outward32(lo: np.ndarray, hi: np.ndarray):
     return np.maximum(lo32, -_FLOAT_MAX).astype(np.float32), np.minimum(hi32, _FLOAT_MAX).astype(np.float32)
 
 
+def pack_nodes(tree: BVH, origin) -> np.ndarray:
+    """The binary nodes as the kernel reads them (NODE), boxes relative to origin (float64, taken
+    before rounding outward): render's packets traverse them around the eye."""
+    out = np.zeros(tree.nodes, dtype=layout(NODE, "fp32").dtype)
+    lo, hi = outward32(tree.lo - np.asarray(origin, np.float64), tree.hi - np.asarray(origin, np.float64))
+    out["lo"][:, :3], out["hi"][:, :3] = lo, hi
+    out["lo"][:, 3] = tree.first.astype(np.int32).view(np.float32)
+    out["hi"][:, 3] = tree.count.astype(np.int32).view(np.float32)
+    return out
+
+
 # -- the BVH of a scene's shapes ------------------------------------------------------------------
 @dataclass(frozen=True)
 class SceneBVH:
@@ -308,6 +329,10 @@ class SceneBVH:
     def nodes(self, origin) -> np.ndarray:
         """The wide nodes with their boxes relative to origin (see pack_wide)."""
         return pack_wide(self.tree, self.wide, origin)
+
+    def binary_nodes(self, origin) -> np.ndarray:
+        """The binary nodes with their boxes relative to origin (see pack_nodes)."""
+        return pack_nodes(self.tree, origin)
 
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
@@ -349,8 +374,11 @@ def scene_bvh(shapes, registry) -> SceneBVH:
         positions = within[tree.order[mine]]
         ordered[t] = [by_type[t][0][p] for p in positions]
         ids[t] = np.array(by_type[t][1], np.int64)[positions].astype(np.int32)
-    wide = collapse(tree)
-    if 7 * wide.depth + 1 > STACK:
+    if len(bounds):
+        wide = collapse(tree)
+    else:  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
+        wide = WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
+    if tree.depth() > BINARY_STACK or 7 * wide.depth + 1 > STACK:
         raise ValueError(f"the BVH is {wide.depth} wide levels deep, more than the kernel's stack holds")
     return SceneBVH(tree, wide, types, leaf_type, leaf_index, ordered, ids, bounds[tree.order])
 
@@ -358,6 +386,7 @@ def scene_bvh(shapes, registry) -> SceneBVH:
 # -- the wide BVH the kernels traverse ---------------------------------------------------------------
 WIDTH = 8  # children per wide node: one float8 box test of all of them per visit
 STACK = 256  # kernels/bvh.h: BVH_STACK
+BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK
 
 WIDE_NODE = Struct(
     "WideNode",

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
-from .bvh import WIDE_NODE
+from .bvh import NODE, WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
 from .shapes import REGISTRY
@@ -121,21 +121,45 @@ def _read(name: str) -> str:
     return kernel_dir().joinpath(name).read_text(encoding="utf-8")
 
 
+# Rays per work-item (vector lanes) the kernels are built for: the device's preferred vector width for
+# its precision (GPUs: 1), in vectors of at most 256 bits (8 floats, 4 doubles). PoCL reports 16 floats
+# and 8 doubles on an AVX-512 CPU, but its kernel compiler targets AVX2 there: it warns that 512-bit
+# arguments change the ABI, and a kernel with 512-bit lanes is not found in the built program
+# (CL_INVALID_KERNEL_NAME), with PoCL 3.0 on this project's machines. $PYCLRAY_LANES overrides the
+# choice (1, 2, 4, 8 or 16).
+LANE_WIDTHS = (1, 2, 4, 8, 16)
+MAX_LANE_BITS = 256
+
+
+def lanes_for(device: cl.Device, precision: str) -> int:
+    """The packet width of the kernels on this device at this precision."""
+    value = os.environ.get("PYCLRAY_LANES", "").strip()
+    if value:
+        if not value.isdigit() or int(value) not in LANE_WIDTHS:
+            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, LANE_WIDTHS))}, got {value!r}")
+        return int(value)
+    if precision == "fp64":
+        preferred, bits = device.preferred_vector_width_double, 64
+    else:
+        preferred, bits = device.preferred_vector_width_float, 32
+    most = min(max(int(preferred), 1), MAX_LANE_BITS // bits)
+    return max(w for w in LANE_WIDTHS if w <= most)
+
+
 @dataclass(frozen=True)
 class Variant:
-    """What selects a program: kernel kind, shape types present, images asked for, precision."""
+    """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render", "cast", "occluded" (any hit of cast's rays) or "rays" (the camera's rays, for render)
+    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
+    # work-item) or "occluded" (cast's any-hit query)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
+    lanes: int = 1
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
-
-    def uses_bvh(self) -> bool:
-        return bool(self.bounded_types()) and (self.bvh or self.kind in ("cast", "occluded"))
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
@@ -144,7 +168,7 @@ class Variant:
             return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
 
         bounded = self.bounded_types()
-        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}"]
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
         lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
         lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
         if bounded:
@@ -158,27 +182,23 @@ class Variant:
             lines.append("#define PYCLRAY_CAST 1")
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
-        if self.kind == "rays":
-            lines.append("#define PYCLRAY_RAYS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
 
-        inline_builtins: replace the OpenCL built-ins by the bit-identical inline copies of
-        kernels/builtins.h, and have the camera's and the shapes' functions always inlined (PoCL's
-        inliner leaves sphere_normal out of the kernel, just above its threshold): on PoCL's CPU
-        device, see kernels/builtins.h. Inlining changes no result."""
+        inline_builtins: on PoCL's CPU device, the lanes' square root as the compiler's own, and the
+        camera's and the shapes' functions always inlined (PoCL's inliner leaves some out of the
+        kernel, just above its threshold): see kernels/lanes.h. Inlining changes no result."""
         shapes = [REGISTRY[t] for t in self.shape_types]
-        parts = ["\n".join(["/* pyclray program variant */"] + self.defines())]
-        parts += [_read("common.h")] + ([_read("builtins.h")] if inline_builtins else [])
-        parts += [c_header([CAMERA, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
+        defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
+        parts = ["\n".join(["/* pyclray program variant */"] + defines)]
+        parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
+        parts += [_read("lanes.h"), c_header([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
         parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
-        if inline_builtins:
-            parts.append("#pragma clang attribute pop")
-        parts.append(_read("pyclray.cl"))
+        parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
     def options(self) -> list[str]:
@@ -212,7 +232,7 @@ def _disk_key(source: str, options: list[str], device: cl.Device) -> str:
 
 
 def is_pocl_cpu(device: cl.Device) -> bool:
-    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/builtins.h)."""
+    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/lanes.h)."""
     return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 

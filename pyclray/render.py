@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import bvh, culling
-from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for
+from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
 from .errors import DeviceError, PyclrayError
 from .layout import CAMERA, PRECISIONS, layout
 from .scene import Scene
@@ -169,10 +169,10 @@ def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
 
 
 def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list:
-    """The kernel arguments before the outputs of a render of this scene: camera, the pixels' rays
-    (computed once by the rays kernel), tile size, tiles per row, then either the BVH (nodes around
-    the eye, refs) and per shape type its packed buffer (bounded types in leaf order) and count, or
-    per shape type its packed buffer and its tile lists (pyclray/culling.py)."""
+    """The kernel arguments of a render of this scene that do not depend on the window: the camera,
+    and then either the BVH (its binary nodes around the eye, refs) and per shape type its packed
+    buffer (bounded types in leaf order) and count, or per shape type its packed buffer and its tile
+    lists (pyclray/culling.py)."""
     key = (ctx.device.int_ptr, id(scene), precision, acceleration)
     with _render_lock:
         entry = _prepared.get(key)
@@ -182,19 +182,14 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
     width, height = scene.image.width, scene.image.height
     rows = scene.camera.basis()
     tan_x, tan_y = scene.camera.tangents(width, height)
-    camera = _camera_struct(rows, tan_x, tan_y, width, height, precision)
-    camera_buffer = _input_buffer(ctx, camera)
-    real = np.dtype(_REAL[precision]).itemsize
-    rays = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, width * height * 4 * real)
-    rays_kernel = kernel_for(ctx, Variant("rays", (), (), precision))
-    rays_kernel(ctx.queue, _global_size(width, height), None, camera_buffer, rays)
-    tiles_x = -(-width // culling.TILE)
-    args = [camera_buffer, rays, np.int32(culling.TILE.bit_length() - 1), np.int32(tiles_x)]
+    camera = _input_buffer(ctx, _camera_struct(rows, tan_x, tan_y, width, height, precision))
     eye = np.asarray(scene.camera.eye, np.float64)
+    shape_args, arrays = [], []
     if acceleration == "bvh":
         tree = scene_bvh(scene)
         if tree.types:
-            args += [_input_buffer(ctx, tree.nodes(eye)), _input_buffer(ctx, tree.refs(scene.shape_types()))]
+            arrays += [tree.binary_nodes(eye), tree.refs(scene.shape_types())]
+            shape_args += [_input_buffer(ctx, a) for a in arrays]
         for kind in scene.shape_types():
             cls = REGISTRY[kind]
             if cls.bounded:
@@ -203,7 +198,8 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
                 ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
                 shapes = [scene.shapes[i] for i in ids]
             packed = cls.pack(shapes, ids, eye, rows, precision)
-            args += [_input_buffer(ctx, packed), np.int32(len(shapes))]
+            arrays.append(packed)
+            shape_args += [_input_buffer(ctx, packed), np.int32(len(shapes))]
     else:
         for kind in scene.shape_types():
             cls = REGISTRY[kind]
@@ -211,10 +207,13 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
             shapes = [scene.shapes[i] for i in ids]
             packed = cls.pack(shapes, ids, eye, rows, precision)
             start, index = culling.tile_lists(kind, shapes, eye, rows, tan_x, tan_y, width, height)
-            args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+            arrays += [packed, start, index]
+            shape_args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+    size = sum(a.nbytes for a in arrays)
+    args = [camera, shape_args]
     with _render_lock:
-        _prepared[key] = (scene, args, rays.size)
-        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of rays (the newest always stays)
+        _prepared[key] = (scene, args, size)
+        # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of inputs (the newest always stays)
         while len(_prepared) > 1 and (
             len(_prepared) > _PREPARED_MAX or sum(e[2] for e in _prepared.values()) > _PREPARED_BYTES
         ):
@@ -222,17 +221,29 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
     return args
 
 
-def _global_size(width: int, height: int) -> tuple[int, int]:
-    """The image rounded up to whole tiles (the kernels skip the pixels beyond the edges)."""
-    tile = culling.TILE
-    return (-(-width // tile) * tile, -(-height // tile) * tile)
+def _window(scene: Scene, window) -> tuple[int, int, int, int]:
+    """(col0, row0, cols, rows) of the part of the image to render: the whole image by default."""
+    width, height = scene.image.width, scene.image.height
+    if window is None:
+        return 0, 0, width, height
+    try:
+        col0, row0, cols, rows = (int(v) for v in window)
+    except (TypeError, ValueError):
+        raise PyclrayError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
+    if not (0 <= col0 and 0 <= row0 and cols >= 1 and rows >= 1 and col0 + cols <= width and row0 + rows <= height):
+        raise PyclrayError(
+            f"window: expected (x0, y0, width, height) inside the {width}x{height} image, got {tuple(window)!r}"
+        )
+    return col0, row0, cols, rows
 
 
-def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, acceleration: str = "auto") -> Frame:
+def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto") -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
     aovs: which images (a subset of depth, normal, id: only those are computed);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
+    window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
+    rendered into images of that size, the same pixels as in the whole image; default: all of it;
     acceleration: how the kernel skips the shapes a ray cannot hit, "tiles" (screen-space tile
     lists), "bvh" (the bounding volume hierarchy) or "auto" (tiles for a few shapes, else the BVH).
     The images do not depend on it, bit for bit.
@@ -240,12 +251,22 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, accele
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     acceleration = acceleration_for(scene, acceleration)
-    width, height = scene.image.width, scene.image.height
-    args = _render_inputs(ctx, scene, precision, acceleration)
-    variant = Variant("render", scene.shape_types(), aovs, precision, bvh=acceleration == "bvh")
-    tile = culling.TILE  # one work-group per tile where the device allows it (the kernel needs none)
-    local_size = (tile, tile) if ctx.device.max_work_group_size >= tile * tile else None
-    images = _run(ctx, variant, args, _global_size(width, height), width * height, aovs, precision, (height, width), local_size)
+    col0, row0, cols, rows = _window(scene, window)
+    camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
+    lanes = lanes_for(ctx.device, precision)
+    variant = Variant("render", scene.shape_types(), aovs, precision, lanes, bvh=acceleration == "bvh")
+    tile = culling.TILE
+    tiles_x = -(-scene.image.width // tile)
+    args = [camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
+            np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
+    # one packet of `lanes` pixels per work-item, packets aligned to multiples of lanes in the image;
+    # work-groups of one tile (tile / lanes packets by tile rows) where the device allows (the kernel
+    # needs none)
+    packets = -(-(col0 + cols) // lanes) - col0 // lanes
+    group = (tile // lanes, tile)
+    global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
+    local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
+    images = _run(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size)
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 
@@ -384,9 +405,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    rays = np.zeros((2, count, 4))
-    rays[0, :, :3], rays[1, :, :3] = origins, unit
-    head = [np.int32(count), _input_buffer(ctx, rays[0]), _input_buffer(ctx, rays[1]),
+    head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), _input_buffer(ctx, np.ascontiguousarray(unit)),
             _input_buffer(ctx, np.ascontiguousarray(tmax)), np.int32(1 if len(tmax) > 1 else 0),
             np.append(anchor, 0.0).astype(np.float64).view(cl.cltypes.double4)[0]]
     if kind == "occluded":

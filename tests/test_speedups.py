@@ -1,5 +1,5 @@
-"""The render path's speed-ups change no bit of the results: the inline built-ins on PoCL
-(kernels/builtins.h) and the cached inputs give the same images as the plain path."""
+"""The render path's speed-ups change no bit of the results: always inlining the kernels' functions
+on PoCL (device.Variant.source) and the cached inputs give the same images as the plain path."""
 from __future__ import annotations
 
 import importlib

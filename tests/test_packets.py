@@ -1,0 +1,98 @@
+"""Packets: the kernels cast LANES rays per work-item in vector lanes (kernels/lanes.h), at the
+device's width (8 float or 4 double lanes on PoCL's CPU device, 1 on GPUs) or $PYCLRAY_LANES.
+
+A lane's arithmetic is the same at every width: contraction into FMAs is off and every operation is
+IEEE (the same dot, cross and square roots), so the images are compared bit for bit across widths;
+the float64 oracle judges the scalar and the vector width alike. Windows of an image are the same
+pixels as the whole image's, bit for bit, wherever they start (packets start at multiples of LANES in
+the image, so a window may cut a packet at both ends)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclray
+import pyclray.device as device
+from test_render import assert_matches_oracle, small
+from test_speedups import random_scene, same
+
+ALL = ("depth", "normal", "id")
+
+
+def widths(precision: str) -> list[int]:
+    """Every lane width up to the widest this machine's PoCL builds (256-bit vectors), and 1."""
+    most = device.MAX_LANE_BITS // (32 if precision == "fp32" else 64)
+    return [w for w in device.LANE_WIDTHS if w <= most]
+
+
+def need(precision):
+    if precision == "fp64" and not device.has_fp64(device.context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+def at_width(monkeypatch, lanes: int, fn):
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_LANES", str(lanes))
+        return fn()
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("seed", range(4))
+def test_every_lane_width_gives_the_same_bits(monkeypatch, seed, precision):
+    """Renders (every AOV set, an odd size: 61 x 47 is no multiple of a packet) and casts (a count
+    that is no multiple of a packet) are bit-identical at widths 1, 2, 4 and 8."""
+    need(precision)
+    scene = random_scene(seed)
+    rng = np.random.default_rng(seed)
+    origins, directions = rng.normal(0, 3, (333, 3)), rng.normal(0, 1, (333, 3))
+
+    def run():
+        out = [pyclray.render(scene, aovs, precision) for aovs in (ALL, ("depth",), ("normal",), ("id",))]
+        return out + [pyclray.cast(scene, origins, directions, precision=precision)]
+
+    runs = {w: at_width(monkeypatch, w, run) for w in widths(precision)}
+    scalar = runs.pop(1)
+    for lanes, frames in runs.items():
+        for a, b in zip(scalar, frames):
+            same(a, b)
+
+
+@pytest.mark.parametrize("lanes", [1, 8])
+@pytest.mark.parametrize("name", ["tp02", "room", "far"])
+def test_scalar_and_vector_widths_match_the_oracle(monkeypatch, scenes_dir, name, lanes):
+    """The error model's fp32 bounds (tests/test_render.py) hold at one ray per work-item and at 8."""
+    scene = small(pyclray.load_scene(scenes_dir / f"{name}.toml"), 67)
+    at_width(monkeypatch, lanes, lambda: assert_matches_oracle(scene))
+
+
+@pytest.mark.parametrize("lanes", [1, 4, 8])
+def test_windows_are_the_same_pixels_as_the_whole_image(monkeypatch, lanes):
+    scene = random_scene(5, size=(83, 37))
+    whole = at_width(monkeypatch, lanes, lambda: pyclray.render(scene))
+    windows = [(0, 0, 83, 37), (0, 0, 1, 1), (82, 36, 1, 1), (3, 5, 17, 9), (8, 0, 8, 37), (13, 2, 70, 35), (0, 20, 83, 17)]
+    for col0, row0, cols, rows in windows:
+        part = at_width(monkeypatch, lanes, lambda: pyclray.render(scene, window=(col0, row0, cols, rows)))
+        cut = {k: np.ascontiguousarray(v[row0 : row0 + rows, col0 : col0 + cols]) for k, v in whole.items()}
+        same(part, cut)
+
+
+@pytest.mark.parametrize("window", [(0, 0, 0, 1), (-1, 0, 4, 4), (80, 0, 4, 4), (0, 0, 83, 38), "a", (1, 2, 3)])
+def test_a_window_outside_the_image_is_a_clear_error(window):
+    scene = random_scene(5, size=(83, 37))
+    with pytest.raises(pyclray.PyclrayError, match="window: expected"):
+        pyclray.render(scene, window=window)
+
+
+def test_the_lane_width_follows_the_device_and_the_environment(monkeypatch):
+    ctx = device.context_for(None)
+    monkeypatch.delenv("PYCLRAY_LANES", raising=False)
+    for precision, bits in (("fp32", 32), ("fp64", 64)):
+        lanes = device.lanes_for(ctx.device, precision)
+        assert lanes in device.LANE_WIDTHS and lanes * bits <= device.MAX_LANE_BITS
+    if device.is_pocl_cpu(ctx.device) and ctx.device.preferred_vector_width_float >= 8:  # AVX or wider
+        assert device.lanes_for(ctx.device, "fp32") == 8 and device.lanes_for(ctx.device, "fp64") == 4
+    monkeypatch.setenv("PYCLRAY_LANES", "2")
+    assert device.lanes_for(ctx.device, "fp32") == 2
+    monkeypatch.setenv("PYCLRAY_LANES", "3")
+    with pytest.raises(pyclray.errors.DeviceError, match="PYCLRAY_LANES: expected one of 1, 2, 4, 8, 16"):
+        device.lanes_for(ctx.device, "fp32")
