@@ -310,6 +310,15 @@ __kernel void render(__global const Camera* camera, const int col0, const int ro
 
 inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v.z); }
 
+/* d / |d| in float64, d scaled by its largest component first (a power of two would change no
+ * bit), so that neither a tiny nor a huge finite direction under- or overflows in the length */
+inline double3 unit_direction(const double3 d)
+{
+    const double3 size = select(d, -d, d < (double3)(0.0));
+    const double3 scaled = d / (size.x > size.y ? (size.x > size.z ? size.x : size.z) : (size.y > size.z ? size.y : size.z));
+    return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
+}
+
 /* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. */
 inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0)
 {
@@ -322,13 +331,14 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     return moved;
 }
 
-/* the setup shared by cast and occluded: the ray (origins and directions: 3 doubles per ray) */
+/* the setup shared by cast and occluded: the ray (origins and directions: 3 doubles per ray; one
+ * origin for every ray where origin_stride is 0), its direction made unit */
 #define PYCLRAY_CAST_RAY                                                            \
     const int r = get_global_id(0);                                                 \
     if (r >= n_rays) return;                                                        \
     RayPacket ray;                                                                  \
-    ray.world = vload3(r, origins);                                                 \
-    ray.dir_exact = vload3(r, directions);                                          \
+    ray.world = vload3(r * origin_stride, origins);                                 \
+    ray.dir_exact = unit_direction(vload3(r, directions));                          \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
     ray.origin = v3_round(ray.world);                                               \
@@ -359,7 +369,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 
 PYCLRAY_KERNELS_BEGIN
 __kernel void cast(__global const Camera* camera, const int n_rays,
-                   __global const double* origins, __global const double* directions,
+                   __global const double* origins, const int origin_stride, __global const double* directions,
                    __global const double* limits, const int limit_stride, const double4 scene_anchor
                    PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
 {
@@ -407,7 +417,8 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
 
 PYCLRAY_KERNELS_BEGIN
-__kernel void occluded(const int n_rays, __global const double* origins, __global const double* directions,
+__kernel void occluded(const int n_rays, __global const double* origins, const int origin_stride,
+                       __global const double* directions,
                        __global const double* limits, const int limit_stride, const double4 scene_anchor
                        PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG), __global char* occluded_out)
 {

@@ -169,8 +169,10 @@ def _radix_tree(keys: np.ndarray):
     return np.minimum(i, j), np.maximum(i, j), gamma
 
 
-def build(bounds: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH:
-    """The BVH of shapes with these world bounds ((N, 2, 3) float64: lo, hi per shape)."""
+def build(bounds: np.ndarray, leaf_size: int | None = None) -> BVH:
+    """The BVH of shapes with these world bounds ((N, 2, 3) float64: lo, hi per shape), leaves of
+    at most leaf_size (default LEAF_SIZE) shapes."""
+    leaf_size = LEAF_SIZE if leaf_size is None else leaf_size
     bounds = np.asarray(bounds, np.float64)
     n = len(bounds)
     if n == 0:

@@ -154,18 +154,67 @@ def scene_bvh(scene: Scene) -> bvh.SceneBVH:
     return built
 
 
-# Render visits the bounded shapes through tile lists (pyclray/culling.py) up to this many, and
-# through the BVH beyond: see bench/REPORT.md ("BVH or tiles") for the measurement.
-TILES_UP_TO = 64
+_kinds: OrderedDict = OrderedDict()
+
+
+def _shape_kinds(scene: Scene) -> tuple[tuple[str, ...], int]:
+    """(the shape types present, the number of bounded shapes), once per shapes tuple: a warm
+    render of a scene of a million shapes must not walk them (an entry holds its tuple)."""
+    key = id(scene.shapes)
+    with _render_lock:
+        entry = _kinds.get(key)
+        if entry is not None and entry[0] is scene.shapes:
+            return entry[1]
+    kinds = (scene.shape_types(), sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded))
+    with _render_lock:
+        _kinds[key] = (scene.shapes, kinds)
+        while len(_kinds) > _PREPARED_MAX:
+            _kinds.popitem(last=False)
+    return kinds
+
+
+# Render visits the bounded shapes through tile lists (pyclray/culling.py) or through the BVH,
+# whichever costs a packet less. Through tile lists a packet tests every shape of its tile's list;
+# through the BVH it pays its traversal. Measured (bench/REPORT.md, "Tiles or BVH"), the two cost
+# the same at about 16 shapes per tile on average (a field of 3,000 spheres at 512x512): below,
+# tiles win (2x at 1,000 spheres: no traversal at all), above, the BVH (3x at 30,000). Beyond
+# TILES_MAX_SHAPES bounded shapes the lists are not even computed: no visible scene of that many
+# shapes has short lists, and computing them costs more than building the tree.
+TILE_LIST_MAX = 16.0
+TILES_MAX_SHAPES = 20_000
+_choices: OrderedDict = OrderedDict()
 
 
 def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
+    """"tiles" or "bvh" for a render of this scene (see TILE_LIST_MAX)."""
     if acceleration not in ("auto", "bvh", "tiles"):
         raise PyclrayError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
     if acceleration != "auto":
         return acceleration
-    bounded = sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded)
-    return "tiles" if bounded <= TILES_UP_TO else "bvh"
+    key = id(scene)
+    with _render_lock:
+        entry = _choices.get(key)
+        if entry is not None and entry[0] is scene:
+            return entry[1]
+    shape_types, bounded = _shape_kinds(scene)
+    if bounded > TILES_MAX_SHAPES:
+        choice = "bvh"
+    else:
+        width, height = scene.image.width, scene.image.height
+        rows = scene.camera.basis()
+        tan_x, tan_y = scene.camera.tangents(width, height)
+        pairs = 0
+        for kind in shape_types:
+            if REGISTRY[kind].bounded:
+                shapes = [shape for shape in scene.shapes if shape.type == kind]
+                start, _ = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+                pairs += int(start[-1])
+        choice = "tiles" if pairs <= TILE_LIST_MAX * (len(start) - 1 if bounded else 1) else "bvh"
+    with _render_lock:
+        _choices[key] = (scene, choice)
+        while len(_choices) > _PREPARED_MAX:
+            _choices.popitem(last=False)
+    return choice
 
 
 def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list:
@@ -254,7 +303,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     col0, row0, cols, rows = _window(scene, window)
     camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
-    variant = Variant("render", scene.shape_types(), aovs, precision, lanes, bvh=acceleration == "bvh")
+    variant = Variant("render", _shape_kinds(scene)[0], aovs, precision, lanes, bvh=acceleration == "bvh")
     tile = culling.TILE
     tiles_x = -(-scene.image.width // tile)
     args = [camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
@@ -289,28 +338,24 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
 
 
 def _cast_rays(origins, directions, tmax):
-    """(origins, unit directions, tmax, leading shape): float64 arrays of the rays, flattened."""
+    """(origins (M, 3), directions (N, 3), tmax, leading shape): float64 arrays of the rays as given,
+    flattened, checked; M is N, or 1 for one origin shared by every ray. The kernel normalizes the
+    directions (scaled by their largest component first, so that neither a tiny nor a huge finite
+    direction under- or overflows in the length). Each check is one pass over the arrays; the row
+    of a failure is looked for only then."""
     directions = _ray_array("directions", directions)
     shape = directions.shape[:-1]
     origins = _ray_array("origins", origins)
-    if origins.shape != directions.shape:
-        if origins.shape != (3,):
-            raise PyclrayError(
-                f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
-            )
-        origins = np.broadcast_to(origins, directions.shape)
+    if origins.shape != directions.shape and origins.shape != (3,):
+        raise PyclrayError(
+            f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
+        )
     for name, array in (("directions", directions), ("origins", origins)):
-        bad = ~np.isfinite(array).all(axis=-1)
-        if bad.any():
-            _first_bad(name, bad, array, "is not finite")
-    # unit directions: scaled by the largest component first, so that neither a tiny nor a huge
-    # (finite) direction under- or overflows in the length
-    largest = np.abs(directions).max(axis=-1)
-    zero = ~(largest > 0)
-    if zero.any():
-        _first_bad("directions", zero, directions, "has zero length")
-    scaled = directions / largest[..., None]
-    unit = scaled / np.linalg.norm(scaled, axis=-1, keepdims=True)
+        if not np.isfinite(array).all():
+            rows = np.broadcast_to(array, directions.shape)
+            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
+    if not directions.any(axis=-1).all():
+        _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
         tmax = np.full(1, np.inf)
     else:
@@ -326,7 +371,7 @@ def _cast_rays(origins, directions, tmax):
         if bad.any():
             raise PyclrayError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
         tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
-    return origins.reshape(-1, 3), unit.reshape(-1, 3), tmax, shape
+    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape
 
 
 _cast_prepared: OrderedDict = OrderedDict()
@@ -385,17 +430,16 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
-    origins, unit, tmax, shape = _cast_rays(origins, directions, tmax)
-    count = len(unit)
+    origins, directions, tmax, shape = _cast_rays(origins, directions, tmax)
+    count = len(directions)
     real = _REAL[precision]
-    shape_types = scene.shape_types()
+    shape_types = _shape_kinds(scene)[0]
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real
-    reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
-    too_far = ~(reach <= np.sqrt(np.finfo(real).max) / 4)
-    if too_far.any():
-        row = int(np.argmax(too_far))
+    bound = np.sqrt(np.finfo(real).max) / 4
+    if not np.abs(origins - anchor).max(initial=0.0) <= bound:
+        row = int(np.argmax(~(np.abs(origins - anchor).max(axis=-1) <= bound)))
         raise PyclrayError(
             f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
             "(their distances overflow)"
@@ -405,7 +449,8 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), _input_buffer(ctx, np.ascontiguousarray(unit)),
+    head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), np.int32(1 if len(origins) > 1 else 0),
+            _input_buffer(ctx, np.ascontiguousarray(directions)),
             _input_buffer(ctx, np.ascontiguousarray(tmax)), np.int32(1 if len(tmax) > 1 else 0),
             np.append(anchor, 0.0).astype(np.float64).view(cl.cltypes.double4)[0]]
     if kind == "occluded":
