@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies", "floor-in-place", "breakdown", "targets-interleaved"]
+KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies", "floor-in-place", "breakdown", "targets-blocks"]
 SCENE_ORDER = ["tp02", "grid64", "grid1024", "floor"]
 TARGETS = {"tp02_speedup": 8.0, "depth_share": 0.60, "grid64_speedup": 2.0}
 
@@ -49,6 +49,7 @@ def load(path: Path) -> list[dict]:
             min=stats["min"], max=stats["max"], rounds=stats["rounds"],
         )
         rows.append(row)
+    rows = [r for r in rows if r["kind"] in KIND_ORDER]  # cases of earlier versions of the matrix are left out
     rows.sort(key=lambda r: (SCENE_ORDER.index(r["scene"]), r["size"], KIND_ORDER.index(r["kind"]), r["aovs"], r["precision"], r.get("part", "")))
     return rows, data.get("machine_info", {}), data.get("datetime", "")
 
@@ -102,7 +103,7 @@ def table(rows) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        if r["kind"] == "targets-interleaved":
+        if r["kind"] == "targets-blocks":
             continue
         llvm = llvm_of(rows, r) if r["kind"] != "breakdown" else None
         ratio = f"{llvm['median'] / r['median']:.2f}x" if llvm and r["kind"] != "mitsuba-llvm" else ("1" if llvm else "")
@@ -117,44 +118,30 @@ def table(rows) -> list[str]:
     return out
 
 
-def round_robin(rows) -> dict:
-    """The cases of every test_targets_interleaved group: label -> statistics."""
+def block_cases(rows) -> dict:
+    """The cases of every test_targets_blocks group: label -> statistics."""
     cases = {}
     for row in rows:
-        if row["kind"] == "targets-interleaved":
+        if row["kind"] == "targets-blocks":
             cases.update(row.get("cases", {}))
     return cases
 
 
-def interleaved(rows) -> list[str]:
-    """The speed targets from test_targets_interleaved (cases timed round-robin)."""
-    c = round_robin(rows)
-    if "tp02 pyclray all" not in c:
+def block_targets(rows) -> list[str]:
+    """The speed targets from test_targets_blocks (bench/blocks.py: each case in blocks of calls)."""
+    from .blocks import PAUSE, ROUNDS, tables
+
+    cases = block_cases(rows)
+    if not cases:
         return []
-    out = [
-        f"Measured round-robin ({next(iter(c.values()))['rounds']} timed calls of each case: 20 rounds of 3 calls of "
-        "each case, the order rotating, after a 50 ms pause and 2 untimed calls at each switch), so that the machine's load "
-        "over the run weighs on all cases alike (`test_targets_interleaved`; grid1024 in a group of its own):",
+    return [
+        f"Each case timed in blocks of calls ({ROUNDS} blocks of about 1 s each, 3 untimed calls first, a "
+        f"{PAUSE:g} s pause at each switch, the order rotating; `bench/blocks.py`, also `python -m bench.blocks`), "
+        "so that one runtime's threads winding down do not weigh on the next; ratios of medians measured in the "
+        "same process. The floor writes the three images into new numpy arrays as pyclray does on a CPU:",
         "",
-        "| case (512×512, fp32, warm) | median ms | IQR ms | min ms |",
-        "|---|---|---|---|",
+        *tables(cases),
     ]
-    for label, v in c.items():
-        out.append(f"| {label} | {ms(v['median'])} | {ms(v['q1'])}–{ms(v['q3'])} | {ms(v['min'])} |")
-    out += ["", "| target | measured (round-robin medians) | goal | met |", "|---|---|---|---|"]
-
-    def line(label, value, goal, ok, text):
-        out.append(f"| {label} | {text} | {goal} | {'yes' if ok else '**no**'} |")
-
-    a, d, m = c["tp02 pyclray all"]["median"], c["tp02 pyclray depth"]["median"], c["tp02 mitsuba-llvm"]["median"]
-    g, gm = c["grid64 pyclray all"]["median"], c["grid64 mitsuba-llvm"]["median"]
-    line("tp02 all AOVs: llvm / pyclray", m / a, f">= {TARGETS['tp02_speedup']:g}x", m / a >= TARGETS["tp02_speedup"],
-         f"{m / a:.2f}x ({ms(m)} ms / {ms(a)} ms)")
-    line("tp02 depth only / all AOVs", d / a, f"<= {TARGETS['depth_share']:.0%}", d / a <= TARGETS["depth_share"],
-         f"{d / a:.0%} ({ms(d)} ms / {ms(a)} ms)")
-    line("grid64 all AOVs: llvm / pyclray", gm / g, f">= {TARGETS['grid64_speedup']:g}x", gm / g >= TARGETS["grid64_speedup"],
-         f"{gm / g:.2f}x ({ms(gm)} ms / {ms(g)} ms)")
-    return out
 
 
 def targets(rows) -> tuple[list[str], dict]:
@@ -215,14 +202,14 @@ def breakdown(rows) -> list[str]:
 
 
 def headline(rows) -> list[str]:
-    """Medians of the round-robin measurement when it has the scene, else of the matrix's cases."""
+    """Medians of the block measurement when it has the scene, else of the matrix's cases."""
     out = [
         "| scene (512×512) | pyclray, all AOVs | pyclray, depth only | Mitsuba 3 llvm_ad_rgb | llvm / pyclray (all AOVs) |",
         "|---|---|---|---|---|",
     ]
-    cases = round_robin(rows)
+    cases = block_cases(rows)
     for name in ("tp02", "grid64", "grid1024"):
-        keys = [f"{name} pyclray all", f"{name} pyclray depth", f"{name} mitsuba-llvm"]
+        keys = [f"{name} 512 all", f"{name} 512 depth", f"{name} 512 llvm"]
         if all(k in cases for k in keys):
             a, d, m = (cases[k]["median"] for k in keys)
             out.append(f"| {name} | {ms(a)} ms | {ms(d)} ms | {ms(m)} ms | {m / a:.1f}x |")
@@ -294,7 +281,7 @@ def main(argv=None) -> None:
         "",
         "## Speed targets (ratios to Mitsuba 3 llvm_ad_rgb measured in the same run)",
         "",
-        *interleaved(rows),
+        *block_targets(rows),
         "",
         "The same ratios from the separate cases of the matrix below (each case timed on its own, so",
         "another process's load during one case and not the other shows in the ratio):",
@@ -307,7 +294,7 @@ def main(argv=None) -> None:
         "",
         *WHERE_THE_TIME_GOES,
         "",
-        "## Headline (512×512, warm, fp32; medians of the round-robin measurement)",
+        "## Headline (512×512, warm, fp32; medians of the block measurement)",
         "",
         *headline(rows),
         "",
@@ -365,7 +352,7 @@ def main(argv=None) -> None:
         "- Before each case's timing the benchmark sleeps 0.3 s, and OpenBLAS runs one thread",
         "  (`bench/conftest.py`), so that threads left busy by the previous case (numpy's BLAS, Dr.Jit's",
         "  pool) do not run into the timing. The machine has 2 cores, and other people's test runs shared",
-        "  them during these runs: spreads are wide, hence also the round-robin measurement of the targets.",
+        "  them during these runs: spreads are wide, hence also the block measurement of the targets.",
         "- Mrays/s = width × height / median time.",
         "",
     ]
@@ -380,21 +367,19 @@ START, END = "<!-- bench-headline: written by python -m bench.report --readme --
 
 
 def target_summary(rows) -> list[str]:
-    c = round_robin(rows)
-    if "tp02 pyclray all" not in c:
+    from .blocks import TARGETS
+
+    c = block_cases(rows)
+    parts = []
+    for name, (top, bottom, goal, sense) in TARGETS.items():
+        if goal is None or top not in c or bottom not in c:
+            continue
+        ratio = c[top]["median"] / c[bottom]["median"]
+        met = ratio <= goal if sense == "<=" else ratio >= goal
+        parts.append(f"{name} {ratio:.2f} (goal {sense} {goal:g}{'' if met else ': **not met**'})")
+    if not parts:
         return []
-    a, d, m = c["tp02 pyclray all"]["median"], c["tp02 pyclray depth"]["median"], c["tp02 mitsuba-llvm"]["median"]
-    g, gm = c["grid64 pyclray all"]["median"], c["grid64 mitsuba-llvm"]["median"]
-    return [
-        "Speed targets, from cases timed round-robin in the same run: tp02 with all images "
-        f"{m / a:.1f}x faster than llvm_ad_rgb (goal 8x: **not met**; {ms(a)} ms against a floor of about "
-        "0.5–0.8 ms for a kernel that only writes the images), depth only "
-        f"{d / a:.0%} of all images (goal at most 60%), grid64 {gm / g:.1f}x faster (goal 2x). "
-        "Why tp02 misses 8x: `bench/REPORT.md`, \"Where the time goes\"."
-        if m / a < TARGETS["tp02_speedup"] else
-        f"Speed targets, from cases timed round-robin in the same run: tp02 {m / a:.1f}x faster than llvm_ad_rgb "
-        f"(goal 8x), depth only {d / a:.0%} of all images (goal 60%), grid64 {gm / g:.1f}x (goal 2x).",
-    ]
+    return ["Speed targets, each system timed in blocks in the same run (`bench/blocks.py`): " + "; ".join(parts) + "."]
 
 
 def update_readme(path: Path, rows, summary) -> None:

@@ -24,6 +24,7 @@ from pyclray import accuracy, culling
 from pyclray import mitsuba as pm
 from pyclray import oracle
 
+from . import blocks
 from .metrics import compare
 
 SCENE_NAMES = ("tp02", "grid64", "grid1024")
@@ -76,26 +77,13 @@ def test_oracle(benchmark, scenes_dir, name):
 
 
 # -- the floor: a kernel that only writes the three images ----------------------------------------
-FLOOR_SOURCE = """
-__kernel void floor_kernel(__global float* depth, __global float* normal, __global int* id, const int width, const int height)
-{
-    const int i = get_global_id(0), j = get_global_id(1);
-    if (i >= width || j >= height) return;
-    const size_t index = (size_t)j * (size_t)width + (size_t)i;
-    depth[index] = INFINITY;
-    vstore3((float3)(0, 0, 0), index, normal);
-    id[index] = -1;
-}
-"""
-
-
 @pytest.mark.parametrize("mode", ["kernel", "copies", "in-place"])
 @pytest.mark.parametrize("size", SIZES)
 def test_floor(benchmark, size, mode):
     """kernel: enqueue and wait; copies: plus enqueue_copy into new numpy arrays; in-place: the
     kernel writes into new numpy arrays (USE_HOST_PTR buffers, then map), as pyclray does on a CPU."""
     ctx = device.context_for(None)
-    kernel = cl.Program(ctx.context, FLOOR_SOURCE).build().floor_kernel
+    kernel = cl.Program(ctx.context, blocks.FLOOR_SOURCE).build().floor_kernel
     count = size * size
     buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, count * n) for n in (4, 12, 4)]
     kernel.set_args(*buffers, np.int32(size), np.int32(size))
@@ -103,18 +91,11 @@ def test_floor(benchmark, size, mode):
     def new_arrays():
         return [np.empty(count, np.float32), np.empty((count, 3), np.float32), np.empty(count, np.int32)]
 
+    in_place = blocks.floor_in_place(ctx, size)
+
     def run():
         if mode == "in-place":
-            out = new_arrays()
-            flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
-            own = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in out]
-            kernel(ctx.queue, (size, size), None, *own, np.int32(size), np.int32(size))
-            maps = [cl.enqueue_map_buffer(ctx.queue, b, cl.map_flags.READ, 0, a.shape, a.dtype, is_blocking=False)[0]
-                    for a, b in zip(out, own)]
-            ctx.queue.finish()
-            for mapped in maps:
-                mapped.base.release()
-            ctx.queue.finish()
+            in_place()
             return
         cl.enqueue_nd_range_kernel(ctx.queue, kernel, (size, size), None)
         if mode == "copies":
@@ -253,14 +234,17 @@ def test_breakdown(benchmark, scenes_dir, part):
     ctx = device.context_for(None)
     width = height = ERROR_SIZE
     pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
-    args = render_module._render_inputs(ctx, scene, "fp32")
-    kernel = device.kernel_for(ctx, device.Variant("render", scene.shape_types(), aovs, "fp32"))
+    camera, shape_args = render_module._render_inputs(ctx, scene, "fp32")
+    lanes = device.lanes_for(ctx.device, "fp32")
+    kernel = device.kernel_for(ctx, device.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
     buffers = render_module._output_buffers(ctx, width * height, aovs, "fp32")
     tile = culling.TILE
-    global_size = render_module._global_size(width, height)
+    whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
+    args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]
+    global_size, local_size = (width // lanes, height), (tile // lanes, tile)
 
     def kernel_only():
-        kernel(ctx.queue, global_size, (tile, tile), *args, *buffers)
+        kernel(ctx.queue, global_size, local_size, *args, *buffers)
         ctx.queue.finish()
 
     small = scene.with_size(16, 16)
@@ -273,55 +257,13 @@ def test_breakdown(benchmark, scenes_dir, part):
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=200), iterations=1, warmup_rounds=3)
 
 
-# -- the speed targets, measured interleaved ---------------------------------------------------
-# round-robin groups: Mitsuba scenes of one group live together (with grid1024's alive beside the
-# others, Dr.Jit's llvm renders of every scene slow down several times, so it gets its own group)
-TARGET_GROUPS = {"tp02+grid64": ("tp02", "grid64"), "grid1024": ("grid1024",)}
-TARGET_ROUNDS = 20
-TARGET_CALLS = 3  # timed calls of a case per round, after SETTLE_CALLS untimed ones
-SETTLE_CALLS = 2
-SWITCH_PAUSE = 0.05  # seconds of quiet at each switch, for the other case's threads to go idle
-
-
-@pytest.mark.parametrize("group", list(TARGET_GROUPS))
-def test_targets_interleaved(benchmark, scenes_dir, group):
-    """The cases of the speed targets timed round-robin (each round: a few calls of each case, the
-    order rotating), so that the machine's load over the run weighs on all of them alike and their
-    ratios are robust to other processes. At each switch a pause and two untimed calls: Dr.Jit's
-    worker threads are still busy for a while after a Mitsuba render and would slow the next case
-    down (measured: a tp02 render takes ~1.7x as long right after an llvm render).
-    Per-case statistics go to extra_info["cases"]."""
-    pm.import_mitsuba("llvm_ad_rgb")
-    calls = {}
-    for name in TARGET_GROUPS[group]:
-        scene = load(scenes_dir, name, ERROR_SIZE)
-        for aovs in ("all", "depth"):
-            calls[f"{name} pyclray {aovs}"] = lambda scene=scene, aovs=AOV_SETS[aovs]: pyclray.render(scene, aovs)
-        mi_scene, _ = pm.load(scene, "llvm_ad_rgb")
-        sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
-        calls[f"{name} mitsuba-llvm"] = lambda s=mi_scene, c=sensor, i=integrator: np.array(i.render(s, c))
-    for call in calls.values():  # warm: builds, JIT
-        call(), call()
-    labels = list(calls)
-    times = {label: [] for label in labels}
-
-    def rounds():
-        for r in range(TARGET_ROUNDS):
-            for label in labels[r % len(labels):] + labels[:r % len(labels)]:
-                time.sleep(SWITCH_PAUSE)
-                for _ in range(SETTLE_CALLS):
-                    calls[label]()
-                for _ in range(TARGET_CALLS):
-                    start = time.perf_counter()
-                    calls[label]()
-                    times[label].append(time.perf_counter() - start)
-
-    info(benchmark, "targets-interleaved", TARGET_GROUPS[group][0], ERROR_SIZE, "all", "fp32", group=group)
-    benchmark.pedantic(rounds, rounds=1, iterations=1)
-    benchmark.extra_info["cases"] = {
-        label: {
-            "median": float(np.median(t)), "q1": float(np.percentile(t, 25)), "q3": float(np.percentile(t, 75)),
-            "min": float(np.min(t)), "max": float(np.max(t)), "rounds": len(t),
-        }
-        for label, t in times.items()
-    }
+# -- the speed targets, measured in blocks (bench/blocks.py) --------------------------------------
+@pytest.mark.parametrize("group", list(blocks.GROUPS))
+def test_targets_blocks(benchmark, group):
+    """The cases of the speed targets, each timed in blocks of calls with a pause at each switch
+    (bench/blocks.py); per-case statistics go to extra_info["cases"]."""
+    name, size, _ = blocks.GROUPS[group]
+    info(benchmark, "targets-blocks", name, size, "all", "fp32", group=group)
+    result = {}
+    benchmark.pedantic(lambda: result.update(blocks.measure((group,))), rounds=1, iterations=1)
+    benchmark.extra_info["cases"] = result

@@ -133,10 +133,10 @@ inline vec3v v3_select(const vec3v a, const vec3v b, const intv mask)
  * as OpenCL's normalize on PoCL, lane by lane. */
 inline vec3v v3_normalize(vec3v v)
 {
-    const intv zero = v.x == 0 && v.y == 0 && v.z == 0;
     realv l2 = v3_dot(v, v);
     const intv tiny = l2 < PYCLRAY_TINY2, huge = l2 == INFINITY;
-    if (ANY(tiny || huge)) {
+    if (ANY(tiny || huge)) {  /* rare: a separate path, so the usual one is a dot, a root and a division */
+        const intv zero = v.x == 0 && v.y == 0 && v.z == 0;
         v = v3_scale(v, tiny ? SPLAT(PYCLRAY_UP) : (huge ? SPLAT(PYCLRAY_DOWN) : SPLAT(1)));
         l2 = v3_dot(v, v);
         const intv infinite = l2 == INFINITY;
@@ -147,9 +147,9 @@ inline vec3v v3_normalize(vec3v v)
             v = v3_select(v, along, infinite);
             l2 = v3_dot(v, v);
         }
+        return v3_select(v3_scale(v, SPLAT(1) / v_sqrt(l2)), v, zero);
     }
-    const vec3v unit = v3_scale(v, SPLAT(1) / v_sqrt(l2));
-    return v3_select(unit, v, zero);
+    return v3_scale(v, SPLAT(1) / v_sqrt(l2));
 }
 
 /* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
