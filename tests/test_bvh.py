@@ -12,6 +12,8 @@ from pyclray import bvh
 from pyclray.device import context_for, has_fp64
 from pyclray.shapes import REGISTRY
 
+from conftest import SCENES
+
 
 def random_bounds(seed: int, n: int) -> np.ndarray:
     """Spheres' boxes: clustered centres (a few Gaussian blobs and a uniform part) and radii
@@ -167,3 +169,30 @@ def test_bad_acceleration_is_a_clear_error():
     scene = crowded_scene(0, count=3, size=12)
     with pytest.raises(pyclray.PyclrayError, match="acceleration"):
         pyclray.render(scene, acceleration="octree")
+
+
+@pytest.mark.parametrize("lanes", [1, 2, 4, 8])
+def test_packets_of_every_width_traverse_to_the_same_bits(monkeypatch, lanes):
+    """A packet visits a node when any lane's widened ray enters it before that lane's nearest
+    hit; the shapes are tested against the whole packet, so every lane sees every shape its own
+    ray could hit: the images equal the tiles' at every lane width, and windows of the image too."""
+    scene = crowded_scene(11, count=200, size=45)
+    monkeypatch.setenv("PYCLRAY_LANES", str(lanes))
+    tiles = pyclray.render(scene, acceleration="tiles")
+    through = pyclray.render(scene, acceleration="bvh")
+    window = pyclray.render(scene, acceleration="bvh", window=(3, 5, 29, 17))
+    for name in tiles:
+        assert np.array_equal(tiles[name], through[name]), name
+        assert np.array_equal(window[name], through[name][5:22, 3:32]), name
+
+
+def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
+    """Tiles where a tile's list is short (render.TILE_LIST_MAX shapes on average), the BVH where
+    it is long: tp02's three spheres, and 3,000 spheres filling a small image."""
+    import sys
+
+    render_module = sys.modules["pyclray.render"]
+    tp02 = pyclray.load_scene(SCENES / "tp02.toml").with_size(64, 64)
+    assert render_module.acceleration_for(tp02) == "tiles"
+    assert render_module.acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"
+    assert render_module.acceleration_for(tp02, "bvh") == "bvh"
