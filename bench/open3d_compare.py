@@ -66,6 +66,14 @@ def once(function) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
+def cpu_once(function) -> float:
+    """CPU time of the process (numpy's build is single-threaded: this is its work, whatever other
+    load the machine carries)."""
+    start = time.process_time()
+    function()
+    return (time.process_time() - start) * 1e3
+
+
 def versus_open3d(rounds: int, block: int) -> dict:
     import open3d as o3d
 
@@ -104,11 +112,15 @@ def scaling(counts, rounds: int, block: int) -> dict:
         bounds = np.stack([centres - radii[:, None], centres + radii[:, None]], axis=1)
         widened = bvh.widened(bounds)
         build = min(once(lambda: bvh.build(widened)) for _ in range(3))
+        build_cpu = min(cpu_once(lambda: bvh.build(widened)) for _ in range(3))
         tree = bvh.build(widened)
         collapse = min(once(lambda: bvh.collapse(tree)) for _ in range(3))
+        collapse_cpu = min(cpu_once(lambda: bvh.collapse(tree)) for _ in range(3))
         prepare = once(lambda: bvh.scene_bvh(scene.shapes, pyclray.shapes.REGISTRY))
         first = once(lambda: pyclray.render(scene))
-        timing = blocks({"render": lambda: pyclray.render(scene)}, rounds, block)["render"]
+        timing = blocks(
+            {"render": lambda: pyclray.render(scene, acceleration="bvh"), "auto": lambda: pyclray.render(scene)}, rounds, block
+        )
         # a moved camera: the same shapes tuple, so the tree is reused; the shapes are packed again
         moved = replace(scene, camera=pyclray.Camera((4.0, 10.0, 24.0), scale.TARGET, fov=scale.FOV))
         camera_move = once(lambda: pyclray.render(moved))
@@ -121,15 +133,19 @@ def scaling(counts, rounds: int, block: int) -> dict:
         }
         out[str(count)] = {
             "tree from bounds ms": build,
+            "tree from bounds cpu ms": build_cpu,
             "wide tree ms": collapse,
+            "wide tree cpu ms": collapse_cpu,
+            "auto": render_module.acceleration_for(scene),
+            "render auto ms": timing["auto"],
             "scene BVH ms (bounds from the shapes, tree, wide tree)": prepare,
             "first render ms (BVH, packing, upload, render)": first,
             "render after a camera move ms (tree reused)": camera_move,
-            "render ms": timing,
+            "render ms": timing["render"],
             "bytes per shape": {k: v / count for k, v in memory.items()},
             "depth": tree.depth(),
         }
-        print(f"  {count:>9,} spheres: render {timing['median']:.1f} ms, tree {build:.0f} ms", file=sys.stderr)
+        print(f"  {count:>9,} spheres: render {timing['render']['median']:.1f} ms, tree {build:.0f} ms", file=sys.stderr)
     return out
 
 
@@ -168,15 +184,19 @@ def report(results: dict) -> str:
             f"| {o['median']:.1f} ({o['q1']:.1f}–{o['q3']:.1f}) | {ratio:.2f}x | {target} |"
         )
     lines += ["", "### Render time against the number of spheres (512x512, ground + N spheres, all AOVs)", ""]
-    lines += ["| spheres | render ms (median, q1–q3) | tree depth | tree from bounds ms | wide tree ms | scene BVH ms | first render ms | after a camera move ms | bytes per shape (binary + wide nodes + refs; cast's anchors) |",
-              "|---|---|---|---|---|---|---|---|---|"]
+    lines += ["Build times: wall (min of 3) and, in brackets, the process's CPU time (numpy builds on one core: "
+              "its work, whatever else loads the machine).", ""]
+    lines += ["| spheres | render through the BVH ms (median, q1–q3) | render, auto ms (its choice) | tree depth | tree from bounds ms | wide tree ms | scene BVH ms | first render ms | after a camera move ms | bytes per shape (binary + wide nodes + refs; cast's anchors) |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for count, row in results["scaling"].items():
         r = row["render ms"]
+        a = row["render auto ms"]
         b = row["bytes per shape"]
         render_bytes = b["binary nodes"] + b["wide nodes"] + b["refs"]
         lines.append(
-            f"| {int(count):,} | {r['median']:.1f} ({r['q1']:.1f}–{r['q3']:.1f}) | {row['depth']} | {row['tree from bounds ms']:.0f} "
-            f"| {row['wide tree ms']:.0f} | {row['scene BVH ms (bounds from the shapes, tree, wide tree)']:.0f} "
+            f"| {int(count):,} | {r['median']:.1f} ({r['q1']:.1f}–{r['q3']:.1f}) | {a['median']:.1f} ({row['auto']}) | {row['depth']} "
+            f"| {row['tree from bounds ms']:.0f} ({row['tree from bounds cpu ms']:.0f}) "
+            f"| {row['wide tree ms']:.0f} ({row['wide tree cpu ms']:.0f}) | {row['scene BVH ms (bounds from the shapes, tree, wide tree)']:.0f} "
             f"| {row['first render ms (BVH, packing, upload, render)']:.0f} | {row['render after a camera move ms (tree reused)']:.0f} "
             f"| {render_bytes:.0f} ({b['binary nodes']:.0f} + {b['wide nodes']:.0f} + {b['refs']:.0f}); {b['cast anchors']:.0f} |"
         )

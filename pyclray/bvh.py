@@ -89,12 +89,13 @@ def _bit_length(x: np.ndarray) -> np.ndarray:
 
 
 def _spread(v: np.ndarray, bits: int) -> np.ndarray:
-    """Interleave: bit b of v goes to bit 3 b (v < 2**bits, bits <= 21)."""
-    v = v.astype(np.uint64)
-    out = np.zeros_like(v)
-    for b in range(bits):
-        out |= ((v >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b)
-    return out
+    """Interleave: bit b of v goes to bit 3 b (v < 2**bits, bits <= 21), by the usual five
+    shift-and-mask steps."""
+    v = v.astype(np.uint64) & np.uint64((1 << bits) - 1)
+    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
 
 
 def morton_order(centres: np.ndarray):
@@ -110,7 +111,7 @@ def morton_order(centres: np.ndarray):
     code = _spread(q[:, 0], axis_bits) << np.uint64(2)
     code |= _spread(q[:, 1], axis_bits) << np.uint64(1)
     code |= _spread(q[:, 2], axis_bits)
-    order = np.argsort(code, kind="stable")
+    order = np.argsort(code)  # ties get distinct keys below, whatever their order
     keys = (code[order] << np.uint64(index_bits)) | np.arange(n, dtype=np.uint64)
     return order, keys
 
@@ -121,16 +122,18 @@ def _radix_tree(keys: np.ndarray):
     [first, g], right child [g + 1, last]). Node 0 is the root.
 
     Prefix lengths are compared through the keys' xor: key j shares a longer prefix with key i
-    than b bits of difference allow exactly when keys[i] ^ keys[j] < 2**(b - 1)."""
+    than b bits of difference allow exactly when keys[i] ^ keys[j] < 2**(b - 1). The binary
+    searches go on only for the nodes still searching (most ranges are short), so the work is
+    about n log(range) in all, not n log n."""
     n = len(keys)
     i = np.arange(n - 1, dtype=np.int64)
     key_i = keys[:-1]
 
-    def closer(j, bits):
+    def closer(nodes, j, bits):
         """Whether key j (a position, possibly out of range: never) differs from key i only below
-        bit bits - 1 (bits = 64: any in-range key, as the 63-bit keys all do)."""
+        bit bits - 1 (bits = 64: any in-range key, as the 63-bit keys all do), for these nodes i."""
         inside = (j >= 0) & (j < n)
-        x = key_i ^ keys[np.clip(j, 0, n - 1)]
+        x = key_i[nodes] ^ keys[np.clip(j, 0, n - 1)]
         return inside & (x < np.left_shift(np.uint64(1), (bits - 1).astype(np.uint64)))
 
     # direction of the node's range: towards the neighbour sharing the longer prefix
@@ -144,27 +147,31 @@ def _radix_tree(keys: np.ndarray):
     bits_min[0] = 64  # the root: no neighbour on the other side
     # the range's length: an upper bound by doubling, then binary search
     length_max = np.full(n - 1, 2, np.int64)
-    active = closer(i + length_max * d, bits_min)
-    while active.any():
-        length_max = np.where(active, 2 * length_max, length_max)
-        active &= closer(i + length_max * d, bits_min)
+    active = i[closer(i, i + 2 * d, bits_min)]
+    while active.size:
+        length_max[active] *= 2
+        active = active[closer(active, active + length_max[active] * d[active], bits_min[active])]
     length = np.zeros(n - 1, np.int64)
     step = length_max // 2
-    while (step > 0).any():
-        grow = (step > 0) & closer(i + (length + step) * d, bits_min)
-        length = np.where(grow, length + step, length)
-        step //= 2
+    active = i[step > 0]
+    while active.size:
+        s = step[active]
+        grow = closer(active, active + (length[active] + s) * d[active], bits_min[active])
+        length[active[grow]] += s[grow]
+        step[active] //= 2
+        active = active[step[active] > 0]
     j = i + length * d
     # the split: the farthest position from i that shares more than the node's prefix with key i
     bits_node = _bit_length(key_i ^ keys[j]).astype(np.int64)
     split = np.zeros(n - 1, np.int64)
     step = length.copy()
-    active = np.ones(n - 1, bool)
-    while active.any():
-        step = np.where(active, (step + 1) // 2, step)
-        grow = active & closer(i + (split + step) * d, bits_node)
-        split = np.where(grow, split + step, split)
-        active &= step > 1
+    active = i
+    while active.size:
+        step[active] = (step[active] + 1) // 2
+        s = step[active]
+        grow = closer(active, active + (split[active] + s) * d[active], bits_node[active])
+        split[active[grow]] += s[grow]
+        active = active[s > 1]
     gamma = i + split * d + np.minimum(d, 0)
     return np.minimum(i, j), np.maximum(i, j), gamma
 
@@ -228,7 +235,9 @@ def build(bounds: np.ndarray, leaf_size: int | None = None) -> BVH:
     # leaves: their ranges partition the sorted shapes in order, so one reduceat bounds them all
     leaf = node_count > 0
     leaf_index = np.flatnonzero(leaf)
-    by_start = leaf_index[np.argsort(ranges[leaf_index, 0])]
+    at_start = np.full(n, -1, np.int64)  # the leaf starting at each sorted position, if any
+    at_start[ranges[leaf_index, 0]] = leaf_index
+    by_start = at_start[at_start >= 0]
     starts = ranges[by_start, 0]
     lo[by_start] = np.minimum.reduceat(lo_sorted, starts, axis=0)
     hi[by_start] = np.maximum.reduceat(hi_sorted, starts, axis=0)
