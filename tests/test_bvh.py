@@ -196,3 +196,24 @@ def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
     assert render_module.acceleration_for(tp02) == "tiles"
     assert render_module.acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"
     assert render_module.acceleration_for(tp02, "bvh") == "bvh"
+
+
+@pytest.mark.parametrize("struct", [bvh.NODE, bvh.WIDE_NODE], ids=lambda s: s.name)
+def test_node_layouts_are_the_devices(struct):
+    from test_layout import measure_on_device
+
+    from pyclray.layout import layout
+
+    spec = layout(struct, "fp32")
+    assert measure_on_device(struct, "fp32") == [spec.dtype.itemsize] + [spec.dtype.fields[name][1] for name, _ in struct.fields]
+
+
+@pytest.mark.parametrize("case", __import__("pyclray.stability", fromlist=["CASES"]).CASES, ids=lambda c: c.name)
+def test_the_stiff_cases_render_the_same_through_the_bvh(case):
+    """pyclray stability's scenes (far, huge, tiny, grazing, coincident shapes...) give the very
+    same bits through the BVH as through tile lists: the BVH changes no exactness result."""
+    scene = case.make()
+    tiles = pyclray.render(scene, acceleration="tiles")
+    through = pyclray.render(scene, acceleration="bvh")
+    for name in tiles:
+        assert np.array_equal(tiles[name], through[name]), name
