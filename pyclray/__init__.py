@@ -20,7 +20,7 @@ if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.a
 
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
-from .render import Frame, cast, render
+from .render import Frame, cast, occluded, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
 from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 
@@ -30,5 +30,5 @@ __all__ = [
     "AOVS", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "Disk", "Frame", "Image", "OutputError",
     "Plane", "PyclrayError", "PyclrayWarning", "Rectangle", "RequestError", "Scene", "SceneError", "Sphere", "cast",
     "list_devices", "load_scene", "render",
-    "scene_from_dict", "select_device",
+    "occluded", "scene_from_dict", "select_device",
 ]
