@@ -22,12 +22,13 @@ from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .render import Frame, cast, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
-from .shapes import Plane, Sphere
+from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "BuildError", "Camera", "DeviceError", "Frame", "Image", "OutputError", "Plane", "PyclrayError",
-    "PyclrayWarning", "RequestError", "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render",
+    "AOVS", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "Disk", "Frame", "Image", "OutputError",
+    "Plane", "PyclrayError", "PyclrayWarning", "Rectangle", "RequestError", "Scene", "SceneError", "Sphere", "cast",
+    "list_devices", "load_scene", "render",
     "scene_from_dict", "select_device",
 ]
