@@ -1,6 +1,7 @@
 """The infinite plane: the points p with normal . p + offset = 0."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,7 +50,21 @@ class Plane(Shape):
         """The plane with this normal through this point."""
         normal = vector3("normal", normal)
         point = vector3("point", point)
-        return cls(normal, -float(dot2(np.array(normal), np.array(point))), name)
+        cls(normal, 0.0, name)  # the normal's own checks come first
+        with np.errstate(over="ignore", invalid="ignore"):
+            offset = -float(dot2(np.array(normal), np.array(point)))
+            if not math.isfinite(offset):
+                # beyond float64 (or beyond the ~1e292 where error-free products overflow in their
+                # splitting): the same plane with a unit normal (normal and offset scale together),
+                # and if even that overflows, an error rather than an inf offset
+                length = norm3(normal)
+                normal = tuple(component / length for component in normal)
+                offset = -float(dot2(np.array(normal), np.array(point)))
+                if not math.isfinite(offset):
+                    offset = -float(np.dot(normal, point))
+        if not math.isfinite(offset):
+            raise SceneError("expected normal . point within the range of float64, got an overflow", key="point")
+        return cls(normal, offset, name)
 
     @classmethod
     def _from_table(cls, table, name):
