@@ -359,8 +359,9 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            rows = np.broadcast_to(array, directions.shape)
-            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
+            if array.ndim == 1:  # the one origin of every ray (also of no ray at all)
+                raise PyclrayError(f"{name}: is not finite: {array}")
+            _first_bad(name, ~np.isfinite(array).all(axis=-1), array, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
