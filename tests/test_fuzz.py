@@ -236,3 +236,12 @@ def test_a_plane_through_a_point_at_the_edge_of_float64(normal, point, expected)
         else:
             plane = pyclray.Plane.through(point, normal)
             assert (plane.normal, plane.offset) == expected
+
+
+def test_a_rectangle_with_sides_at_the_edge_of_float64():
+    """Found by the document fuzzing: u . v overflowed (a numpy RuntimeWarning) for u = (1, 1.8e308, 0)."""
+    with strict_warnings():
+        with pytest.raises(SceneError, match="expected v orthogonal to u"):
+            pyclray.Rectangle((0.0, 0.0, 0.0), (1.0, 1.7976931348623157e308, 0.0), (0.0, 2.0, 0.0))
+        side = pyclray.Rectangle((0.0, 0.0, 0.0), (1.7976931348623157e308, 0.0, 0.0), (0.0, 1.7976931348623157e308, 0.0))
+        assert side.u[0] == side.v[1] == 1.7976931348623157e308
