@@ -33,6 +33,7 @@ class Plane(Shape):
             ("normal", "real4"),  # unit normal in the frame; w: signed distance of the frame origin
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
+            ("exact", "ulong4"),  # unit normal and offset in world space, the bits of float64 numbers
         ),
         "Plane n.p + h = 0: normal.xyz = n in the frame, normal.w = h at the frame's origin.",
     )
@@ -93,10 +94,11 @@ class Plane(Shape):
         h = np.array([p.unit()[1] for p in planes])
         # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
         n_h = np.concatenate([n, h[:, None]], axis=1)
-        origin_1 = np.broadcast_to(np.append(origin, 1.0), n_h.shape)
+        origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(planes), 1))], axis=1)
         out["normal"][:, :3] = n @ rotation.T
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
+        out["exact"] = n_h.view(np.uint64)
 
     # -- float64 oracle ----------------------------------------------------------------------
     def oracle_distance(self, origins, directions):
