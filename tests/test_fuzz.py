@@ -70,11 +70,22 @@ valid_plane = st.one_of(
     st.fixed_dictionaries({"type": st.just("plane"), "normal": point, "offset": finite}, optional={"name": names}),
     st.fixed_dictionaries({"type": st.just("plane"), "normal": point, "point": point}, optional={"name": names}),
 )
+positive = st.floats(0.01, 50.0)
+valid_cylinder = st.fixed_dictionaries({"type": st.just("cylinder"), "p0": point, "p1": point, "radius": positive},
+                                       optional={"name": names, "caps": st.booleans()})
+valid_disk = st.fixed_dictionaries({"type": st.just("disk"), "center": point, "normal": point, "radius": positive},
+                                   optional={"name": names})
+valid_rectangle = st.builds(  # u and v orthogonal: u along x, v in the y-z plane
+    lambda center, a, b, c: {"type": "rectangle", "center": center, "u": [a, 0.0, 0.0], "v": [0.0, b, c]},
+    point, positive, positive, finite)
+valid_box = st.fixed_dictionaries({"type": st.just("box"), "center": point, "size": st.lists(positive, min_size=3, max_size=3)},
+                                  optional={"name": names, "axis": point, "angle": st.floats(-360.0, 360.0)})
+valid_shapes = st.one_of(valid_sphere, valid_plane, valid_cylinder, valid_disk, valid_rectangle, valid_box)
 valid_documents = st.fixed_dictionaries(
-    {"camera": valid_camera, "shapes": st.lists(st.one_of(valid_sphere, valid_plane), max_size=4)},
+    {"camera": valid_camera, "shapes": st.lists(valid_shapes, max_size=4)},
     optional={"image": valid_image},
 )
-damage = st.one_of(numbers, vectors, garbage, st.sampled_from(["sphere", "plane", "x", "y"]))
+damage = st.one_of(numbers, vectors, garbage, st.sampled_from(["sphere", "plane", "cylinder", "disk", "rectangle", "box", "x", "y"]))
 mutations = st.lists(st.tuples(st.sampled_from(["replace", "replace", "delete", "add"]), st.integers(0, 2**16), damage, names),
                      max_size=4)
 
@@ -225,3 +236,12 @@ def test_a_plane_through_a_point_at_the_edge_of_float64(normal, point, expected)
         else:
             plane = pyclray.Plane.through(point, normal)
             assert (plane.normal, plane.offset) == expected
+
+
+def test_a_rectangle_with_sides_at_the_edge_of_float64():
+    """Found by the document fuzzing: u . v overflowed (a numpy RuntimeWarning) for u = (1, 1.8e308, 0)."""
+    with strict_warnings():
+        with pytest.raises(SceneError, match="expected v orthogonal to u"):
+            pyclray.Rectangle((0.0, 0.0, 0.0), (1.0, 1.7976931348623157e308, 0.0), (0.0, 2.0, 0.0))
+        side = pyclray.Rectangle((0.0, 0.0, 0.0), (1.7976931348623157e308, 0.0, 0.0), (0.0, 1.7976931348623157e308, 0.0))
+        assert side.u[0] == side.v[1] == 1.7976931348623157e308
