@@ -359,9 +359,10 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            if array.ndim == 1:  # the one origin of every ray (also of no ray at all)
+            rows = np.broadcast_to(array, directions.shape)
+            if rows.size == 0:  # the one origin of no ray at all
                 raise PyclrayError(f"{name}: is not finite: {array}")
-            _first_bad(name, ~np.isfinite(array).all(axis=-1), array, "is not finite")
+            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
@@ -427,6 +428,9 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
     return args, anchor
 
 
+BOX_REACH = 1e36
+
+
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
     scene = as_scene(scene)
     ctx = context_for(device)
@@ -445,8 +449,10 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     shape_types = _shape_kinds(scene)[0]
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
-    # the largest real
-    bound = np.sqrt(np.finfo(real).max) / 4
+    # the largest real; and the BVH's boxes are tested in float32 around the scene's anchor
+    # (kernels/bvh.h), so no origin may be farther than float32 can hold with room for the box
+    # test's sums: beyond 1e36 an fp64 ray would be lost in an infinite box coordinate
+    bound = min(np.sqrt(np.finfo(real).max) / 4, BOX_REACH)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
