@@ -100,8 +100,12 @@ def run(args) -> int:
     except (ImportError, ValueError) as error:
         raise BadInput(str(error)) from None
 
-    images = cross_check(scene, args.variant, device=args.device)
-    rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+    from .progress import step, steps
+
+    with steps(4, desc="pyclray check"):
+        images = cross_check(scene, args.variant, device=args.device)
+        step("ray level")
+        rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
         f"against Mitsuba {mi.__version__} {args.variant}"

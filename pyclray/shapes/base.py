@@ -16,6 +16,8 @@ type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 """
 from __future__ import annotations
 
+import math
+
 from typing import ClassVar
 
 import numpy as np
@@ -78,6 +80,14 @@ class Shape:
     @classmethod
     def _pack(cls, out, shapes, origin, rotation) -> None:
         raise NotImplementedError
+
+    def lengths(self, eye) -> dict[str, float]:
+        """Scene key -> the size of what the kernel computes from it in the camera's frame (e.g. a
+        centre's distance from the eye, a radius), which the kernel may square: the range check
+        (scene.check_renderable) refuses a scene whose lengths exceed the precision's range."""
+        return {}
+
+
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
@@ -189,3 +199,9 @@ def flag(key: str, value) -> bool:
     if not isinstance(value, bool):
         raise SceneError(f"expected true or false, got {_shown(value)}", key=key)
     return value
+
+
+def distance(point, eye) -> float:
+    """|point - eye| in float64, inf where it overflows (the range check refuses it)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return float(math.hypot(*np.subtract(point, eye)))

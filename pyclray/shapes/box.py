@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, padded_bounds, to_world
+from .base import Shape, padded_bounds, to_world, distance
 
 
 def rotation(axis, angle_degrees) -> np.ndarray:
@@ -75,6 +75,9 @@ class Box(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["center"], table["size"], table.get("axis"), table.get("angle", 0.0), name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "size": distance(self.size, 0.0)}
 
     @classmethod
     def random(cls, rng, shift=0.0):

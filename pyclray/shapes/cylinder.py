@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, dot_rows, flag, frame_columns, padded_bounds, to_world
+from .base import Shape, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,9 @@ class Cylinder(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["p0"], table["p1"], table["radius"], table.get("caps", True), name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"p0": distance(self.p0, eye), "p1": distance(self.p1, eye), "radius": self.radius}
 
     @classmethod
     def random(cls, rng, shift=0.0):

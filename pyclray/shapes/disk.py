@@ -8,7 +8,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, dot_rows, frame_columns, padded_bounds, to_world, unit_rows
+from .base import Shape, dot_rows, frame_columns, padded_bounds, to_world, unit_rows, distance
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,9 @@ class Disk(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["center"], table["normal"], table["radius"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "radius": self.radius}
 
     @classmethod
     def random(cls, rng, shift=0.0):

@@ -8,7 +8,7 @@ import numpy as np
 from ..errors import SceneError, norm3, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, padded_bounds, to_world, unit_rows
+from .base import Shape, padded_bounds, to_world, unit_rows, distance
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -56,6 +56,9 @@ class Rectangle(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["center"], table["u"], table["v"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "u": distance(self.u, 0.0), "v": distance(self.v, 0.0)}
 
     @classmethod
     def random(cls, rng, shift=0.0):

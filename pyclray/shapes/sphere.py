@@ -1,6 +1,7 @@
 """The sphere: the points p with |p - center| = radius."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -8,7 +9,7 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape
+from .base import Shape, distance
 
 
 def eye_term(F, radius):
@@ -46,6 +47,9 @@ class Sphere(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["center"], table["radius"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "radius": self.radius}
 
     @classmethod
     def _pack(cls, out, spheres, origin, rotation):

@@ -27,7 +27,7 @@ def heat_map(relative: np.ndarray, judged: np.ndarray, outside: np.ndarray) -> n
 
 def save(result, folder: Path, stem: str) -> list[Path]:
     """Write both renders of an ImageCheck as EXR and the depth-difference heat map as PNG."""
-    from ..output import write_exr, write_png
+    from ..output import write_exr, write_png, write_together
 
     ours, theirs = result.images["ours"], result.images["theirs"]
     paths = [
@@ -35,8 +35,10 @@ def save(result, folder: Path, stem: str) -> list[Path]:
         folder / f"{stem}.mitsuba-{result.variant}.exr",
         folder / f"{stem}.depth-error.png",
     ]
-    write_exr(paths[0], ours, comment="pyclray fp32 render (pyclray check)")
-    write_exr(paths[1], {k: theirs[k] for k in ("depth", "normal", "id")},
-              comment=f"Mitsuba {result.variant} render in pyclray's conventions (pyclray check)")
-    write_png(paths[2], heat_map(result.images["relative"], result.images["judged"], result.images["outside"]))
-    return paths
+    heat = heat_map(result.images["relative"], result.images["judged"], result.images["outside"])
+    return write_together([  # the three files replaced together or not at all
+        (paths[0], lambda tmp: write_exr(tmp, ours, comment="pyclray fp32 render (pyclray check)")),
+        (paths[1], lambda tmp: write_exr(tmp, {k: theirs[k] for k in ("depth", "normal", "id")},
+                                         comment=f"Mitsuba {result.variant} render in pyclray's conventions (pyclray check)")),
+        (paths[2], lambda tmp: write_png(tmp, heat)),
+    ])

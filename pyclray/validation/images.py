@@ -62,10 +62,14 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     mitsuba_scene: the scene Mitsuba renders, if not the same one (tests pass a slightly moved
     scene to see the check fail)."""
     from .. import mitsuba, oracle
+    from ..progress import step
     from ..render import render
 
+    step("pyclray render")
     ours = render(scene, precision="fp32", device=device)
+    step(f"Mitsuba {variant} render")
     theirs = mitsuba.render(scene if mitsuba_scene is None else mitsuba_scene, variant)
+    step("float64 oracle")
     origins, directions = oracle.camera_rays(scene)
     truth = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
