@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from .bvh import NODE, WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
 from .shapes import REGISTRY
@@ -149,21 +150,38 @@ def lanes_for(device: cl.Device, precision: str) -> int:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render" (camera rays, a packet of pixels per work-item) or "cast" (rays given)
+    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
+    # work-item) or "occluded" (cast's any-hit query)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
     lanes: int = 1
+    bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
+
+    def bounded_types(self) -> tuple[str, ...]:
+        return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
-        listed = " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in self.shape_types)
-        lines = [f"#define PYCLRAY_SHAPES(X) {listed}", f"#define PYCLRAY_LANES {self.lanes}"]
+
+        def listed(types):
+            return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
+
+        bounded = self.bounded_types()
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
+        lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
+        if bounded:
+            lines.append("#define PYCLRAY_HAS_BOUNDED 1")
+        if self.bvh and self.kind == "render":
+            lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
-        if self.kind == "cast":
+        if self.kind in ("cast", "occluded"):
             lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "occluded":
+            lines.append("#define PYCLRAY_OCCLUDED 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
@@ -178,8 +196,8 @@ class Variant:
         parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("lanes.h"), c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
-        parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        parts += [_read("lanes.h"), c_header([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
+        parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 

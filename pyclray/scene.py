@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .animation import Animation, scene_at
 from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, text, vector3
 from .shapes import REGISTRY
 from .shapes.base import Shape
@@ -98,6 +99,7 @@ class Scene:
     image: Image = field(default_factory=Image)
     shapes: tuple[Shape, ...] = ()
     source: str | None = None  # the file it was read from, for messages
+    animation: Animation | None = None  # keyframes (pyclray/animation.py); None: a static scene
 
     def __post_init__(self):
         object.__setattr__(self, "shapes", tuple(self.shapes))
@@ -117,6 +119,12 @@ class Scene:
                 key="fov",
                 file=self.source,
             )
+        if self.animation is not None:
+            self.animation.bind(self)  # known targets and keys, and every frame's scene valid
+
+    def at(self, t: float) -> "Scene":
+        """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
+        return scene_at(self, t)
 
     def with_size(self, width: int, height: int) -> "Scene":
         return replace(self, image=Image(width, height))
@@ -174,7 +182,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     if not isinstance(data, dict):
         raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
-        no_unknown_keys(data, ("camera", "image", "shapes"), required=())
+        no_unknown_keys(data, ("camera", "image", "shapes", "animation"), required=())
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
     try:
@@ -208,7 +216,11 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
             shapes.append(REGISTRY[kind].from_table(entry, index))
         except SceneError as error:
             raise error.within(file=source, table=where) from None
-    return Scene(camera, image, tuple(shapes), source)
+    try:
+        animation = Animation.from_table(data["animation"]) if "animation" in data else None
+    except SceneError as error:
+        raise error.within(file=source, table="[animation]") from None
+    return Scene(camera, image, tuple(shapes), source, animation=animation)
 
 
 def load_scene(path) -> Scene:
