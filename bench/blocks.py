@@ -31,6 +31,7 @@ GROUPS = {
     "tp02 2048": ("tp02", 2048, ("floor", "all", "depth", "llvm")),
     "grid64 512": ("grid64", 512, ("floor", "all", "depth", "llvm")),
     "grid1024 512": ("grid1024", 512, ("floor", "all", "depth", "llvm")),
+    "shapes 512": ("shapes", 512, ("floor", "all", "depth", "llvm")),  # every shape type
 }
 
 FLOOR_SOURCE = """
@@ -140,6 +141,8 @@ TARGETS = {
     "grid64 512 all AOVs: llvm / pyclray": ("grid64 512 llvm", "grid64 512 all", 2.0, ">="),
     "grid1024 512 all AOVs: pyclray / floor": ("grid1024 512 all", "grid1024 512 floor", None, ""),
     "grid1024 512 all AOVs: llvm / pyclray": ("grid1024 512 llvm", "grid1024 512 all", None, ""),
+    "shapes 512 all AOVs: pyclray / floor": ("shapes 512 all", "shapes 512 floor", None, ""),
+    "shapes 512 all AOVs: llvm / pyclray": ("shapes 512 llvm", "shapes 512 all", None, ""),
 }
 
 

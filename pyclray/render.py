@@ -9,9 +9,9 @@ import pyopencl as cl
 
 from . import bvh, culling
 from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
-from .errors import DeviceError, PyclrayError
+from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
-from .scene import Scene
+from .scene import Scene, as_scene, check_renderable
 from .shapes import REGISTRY
 
 _REAL = {"fp32": np.float32, "fp64": np.float64}
@@ -37,12 +37,15 @@ class Frame(dict):
 def _check_request(aovs, precision: str, ctx: DeviceContext) -> tuple[str, ...]:
     if isinstance(aovs, str):
         aovs = tuple(a.strip() for a in aovs.split(","))
-    aovs = tuple(aovs)
-    unknown = [a for a in aovs if a not in AOVS]
+    try:
+        aovs = tuple(aovs)
+    except TypeError:
+        raise RequestError(f"aovs: expected a selection of {', '.join(AOVS)}, got {type(aovs).__name__}") from None
+    unknown = [a for a in aovs if not isinstance(a, str) or a not in AOVS]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
-        raise PyclrayError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {aovs!r}")
-    if precision not in PRECISIONS:
-        raise PyclrayError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+    if not isinstance(precision, str) or precision not in PRECISIONS:
+        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "fp64" and not has_fp64(ctx.device):
         raise DeviceError(
             f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
@@ -207,7 +210,7 @@ def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
         for kind in shape_types:
             if REGISTRY[kind].bounded:
                 shapes = [shape for shape in scene.shapes if shape.type == kind]
-                start, _ = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+                start, _ = culling.tile_lists(REGISTRY[kind], shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
                 pairs += int(start[-1])
         choice = "tiles" if pairs <= TILE_LIST_MAX * (len(start) - 1 if bounded else 1) else "bvh"
     with _render_lock:
@@ -255,7 +258,7 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
             ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
             shapes = [scene.shapes[i] for i in ids]
             packed = cls.pack(shapes, ids, eye, rows, precision)
-            start, index = culling.tile_lists(kind, shapes, eye, rows, tan_x, tan_y, width, height)
+            start, index = culling.tile_lists(cls, shapes, eye, rows, tan_x, tan_y, width, height)
             arrays += [packed, start, index]
             shape_args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
     size = sum(a.nbytes for a in arrays)
@@ -289,6 +292,8 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto") -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
+    scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
+    SceneError (see scene.check_renderable).
     aovs: which images (a subset of depth, normal, id: only those are computed);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
     window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
@@ -297,8 +302,10 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     lists), "bvh" (the bounding volume hierarchy) or "auto" (tiles for a few shapes, else the BVH).
     The images do not depend on it, bit for bit.
     """
+    scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
+    check_renderable(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
     camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
@@ -322,7 +329,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
 def _ray_array(name: str, value) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise PyclrayError(f"{name}: expected an array of shape (..., 3) of numbers") from None
     if array.size == 0 and array.ndim == 1:  # an empty list: no rays
         array = array.reshape(0, 3)
@@ -444,11 +451,12 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
 
 
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
+    scene = as_scene(scene)
     ctx = context_for(device)
     if kind == "cast":
         aovs = _check_request(aovs, precision, ctx)
-    elif precision not in PRECISIONS:
-        raise PyclrayError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+    elif not isinstance(precision, str) or precision not in PRECISIONS:
+        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if not has_fp64(ctx.device):
         raise DeviceError(
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
@@ -462,8 +470,10 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real
     bound = np.sqrt(np.finfo(real).max) / 4
-    if not np.abs(origins - anchor).max(initial=0.0) <= bound:
-        row = int(np.argmax(~(np.abs(origins - anchor).max(axis=-1) <= bound)))
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
+        reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
+    if not (reach <= bound).all():
+        row = int(np.argmax(~(reach <= bound)))
         raise PyclrayError(
             f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
             "(their distances overflow)"

@@ -1,39 +1,29 @@
 """pyclray.cast, the batch ray API: agreement with the float64 oracle, independence from the batch,
 far origins, tmax and occluded, input checks, edge cases.
 
-Error model of cast (eps = 2^-24 in fp32, 2^-53 in fp64). Each ray is traced on its own
-(kernels/pyclray.cl): a bounded shape of anchor A (its box's centre) and bounding radius R is
-tested from the point O' = O + s0 D of the ray, s0 = max(0, (A - O).D - R), taken in float64 with
-the shape's coordinates relative to A; a plane from the ray's world origin in float64. What is
-rounded to the kernel's precision is then of size L = |O' - A| + (the shape's size) for a bounded
-shape, 0 for a plane (its signed distance is rounded once, a relative error). So a hit is the exact
-hit of a ray moved by about eps (t_local + L), t_local = t - s0 the distance from O'. Along the ray
-such a move becomes a distance error divided by the cosine of the incidence angle, and seen from
-a sphere's centre of radius r an angle of that distance over r:
-
-    |depth - oracle| <= K (eps (t + L) + eps64 (t + W)) / cos
-    angle(normal, oracle) <= K (eps (1 + (t_local + L) / (r cos)) + eps64 (1 + (t + W) / (r cos)))
-
-where the eps64 term is the oracle's own error: it works in world coordinates of size
-W = |origin| + |anchor|. K = 4 here (measured: depths within 1.0, normals within 1.0 of the bound
-over these tests, fp32).
-Rays with |cos| < 0.02 (grazing: the 1/cos law turns into a square-root law at tangency) and rays
-whose two nearest shapes are within the depth tolerance (either may win) may disagree on the id;
-any other id disagreement fails.
+Error model of cast (pyclray.accuracy: pyclray_tolerances and cast_frames). Each ray is traced
+on its own (kernels/pyclray.cl): a bounded shape of anchor A (its box's centre) and bounding radius
+R is tested from the point O' = O + s0 D of the ray, s0 = max(0, (A - O).D - R), taken in float64
+with the shape's coordinates relative to A; a plane from the ray's world origin in float64. What is
+rounded to the kernel's precision is then of size L = |O' - A| + R for a bounded shape, 0 for a
+plane (its signed distance is rounded once, a relative error). So a hit is the exact hit of a ray
+moved by about eps (t - s0 + L): along the ray a depth error over the cosine of incidence, and
+seen from a centre of curvature of radius r an angle of that over r; the oracle adds its own
+eps64 (t + W), W the size of its world coordinates. K_ORACLE = 4.
+Silhouettes, near ties and edges may disagree on the id; any other id disagreement fails.
 """
 import numpy as np
 import pytest
 
 import pyclray
-from pyclray import oracle
+from pyclray import accuracy, oracle
 from pyclray.device import context_for, has_fp64
+from pyclray.validation.images import next_to_id_change
 
 from conftest import SCENES
+from oracle_checks import assert_agrees_with_oracle
 
-EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}
-ORACLE_EPSILON = 2.0**-53
-K = 4.0
-GRAZING_COS = 0.02
+EPSILON = accuracy.EPSILON
 
 
 def random_scene(seed: int):
@@ -52,74 +42,9 @@ def random_scene(seed: int):
     return scene, origins, directions
 
 
-def error_scales(scene, origins, directions, ids):
-    """(L, W, s0) per ray: the size of what the kernel rounds, the world's coordinate size and the
-    distance the ray's origin moved before the shape's test (see the module docstring)."""
-    size = np.zeros(len(scene.shapes))
-    anchors = np.zeros((len(scene.shapes), 3))
-    radius = np.full(len(scene.shapes), np.inf)  # a plane: no anchor, nothing moved
-    for index, shape in enumerate(scene.shapes):
-        if shape.type == "sphere":
-            anchors[index], size[index] = shape.center, shape.radius
-            radius[index] = np.sqrt(3.0) * shape.radius
-    mine = np.maximum(ids, 0)
-    F = anchors[mine] - origins
-    bounded = np.isfinite(radius[mine])
-    s0 = np.where(bounded, np.maximum(0.0, np.einsum("ij,ij->i", F, directions) - np.where(bounded, radius[mine], 0)), 0.0)
-    frame = np.where(bounded, np.linalg.norm(F - s0[:, None] * directions, axis=1) + size[mine], 0.0)
-    world = np.linalg.norm(origins, axis=1) + np.linalg.norm(anchors[mine], axis=1)
-    return frame, world, s0
-
-
-def angle_between(a, b):
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...k,...k", a, b))
-
-
-def second_nearest(scene, origins, directions):
-    distances = np.sort(np.stack([shape.oracle_distance(origins, directions) for shape in scene.shapes]), axis=0)
-    return distances[1] if len(scene.shapes) > 1 else np.full(len(origins), np.inf)
-
-
 def need_precision(precision):
     if precision == "fp64" and not has_fp64(context_for(None).device):
         pytest.skip("device lacks cl_khr_fp64")
-
-
-def assert_agrees_with_oracle(scene, origins, directions, result, precision):
-    """The error model's bounds on depth, normal and id against the float64 oracle."""
-    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    truth = oracle.trace(scene, origins, unit)
-    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
-    frame, world, s0 = error_scales(scene, origins, unit, truth["id"])
-    eps = EPSILON[precision]
-    t = np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0)
-    depth_tolerance = K * (eps * (t + frame) + ORACLE_EPSILON * (t + world)) / cos
-    radius = np.array([getattr(shape, "radius", np.inf) for shape in scene.shapes])[np.maximum(truth["id"], 0)]
-    local = np.maximum(t - s0, 0.0)
-    normal_tolerance = K * (eps * (1 + (local + frame) / (radius * cos)) + ORACLE_EPSILON * (1 + (t + world) / (radius * cos)))
-
-    # ids: a disagreement only where grazing or where the two nearest shapes nearly tie
-    with np.errstate(invalid="ignore"):  # inf - inf where both miss
-        explained = (cos < GRAZING_COS) | (second_nearest(scene, origins, unit) - truth["depth"] <= depth_tolerance)
-        depth_error = np.abs(result["depth"].astype(np.float64) - truth["depth"])
-    wrong = (result["id"] != truth["id"]) & ~explained
-    assert not wrong.any(), f"{wrong.sum()} unexplained id disagreements, e.g. ray {np.argmax(wrong)}"
-
-    # depth and normal where both hit the same shape, not grazing
-    judged = (result["id"] == truth["id"]) & (truth["id"] >= 0) & (cos >= GRAZING_COS)
-    assert judged.sum() > len(origins) // 10, "too few hits for the test to mean anything"
-    ratio = np.where(judged, depth_error / depth_tolerance, 0.0)
-    assert ratio.max() <= 1.0, f"depth off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
-    angle = angle_between(result["normal"], truth["normal"])
-    ratio = np.where(judged, angle / normal_tolerance, 0.0)
-    assert ratio.max() <= 1.0, f"normal off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
-
-    # the miss convention: inf, (0, 0, 0) and -1 together
-    miss = result["id"] < 0
-    assert np.all(np.isinf(result["depth"][miss])) and np.all(result["normal"][miss] == 0)
-    assert np.all(np.isfinite(result["depth"][~miss])) and np.all(result["depth"][~miss] > 0)
-    assert np.allclose(np.linalg.norm(result["normal"][~miss].astype(np.float64), axis=1), 1.0, rtol=0, atol=8 * eps)
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -262,39 +187,36 @@ def camera_scenes():
 @pytest.mark.parametrize("scene", camera_scenes(), ids=lambda s: str(s.source).rsplit("/", 1)[-1])
 def test_camera_rays_match_render(scene):
     """cast of the camera's own pixel rays gives render's images: both are within the error model
-    of the oracle (render works in the eye's frame, cast from each shape's anchor), so
-    they differ by at most the sum, K eps (t + L) / cos each; ids agree except at grazing pixels
-    and next to an id change (a ray moved by an ulp may cross an edge)."""
+    of the oracle (render works in the eye's frame, cast traces each ray from next to each shape),
+    so they differ by at most the sum of their bounds; ids agree except at silhouettes, edges, near
+    ties and next to an id change (a ray moved by an ulp may cross an edge)."""
     image = pyclray.render(scene)
     origins, directions = oracle.camera_rays(scene)
     flat = directions.reshape(-1, 3)
     result = pyclray.cast(scene, scene.camera.eye, flat)
-    truth = oracle.trace(scene, origins, directions)
-    cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"]).ravel()
-    frame, _, _ = error_scales(scene, origins.reshape(-1, 3), flat, truth["id"].ravel())
-    # plus render's own: it rounds each sphere's centre relative to the eye
-    centres = np.array([getattr(s, "center", scene.camera.eye) for s in scene.shapes])[np.maximum(truth["id"], 0).ravel()]
-    frame = frame + np.linalg.norm(centres - np.array(scene.camera.eye), axis=1)
-    t = np.where(np.isfinite(truth["depth"]), truth["depth"], 0).ravel()
-    eps = EPSILON["fp32"]
+    truth = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
+    cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
 
+    def both(t, ids, c):  # render's bounds plus cast's
+        rendered = accuracy.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", scene.camera.eye)
+        cast = accuracy.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", directions=directions)
+        return rendered[0] + cast[0], rendered[1] + cast[1]
+
+    depth_tolerance, normal_tolerance = both(truth["depth"], truth["id"], cos)
+    edge = accuracy.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (image["id"], image["depth"])],
+                             depth_tolerance * cos)
+    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    explained = (accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) | next_to_id_change(truth["id"]) | edge
+                 | accuracy.near_ties(dict(truth, cos=cos), lambda t, ids, c: both(t, ids, c)[0])).ravel()
     ids = image["id"].ravel()
-    padded = np.pad(truth["id"], 1, mode="edge")
-    edge = np.zeros(truth["id"].shape, bool)
-    for dj in (-1, 0, 1):
-        for di in (-1, 0, 1):
-            edge |= padded[1 + dj: 1 + dj + truth["id"].shape[0], 1 + di: 1 + di + truth["id"].shape[1]] != truth["id"]
-    explained = (cos < GRAZING_COS) | edge.ravel()
     assert not ((result["id"] != ids) & ~explained).any()
-    judged = (result["id"] == ids) & (ids >= 0) & (cos >= GRAZING_COS)
+    judged = (result["id"] == ids) & (ids >= 0) & ~explained
     assert judged.any()
-    depth_tolerance = 2 * K * eps * (t + frame) / cos
     with np.errstate(invalid="ignore"):  # inf - inf where both miss
         depth_error = np.abs(result["depth"].astype(np.float64) - image["depth"].ravel())
-    assert np.all(depth_error[judged] <= depth_tolerance[judged])
-    radius = np.array([getattr(s, "radius", np.inf) for s in scene.shapes])[np.maximum(truth["id"].ravel(), 0)]
-    angle = angle_between(result["normal"], image["normal"].reshape(-1, 3))
-    assert np.all(angle[judged] <= (2 * K * eps * (1 + (t + frame) / (radius * cos)))[judged])
+    assert np.all(depth_error[judged] <= depth_tolerance.ravel()[judged])
+    angle = accuracy.angle_between(result["normal"], image["normal"].reshape(-1, 3))
+    assert np.all(angle[judged] <= normal_tolerance.ravel()[judged])
     misses = (ids < 0) & (result["id"] < 0)
     assert np.all(np.isinf(result["depth"][misses])) and np.all(np.isinf(image["depth"].ravel()[misses]))
 
