@@ -346,3 +346,27 @@ def test_origins_beyond_the_float32_boxes_are_refused_not_lost():
     for far in (1e39, 1e153):
         with pytest.raises(pyclray.PyclrayError, match="too far"):
             pyclray.cast(scene, (0.0, 1.0, far), (0.0, 0.0, -1.0), precision="fp64")
+
+
+def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
+    """From render.COHERENT_FROM rays on, cast runs them in a Morton order of their origins (or of
+    their directions, sharing one origin) and puts the results back: the same bits as batches too
+    small to be reordered, for cast and occluded."""
+    import sys
+
+    render_module = sys.modules["pyclray.render"]
+    scene, origins, directions = random_scene(12)
+    rng = np.random.default_rng(12)
+    count = render_module.COHERENT_FROM + 1000
+    origins = rng.uniform(-6, 6, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    tmax = rng.uniform(0.5, 10.0, count)
+    chunks = range(0, count, 1000)
+    for shared in (False, True):
+        o = origins[0] if shared else origins
+        whole = pyclray.cast(scene, o, directions, tmax=tmax)
+        blocked = pyclray.occluded(scene, o, directions, tmax)
+        parts = [pyclray.cast(scene, o if shared else o[c: c + 1000], directions[c: c + 1000], tmax=tmax[c: c + 1000]) for c in chunks]
+        for name in pyclray.AOVS:
+            assert np.array_equal(whole[name], np.concatenate([p[name] for p in parts]))
+        assert np.array_equal(blocked, whole["id"] >= 0)
