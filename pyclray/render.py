@@ -359,7 +359,7 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            rows = np.broadcast_to(array, directions.shape)
+            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
             _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
@@ -444,8 +444,9 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     shape_types = _shape_kinds(scene)[0]
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
-    # the largest real
-    bound = np.sqrt(np.finfo(real).max) / 4
+    # the largest real; and, whatever the precision, below float32's range, in which the BVH's
+    # traversal works (an fp64 ray from 1e39 away read out of bounds: a segfault in the cast kernel)
+    bound = min(np.sqrt(np.finfo(real).max), float(np.finfo(np.float32).max)) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
