@@ -359,9 +359,7 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            rows = np.broadcast_to(array, directions.shape)
-            if rows.size == 0:  # the one origin of no ray at all
-                raise PyclrayError(f"{name}: is not finite: {array}")
+            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
             _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")

@@ -245,3 +245,33 @@ def test_a_rectangle_with_sides_at_the_edge_of_float64():
             pyclray.Rectangle((0.0, 0.0, 0.0), (1.0, 1.7976931348623157e308, 0.0), (0.0, 2.0, 0.0))
         side = pyclray.Rectangle((0.0, 0.0, 0.0), (1.7976931348623157e308, 0.0, 0.0), (0.0, 1.7976931348623157e308, 0.0))
         assert side.u[0] == side.v[1] == 1.7976931348623157e308
+
+
+def test_cast_of_no_rays_from_an_origin_that_is_not_finite():
+    """Found by the cast fuzzing: a (3,) origin holding inf with no directions failed inside
+    numpy (argmax of an empty sequence). The shared origin is refused as with rays."""
+    for directions in ([], [[0.0, 0.0, 1.0]]):
+        with pytest.raises(PyclrayError, match="origins: row 0 is not finite"):
+            pyclray.cast(SCENE, [0.0, 0.0, math.inf], directions)
+
+
+def test_an_fp64_cast_from_beyond_float32s_range_is_refused_not_a_crash():
+    """Found by the cast fuzzing: an fp64 cast from 1e39 away (beyond float32's range, in which the
+    BVH's traversal works) crashed the process (SIGSEGV in the cast kernel). Run in a child process
+    so that a crash is a failure here, not the end of the test run."""
+    code = (
+        "import pyclray\n"
+        "s = pyclray.Scene(pyclray.Camera((0.0, 2.0, 6.0), (0.0, 0.5, 0.0)), pyclray.Image(8, 8),\n"
+        "                  (pyclray.Plane((0.0, 1.0, 0.0), 0.0), pyclray.Sphere((0.0, 1.0, 0.0), 1.0)))\n"
+        "for far in (1e37, 1e39, 1e126):\n"
+        "    try:\n"
+        "        print(pyclray.cast(s, [0.0, far, far], [[1.0, 0.0, 1.0]], precision='fp64')['id'][0])\n"
+        "    except pyclray.PyclrayError as error:\n"
+        "        print(str(error).split(' (')[0])\n"
+    )
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, (result.returncode, result.stderr[-2000:])
+    assert result.stdout.splitlines() == ["-1", "origins: row 0", "origins: row 0"], result.stdout
