@@ -335,7 +335,7 @@ def test_bad_tmax_is_a_clear_error(tmax, words):
 
 def test_origins_beyond_the_float32_boxes_are_refused_not_lost():
     """The BVH's boxes are float32 around the scene's anchor: an fp64 ray from 1e30 away still hits
-    (distance 1e30, the sphere's id); from beyond 1e36 (where a box coordinate would overflow, and
+    (distance 1e30, the sphere's id); from beyond float32's range (where a box coordinate would overflow, and
     the ray was silently lost or the kernel crashed) it is one clear error."""
     if not has_fp64(context_for(None).device):
         pytest.skip("device lacks cl_khr_fp64")
