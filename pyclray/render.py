@@ -289,6 +289,24 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
+_checked: OrderedDict = OrderedDict()
+
+
+def _check_renderable_once(scene: Scene, precision: str) -> None:
+    """scene.check_renderable, once per scene object and precision: a Scene is frozen, and the check
+    visits every shape in Python (17 ms a render for 1024 spheres)."""
+    key = (id(scene), precision)
+    with _render_lock:
+        entry = _checked.get(key)
+        if entry is not None and entry is scene:
+            return
+    check_renderable(scene, precision)
+    with _render_lock:
+        _checked[key] = scene  # holds the scene, so its id() is not reused while cached
+        while len(_checked) > _PREPARED_MAX:
+            _checked.popitem(last=False)
+
+
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto") -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
@@ -305,7 +323,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
-    check_renderable(scene, precision)
+    _check_renderable_once(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
     camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
