@@ -297,9 +297,12 @@ __kernel void render(__global const Camera* camera, const int col0, const int ro
     {                                                                               \
         const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
         double s0;                                                                  \
-        const RayPacket moved = moved_ray(&ray, anchors[q], &s0);                   \
-        PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                    \
-        PYCLRAY_CAST_LIMIT                                                          \
+        bool near;                                                                  \
+        const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \
+        if (near && s0 <= PYCLRAY_CAST_REACH) {                                     \
+            PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                \
+            PYCLRAY_CAST_LIMIT                                                      \
+        }                                                                           \
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
@@ -319,15 +322,21 @@ inline double3 unit_direction(const double3 d)
     return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
-/* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. */
-inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0)
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. near: whether
+ * the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without cancellation);
+ * where it does not, it misses the shape by more than 2^-12 R, far more than the shape's test,
+ * which rounds quantities of the size of G (about R), could err by: the test is skipped. */
+inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0, bool* near)
 {
     const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
     const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w;
     *s0 = along > 0 ? along : 0;
+    const double3 G = F - *s0 * D;
+    const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
+    *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
     RayPacket moved = *ray;
-    moved.origin = v3_round(*s0 * D - F);
+    moved.origin = v3_round(-G);
     return moved;
 }
 
@@ -364,6 +373,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
 #endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
+#define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
 #define PYCLRAY_CAST_NORMAL(Type, type) \
     if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
 
@@ -395,7 +405,8 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #ifdef PYCLRAY_HAS_BOUNDED
         if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
             double s0;
-            ray = moved_ray(&ray, anchors[best_q], &s0);
+            bool near;
+            ray = moved_ray(&ray, anchors[best_q], &s0, &near);
         }
 #endif
         vec3v normal = v3(0, 0, 0);
@@ -415,6 +426,7 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 /* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
+#define PYCLRAY_CAST_REACH t_max
 
 PYCLRAY_KERNELS_BEGIN
 __kernel void occluded(const int n_rays, __global const double* origins, const int origin_stride,

@@ -382,6 +382,30 @@ def _cast_rays(origins, directions, tmax):
 
 
 _cast_prepared: OrderedDict = OrderedDict()
+# Rays are cast in the order of a Morton curve through their origins (or, sharing one origin, their
+# directions) when there are at least this many: neighbouring work-items then walk the same nodes
+# and shapes, which stay in cache (100,000 random rays into 100,000 spheres: half the kernel time,
+# for a sort of a few milliseconds). Each ray is traced on its own, so the order changes no bit.
+COHERENT_FROM = 4096
+
+
+def _spread10(v: np.ndarray) -> np.ndarray:
+    """Interleave the 10 low bits of v: bit b goes to bit 3 b."""
+    v = v & np.uint32(0x3FF)
+    for shift, mask in ((16, 0x30000FF), (8, 0x300F00F), (4, 0x30C30C3), (2, 0x9249249)):
+        v = (v | (v << np.uint32(shift))) & np.uint32(mask)
+    return v
+
+
+def _coherent_order(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    points = origins if len(origins) > 1 else directions
+    lo = points.min(axis=0)
+    extent = points.max(axis=0) - lo
+    extent[~(extent > 0)] = 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        q = np.clip((points - lo) * (1023.0 / extent), 0, 1023).astype(np.uint32)
+    code = (_spread10(q[:, 0]) << np.uint32(2)) | (_spread10(q[:, 1]) << np.uint32(1)) | _spread10(q[:, 2])
+    return np.argsort(code)
 
 
 def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, np.ndarray]:
@@ -426,6 +450,9 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
     return args, anchor
 
 
+BOX_REACH = float(np.finfo(np.float32).max)
+
+
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
     scene = as_scene(scene)
     ctx = context_for(device)
@@ -445,8 +472,9 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real; and, whatever the precision, below float32's range, in which the BVH's
-    # traversal works (an fp64 ray from 1e39 away read out of bounds: a segfault in the cast kernel)
-    bound = min(np.sqrt(np.finfo(real).max), float(np.finfo(np.float32).max)) / 4
+    # traversal works (kernels/bvh.h: an fp64 ray from 1e39 away was lost in an infinite box
+    # coordinate, or crashed the cast kernel)
+    bound = min(np.sqrt(np.finfo(real).max), BOX_REACH) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
@@ -460,6 +488,11 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
+    order = _coherent_order(origins, directions) if count >= COHERENT_FROM else None
+    if order is not None:
+        directions = directions[order]
+        origins = origins[order] if len(origins) > 1 else origins
+        tmax = tmax[order] if len(tmax) > 1 else tmax
     head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), np.int32(1 if len(origins) > 1 else 0),
             _input_buffer(ctx, np.ascontiguousarray(directions)),
             _input_buffer(ctx, np.ascontiguousarray(tmax)), np.int32(1 if len(tmax) > 1 else 0),
@@ -470,12 +503,22 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
         kernel_for(ctx, variant)(ctx.queue, (count,), None, *head, *args, buffer)
         cl.enqueue_copy(ctx.queue, out, buffer)
-        return out.astype(bool).reshape(shape)
+        return _unsorted(out.astype(bool), order).reshape(shape)
     identity = np.eye(3)
     camera = _camera_struct(identity, 0.0, 0.0, 0, 0, precision)
     variant = Variant("cast", shape_types, aovs, precision)
-    results = _run(ctx, variant, [_input_buffer(ctx, camera), *head, *args], (count,), count, aovs, precision, shape)
+    results = _run(ctx, variant, [_input_buffer(ctx, camera), *head, *args], (count,), count, aovs, precision, (count,))
+    results = {k: _unsorted(v, order).reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
+
+
+def _unsorted(values: np.ndarray, order) -> np.ndarray:
+    """Results of rays cast in this order, back in the rays' own order."""
+    if order is None:
+        return values
+    out = np.empty_like(values)
+    out[order] = values
+    return out
 
 
 def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None) -> Frame:
