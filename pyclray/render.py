@@ -339,6 +339,8 @@ def _ray_array(name: str, value) -> np.ndarray:
 
 
 def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
+    if not bad.ndim or not bad.size:  # one shared origin and no rays: the origin itself
+        raise PyclrayError(f"{name}: {what}: {rows}")
     index = np.unravel_index(int(np.argmax(bad)), bad.shape)
     where = "row " + (str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index)))
     raise PyclrayError(f"{name}: {where} {what}: {rows[index]}")
@@ -359,7 +361,7 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            rows = np.broadcast_to(array, directions.shape)
+            rows = np.broadcast_to(array, directions.shape) if directions.size else array
             _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
@@ -420,11 +422,15 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
             return entry[2], entry[3]
     tree = scene_bvh(scene)
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
+    # w: 1 where the scene reaches beyond 2^100 from its anchor, too far for the float box tests
+    # (kernels/pyclray.cl: its rays then test every bounded shape)
+    large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
+    anchor = np.append(anchor, 1.0 if large else 0.0)
     args = []
     if tree.types:
         anchors = tree.anchors()
         args += [
-            _input_buffer(ctx, tree.nodes(anchor)),
+            _input_buffer(ctx, tree.nodes(anchor[:3])),
             _input_buffer(ctx, tree.refs(shape_types)),
             _input_buffer(ctx, np.ascontiguousarray(anchors)),
         ]
@@ -471,7 +477,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the largest real
     bound = np.sqrt(np.finfo(real).max) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
-        reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
+        reach = np.abs(origins - anchor[:3]).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
         row = int(np.argmax(~(reach <= bound)))
         raise PyclrayError(
@@ -491,7 +497,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), np.int32(1 if len(origins) > 1 else 0),
             _input_buffer(ctx, np.ascontiguousarray(directions)),
             _input_buffer(ctx, np.ascontiguousarray(tmax)), np.int32(1 if len(tmax) > 1 else 0),
-            np.append(anchor, 0.0).astype(np.float64).view(cl.cltypes.double4)[0]]
+            anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
     if kind == "occluded":
         variant = Variant("occluded", shape_types, (), precision)
         out = np.empty(count, np.int8)
