@@ -220,6 +220,26 @@ def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
     return choice
 
 
+_checked: OrderedDict = OrderedDict()
+
+
+def _check_renderable(scene: Scene, precision: str) -> None:
+    """scene.check_renderable once per scene object and precision: its range check walks every
+    shape, which a warm render of a million shapes must not do again (a Scene is frozen, so the
+    answer cannot change; an entry holds its scene)."""
+    key = (id(scene), precision)
+    with _render_lock:
+        entry = _checked.get(key)
+        if entry is not None and entry is scene:
+            return
+    check_renderable(scene, precision)
+    if scene.shapes:  # a scene without shapes is warned about at every render
+        with _render_lock:
+            _checked[key] = scene
+            while len(_checked) > _PREPARED_MAX:
+                _checked.popitem(last=False)
+
+
 def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list:
     """The kernel arguments of a render of this scene that do not depend on the window: the camera,
     and then either the BVH (its binary nodes around the eye, refs) and per shape type its packed
@@ -305,7 +325,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
-    check_renderable(scene, precision)
+    _check_renderable(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
     camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
