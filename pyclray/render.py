@@ -220,6 +220,26 @@ def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
     return choice
 
 
+_checked: OrderedDict = OrderedDict()
+
+
+def _check_renderable(scene: Scene, precision: str) -> None:
+    """scene.check_renderable once per scene object and precision: its range check walks every
+    shape, which a warm render of a million shapes must not do again (a Scene is frozen, so the
+    answer cannot change; an entry holds its scene)."""
+    key = (id(scene), precision)
+    with _render_lock:
+        entry = _checked.get(key)
+        if entry is not None and entry is scene:
+            return
+    check_renderable(scene, precision)
+    if scene.shapes:  # a scene without shapes is warned about at every render
+        with _render_lock:
+            _checked[key] = scene
+            while len(_checked) > _PREPARED_MAX:
+                _checked.popitem(last=False)
+
+
 def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list:
     """The kernel arguments of a render of this scene that do not depend on the window: the camera,
     and then either the BVH (its binary nodes around the eye, refs) and per shape type its packed
@@ -289,24 +309,6 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
-_checked: OrderedDict = OrderedDict()
-
-
-def _check_renderable_once(scene: Scene, precision: str) -> None:
-    """scene.check_renderable, once per scene object and precision: a Scene is frozen, and the check
-    visits every shape in Python (17 ms a render for 1024 spheres)."""
-    key = (id(scene), precision)
-    with _render_lock:
-        entry = _checked.get(key)
-        if entry is not None and entry is scene:
-            return
-    check_renderable(scene, precision)
-    with _render_lock:
-        _checked[key] = scene  # holds the scene, so its id() is not reused while cached
-        while len(_checked) > _PREPARED_MAX:
-            _checked.popitem(last=False)
-
-
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto") -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
@@ -323,7 +325,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
-    _check_renderable_once(scene, precision)
+    _check_renderable(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
     camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
@@ -357,6 +359,8 @@ def _ray_array(name: str, value) -> np.ndarray:
 
 
 def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
+    if not bad.ndim or not bad.size:  # one shared origin and no rays: the origin itself
+        raise PyclrayError(f"{name}: {what}: {rows}")
     index = np.unravel_index(int(np.argmax(bad)), bad.shape)
     where = "row " + (str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index)))
     raise PyclrayError(f"{name}: {where} {what}: {rows[index]}")
@@ -438,11 +442,15 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
             return entry[2], entry[3]
     tree = scene_bvh(scene)
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
+    # w: 1 where the scene reaches beyond 2^100 from its anchor, too far for the float box tests
+    # (kernels/pyclray.cl: its rays then test every bounded shape)
+    large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
+    anchor = np.append(anchor, 1.0 if large else 0.0)
     args = []
     if tree.types:
         anchors = tree.anchors()
         args += [
-            _input_buffer(ctx, tree.nodes(anchor)),
+            _input_buffer(ctx, tree.nodes(anchor[:3])),
             _input_buffer(ctx, tree.refs(shape_types)),
             _input_buffer(ctx, np.ascontiguousarray(anchors)),
         ]
@@ -494,7 +502,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # coordinate, or crashed the cast kernel)
     bound = min(np.sqrt(np.finfo(real).max), BOX_REACH) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
-        reach = np.abs(origins - anchor).max(axis=-1, initial=0.0)
+        reach = np.abs(origins - anchor[:3]).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
         row = int(np.argmax(~(reach <= bound)))
         raise PyclrayError(
@@ -514,7 +522,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     head = [np.int32(count), _input_buffer(ctx, np.ascontiguousarray(origins)), np.int32(1 if len(origins) > 1 else 0),
             _input_buffer(ctx, np.ascontiguousarray(directions)),
             _input_buffer(ctx, np.ascontiguousarray(tmax)), np.int32(1 if len(tmax) > 1 else 0),
-            np.append(anchor, 0.0).astype(np.float64).view(cl.cltypes.double4)[0]]
+            anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
     if kind == "occluded":
         variant = Variant("occluded", shape_types, (), precision)
         out = np.empty(count, np.int8)

@@ -370,3 +370,17 @@ def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
         for name in pyclray.AOVS:
             assert np.array_equal(whole[name], np.concatenate([p[name] for p in parts]))
         assert np.array_equal(blocked, whole["id"] >= 0)
+
+
+def test_origins_beyond_the_float_box_tests_still_hit():
+    """fp64 accepts origins far beyond float32's range from the scene (up to sqrt of double's
+    largest / 4); the BVH's box tests are in float, so such rays test every bounded shape instead
+    (kernels/pyclray.cl): the same hits, from 1e40 away as from 10."""
+    need_precision("fp64")
+    scene = pyclray.Scene(pyclray.Camera((0, 0, 10), (0, 0, 0)), pyclray.Image(4, 4),
+                          (pyclray.Sphere((0.0, 0.0, 0.0), 1.0), pyclray.Sphere((0.0, 3.0, 0.0), 1.0)))
+    origins = np.array([[1e40, 0.0, 0.0], [10.0, 0.0, 0.0], [1e40, 3.0, 0.0], [1e40, 5.0, 0.0]])
+    result = pyclray.cast(scene, origins, [[-1.0, 0.0, 0.0]] * 4, precision="fp64")
+    np.testing.assert_array_equal(result["id"], [0, 0, 1, -1])
+    np.testing.assert_allclose(result["depth"][:3], [1e40 - 1.0, 9.0, 1e40 - 1.0], rtol=1e-15)
+    np.testing.assert_array_equal(result["normal"][:3], [[1.0, 0.0, 0.0]] * 3)
