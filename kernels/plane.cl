@@ -4,11 +4,8 @@
 inline realv plane_hit(__global const Plane* plane, const RayPacket* ray)
 {
     const vec3v n = v3_splat(plane->normal);
-#ifdef PYCLRAY_CAST
-    const realv h = SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
-#else
-    const realv h = SPLAT(plane->normal.w);
-#endif
+    /* the signed distance of the ray's origin (the frame's origin's, from the host, for camera rays) */
+    const realv h = FROM_EYE(ray) ? SPLAT(plane->normal.w) : SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
     /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit */
     const realv s = -h / v3_dot(n, ray->dir);
     return s > 0 ? s : SPLAT(MISS);

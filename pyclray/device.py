@@ -13,9 +13,13 @@ import pyopencl as cl
 
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
+from .shading import STRUCTS as SHADING_STRUCTS
 from .shapes import REGISTRY
 
+# the images of every render and cast (and their default), and every image a render can make, in the
+# kernels' order
 AOVS = ("depth", "normal", "id")
+RENDER_AOVS = AOVS + ("zdepth", "position", "shaded")
 # Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
 BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
@@ -154,6 +158,7 @@ class Variant:
     aovs: tuple[str, ...]
     precision: str
     lanes: int = 1
+    shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
@@ -164,6 +169,8 @@ class Variant:
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind == "cast":
             lines.append("#define PYCLRAY_CAST 1")
+        if self.shadows and "shaded" in self.aovs:
+            lines.append("#define PYCLRAY_SHADOWS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
@@ -178,8 +185,12 @@ class Variant:
         parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("lanes.h"), c_header([CAMERA] + [s.struct for s in shapes], self.precision)]
+        shading = "shaded" in self.aovs
+        structs = [CAMERA] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        parts += [_read("lanes.h"), c_header(structs, self.precision)]
         parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if shading:  # materials, lights and shadows: only in the programs that shade
+            parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError, integer, no_unknown_keys, norm3, number, text, vector3
+from .lighting import Shading, check_lights, lights_from_list
 from .shapes import REGISTRY
 from .shapes.base import Shape
 
@@ -89,9 +90,14 @@ class Scene:
     image: Image = field(default_factory=Image)
     shapes: tuple[Shape, ...] = ()
     source: str | None = None  # the file it was read from, for messages
+    lights: tuple = ()  # PointLight, DirectionalLight (pyclray.lighting); none: the headlight
+    shading: Shading = field(default_factory=Shading)
 
     def __post_init__(self):
         object.__setattr__(self, "shapes", tuple(self.shapes))
+        object.__setattr__(self, "lights", check_lights(self.lights, self.source))
+        if not isinstance(self.shading, Shading):
+            raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
         for index, shape in enumerate(self.shapes):
             if not isinstance(shape, Shape):
                 raise SceneError(
@@ -131,7 +137,7 @@ def _table(data: dict, key: str, *, required: bool) -> dict:
 def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     """A Scene from the parsed contents of a scene file (see scene-format.md)."""
     try:
-        no_unknown_keys(data, ("camera", "image", "shapes"), required=())
+        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading"), required=())
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
     try:
@@ -165,7 +171,12 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
             shapes.append(REGISTRY[kind].from_table(entry, index))
         except SceneError as error:
             raise error.within(file=source, table=where) from None
-    return Scene(camera, image, tuple(shapes), source)
+    lights = lights_from_list(data.get("lights", []), source)
+    try:
+        shading = Shading.from_table(_table(data, "shading", required=False))
+    except SceneError as error:
+        raise error.within(file=source, table="[shading]") from None
+    return Scene(camera, image, tuple(shapes), source, lights, shading)
 
 
 def load_scene(path) -> Scene:
