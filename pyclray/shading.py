@@ -149,3 +149,63 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
         lit = np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0
         out.append((base & lit & (ids >= 0)).astype(np.float64))
     return (out, unsure) if blur > 0 else out
+
+
+# -- the shading's error bound -----------------------------------------------------------------------
+POW_ULPS = 16  # OpenCL C's pow: at most 16 ulps (its specification's bound for float)
+
+
+def tolerance(scene, directions, hits, depth_tolerance, normal_tolerance, eps):
+    """(bound on |shaded - reference| per pixel and channel's largest, pixels where the model is
+    discontinuous within that error): what the error model's bounds on the hit (``depth_tolerance``
+    along the ray, scene units) and on the normal (``normal_tolerance``, radians) and the kernel's own
+    roundings (``eps``: its unit roundoff) make of the shading model, which is a smooth function of
+    the point and the normal (kernels/shading.h), term by term:
+
+    - the point p moves by dp = depth_tolerance: a point light's direction L turns by dp / d and
+      its falloff 1 / d^2 changes by 2 dp / d relative (d: the distance to the light);
+    - cos = n_s.L moves by the normal's angle + L's turn + the roundings (8 eps: the normal turned
+      into the frame, L normalized, the dot);
+    - H = normalize(L - D) turns by (L's turn + 4 eps) / |L - D|, so n_s.H by that plus the normal's
+      angle, and x^k by k max(x, x + dx)^(k - 1) dx (k >= 1; |dx|^k for k < 1: x^k is Hoelder), plus
+      pow's own POW_ULPS ulps;
+    - each term is a product and a sum of a few roundings: 8 eps of its size.
+
+    Where cos or the visibility V changes within the error (the terminator of a light with a
+    specular term, where the model's "if n_s.L > 0" jumps; a shadow's edge) no bound holds: the
+    second result marks the terminators (shadow edges are the caller's, see reference_visibility)."""
+    ids = hits["id"]
+    hit = ids >= 0
+    index = np.maximum(ids, 0)
+    points, normals = hits["points"], hits["normal"]
+    albedo = np.array([s.material.color for s in scene.shapes] or [(0, 0, 0)])[index].max(axis=-1)
+    specular = np.array([s.material.specular for s in scene.shapes] or [0.0])[index]
+    shininess = np.array([s.material.shininess for s in scene.shapes] or [1.0])[index]
+    n_s = facing_normals(normals, directions)
+    dp = np.where(hit, depth_tolerance, 0.0)
+    angle = np.where(hit, normal_tolerance, 0.0)
+    bound = 8 * eps * albedo * max(scene.shading.ambient) + np.zeros(ids.shape)
+    jump = np.zeros(ids.shape, bool)
+    for light in effective_lights(scene):
+        L, E, distance = light_terms(light, points)
+        E = E.max(axis=-1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            turn = np.where(np.isfinite(distance), dp / distance, 0.0) + 4 * eps
+            falloff = np.where(np.isfinite(distance), 2 * dp / distance, 0.0) + 4 * eps
+            cos = np.einsum("...k,...k", n_s, L)
+            d_cos = angle + turn + 8 * eps
+            half = L - directions
+            half_length = np.linalg.norm(half, axis=-1)
+            H = half / half_length[..., None]
+            n_h = np.maximum(np.einsum("...k,...k", n_s, H), 0.0)
+            d_nh = angle + (turn + 4 * eps) / half_length + 4 * eps
+            k = shininess
+            top = np.minimum(n_h + d_nh, 1.0)
+            d_pow = np.where(k >= 1, k * top ** np.maximum(k - 1, 0), d_nh ** np.minimum(k, 1))
+            d_pow = d_pow * np.where(k >= 1, d_nh, 1.0) + POW_ULPS * 2 * eps * n_h**k
+            value = albedo * np.maximum(cos, 0) + specular * n_h**k
+            term = E * (albedo * d_cos + specular * d_pow + value * falloff + 8 * eps * value)
+        # beyond the terminator (cos < -d_cos) the light adds nothing, whatever the error
+        bound = bound + np.where(hit & (cos > -d_cos), term, 0.0)
+        jump |= hit & (specular > 0) & (np.abs(cos) <= d_cos)
+    return bound, jump
