@@ -25,12 +25,12 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _aovs(text: str) -> tuple[str, ...]:
-    from .device import AOVS
+    from .device import RENDER_AOVS
 
     names = tuple(a.strip() for a in text.split(",") if a.strip())
-    bad = [a for a in names if a not in AOVS]
+    bad = [a for a in names if a not in RENDER_AOVS]
     if bad or not names:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(AOVS)}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(RENDER_AOVS)}, got {text!r}")
     return names
 
 
@@ -56,7 +56,7 @@ def cmd_render(args) -> int:
     out = Path(args.output)
     _writable(out, "-o")
     scene = _load(args.scene, args.size)
-    previews = output.preview_paths(out) if args.png else {}
+    previews = output.preview_paths(out, args.aov) if args.png else {}
     start = time.perf_counter()
     frame = render(scene, aovs=args.aov, precision=args.precision, device=args.device)
     elapsed = time.perf_counter() - start
@@ -65,11 +65,11 @@ def cmd_render(args) -> int:
     with ExitStack() as stack:
         tmp = stack.enter_context(output.atomic_path(out))
         output.write_exr(tmp, frame, comment=f"pyclray render of {args.scene}")
-        for name, make in (("depth", output.depth_preview), ("normal", output.normal_preview)):
-            if name in frame and name in previews:
-                png = stack.enter_context(output.atomic_path(previews[name]))
-                output.write_png(png, make(frame[name]))
-                written.append(previews[name])
+        for name, path in previews.items():
+            if name in frame:
+                png = stack.enter_context(output.atomic_path(path))
+                output.write_png(png, output.PREVIEWS[name](frame[name]))
+                written.append(path)
     channels = ", ".join(output.exr_channels(frame))
     print(
         f"rendered {args.scene} ({scene.image.width}x{scene.image.height}, {args.precision}, "
@@ -106,17 +106,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="render a scene to a multi-channel OpenEXR file (and PNG previews)",
         description="Render SCENE with one ray per pixel centre and write one OpenEXR file with "
         "the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z (unit world normal, "
-        "0 on a miss) and id (UINT holding the int32 shape id; 4294967295 = -1 on a miss).",
+        "0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), and as asked "
+        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear).",
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
     render.add_argument(
         "--aov", type=_aovs, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id (default: all); fewer is faster",
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded "
+        "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",
-        help="also write OUT.depth.png (near bright, far dark, misses black) and OUT.normal.png (n*0.5+0.5)",
+        help="also write a PNG preview of each image: OUT.depth.png and OUT.zdepth.png (near bright, far "
+        "dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a colour per shape, misses black), "
+        "OUT.shaded.png (clamped, sRGB)",
     )
     render.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     render.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")

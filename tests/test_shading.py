@@ -297,3 +297,36 @@ def test_fp64_shading_matches_the_float64_model(scenes_dir):
     scene = pyclray.load_scene(scenes_dir / "tp02-lit.toml").with_size(48, 48)
     result = compare_shaded(scene, precision="fp64", blur=1e-6)
     assert result["lit"] > 200, result["lit"]
+
+
+# -- outputs -------------------------------------------------------------------------------------------
+def test_render_command_writes_the_new_channels_and_previews(scenes_dir, tmp_path):
+    from pyclray import output
+    from pyclray.cli import main
+
+    out = tmp_path / "lit.exr"
+    aovs = "depth,id,zdepth,position,shaded"
+    assert main(["render", str(scenes_dir / "tp02-lit.toml"), "-o", str(out), "--aov", aovs, "--png", "--size", "40x30"]) == 0
+    scene = pyclray.load_scene(scenes_dir / "tp02-lit.toml").with_size(40, 30)
+    frame = pyclray.render(scene, aovs=aovs)
+    back = output.read_exr(out)
+    assert set(back) == set(frame)
+    for name in frame:  # the file holds the render's images bit for bit
+        np.testing.assert_array_equal(back[name], frame[name])
+    for name in ("depth", "id", "zdepth", "shaded"):
+        assert (tmp_path / f"lit.{name}.png").is_file()
+    assert not (tmp_path / "lit.position.png").exists()  # positions have no preview
+
+
+def test_previews():
+    from pyclray import output
+
+    # shaded: clamped, sRGB-encoded (0.5 linear -> 188)
+    rgb = output.srgb_preview(np.array([[[-1.0, 0.5, 2.0], [0.0031308, 1.0, np.nan]]]))
+    assert rgb.tolist() == [[[0, 188, 255], [10, 255, 0]]]
+    # id: misses black, every id its own colour, none black
+    ids = np.arange(-1, 64).reshape(5, 13)
+    image = output.id_preview(ids)
+    assert (image[ids < 0] == 0).all()
+    colours = {tuple(c) for c in image[ids >= 0]}
+    assert len(colours) == 64 and (0, 0, 0) not in colours
