@@ -121,8 +121,9 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
     p toward the light, beyond skip times the scene's size (the surface at p itself never shadows p,
     and a float64 test of it from p errs by far less), before the light.
 
-    blur > 0 also tests rays from points moved by blur (in scene units) along six directions, and
-    returns per light a second array: True where the moved rays disagree (a shadow boundary)."""
+    blur > 0 (scene units, one number or one per point) also tests rays from points moved by blur
+    along six directions, and returns per light a second array: True where the moved rays disagree
+    (a shadow boundary)."""
     from .oracle import trace
 
     size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
@@ -136,19 +137,22 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
             return ~(t < distance - skip * size)
 
         base = visible(points)
-        if blur > 0:
+        if np.any(blur > 0):
             mixed = np.zeros_like(base)
+            reach = np.broadcast_to(blur, base.shape)[..., None]
             for axis in range(3):
                 for sign in (-1.0, 1.0):
                     step = np.zeros(3)
-                    step[axis] = sign * blur
+                    step[axis] = sign
                     # move within the surface's tangent plane (and slightly off it, to the lit side)
                     moved = step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s
-                    mixed |= visible(points + moved + 0.5 * blur * n_s) != base
-            unsure.append(mixed)
+                    mixed |= visible(points + reach * (moved + 0.5 * n_s)) != base
+        # where the light is behind the surface (cos <= 0) it adds nothing, shadow or not
         lit = np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0
+        if np.any(blur > 0):
+            unsure.append(mixed & lit & (ids >= 0))
         out.append((base & lit & (ids >= 0)).astype(np.float64))
-    return (out, unsure) if blur > 0 else out
+    return (out, unsure) if np.any(blur > 0) else out
 
 
 # -- the shading's error bound -----------------------------------------------------------------------

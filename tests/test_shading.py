@@ -330,3 +330,20 @@ def test_previews():
     assert (image[ids < 0] == 0).all()
     colours = {tuple(c) for c in image[ids >= 0]}
     assert len(colours) == 64 and (0, 0, 0) not in colours
+
+
+# -- against Mitsuba 3's direct integrator --------------------------------------------------------------
+@pytest.mark.parametrize("name, variant", [("tp02-lit", "scalar_rgb"), ("tp02", "llvm_ad_rgb")])
+def test_shaded_equals_mitsuba_direct_up_to_pi(scenes_dir, name, variant):
+    """Point lights with shadows (tp02-lit) and the headlight, a directional light (tp02): the
+    tolerance is the sum of both engines' bounds (pyclray.shaded_check)."""
+    pytest.importorskip("mitsuba")
+    from pyclray import shaded_check
+
+    scene = pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(64, 64)
+    result = shaded_check.cross_check_shaded(scene, variant)
+    assert result.passed, shaded_check.format_shaded_check(result)
+    assert result.lit > 2000 and result.worst <= 1.0
+    assert result.left_out["shadow edge"] < 0.01 * 64 * 64
+    if name == "tp02-lit":
+        assert result.shadowed > 50
