@@ -156,7 +156,7 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
 
 
 # -- the shading's error bound -----------------------------------------------------------------------
-POW_ULPS = 16  # OpenCL C's pow: at most 16 ulps (its specification's bound for float)
+LOG_EXP_ULPS = 3  # OpenCL C's log2 and exp2: at most 3 ulps each (x^k = exp2(k log2 x) in the kernel)
 
 
 def tolerance(scene, directions, hits, depth_tolerance, normal_tolerance, eps):
@@ -172,7 +172,7 @@ def tolerance(scene, directions, hits, depth_tolerance, normal_tolerance, eps):
       into the frame, L normalized, the dot);
     - H = normalize(L - D) turns by (L's turn + 4 eps) / |L - D|, so n_s.H by that plus the normal's
       angle, and x^k by k max(x, x + dx)^(k - 1) dx (k >= 1; |dx|^k for k < 1: x^k is Hoelder), plus
-      pow's own POW_ULPS ulps;
+      the kernel's exp2(k log2 x): ln 2 |k log2 x| 7 ulps + 6 ulps relative;
     - each term is a product and a sum of a few roundings: 8 eps of its size.
 
     Where cos or the visibility V changes within the error (the terminator of a light with a
@@ -206,7 +206,10 @@ def tolerance(scene, directions, hits, depth_tolerance, normal_tolerance, eps):
             k = shininess
             top = np.minimum(n_h + d_nh, 1.0)
             d_pow = np.where(k >= 1, k * top ** np.maximum(k - 1, 0), d_nh ** np.minimum(k, 1))
-            d_pow = d_pow * np.where(k >= 1, d_nh, 1.0) + POW_ULPS * 2 * eps * n_h**k
+            # exp2(k log2 x): log2's error times k, the product's rounding, exp2's error (relative)
+            log_power = np.abs(k * np.log2(np.where(n_h > 0, n_h, 1.0)))
+            relative = np.log(2) * log_power * (2 * LOG_EXP_ULPS + 1) * 2 * eps + 2 * LOG_EXP_ULPS * 2 * eps
+            d_pow = d_pow * np.where(k >= 1, d_nh, 1.0) + relative * n_h**k
             value = albedo * np.maximum(cos, 0) + specular * n_h**k
             term = E * (albedo * d_cos + specular * d_pow + value * falloff + 8 * eps * value)
         # beyond the terminator (cos < -d_cos) the light adds nothing, whatever the error
