@@ -333,7 +333,9 @@ def test_previews():
 
 
 # -- against Mitsuba 3's direct integrator --------------------------------------------------------------
-@pytest.mark.parametrize("name, variant", [("tp02-lit", "scalar_rgb"), ("tp02", "llvm_ad_rgb")])
+# llvm_ad_rgb aborts in its LLVM back end on a directional emitter (Mitsuba 3.9.1, AVX-512: "Cannot
+# select" an fma of v16f32), so the headlight (directional) is checked in scalar_rgb
+@pytest.mark.parametrize("name, variant", [("tp02-lit", "llvm_ad_rgb"), ("tp02", "scalar_rgb")])
 def test_shaded_equals_mitsuba_direct_up_to_pi(scenes_dir, name, variant):
     """Point lights with shadows (tp02-lit) and the headlight, a directional light (tp02): the
     tolerance is the sum of both engines' bounds (pyclray.shaded_check)."""
