@@ -6,6 +6,7 @@
 """
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, PyclrayError, SceneError
+from .lighting import DirectionalLight, Material, PointLight, Shading
 from .render import Frame, cast, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
 from .shapes import Plane, Sphere
@@ -13,7 +14,8 @@ from .shapes import Plane, Sphere
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "BuildError", "Camera", "DeviceError", "Frame", "Image", "Plane", "PyclrayError",
+    "AOVS", "BuildError", "Camera", "DeviceError", "DirectionalLight", "Frame", "Image", "Material", "Plane",
+    "PointLight", "PyclrayError", "Shading",
     "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render",
     "scene_from_dict", "select_device",
 ]
