@@ -4,8 +4,22 @@
     scene = pyclray.load_scene("scenes/tp02.toml")
     frame = pyclray.render(scene, aovs=("depth", "normal", "id"))   # AOV name -> numpy array
 """
+import os as _os
+import signal as _signal
+import sys as _sys
+
+
+def _quiet_interrupt(number, frame):
+    raise SystemExit(130)
+
+
+# Run as the command line (the pyclray script, or python -m pyclray while the package is found),
+# Ctrl-C during these imports exits quietly with status 130; cli.main takes over from there.
+if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.argv else False:
+    _signal.signal(_signal.SIGINT, _quiet_interrupt)
+
 from .device import AOVS, list_devices, select_device
-from .errors import BuildError, DeviceError, PyclrayError, SceneError
+from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .lighting import DirectionalLight, Material, PointLight, Shading
 from .render import Frame, cast, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
@@ -14,8 +28,8 @@ from .shapes import Plane, Sphere
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "BuildError", "Camera", "DeviceError", "DirectionalLight", "Frame", "Image", "Material", "Plane",
-    "PointLight", "PyclrayError", "Shading",
-    "Scene", "SceneError", "Sphere", "cast", "list_devices", "load_scene", "render",
+    "AOVS", "BuildError", "Camera", "DeviceError", "DirectionalLight", "Frame", "Image", "Material", "OutputError",
+    "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "RequestError", "Scene", "SceneError", "Shading",
+    "Sphere", "cast", "list_devices", "load_scene", "render",
     "scene_from_dict", "select_device",
 ]

@@ -246,10 +246,14 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     mitsuba_scene: the scene Mitsuba renders, if not the same one (tests pass a slightly moved
     scene to see the check fail)."""
     from . import mitsuba, oracle
+    from .progress import step
     from .render import render
 
+    step("pyclray render")
     ours = render(scene, precision="fp32", device=device)
+    step(f"Mitsuba {variant} render")
     theirs = mitsuba.render(scene if mitsuba_scene is None else mitsuba_scene, variant)
+    step("float64 oracle")
     origins, directions = oracle.camera_rays(scene)
     truth = oracle.trace(scene, origins, directions)
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
@@ -523,7 +527,7 @@ def heat_map(relative: np.ndarray, judged: np.ndarray, outside: np.ndarray) -> n
 
 def save(result: ImageCheck, folder: Path, stem: str) -> list[Path]:
     """Write both renders as EXR and the depth-difference heat map as PNG; return the paths."""
-    from .output import write_exr, write_png
+    from .output import write_exr, write_png, write_together
 
     ours, theirs = result.images["ours"], result.images["theirs"]
     paths = [
@@ -531,11 +535,13 @@ def save(result: ImageCheck, folder: Path, stem: str) -> list[Path]:
         folder / f"{stem}.mitsuba-{result.variant}.exr",
         folder / f"{stem}.depth-error.png",
     ]
-    write_exr(paths[0], ours, comment="pyclray fp32 render (pyclray check)")
-    write_exr(paths[1], {k: theirs[k] for k in ("depth", "normal", "id")},
-              comment=f"Mitsuba {result.variant} render in pyclray's conventions (pyclray check)")
-    write_png(paths[2], heat_map(result.images["relative"], result.images["judged"], result.images["outside"]))
-    return paths
+    heat = heat_map(result.images["relative"], result.images["judged"], result.images["outside"])
+    return write_together([  # the three files replaced together or not at all
+        (paths[0], lambda tmp: write_exr(tmp, ours, comment="pyclray fp32 render (pyclray check)")),
+        (paths[1], lambda tmp: write_exr(tmp, {k: theirs[k] for k in ("depth", "normal", "id")},
+                                         comment=f"Mitsuba {result.variant} render in pyclray's conventions (pyclray check)")),
+        (paths[2], lambda tmp: write_png(tmp, heat)),
+    ])
 
 
 # -- command line --------------------------------------------------------------------------------
@@ -584,11 +590,16 @@ def run(args) -> int:
     except (ImportError, ValueError) as error:
         raise BadInput(str(error)) from None
 
-    images = cross_check(scene, args.variant, device=args.device)
-    rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
-    from .shaded_check import cross_check_shaded, format_shaded_check
+    from .progress import step, steps
 
-    shaded = cross_check_shaded(scene, args.variant, device=args.device) if scene.shading.shadows else None
+    with steps(5, desc="pyclray check"):
+        images = cross_check(scene, args.variant, device=args.device)
+        step("ray level")
+        rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+        step("shaded")
+        from .shaded_check import cross_check_shaded, format_shaded_check
+
+        shaded = cross_check_shaded(scene, args.variant, device=args.device) if scene.shading.shadows else None
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
         f"against Mitsuba {mi.__version__} {args.variant}"

@@ -1,17 +1,36 @@
-"""The command line: pyclray render | devices (and the commands other modules add)."""
+"""The command line: pyclray render | devices (and the commands other modules add).
+
+Exit status: 0 success; 1 a check outside its tolerance, or an unexpected error; 2 bad input (a
+scene, an option) or an output that cannot be written, reported as one line on stderr, with no
+file replaced; 130 interrupted (Ctrl-C), quietly, with no file replaced.
+"""
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
-from contextlib import ExitStack
 from pathlib import Path
 
+EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+EXIT_STATUS_HELP = (
+    "Exit status: 0 done; 1 a check outside its tolerance (or an unexpected error); 2 bad input (one "
+    "line naming the file, table and key, or the option) or an output that cannot be written (a "
+    "missing or read-only folder, a full disk, a path that is a folder); 130 interrupted. On 2 and "
+    "130 no output file is replaced: the files of one command are replaced together or not at all."
+)
 
 
 class BadInput(Exception):
     """Reported as one line on stderr with exit status 2."""
+
+
+def _max_side() -> int:
+    from .scene import MAX_IMAGE_SIDE
+
+    return MAX_IMAGE_SIDE
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -21,6 +40,8 @@ def _size(text: str) -> tuple[int, int]:
             raise ValueError
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 512x512, got {text!r}") from None
+    if max(width, height) > _max_side():
+        raise argparse.ArgumentTypeError(f"expected each side at most {_max_side()} pixels, got {text!r}")
     return width, height
 
 
@@ -31,6 +52,9 @@ def _aovs(text: str) -> tuple[str, ...]:
     bad = [a for a in names if a not in RENDER_AOVS]
     if bad or not names:
         raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(RENDER_AOVS)}, got {text!r}")
+    repeated = sorted({a for a in names if names.count(a) > 1})
+    if repeated:
+        raise argparse.ArgumentTypeError(f"expected each image once, got {text!r} ({', '.join(repeated)} more than once)")
     return names
 
 
@@ -41,39 +65,49 @@ def _load(path: str, size=None):
     return scene.with_size(*size) if size else scene
 
 
-def _writable(path: Path, what: str) -> None:
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise BadInput(f"{what} {path}: the folder {folder} does not exist")
-    if path.is_dir():
-        raise BadInput(f"{what} {path}: is a folder")
+def _band_renderer(scene, aovs, precision, device):
+    """window (x0, y0, w, h) -> the images of that part of the image (pyclray.render's window)."""
+    from .render import render
+
+    return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
 
 
 def cmd_render(args) -> int:
     from . import output
-    from .render import render
+    from .progress import progress, seconds
 
     out = Path(args.output)
-    _writable(out, "-o")
     scene = _load(args.scene, args.size)
-    previews = output.preview_paths(out, args.aov) if args.png else {}
+    targets = [out, *(output.preview_paths(out, args.aov).values() if args.png else ())]
+    for target in targets:  # before the render: a path that cannot be written costs no time
+        output.check_target(target)
+    width, height = scene.image.width, scene.image.height
+    render_band = _band_renderer(scene, args.aov, args.precision, args.device)
+    rows = output.band_rows(width)
+    spent = {"render": 0.0}
+    devices = []
+
+    def bands():
+        """The image in bands of whole rows, rendered as they are written (bounded memory)."""
+        for top in range(0, height, rows):
+            count = min(rows, height - top)
+            start = time.perf_counter()
+            frame = render_band((0, top, width, count))
+            spent["render"] += time.perf_counter() - start
+            devices.append(frame.device)
+            yield frame
+            bar.update(count)
+
     start = time.perf_counter()
-    frame = render(scene, aovs=args.aov, precision=args.precision, device=args.device)
-    elapsed = time.perf_counter() - start
-    written = [out]
-    # every file goes to a temporary name first; all are renamed only once all are written
-    with ExitStack() as stack:
-        tmp = stack.enter_context(output.atomic_path(out))
-        output.write_exr(tmp, frame, comment=f"pyclray render of {args.scene}")
-        for name, path in previews.items():
-            if name in frame:
-                png = stack.enter_context(output.atomic_path(path))
-                output.write_png(png, output.PREVIEWS[name](frame[name]))
-                written.append(path)
-    channels = ", ".join(output.exr_channels(frame))
+    with progress(height, desc="pyclray render", unit="row") as bar:
+        written = output.write_images(out, bands(), width=width, height=height, aovs=args.aov, previews=args.png,
+                                      comment=f"pyclray render of {args.scene}")
+    total = time.perf_counter() - start
+    channels = ", ".join(output.exr_channel_arrays(output.empty_images(args.aov)))
     print(
-        f"rendered {args.scene} ({scene.image.width}x{scene.image.height}, {args.precision}, "
-        f"{frame.device}) in {elapsed * 1e3:.1f} ms; wrote {', '.join(map(str, written))} [{channels}]"
+        f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
+        f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
+        f"wrote {', '.join(map(str, written))} [{channels}]"
     )
     return 0
 
@@ -97,8 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pyclray",
         description="pyclray: an exact OpenCL ray caster. It renders depth, normal and id images of "
         "analytic scenes (planes, spheres) described in TOML files.",
-        epilog="Bad input prints one line naming the file, table and key, and exits with status 2.",
+        epilog=EXIT_STATUS_HELP,
     )
+    parser.add_argument("--version", action="version", version=f"pyclray {_version()}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     render = commands.add_parser(
@@ -107,7 +142,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Render SCENE with one ray per pixel centre and write one OpenEXR file with "
         "the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z (unit world normal, "
         "0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), and as asked "
-        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear).",
+        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear RGB). "
+        "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
+        "float32): OpenEXR has no 64-bit "
+        "float channel type. Large images are rendered and written in bands of rows, so memory stays "
+        "bounded; a progress bar shows on a terminal.",
+        epilog=EXIT_STATUS_HELP,
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
@@ -122,8 +162,12 @@ def build_parser() -> argparse.ArgumentParser:
         "dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a colour per shape, misses black), "
         "OUT.shaded.png (clamped, sRGB)",
     )
-    render.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
-    render.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")
+    render.add_argument(
+        "--precision", choices=("fp32", "fp64"), default="fp32",
+        help="kernel precision (default fp32); fp64 depth and normals are stored in the EXR as 32-bit floats",
+    )
+    render.add_argument("--size", type=_size, metavar="WxH",
+                        help="override the scene's image size (each side at most 65536)")
     render.add_argument(
         "--device", metavar="DEV",
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
@@ -156,21 +200,49 @@ def _extra_commands():
     return out
 
 
-def main(argv=None) -> int:
-    from .errors import DeviceError, PyclrayError, SceneError
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
-        return args.run(args)
-    except (BadInput, SceneError, DeviceError) as error:
-        print(f"pyclray {args.command}: error: {error}", file=sys.stderr)
+        return version("pyclray")
+    except PackageNotFoundError:  # run from a checkout that is not installed
+        from . import __version__
+
+        return __version__
+
+
+def _show_warning(command: str):
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"pyclray {command}: warning: {message}", file=sys.stderr)
+
+    return show
+
+
+def main(argv=None) -> int:
+    import warnings
+
+    # Ctrl-C from here on is a KeyboardInterrupt, answered below (pyclray/__init__ answers it
+    # while the package is imported)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    command = "?"
+    try:
+        from .errors import DeviceError, OutputError, PyclrayError, PyclrayWarning, SceneError
+
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        command = args.command
+        with warnings.catch_warnings():
+            warnings.simplefilter("default", PyclrayWarning)
+            warnings.showwarning = _show_warning(command)
+            return args.run(args)
+    except (BadInput, SceneError, DeviceError, OutputError) as error:
+        print(f"pyclray {command}: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except PyclrayError as error:
-        print(f"pyclray {args.command}: error: {error}", file=sys.stderr)
-        return 1
+        print(f"pyclray {command}: error: {error}", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ class SceneError(PyclrayError, ValueError):
         if self.table is not None:
             where.append(f"table {self.table}")
         if self.key is not None:
-            where.append(f"key '{self.key}'")
+            where.append(f"key {self.key!r}")  # repr: quoted, and one line whatever the key holds
         return ": ".join(where + [self.message])
 
 
@@ -47,6 +47,21 @@ class BuildError(PyclrayError, RuntimeError):
     """The OpenCL compiler rejected a kernel; the message holds its log."""
 
 
+class OutputError(PyclrayError, OSError):
+    """An output file that cannot be written (a missing or read-only folder, a full disk, a path
+    that is a folder): names the path and the reason. Nothing was replaced: the command's old
+    files are intact and no temporary is left behind. Exit status 2 on the command line."""
+
+
+class RequestError(PyclrayError, ValueError):
+    """A call with arguments of the wrong kind (e.g. aovs with repeats, an unknown precision, a
+    scene that is neither a Scene nor a path): says which argument and what was expected."""
+
+
+class PyclrayWarning(UserWarning):
+    """Something that renders but is probably not what was meant (e.g. a scene with no shapes)."""
+
+
 def _shown(value) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
@@ -56,7 +71,10 @@ def number(key: str, value, *, positive: bool = False) -> float:
     """A finite real number (an int is accepted; a bool or a string is not)."""
     if isinstance(value, bool) or not isinstance(value, Real):
         raise SceneError(f"expected a number, got {_shown(value)}", key=key)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond float64
+        value = math.inf
     if not math.isfinite(value):
         raise SceneError(f"expected a finite number, got {value}", key=key)
     if positive and not value > 0:
@@ -72,7 +90,10 @@ def vector3(key: str, value) -> tuple[float, float, float]:
     for component in value:
         if isinstance(component, bool) or not isinstance(component, Real):
             raise SceneError(f"expected 3 numbers [x, y, z], got {_shown(value)}", key=key)
-        component = float(component)
+        try:
+            component = float(component)
+        except OverflowError:  # an integer beyond float64
+            component = math.inf
         if not math.isfinite(component):
             raise SceneError(f"expected 3 finite numbers, got {_shown(value)}", key=key)
         out.append(component)

@@ -10,9 +10,9 @@ import pyopencl as cl
 from . import culling
 from . import shading
 from .device import AOVS, RENDER_AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
-from .errors import DeviceError, PyclrayError
+from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
-from .scene import Scene
+from .scene import Scene, as_scene, check_renderable
 from .shapes import REGISTRY
 
 _REAL = {"fp32": np.float32, "fp64": np.float64}
@@ -40,12 +40,15 @@ class Frame(dict):
 def _check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple[str, ...]:
     if isinstance(aovs, str):
         aovs = tuple(a.strip() for a in aovs.split(","))
-    aovs = tuple(aovs)
-    unknown = [a for a in aovs if a not in known]
+    try:
+        aovs = tuple(aovs)
+    except TypeError:
+        raise RequestError(f"aovs: expected a selection of {', '.join(known)}, got {type(aovs).__name__}") from None
+    unknown = [a for a in aovs if not isinstance(a, str) or a not in known]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
-        raise PyclrayError(f"aovs: expected a non-empty selection of {', '.join(known)} without repeats, got {aovs!r}")
-    if precision not in PRECISIONS:
-        raise PyclrayError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(known)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+    if not isinstance(precision, str) or precision not in PRECISIONS:
+        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "fp64" and not has_fp64(ctx.device):
         raise DeviceError(
             f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
@@ -228,14 +231,18 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
+    scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
+    SceneError (see scene.check_renderable).
     aovs: which images (a subset of depth, normal, id, zdepth, position, shaded: only those are
     computed; shaded casts shadow rays where the scene's [shading] asks for them);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
     window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
     rendered into images of that size, the same pixels as in the whole image; default: all of it.
     """
+    scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx, RENDER_AOVS)
+    check_renderable(scene, precision)
     col0, row0, cols, rows = _window(scene, window)
     camera, (shape_args, counts), lighting = _render_inputs(ctx, scene, precision)
     lanes = lanes_for(ctx.device, precision)
@@ -266,7 +273,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
 def _rays(name: str, value, count: int | None = None) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise PyclrayError(f"{name}: expected an (N, 3) array of numbers") from None
     if array.ndim == 1 and array.shape == (3,) and count is not None:
         array = np.broadcast_to(array, (count, 3))
@@ -291,6 +298,7 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     Raises PyclrayError for arrays of another shape, rows that are not finite, zero directions,
     and origins (or shapes) so far from the rays' mean origin that the precision overflows.
     """
+    scene = as_scene(scene)
     ctx = context_for(device)
     aovs = _check_request(aovs, precision, ctx)
     directions = _rays("directions", directions)
@@ -306,8 +314,9 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     unit = scaled / np.linalg.norm(scaled, axis=1, keepdims=True)
     real = _REAL[precision]
     # the frame: world axes around the rays' mean origin, subtracted in float64 on the host
-    reference = origins.mean(axis=0) if count else np.zeros(3)
-    relative = origins - reference
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, not a warning
+        reference = origins.mean(axis=0) if count else np.zeros(3)
+        relative = origins - reference
     # the kernel squares distances: keep them below the square root of the largest real
     too_far = ~(np.abs(relative).max(axis=1, initial=0.0) <= np.sqrt(np.finfo(real).max) / 4)
     if too_far.any():

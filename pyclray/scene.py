@@ -2,13 +2,15 @@
 from __future__ import annotations
 
 import math
+import os
 import tomllib
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError, integer, no_unknown_keys, norm3, number, text, vector3
+from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, text, vector3
 from .lighting import Shading, check_lights, lights_from_list
 from .shapes import REGISTRY
 from .shapes.base import Shape
@@ -20,6 +22,10 @@ MIN_UP_SINE = 1e-6
 # neighbouring pixels are no longer distinct in float32, so such a fov is an error.
 MIN_PIXEL_TAN = 1e-30
 MAX_IMAGE_SIDE = 1 << 16
+# The kernels square lengths in the camera's frame (|centre - eye|^2, r^2, b^2) and add a few such
+# squares: every length must stay below the square root of the precision's largest float, with a
+# factor 4 of room for those sums. fp32: 4.6e18 scene units, fp64: 3.4e153.
+MAX_LENGTH = {precision: math.sqrt(float(np.finfo(real).max)) / 4 for precision, real in (("fp32", np.float32), ("fp64", np.float64))}
 
 
 @dataclass(frozen=True)
@@ -46,8 +52,11 @@ class Camera:
 
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64."""
-        forward = np.subtract(self.target, self.eye)
+        with np.errstate(over="ignore"):
+            forward = np.subtract(self.target, self.eye)
         length = norm3(forward)
+        if not math.isfinite(length):
+            raise SceneError("expected target - eye within the range of float64, got an overflow", key="target")
         if length == 0:
             raise SceneError("expected target != eye (the view direction is undefined)", key="target")
         w = forward / length
@@ -124,6 +133,38 @@ class Scene:
         return tuple(t for t in REGISTRY if t in present)
 
 
+def check_renderable(scene: Scene, precision: str) -> None:
+    """Refuse geometry beyond the precision's range (a SceneError naming the shape and the key, and
+    whether fp64 would do) rather than render it as silent misses; warn about a scene with no
+    shapes (every pixel a miss)."""
+    if not scene.shapes:
+        where = f"{scene.source}: no [[shapes]]" if scene.source else "the scene has no shapes"
+        warnings.warn(f"{where}: every pixel is a miss", PyclrayWarning, stacklevel=3)
+    limit = MAX_LENGTH[precision]
+    for index, shape in enumerate(scene.shapes):
+        for key, length in shape.lengths(scene.camera.eye).items():
+            if length <= limit:
+                continue
+            if length <= MAX_LENGTH["fp64"]:
+                remedy = "precision fp64 is needed (--precision fp64)"
+            else:
+                remedy = "beyond fp64 too: move it nearer the camera"
+            raise SceneError(
+                f"{length:.3g} from the eye in the camera's frame, beyond what {precision} can render "
+                f"(at most {limit:.2g}: the kernel squares lengths); {remedy}",
+                file=scene.source, table=f"[[shapes]] #{index} ({shape.type})", key=key,
+            )
+
+
+def as_scene(value) -> Scene:
+    """A Scene, or the path of a scene file (loaded); anything else is a RequestError."""
+    if isinstance(value, Scene):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return load_scene(value)
+    raise RequestError(f"scene: expected a pyclray.Scene or the path of a scene file, got {type(value).__name__}")
+
+
 def _table(data: dict, key: str, *, required: bool) -> dict:
     if key not in data:
         if required:
@@ -136,6 +177,8 @@ def _table(data: dict, key: str, *, required: bool) -> dict:
 
 def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     """A Scene from the parsed contents of a scene file (see scene-format.md)."""
+    if not isinstance(data, dict):
+        raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
         no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading"), required=())
     except SceneError as error:
@@ -183,12 +226,16 @@ def load_scene(path) -> Scene:
     """Read and validate a scene file; raises SceneError naming the file, table and key."""
     path = Path(path)
     try:
-        with open(path, "rb") as handle:
-            data = tomllib.load(handle)
+        raw = path.read_bytes()
     except OSError as error:
-        raise SceneError(f"cannot read the scene file: {error.strerror or error}", file=path) from None
+        raise SceneError(f"cannot read the scene file: {(error.strerror or str(error)).lower()}", file=path) from None
+    try:
+        # a UTF-8 byte order mark (as some editors write) is not part of the text
+        data = tomllib.loads(raw.removeprefix(b"\xef\xbb\xbf").decode("utf-8"))
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"not valid TOML: {error}", file=path) from None
     except UnicodeDecodeError as error:
         raise SceneError(f"not valid UTF-8 text: {error}", file=path) from None
+    except RecursionError:
+        raise SceneError("not a scene: arrays or tables nested too deeply", file=path) from None
     return scene_from_dict(data, source=str(path))

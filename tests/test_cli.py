@@ -133,3 +133,190 @@ def test_console_script_is_installed():
     assert script.is_file(), "the console script pyclray is not installed beside this Python"
     result = subprocess.run([str(script), "--help"], capture_output=True, text=True)
     assert result.returncode == 0 and "render" in result.stdout
+
+
+# -- hardening (issue 14) ---------------------------------------------------------------------------
+def one_error_line(result) -> str:
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    return lines[0]
+
+
+def test_a_preview_path_that_is_a_folder_replaces_nothing(tmp_path):
+    """Defect 1: OUT.depth.png is a folder: one line, exit 2, OUT.exr and OUT.normal.png keep their
+    old contents (before: a traceback, OUT.normal.png replaced and OUT.exr old)."""
+    (tmp_path / "o.depth.png").mkdir()
+    for name in ("o.exr", "o.normal.png"):
+        (tmp_path / name).write_bytes(b"old")
+    result = cli("render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--png", "--size", "16x16")
+    assert result.returncode == 2
+    assert "o.depth.png: it is a folder" in one_error_line(result)
+    assert (tmp_path / "o.exr").read_bytes() == b"old" and (tmp_path / "o.normal.png").read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.depth.png", "o.exr", "o.normal.png"]
+
+
+WRAPPER = """
+import os, signal, sys
+{patch}
+sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "pyclray")  # as the console script runs
+from pyclray.cli import main
+sys.exit(main())
+"""
+
+
+def wrapped(patch, *args):
+    """Run the command line as the console script does, with a fault injected by ``patch``."""
+    return subprocess.run([sys.executable, "-c", WRAPPER.format(patch=patch), *map(str, args)],
+                          capture_output=True, text=True, env=dict(os.environ))
+
+
+def test_a_full_disk_is_one_line_exit_2_and_old_files_kept(tmp_path):
+    """Defect 2: ENOSPC while writing (injected in the EXR writer after its first band)."""
+    patch = (
+        "import errno, pyclray.output as o\n"
+        "real = o.ExrWriter.write\n"
+        "def full(self, band):\n"
+        "    real(self, band)\n"
+        "    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))\n"
+        "o.ExrWriter.write = full\n"
+    )
+    (tmp_path / "o.exr").write_bytes(b"old")
+    result = wrapped(patch, "render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--png", "--size", "16x16")
+    assert result.returncode == 2
+    written = ", ".join(str(tmp_path / n) for n in ("o.exr", "o.depth.png", "o.normal.png", "o.id.png"))
+    assert one_error_line(result) == f"pyclray render: error: cannot write {written}: no space left on device; nothing was replaced"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.exr"] and (tmp_path / "o.exr").read_bytes() == b"old"
+
+
+@pytest.mark.parametrize("where", ["import numpy", "import pyopencl", "writing"])
+def test_ctrl_c_exits_quietly_with_130_and_replaces_nothing(tmp_path, where):
+    """Defect 5: Ctrl-C while the package's modules are imported, or while the outputs are being
+    written (after the EXR, before the previews), exits with 130, no traceback, old files kept."""
+    if where == "writing":
+        patch = ("import pyclray.output as o\n"
+                 "o.PngWriter.close = lambda self: os.kill(os.getpid(), signal.SIGINT)\n")
+    else:  # SIGINT as the module starts to load
+        module = where.split()[1]
+        patch = (
+            "import importlib.abc\n"
+            "class Interrupt(importlib.abc.MetaPathFinder):\n"
+            "    def find_spec(self, name, path, target=None):\n"
+            f"        if name == {module!r}:\n"
+            "            os.kill(os.getpid(), signal.SIGINT)\n"
+            "        return None\n"
+            "sys.meta_path.insert(0, Interrupt())\n"
+        )
+    (tmp_path / "o.exr").write_bytes(b"old")
+    result = wrapped(patch, "render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--png", "--size", "16x16")
+    assert result.returncode == 130, result.stderr
+    assert result.stderr == "" and result.stdout == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.exr"] and (tmp_path / "o.exr").read_bytes() == b"old"
+
+
+def test_repeated_aov_and_oversized_size_are_option_errors(tmp_path):
+    """Defect 5: --aov depth,depth (was exit 1 with a Python tuple) and --size 100000x100000 (was
+    blamed on the TOML key 'width') name the option and exit 2."""
+    result = cli("render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--aov", "depth,depth")
+    assert result.returncode == 2
+    last = result.stderr.strip().splitlines()[-1]
+    assert "--aov" in last and "depth more than once" in last and "(" + "'depth'" not in last
+    result = cli("render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--size", "100000x100000")
+    assert result.returncode == 2
+    last = result.stderr.strip().splitlines()[-1]
+    assert "--size" in last and "65536" in last and "width" not in last
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scene_file_with_a_byte_order_mark_and_no_shapes(tmp_path):
+    """Defect 5: a UTF-8 BOM is not an 'Invalid statement'; a scene with no shapes renders with one
+    warning line (every pixel is a miss)."""
+    scene = tmp_path / "bom.toml"
+    scene.write_bytes(b"\xef\xbb\xbf" + b'[camera]\neye = [0.0, 0.0, 0.0]\ntarget = [0.0, 0.0, -1.0]\nfov = 40.0\n')
+    result = cli("render", scene, "-o", tmp_path / "o.exr", "--size", "8x8")
+    assert result.returncode == 0, result.stderr
+    assert one_error_line(result) == f"pyclray render: warning: {scene}: no [[shapes]]: every pixel is a miss"
+    assert (read_exr(tmp_path / "o.exr")["id"] == -1).all()
+
+
+def test_the_final_line_reports_the_phases(tmp_path):
+    """Progress and timing: the last line says how long rendering and writing took (writing was
+    left out before); no progress bar when stderr is not a terminal."""
+    result = cli("render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--png", "--size", "32x32")
+    assert result.returncode == 0 and result.stderr == ""
+    last = result.stdout.strip().splitlines()[-1]
+    assert " (render " in last and ", write " in last and "wrote" in last
+
+
+def test_version_and_python_dash_m():
+    """Defect 7: pyclray --version and python -m pyclray."""
+    from importlib.metadata import version
+
+    result = subprocess.run([sys.executable, "-m", "pyclray", "--version"], capture_output=True, text=True)
+    assert result.returncode == 0 and result.stdout.strip() == f"pyclray {version('pyclray')}"
+    assert version("pyclray") == pyclray.__version__
+    result = subprocess.run([sys.executable, "-m", "pyclray", "render", "--help"], capture_output=True, text=True)
+    assert result.returncode == 0
+    text = " ".join(result.stdout.split())
+    assert "32-bit FLOAT channels also for --precision fp64" in text and "no 64-bit float channel" in text
+    assert "Exit status" in text
+
+
+def test_the_readme_command_block_lists_every_command():
+    """Defect 7: the README's command-line block names every subcommand the parser has."""
+    from pyclray.cli import build_parser
+
+    readme = (REPO / "README.md").read_text()
+    block = readme.split("## Command line", 1)[1].split("```", 2)[1]
+    listed = {line.split()[1] for line in block.strip().splitlines() if line.startswith("pyclray ")}
+    commands = next(a for a in build_parser()._actions if isinstance(a, __import__("argparse")._SubParsersAction))
+    assert listed == set(commands.choices) | {"--version"}, listed
+
+
+def test_a_render_in_many_bands_is_the_whole_render(tmp_path, monkeypatch, capsys):
+    """Defect 4: pyclray render renders and writes bands of rows (bounded memory); cut into bands
+    of 16 rows here (4 Mpx in real use), the EXR holds exactly the whole image's pixels and the
+    previews are those of the whole image."""
+    from pyclray import cli as cli_module, output
+
+    from test_output import read_png
+
+    monkeypatch.setattr(output, "band_rows", lambda width: 16)
+    out = tmp_path / "b.exr"
+    assert cli_module.main(["render", str(REPO / "scenes/tp02.toml"), "-o", str(out), "--png", "--size", "40x70"]) == 0
+    whole = pyclray.render(pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(40, 70))
+    images = read_exr(out)
+    for name in ("depth", "normal", "id"):
+        assert np.array_equal(images[name], whole[name]), name
+    assert np.array_equal(read_png(tmp_path / "b.depth.png"), output.depth_preview(whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "b.normal.png"), output.normal_preview(whole["normal"]))
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_a_progress_bar_on_a_terminal_only(tmp_path):
+    """Progress: on a terminal (stderr a pty) a tqdm bar counts the rows (shown from the start
+    here: the delay of 1 s is set to 0); the stdout's last line is the same as without one."""
+    patch = "import pyclray.progress as p\np.DELAY = 0\nimport pyclray.output as o\no.band_rows = lambda width: 16\n"
+    import fcntl
+    import struct
+    import termios
+
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 columns wide
+    process = subprocess.Popen([sys.executable, "-c", WRAPPER.format(patch=patch), "render", str(REPO / "scenes/tp02.toml"),
+                                "-o", str(tmp_path / "o.exr"), "--size", "64x64"],
+                               stdout=subprocess.PIPE, stderr=slave, env=dict(os.environ))
+    os.close(slave)
+    drawn = b""
+    while True:
+        try:
+            data = os.read(master, 4096)
+        except OSError:  # EIO: the other end is closed
+            break
+        if not data:
+            break
+        drawn += data
+    os.close(master)
+    stdout = process.stdout.read().decode()
+    assert process.wait() == 0
+    assert b"pyclray render" in drawn and b"/64 [" in drawn and b"row" in drawn, drawn
+    assert stdout.strip().splitlines()[-1].startswith("rendered ")

@@ -97,7 +97,8 @@ def test_misses_are_inf_zero_and_minus_one():
 
 
 def test_empty_scene_renders_all_misses():
-    frame = pyclray.render(pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), pyclray.Image(5, 3)))
+    with pytest.warns(pyclray.PyclrayWarning, match="no shapes: every pixel is a miss"):
+        frame = pyclray.render(pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), pyclray.Image(5, 3)))
     assert np.all(np.isposinf(frame["depth"])) and np.all(frame["id"] == -1)
 
 
@@ -264,3 +265,35 @@ def test_device_selection():
     with pytest.raises(pyclray.DeviceError, match="no OpenCL device matches"):
         select_device("9:9")
     assert any(d["default"] for d in pyclray.list_devices())
+
+
+# -- hardening (issue 14) ---------------------------------------------------------------------------
+def test_huge_geometry_renders_right_in_fp64_and_at_the_fp32_limit():
+    """Defect 3: what fp32 refuses, fp64 renders as the oracle does (a ground sphere of radius
+    2e19 under the camera, as in the SceneError's advice); and fp32 renders geometry up to its
+    limit (4.6e18) exactly too, without a numpy warning. Same tolerances as above."""
+    import warnings
+
+    camera = pyclray.Camera((0.0, 2.0, 6.0), (0.0, 0.5, 0.0))
+    ground = pyclray.Scene(camera, pyclray.Image(48, 48), (Sphere((0.0, -2e19, 0.0), 2e19), Sphere((0.0, 1.0, 0.0), 1.0)))
+    near_limit = pyclray.Scene(camera, pyclray.Image(48, 48), (Sphere((0.0, -4e18, 0.0), 4e18), Sphere((0.0, 1.0, 0.0), 1.0)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(pyclray.SceneError, match="fp64 is needed"):
+            pyclray.render(ground)
+        if has_fp64(context_for(None).device):
+            result = assert_matches_oracle(ground, precision="fp64")
+            assert result["pixels"] > 1000
+        result = assert_matches_oracle(near_limit)
+        assert result["pixels"] > 1000
+
+
+def test_the_ball_cut_by_the_image_border_is_cut_by_it(scenes_dir):
+    """Defect 6: scenes/room.toml says one ball is cut by the image border; it appeared in no pixel."""
+    scene = pyclray.load_scene(scenes_dir / "room.toml")
+    assert "cut by the right border" in (scenes_dir / "room.toml").read_text()
+    edge = next(i for i, shape in enumerate(scene.shapes) if shape.name == "edge")
+    ids = pyclray.render(scene, aovs=("id",))["id"]
+    mine = ids == edge
+    assert mine.sum() > 1000 and mine[:, -1].sum() > 50  # seen, and running into the right border
+    assert not mine[:, 0].any() and not mine[0].any() and not mine[-1].any()

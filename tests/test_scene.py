@@ -167,3 +167,73 @@ def test_scenes_built_in_code_are_validated_too():
     assert caught.value.key == "radius"
     with pytest.raises(SceneError):
         pyclray.Scene(pyclray.Camera((0, 0, 0), (0, 0, -1)), shapes=("not a shape",))
+
+
+# -- hardening (issue 14) ---------------------------------------------------------------------------
+def test_a_byte_order_mark_is_not_part_of_the_text(tmp_path):
+    """Defect 5: editors that write a UTF-8 BOM (was: 'Invalid statement (at line 1, column 1)')."""
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD.encode())
+    with_mark, without = pyclray.load_scene(path), pyclray.load_scene(write(tmp_path, GOOD))
+    assert (with_mark.camera, with_mark.image, with_mark.shapes) == (without.camera, without.image, without.shapes)
+
+
+def test_render_and_cast_accept_a_path_and_say_what_they_expect(scenes_dir):
+    """Defect 5: pyclray.render("scenes/tp02.toml") raised a bare AttributeError."""
+    path = scenes_dir / "tp02.toml"
+    scene = pyclray.load_scene(path).with_size(8, 8)
+    direct = pyclray.render(pyclray.load_scene(path))
+    assert np.array_equal(pyclray.render(str(path))["depth"], direct["depth"])
+    assert pyclray.cast(path, (0.0, 2.0, 6.0), [[0.0, -0.25, -1.0]])["id"][0] >= 0
+    for bad in (42, None, {"camera": {}}):
+        with pytest.raises(pyclray.RequestError, match="scene: expected a pyclray.Scene or the path of a scene file"):
+            pyclray.render(bad)
+    with pytest.raises(SceneError, match="cannot read"):
+        pyclray.render(str(path) + ".missing")
+    assert scene.image.width == 8
+
+
+def test_repeated_aovs_are_named_not_shown_as_a_tuple(scenes_dir):
+    scene = pyclray.load_scene(scenes_dir / "tp02.toml").with_size(8, 8)
+    with pytest.raises(pyclray.RequestError) as error:
+        pyclray.render(scene, aovs=("depth", "depth"))
+    assert "got depth, depth" in str(error.value) and "(" not in str(error.value).split("got")[1]
+
+
+BIG = '''
+[camera]
+eye = [0.0, 2.0, 6.0]
+target = [0.0, 0.5, 0.0]
+fov = 45.0
+
+[[shapes]]
+{shape}
+'''
+
+
+@pytest.mark.parametrize(
+    "shape,key,fp64_renders",
+    [
+        ('type = "sphere"\ncenter = [0.0, -2e19, 0.0]\nradius = 2e19', "center", True),
+        ('type = "sphere"\ncenter = [0.0, 1.0, -3e18]\nradius = 2e19', "radius", True),
+        ('type = "plane"\nnormal = [0.0, 1.0, 0.0]\noffset = 1e39', "offset", True),
+        ('type = "sphere"\ncenter = [1e300, 0.0, 0.0]\nradius = 1.0', "center", False),
+        ('type = "sphere"\ncenter = [-1.7e308, 0.0, 0.0]\nradius = 1.0', "center", False),
+    ],
+)
+def test_geometry_beyond_the_precision_is_a_scene_error_naming_the_key(tmp_path, shape, key, fp64_renders):
+    """Defect 3: geometry beyond float32's range rendered as silent misses with numpy warnings.
+    Now a SceneError names the shape and the key and says whether fp64 is needed; no warning."""
+    scene = pyclray.load_scene(write(tmp_path, BIG.format(shape=shape))).with_size(8, 8)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a raw numpy RuntimeWarning fails the test
+        with pytest.raises(SceneError) as error:
+            pyclray.render(scene)
+        message = str(error.value)
+        assert "table [[shapes]] #0" in message and f"key '{key}'" in message
+        assert ("fp64 is needed" in message) == fp64_renders, message
+        if not fp64_renders:
+            with pytest.raises(SceneError, match="beyond fp64 too"):
+                pyclray.render(scene, precision="fp64")

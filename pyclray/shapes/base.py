@@ -49,6 +49,12 @@ class Shape:
             cls._pack(out, shapes, np.asarray(origin, np.float64), np.asarray(rotation, np.float64))
         return out
 
+    def lengths(self, eye) -> dict[str, float]:
+        """Scene key -> the size of what the kernel computes from it in the camera's frame (e.g. a
+        centre's distance from the eye, a radius), which the kernel may square: the range check
+        (scene.check_renderable) refuses a scene whose lengths exceed the precision's range."""
+        return {}
+
     def describe(self) -> str:
         return f"{self.type} '{self.name}'"
 

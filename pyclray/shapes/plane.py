@@ -62,6 +62,11 @@ class Plane(Shape):
         length = norm3(self.normal)
         return np.array(self.normal) / length, self.offset / length
 
+    def lengths(self, eye) -> dict[str, float]:
+        n, h = self.unit()
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is an inf, which the range check refuses
+            return {"offset": abs(float(np.dot(n, eye) + h))}  # the eye's distance to the plane
+
     @classmethod
     def _pack(cls, out, planes, origin, rotation):
         n = np.array([p.unit()[0] for p in planes])

@@ -1,6 +1,7 @@
 """The sphere: the points p with |p - center| = radius."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,10 @@ class Sphere(Shape):
     @classmethod
     def _from_table(cls, table, name):
         return cls(table["center"], table["radius"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        with np.errstate(over="ignore"):  # an overflow is an inf, which the range check refuses
+            return {"center": math.hypot(*np.subtract(self.center, eye)), "radius": self.radius}
 
     @classmethod
     def _pack(cls, out, spheres, origin, rotation):
