@@ -31,6 +31,7 @@ GROUPS = {
     "tp02 2048": ("tp02", 2048, ("floor", "all", "depth", "llvm")),
     "grid64 512": ("grid64", 512, ("floor", "all", "depth", "llvm")),
     "grid1024 512": ("grid1024", 512, ("floor", "all", "depth", "llvm")),
+    "shapes 512": ("shapes", 512, ("floor", "all", "depth", "llvm")),  # every shape type
     # tp02 with two point lights and shadows (scenes/tp02-lit.toml)
     "tp02-lit 512": ("tp02-lit", 512, ("unshaded", "shaded", "shaded no-shadows", "direct llvm")),
 }
@@ -76,7 +77,7 @@ def mitsuba_direct(scene):
     BSDFs, the same lights as emitters), one pixel-centre sample per pixel and as many emitter
     samples as the scene has lights: the same number of shadow rays per pixel as pyclray casts."""
     from pyclray import mitsuba as pm
-    from pyclray import shaded_check
+    from pyclray.validation import shaded as shaded_check
     from pyclray.lighting import effective_lights
 
     mi = pm.import_mitsuba("llvm_ad_rgb")
@@ -172,6 +173,8 @@ TARGETS = {
     "grid64 512 all AOVs: llvm / pyclray": ("grid64 512 llvm", "grid64 512 all", 2.0, ">="),
     "grid1024 512 all AOVs: pyclray / floor": ("grid1024 512 all", "grid1024 512 floor", None, ""),
     "grid1024 512 all AOVs: llvm / pyclray": ("grid1024 512 llvm", "grid1024 512 all", None, ""),
+    "shapes 512 all AOVs: pyclray / floor": ("shapes 512 all", "shapes 512 floor", None, ""),
+    "shapes 512 all AOVs: llvm / pyclray": ("shapes 512 llvm", "shapes 512 all", None, ""),
     "tp02-lit 512 shaded: Mitsuba direct llvm / pyclray": ("tp02-lit 512 direct llvm", "tp02-lit 512 shaded", 5.0, ">="),
     "tp02-lit 512: shaded with shadows / all AOVs unshaded": ("tp02-lit 512 shaded", "tp02-lit 512 unshaded", 2.0, "<="),
     "tp02-lit 512: shaded without shadows / all AOVs unshaded": ("tp02-lit 512 shaded no-shadows", "tp02-lit 512 unshaded", None, ""),

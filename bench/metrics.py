@@ -5,13 +5,13 @@ from __future__ import annotations
 from pyclray import accuracy
 
 
-def compare(scene, images: dict, reference: dict, exclude=None) -> dict:
+def compare(scene, images: dict, reference: dict, exclude=None, engine: str = "fp32") -> dict:
     """Depth error in float32 ulps of t times |cos incidence| (max, p99; and the raw max), normal
     error |n - n_ref| times |cos| (max) and id mismatches (depth only: hit/miss disagreements),
-    over the pixels that are neither silhouettes (|cos| < 0.02) nor near-ties by the oracle, nor
-    in ``exclude`` (e.g. Mitsuba's plane beyond its stand-in disk). ``reference`` comes from
+    over the pixels that are neither silhouettes (|cos| < 0.02) nor near-ties nor at edges by the
+    error model of ``engine`` ("fp32", "fp64" or a Mitsuba variant), nor in ``exclude`` (e.g. Mitsuba's plane beyond its stand-in disk). ``reference`` comes from
     pyclray.accuracy.reference(scene)."""
-    result = accuracy.compare(images, reference, exclude=exclude)
+    result = accuracy.compare(images, reference, exclude=exclude, engine=engine)
     out = {
         "pixels": result["pixels"],
         "excluded": int(reference["id"].size) - result["pixels"],

@@ -10,7 +10,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies", "floor-in-place", "breakdown", "targets-blocks"]
-SCENE_ORDER = ["tp02", "grid64", "grid1024", "floor"]
+SCENE_ORDER = ["tp02", "grid64", "grid1024", "shapes", "floor"]
 TARGETS = {"tp02_speedup": 8.0, "depth_share": 0.60, "grid64_speedup": 2.0}
 
 
@@ -208,7 +208,7 @@ def headline(rows) -> list[str]:
         "|---|---|---|---|---|",
     ]
     cases = block_cases(rows)
-    for name in ("tp02", "grid64", "grid1024"):
+    for name in ("tp02", "grid64", "grid1024", "shapes"):
         keys = [f"{name} 512 all", f"{name} 512 depth", f"{name} 512 llvm"]
         if all(k in cases for k in keys):
             a, d, m = (cases[k]["median"] for k in keys)
@@ -228,7 +228,7 @@ def plot(rows, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    markers = {"tp02": "o", "grid64": "s", "grid1024": "^"}
+    markers = {"tp02": "o", "grid64": "s", "grid1024": "^", "shapes": "D"}
     colours = {("pyclray", "fp32"): "tab:blue", ("pyclray", "fp64"): "tab:cyan", ("mitsuba-llvm", "fp32"): "tab:red",
                ("mitsuba-scalar", "fp32"): "tab:orange"}
     floor_value = 1e-9  # errors of exactly 0 (or below) are drawn here
@@ -249,7 +249,7 @@ def plot(rows, path: Path) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("median render time at 512×512 [s] (warm)")
     ax.set_ylabel("max depth error vs float64 oracle [float32 ulps x |cos incidence|]")
-    ax.set_title("Error against run time (one point per configuration;\nmarkers: o tp02, □ grid64, △ grid1024; hollow: depth only)")
+    ax.set_title("Error against run time (one point per configuration;\nmarkers: o tp02, □ grid64, △ grid1024, ◇ shapes; hollow: depth only)")
     ax.grid(True, which="both", alpha=0.3)
     if seen:
         ax.legend(fontsize=8)
@@ -346,9 +346,9 @@ def main(argv=None) -> None:
         "  a direction error moves the hit by 1/|cos| more at grazing incidence), max and 99th percentile, over",
         "  the pixels where both hit the same shape (`depth_ulps_raw_max` in the JSON is the max without the",
         "  |cos| factor); normal error |n - n_ref| x |cos|; id mismatches (depth only: hit/miss disagreements).",
-        "  Silhouettes (|cos incidence| < 0.02) and near-ties (a second surface within 1e-5 relative) are left",
-        "  out (column `excluded` in the JSON). For Mitsuba, the pixels where the plane lies beyond its",
-        "  stand-in disk (`pyclray.mitsuba.plane_beyond_disk`) are left out too.",
+        "  Silhouettes, near-ties and edges, by each engine's own tolerance (`pyclray.accuracy.judged_pixels`),",
+        "  are left out (column `excluded` in the JSON). For Mitsuba, the pixels where the plane lies beyond",
+        "  its stand-in disk (`pyclray.mitsuba.beyond_counterparts`) are left out too.",
         "- Before each case's timing the benchmark sleeps 0.3 s, and OpenBLAS runs one thread",
         "  (`bench/conftest.py`), so that threads left busy by the previous case (numpy's BLAS, Dr.Jit's",
         "  pool) do not run into the timing. The machine has 2 cores, and other people's test runs shared",

@@ -27,7 +27,7 @@ from pyclray import oracle
 from . import blocks
 from .metrics import compare
 
-SCENE_NAMES = ("tp02", "grid64", "grid1024")
+SCENE_NAMES = ("tp02", "grid64", "grid1024", "shapes")  # shapes: every shape type (scenes/shapes.toml)
 SIZES = (512, 2048)
 AOV_SETS = {"all": ("depth", "normal", "id"), "depth": ("depth",)}
 PRECISIONS = ("fp32", "fp64")
@@ -121,7 +121,7 @@ def test_pyclray_warm(benchmark, scenes_dir, name, size, aovs, precision):
     benchmark.pedantic(pyclray.render, args=(scene, AOV_SETS[aovs], precision), rounds=rounds_for(seconds), iterations=1, warmup_rounds=1)
     # errors after the timing: numpy's BLAS threads keep spinning for a while after use
     if size == ERROR_SIZE:
-        benchmark.extra_info.update(compare(scene, images, reference(scenes_dir, name)))
+        benchmark.extra_info.update(compare(scene, images, reference(scenes_dir, name), engine=precision))
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -194,8 +194,9 @@ def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, 
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
     if size == ERROR_SIZE:  # after the timing, as for pyclray
         origins, directions = oracle.camera_rays(scene)
-        mask = pm.plane_beyond_disk(scene, origins, directions)
-        errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask)
+        mask = pm.beyond_counterparts(scene, origins, directions)
+        errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask,
+                         engine=variant)
         benchmark.extra_info.update(errors)
     del mi
 
@@ -206,7 +207,7 @@ def test_mitsuba_llvm(benchmark, scenes_dir, name, size):
     _mitsuba(benchmark, scenes_dir, name, size, "llvm_ad_rgb", "mitsuba-llvm")
 
 
-@pytest.mark.parametrize("name", ["tp02", "grid64"])
+@pytest.mark.parametrize("name", ["tp02", "grid64", "shapes"])
 def test_mitsuba_scalar(benchmark, scenes_dir, name):
     """512x512 only, and not grid1024 (~3 min a render): see the module's docstring."""
     _mitsuba(benchmark, scenes_dir, name, ERROR_SIZE, "scalar_rgb", "mitsuba-scalar", most_rounds=3)

@@ -23,13 +23,13 @@ from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayW
 from .lighting import DirectionalLight, Material, PointLight, Shading
 from .render import Frame, cast, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
-from .shapes import Plane, Sphere
+from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "BuildError", "Camera", "DeviceError", "DirectionalLight", "Frame", "Image", "Material", "OutputError",
-    "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "RequestError", "Scene", "SceneError", "Shading",
-    "Sphere", "cast", "list_devices", "load_scene", "render",
+    "AOVS", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame", "Image",
+    "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle", "RequestError",
+    "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
     "scene_from_dict", "select_device",
 ]

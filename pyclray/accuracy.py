@@ -1,14 +1,39 @@
-"""The error model: how far an image may be from the float64 reference, and the measures of it.
+"""The error model: the one place that says how far a result may be from the float64 oracle or
+from Mitsuba 3, which rays are not judged, and the measures of a render's error.
 
-A float32 kernel rounds the ray, the shape and the arithmetic, so its distance t can only be
-trusted to a few float32 ulps of t; where the ray meets the surface at incidence angle theta, an
-error in the ray's direction moves the hit along the surface by 1/cos(theta) more, so the bound
-scales by 1/|cos theta|. Normals are unit vectors and carry the same relative error. Two classes of
-pixels are outside any such bound and are counted apart:
-- silhouettes: |cos theta| < SILHOUETTE_COS, where a ray in float32 may miss what the float64 ray
-  grazes (or the reverse);
-- near-ties: a second surface within NEAR_TIE_RELATIVE of the nearest one, where rounding decides
-  which is nearer.
+A rounded intersection is the exact intersection of a slightly moved ray: a position error of a
+few eps (the unit roundoff) times the size of the coordinates involved, ``t + L`` (t: the distance
+along the ray; L: the size of the coordinates the engine intersects in). Along the ray that error
+becomes a depth error over the cosine of incidence (a sideways move slides a grazing hit far), and
+seen from a centre of curvature of radius r it turns the normal by that error over r:
+
+    depth  <= D = (k eps (t + L) [+ k eps64 (t + W)] [+ camera]) / cos
+    normal <= k eps [+ k eps64] + D / r
+
+- eps64 (t + W): the float64 oracle's own error, W the size of its world coordinates (only where
+  the comparison is against the oracle and the origins are arbitrary);
+- camera: Mitsuba's float32 look_at camera turns its rays by up to alpha = 3 eps (1 + S),
+  S = max(|eye|, |target|) / |target - eye|, and its origins lie within 2 eps max(|eye|, 1) of the
+  eye: alpha t + 2 eps max(|eye|, 1) (images against Mitsuba only);
+- L: pyclray subtracts the eye (render) or the rays' mean origin (cast) in float64 on the host, so
+  its L is the size of frame coordinates: |origin - ref| + |anchor - ref|; Mitsuba works in
+  float32 world coordinates: L = max(|eye|, |anchor|, |eye - anchor|). The anchor is the point a
+  shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
+- k: K_ORACLE = 4 against the oracle (measured <= 2.4 for depths over random scenes of every
+  shape, tests/test_cast.py and tests/test_shapes.py), K_MITSUBA = 6 against Mitsuba (measured
+  <= 2.8 over 75 random scenes moved up to 1000 units off the origin).
+
+Rays outside the model, counted apart and not judged (one rule each):
+- silhouettes: |cos| < SILHOUETTE_COS, where the 1/cos law turns into a square-root law;
+- near ties: the oracle's second-nearest surface within D of the nearest: either may win;
+- edges: a hit point (the oracle's or the engine's) within D of an edge of its shape (a rim, a
+  border, a box's edge): a ray within rounding of an edge may go either way.
+
+The stability targets (``meets_targets``) are stated in float32 ulps of t: fp32 depth within 8
+ulps x 1/|cos|, normals within 2e-5 / |cos|, ids right; fp64 depth within 1e-12 relative / |cos|,
+normals within 1e-12 / |cos| times the normal's conditioning max(1, (t + |eye|) / r) (the float64
+reference rounds its ray and its world coordinates to 2^-53, which moves the normal of a unit
+sphere 1e7 away by ~1e-9: an error of the reference, not of the kernel).
 """
 from __future__ import annotations
 
@@ -17,49 +42,246 @@ import numpy as np
 from . import oracle
 from .scene import Scene
 
-SILHOUETTE_COS = 0.02
-NEAR_TIE_RELATIVE = 1e-5
+EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}  # unit roundoff: half an ulp of 1
+ORACLE_EPSILON = EPSILON["fp64"]
 ULP_ONE_FP32 = 2.0**-23  # the float32 ulp of 1
+SILHOUETTE_COS = 0.02
+K_ORACLE = 4.0
+K_MITSUBA = 6.0
+CAMERA_K = 3.0  # Mitsuba's camera rays: angle <= CAMERA_K eps (1 + S)
+ORIGIN_K = 2.0  # Mitsuba's camera rays: origin off our ray <= ORIGIN_K eps max(|eye|, 1)
+
+FP32_DEPTH_ULPS = 8.0
+FP32_NORMAL = 2e-5
+FP64_DEPTH_RELATIVE = 1e-12
+FP64_NORMAL = 1e-12
 
 
+# -- measures ------------------------------------------------------------------------------------
 def ulp32(x) -> np.ndarray:
     """The float32 ulp of |x| (as float64)."""
     x = np.abs(np.asarray(x, np.float64))
     return np.spacing(x.astype(np.float32)).astype(np.float64)
 
 
+def angle_between(a, b) -> np.ndarray:
+    """Angle in radians between vectors (last axis), accurate for tiny angles (atan2 of the cross
+    and dot products; arccos of the dot product loses half the digits near 0)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...k,...k", a, b))
+
+
+# -- what the shapes contribute --------------------------------------------------------------------
+def anchors(scene: Scene, point) -> np.ndarray:
+    """(shapes, 3): each shape's anchor for rays from ``point`` (one row of zeros if no shapes)."""
+    return np.array([shape.anchor(point) for shape in scene.shapes] or [np.zeros(3)], np.float64).reshape(-1, 3)
+
+
+def curvature_radii(scene: Scene) -> np.ndarray:
+    """The smallest radius of curvature per shape id (inf for flat shapes)."""
+    return np.array([shape.curvature_radius() for shape in scene.shapes] or [np.inf], np.float64)
+
+
+def world_sizes(scene: Scene, point) -> np.ndarray:
+    """Per shape: the size of float32 world coordinates in which an engine that does not move the
+    origin (Mitsuba) intersects it from ``point``: max(|point|, |anchor|, |point - anchor|)."""
+    point = np.asarray(point, np.float64)
+    anchor = anchors(scene, point)
+    return np.maximum.reduce([np.full(len(anchor), np.linalg.norm(point)), np.linalg.norm(anchor, axis=1),
+                              np.linalg.norm(anchor - point, axis=1)])
+
+
+# -- the bounds ------------------------------------------------------------------------------------
+def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach=0.0):
+    """(depth tolerance, normal angle tolerance in radians) per ray: the formula of the module's
+    docstring. t, cos, radius, scale (L), oracle_scale (W) and camera_reach are per ray."""
+    t = np.where(np.isfinite(t), t, 0.0)
+    reach = k * eps * (t + scale)
+    angle = k * eps
+    if oracle_scale is not None:
+        reach = reach + k * ORACLE_EPSILON * (t + oracle_scale)
+        angle = angle + k * ORACLE_EPSILON
+    reach = reach + camera_reach
+    with np.errstate(invalid="ignore", divide="ignore"):
+        depth = reach / cos
+        normal = angle + depth / radius
+    return depth, normal
+
+
+def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None):
+    """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
+    for rays from ``origins``; the kernel's frame is centred on ``reference_point`` (the eye for
+    renders, the rays' mean origin for cast; default: the origins' mean)."""
+    origins = np.asarray(origins, np.float64)
+    flat = origins.reshape(-1, 3)
+    ref = flat.mean(axis=0) if reference_point is None else np.asarray(reference_point, np.float64)
+    index = np.maximum(truth["id"], 0)
+    anchor = anchors(scene, ref)[index]
+    frame = np.linalg.norm(origins - ref, axis=-1) + np.linalg.norm(anchor - ref, axis=-1)
+    world = np.linalg.norm(origins, axis=-1) + np.linalg.norm(anchor, axis=-1)
+    return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=frame,
+                      k=K_ORACLE, oracle_scale=world)
+
+
+def camera_angle_tolerance(scene: Scene) -> float:
+    """alpha: how far (radians) Mitsuba's float32 look_at camera rays may be from pyclray's."""
+    eye, target = np.array(scene.camera.eye), np.array(scene.camera.target)
+    return CAMERA_K * EPSILON["fp32"] * (1 + max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye))
+
+
+def mitsuba_tolerances(scene: Scene, t, ids, cos, *, cameras: bool, origin_scale=None):
+    """Bounds of pyclray fp32 against Mitsuba (float32 world coordinates): cameras adds the
+    difference of the two cameras' rays (images; not for the very same rays); origin_scale: the
+    size of the rays' origins if they are not the eye (ray level)."""
+    index = np.maximum(ids, 0)
+    scale = world_sizes(scene, scene.camera.eye)[index]
+    if origin_scale is not None:
+        scale = np.maximum(scale, origin_scale)
+    # a Mitsuba counterpart less exact than the model's K (Shape.mitsuba_error_scale)
+    k = K_MITSUBA * np.array([s.mitsuba_error_scale for s in scene.shapes] or [1.0])[index]
+    camera_reach = 0.0
+    if cameras:
+        eye = np.linalg.norm(scene.camera.eye)
+        camera_reach = camera_angle_tolerance(scene) * np.where(np.isfinite(t), t, 0.0) + ORIGIN_K * EPSILON["fp32"] * max(eye, 1.0)
+    return tolerances(t, cos, curvature_radii(scene)[index], eps=EPSILON["fp32"], scale=scale, k=k,
+                      camera_reach=camera_reach)
+
+
+# -- the rays not judged ---------------------------------------------------------------------------
+def silhouettes(ids, cos, depth_tolerance=None, radius=None) -> np.ndarray:
+    """Grazing hits: |cos| < SILHOUETTE_COS, and on a curved shape (radius of curvature r) also
+    where a sideways move of the ray by its position error e = D |cos| may take it off the
+    silhouette: the ray passes the rim r cos^2 / 2 inside it, so cos^2 < 2 e / r (the square-root
+    law that replaces 1/cos at tangency; for a unit sphere 1e5 away in fp32 that is cos < 0.3)."""
+    ids = np.asarray(ids)
+    out = (ids >= 0) & (cos < SILHOUETTE_COS)
+    if depth_tolerance is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out |= (ids >= 0) & (cos * cos < 2 * depth_tolerance * cos / radius)
+    return out
+
+
+def near_ties(truth: dict, tolerance) -> np.ndarray:
+    """The one near-tie rule: the oracle's second-nearest surface lies within the sum of both
+    surfaces' depth tolerances of the nearest (each may be off by its own, at its own incidence).
+    truth: oracle.trace's result with "second"; tolerance(t, ids, cos): the depth tolerance."""
+    nearest, second = truth["depth"], truth["second"]
+    both = tolerance(nearest, truth["id"], truth["cos"]) + tolerance(second, truth["second_id"], truth["second_cos"])
+    with np.errstate(invalid="ignore"):  # inf - inf where nothing is hit
+        return np.isfinite(nearest) & (second - nearest <= both)
+
+
+def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
+    """Rays that one of ``hits`` ((ids, depth) pairs: the oracle's, an engine's) sees at an edge
+    or a silhouette of the shape it hits, where a ray moved by its position error ``reach`` (per
+    ray, scene units: the depth tolerance times |cos|) may go either way: the hit point within
+    reach / |cos| of an edge of its shape (a rim, a border, a box's edge), or a grazing hit by
+    the silhouette rule at its own incidence. Both sides are looked at, so a ray that one side
+    sees and the other misses is found from either; the first of ``hits`` is the reference, the
+    others count where they hit another shape than it."""
+    origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions))
+    out = np.zeros(np.shape(directions)[:-1], bool)
+    reach = np.broadcast_to(reach, out.shape)
+    first = np.asarray(hits[0][0])
+    for k, (ids, depth) in enumerate(hits):
+        ids = np.asarray(ids)
+        depth = np.asarray(depth, np.float64)
+        # another side's hit point tells something only where it hits another shape (a far
+        # float32 hit point is too coarse to place on the surface: its own normal would be noise)
+        other = (ids != first) if k else np.ones(ids.shape, bool)
+        for index, shape in enumerate(scene.shapes):
+            mine = (ids == index) & np.isfinite(depth) & other
+            if mine.any():
+                points = origins[mine] + depth[mine][:, None] * directions[mine]
+                cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), directions[mine]))
+                grazing = silhouettes(np.zeros(len(cos)), cos, reach[mine] / cos, shape.curvature_radius())
+                out[mine] |= grazing | (shape.edge_distance(points) <= reach[mine] / np.maximum(cos, SILHOUETTE_COS))
+    return out
+
+
+# -- a render against the oracle -------------------------------------------------------------------
 def reference(scene: Scene) -> dict:
-    """The float64 images plus what the error model needs: |cos incidence| and the masks."""
+    """The float64 images plus what the error model needs: |cos incidence|, the second-nearest
+    distance, the normal's conditioning and the silhouettes."""
     origins, directions = oracle.camera_rays(scene)
     ref = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, directions, ref["id"], ref["normal"])
-    hit = ref["id"] >= 0
     ref["cos"] = cos
     # how far the float64 reference's own rounding (2^-53 of the ray's length and of the world
-    # coordinates) moves a normal: (t + |origin|) / radius on a sphere, 0 on a plane
-    condition = np.zeros(cos.shape)
-    reach = ref["depth"] + np.linalg.norm(origins, axis=-1)
-    for index, shape in enumerate(scene.shapes):
-        if shape.type == "sphere":
-            mine = ref["id"] == index
-            condition[mine] = reach[mine] / shape.radius
-    ref["normal_condition"] = condition
-    ref["silhouette"] = hit & (cos < SILHOUETTE_COS)
-    with np.errstate(invalid="ignore"):
-        ref["near_tie"] = hit & (ref["second"] - ref["depth"] <= NEAR_TIE_RELATIVE * ref["depth"])
+    # coordinates) moves a normal: (t + |origin|) / r, r the shape's radius of curvature
+    reach = np.where(np.isfinite(ref["depth"]), ref["depth"], 0.0) + np.linalg.norm(origins, axis=-1)
+    ref["normal_condition"] = np.where(ref["id"] >= 0, reach / curvature_radii(scene)[np.maximum(ref["id"], 0)], 0.0)
+    ref["silhouette"] = silhouettes(ref["id"], cos)
     ref["origins"], ref["directions"] = origins, directions
+    ref["scene"] = scene
     return ref
 
 
-def compare(images: dict, ref: dict, exclude=None) -> dict:
+def render_reach(scene: Scene, t, ids, directions, precision: str) -> np.ndarray:
+    """The sideways position error of pyclray's render rays at their hits (scene units), which
+    decides silhouettes and edges. The render works in the camera's frame, where every coordinate
+    keeps its own relative precision (README, "Numerical design"): a ray's sideways error is eps
+    times the sideways size of the coordinates involved (the hit's and the anchor's distances from
+    the optical axis), not eps t; plus the oracle's own eps64 (t + W)."""
+    eye = np.asarray(scene.camera.eye, np.float64)
+    w = scene.camera.basis()[2]
+    t = np.where(np.isfinite(t), t, 0.0)
+    hit = t[..., None] * directions
+    anchor = anchors(scene, eye)[np.maximum(ids, 0)] - eye
+
+    def sideways(v):
+        return np.linalg.norm(v - np.einsum("...k,k", v, w)[..., None] * w, axis=-1)
+
+    world = np.linalg.norm(eye) + np.linalg.norm(anchor + eye, axis=-1)
+    return K_ORACLE * (EPSILON[precision] * (sideways(hit) + sideways(anchor)) + ORACLE_EPSILON * (t + world))
+
+
+def judged_pixels(images: dict, ref: dict, engine: str = "fp32") -> dict:
+    """The masks of pixels set apart for this engine ("fp32", "fp64": pyclray's render; anything
+    else: Mitsuba): silhouettes (by its position error), near ties (by its depth tolerance) and
+    edges (within its position error, seen from the oracle's hit or the engine's)."""
+    scene = ref["scene"]
+
+    def depth_tolerance(t, ids, cos):
+        if engine in EPSILON:
+            return pyclray_tolerances(scene, {"depth": t, "id": ids}, cos, ref["origins"], engine, scene.camera.eye)[0]
+        return mitsuba_tolerances(scene, t, ids, cos, cameras=True)[0]
+
+    near_tie = near_ties(ref, depth_tolerance)
+    t = np.where(np.isfinite(ref["depth"]), ref["depth"], 0.0)
+    hits = [(ref["id"], ref["depth"])]
+    if "id" in images and "depth" in images:
+        ours = np.asarray(images["depth"], np.float64)
+        hits.append((images["id"], ours))
+        t = np.maximum(t, np.where(np.isfinite(ours), ours, 0.0))
+    if engine in EPSILON:
+        reach = render_reach(scene, t, ref["id"], ref["directions"], engine)
+    else:
+        reach = depth_tolerance(t, ref["id"], ref["cos"]) * ref["cos"]
+    radius = curvature_radii(scene)[np.maximum(ref["id"], 0)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        silhouette = silhouettes(ref["id"], ref["cos"], reach / ref["cos"], radius)
+    edge = at_edges(scene, ref["origins"], ref["directions"], hits, reach)
+    return {"silhouette": silhouette, "near_tie": near_tie, "edge": edge}
+
+
+def compare(images: dict, ref: dict, exclude=None, engine: str = "fp32") -> dict:
     """Errors of a render against the reference, on the pixels that are neither silhouettes nor
-    near-ties (nor in ``exclude``): depth in float32 ulps of t times |cos|, relative depth error,
-    normal error (Euclidean) times |cos|, id mismatches, and counts of what was left out."""
-    excluded = ref["silhouette"] | ref["near_tie"]
+    near-ties nor at edges (by ``engine``'s tolerance, see judged_pixels) nor in ``exclude``:
+    depth in float32 ulps of t times |cos|, relative depth error, normal error (Euclidean) times
+    |cos|, id mismatches, and counts of what was left out."""
+    masks = judged_pixels(images, ref, engine)
+    excluded = masks["silhouette"] | masks["near_tie"] | masks["edge"]
     if exclude is not None:
         excluded = excluded | exclude
     judged = ~excluded
-    out = {"pixels": int(judged.sum()), "silhouette": int(ref["silhouette"].sum()), "near_tie": int((ref["near_tie"] & ~ref["silhouette"]).sum())}
+    out = {
+        "pixels": int(judged.sum()),
+        "silhouette": int(masks["silhouette"].sum()),
+        "near_tie": int((masks["near_tie"] & ~masks["silhouette"]).sum()),
+        "edge": int((masks["edge"] & ~masks["silhouette"] & ~masks["near_tie"]).sum()),
+    }
     if "id" in images:
         out["id_mismatch"] = int(((images["id"] != ref["id"]) & judged).sum())
         same = judged & (images["id"] == ref["id"]) & (ref["id"] >= 0)
@@ -88,7 +310,16 @@ def compare(images: dict, ref: dict, exclude=None) -> dict:
         out["normal_cos_max"] = float((error * cos).max()) if error.size else 0.0
         out["normal_cos_p99"] = float(np.percentile(error * cos, 99)) if error.size else 0.0
         # scaled by the normal's conditioning max(1, (t + |origin|) / r): what the float64
-        # reference's own rounding moves a far or far-off sphere's normal by
+        # reference's own rounding moves a far or far-off curved shape's normal by
         scaled = error * cos / np.maximum(1.0, ref["normal_condition"][same])
         out["normal_conditioned_max"] = float(scaled.max()) if error.size else 0.0
     return out
+
+
+def meets_targets(result: dict, precision: str) -> bool:
+    """Whether a compare() result of pyclray at this precision meets the stability targets."""
+    if precision == "fp64":
+        return (result["depth_rel_cos_max"] <= FP64_DEPTH_RELATIVE and result["normal_conditioned_max"] <= FP64_NORMAL
+                and result["id_mismatch"] == 0 and result["miss_mismatch"] == 0)
+    return (result["depth_ulps_max"] <= FP32_DEPTH_ULPS and result["normal_cos_max"] <= FP32_NORMAL
+            and result["id_mismatch"] == 0 and result["miss_mismatch"] == 0)

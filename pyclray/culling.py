@@ -3,13 +3,15 @@ each type whose conservative screen bounds meet it. The kernel visits only those
 exactly as before, so the images do not change: a shape is left out of a tile only when no ray of
 the tile can hit it, with a wide margin over every float rounding of the kernel.
 
-A shape type without a bounds function here (the plane) is visited in every tile.
+Each shape is bounded by its type's bounding spheres (``Shape.bounding_spheres``); a type that is
+not ``bounded`` (the plane) is visited in every tile.
 """
 from __future__ import annotations
 
 import numpy as np
 
 TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-group size)
+ENABLED = True  # False: every tile visits every shape (tests compare the two)
 
 # The kernel's float32 test accepts a ray whose true squared distance to the centre exceeds r^2
 # by at most a few dozen ulps of |F|^2 (F: centre in the camera frame); 256 float32 ulps bound
@@ -18,17 +20,16 @@ TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-
 _WIDEN = 16.0 * np.sqrt(np.finfo(np.float32).eps)
 
 
-def sphere_bounds(spheres, origin, rotation):
+def sphere_bounds(center, radius, origin, rotation):
     """(N, 4) bounds (sx_lo, sx_hi, sy_lo, sy_hi) of the image-plane coordinates (x/z, y/z in the
-    camera frame) of the rays that can meet each sphere; NaN rows: anywhere (the sphere reaches the
-    eye's plane); +inf lo rows: nowhere (wholly behind the eye)."""
-    center = np.array([s.center for s in spheres], np.float64) - origin
-    F = center @ np.asarray(rotation, np.float64).T  # camera frame: x left, y up, z forward
-    r = np.array([s.radius for s in spheres], np.float64)
+    camera frame) of the rays that can meet each sphere (centres (N, 3), radii (N,)); NaN rows:
+    anywhere (the sphere reaches the eye's plane); +inf lo rows: nowhere (wholly behind the eye)."""
+    F = (np.asarray(center, np.float64) - origin) @ np.asarray(rotation, np.float64).T  # camera frame: x left, y up, z forward
+    r = np.asarray(radius, np.float64)
     distance = np.linalg.norm(F, axis=1)
     r = r * (1 + 1e-6) + _WIDEN * distance
     x, y, z = F[:, 0], F[:, 1], F[:, 2]
-    out = np.full((len(spheres), 4), np.nan)
+    out = np.full((len(r), 4), np.nan)
     ahead = z - r > 1e-6 * r  # wholly in front of the eye's plane, with a margin
     behind = z + r < 0
     out[behind] = (np.inf, -np.inf, np.inf, -np.inf)
@@ -44,9 +45,6 @@ def sphere_bounds(spheres, origin, rotation):
     return out
 
 
-BOUNDS = {"sphere": sphere_bounds}
-
-
 def _pixel_range(lo, hi, tangent, size):
     """First and last pixel index whose centre coordinate tangent (size - 2 i - 1) / size lies in
     [lo, hi] (the coordinate decreases with i), widened by one pixel and clamped."""
@@ -55,13 +53,14 @@ def _pixel_range(lo, hi, tangent, size):
     return np.clip(first, 0, size - 1), np.clip(last, -1, size - 1), (last >= 0) & (first <= size - 1)
 
 
-def tile_lists(kind: str, shapes, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
-    """(start, index) int32 arrays: the shapes (positions in the packed array) that tile t visits
-    are index[start[t]:start[t+1]], in increasing order; tiles are numbered row by row."""
+def tile_lists(cls, shapes, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
+    """(start, index) int32 arrays: the shapes (positions in the packed array, all of the shape
+    class ``cls``) that tile t visits are index[start[t]:start[t+1]], in increasing order; tiles
+    are numbered row by row."""
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)
     n = len(shapes)
-    if kind in BOUNDS and n:
-        bounds = BOUNDS[kind](shapes, np.asarray(origin, np.float64), rotation)
+    if ENABLED and cls.bounded and n:
+        bounds = sphere_bounds(*cls.bounding_spheres(shapes), np.asarray(origin, np.float64), rotation)
         everywhere = np.isnan(bounds).any(axis=1)
         c0, c1, ok_x = _pixel_range(bounds[:, 0], bounds[:, 1], tan_x, width)
         r0, r1, ok_y = _pixel_range(bounds[:, 2], bounds[:, 3], tan_y, height)

@@ -7,11 +7,12 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
   depth + near_clip / cos(angle to the optical axis). A miss is 0 in every AOV; here +inf.
 - ids: Mitsuba's ``shape_index`` is 1 + the position in ``scene.shapes()`` in the scalar variants
   and the shape's registry id in the JIT (llvm, cuda) ones; both are mapped back to pyclray ids.
-- planes: Mitsuba has no infinite plane. A disk of radius ``PLANE_DISK_SCALE`` times the scene's
-  extent, centred at the eye's foot on the plane, stands in for it (a disk's error does not depend
-  on its size; a rectangle's, two float32 triangles, does). Beyond the disk's edge, near the
-  horizon, Mitsuba sees nothing where pyclray sees the plane: ``plane_beyond_disk`` marks those
-  pixels so that comparisons can leave them out.
+- shapes: each shape module builds its counterpart (``Shape.mitsuba_shapes``: one or more Mitsuba
+  shapes, all mapped back to its id; a cylinder's caps are two disks beside Mitsuba's open
+  cylinder). Mitsuba has no infinite plane: a disk of radius ``PLANE_DISK_SCALE`` times the
+  scene's extent, centred at the eye's foot on the plane, stands in for it. Beyond the disk's
+  edge, near the horizon, Mitsuba sees nothing where pyclray sees the plane:
+  ``beyond_counterparts`` marks those pixels so that comparisons can leave them out.
 - normals: ``geo_normal`` is the geometric normal, outward and not flipped, as pyclray's.
 """
 from __future__ import annotations
@@ -19,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 
 from .scene import Scene
+from .shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
 DEFAULT_VARIANT = "scalar_rgb"
-PLANE_DISK_SCALE = 1e4
 AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index"
 
 
@@ -42,43 +43,39 @@ def extent(scene: Scene) -> float:
     eye = np.array(scene.camera.eye)
     size = max(1.0, float(np.linalg.norm(np.subtract(scene.camera.target, eye))))
     for shape in scene.shapes:
-        if shape.type == "sphere":
-            size = max(size, float(np.linalg.norm(np.subtract(shape.center, eye))) + shape.radius)
-        elif shape.type == "plane":
-            n, h = shape.unit()
-            size = max(size, abs(float(n @ eye + h)))
+        size = max(size, shape.extent_from(eye))
     return size
 
 
 def clip_range(scene: Scene) -> tuple[float, float]:
-    """(near_clip, far_clip): near small against every distance, far beyond every disk's edge."""
+    """(near_clip, far_clip): near small against every distance, far beyond every stand-in's edge."""
     size = extent(scene)
     near = 1e-6 * size
+    eye = np.array(scene.camera.eye, np.float64)[None]
     for shape in scene.shapes:  # stay nearer than the nearest surface
-        if shape.type == "sphere":
-            gap = abs(float(np.linalg.norm(np.subtract(shape.center, scene.camera.eye))) - shape.radius)
-        else:
-            n, h = shape.unit()
-            gap = abs(float(n @ np.array(scene.camera.eye) + h))
+        gap = float(shape.surface_distance(eye)[0])
         if gap > 0:
             near = min(near, 1e-3 * gap)
     return near, 4 * PLANE_DISK_SCALE * size
 
 
-def plane_disk(plane, scene: Scene):
-    """(centre, frame columns, radius) of the disk standing in for a plane."""
-    n, h = plane.unit()
-    eye = np.array(scene.camera.eye)
-    centre = eye - (n @ eye + h) * n  # the eye's foot on the plane
-    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = np.cross(helper, n)
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(n, t1)
-    return centre, (t1, t2, n), PLANE_DISK_SCALE * extent(scene)
+def shape_key(index: int, part: int = 0) -> str:
+    """The Mitsuba id of part ``part`` of pyclray shape ``index`` (a cylinder's caps are parts)."""
+    return f"shape_{index:06d}" if part == 0 else f"shape_{index:06d}_{part}"
 
 
-def shape_key(index: int) -> str:
-    return f"shape_{index:06d}"
+def pyclray_id(mitsuba_id: str) -> int:
+    """The pyclray id a Mitsuba shape id (shape_key) maps back to."""
+    return int(mitsuba_id.removeprefix("shape_").split("_")[0])
+
+
+def _mitsuba_values(mi, value):
+    """A shape dict's values for Mitsuba: 4x4 numpy matrices become ScalarTransform4f."""
+    if isinstance(value, np.ndarray) and value.shape == (4, 4):
+        return mi.ScalarTransform4f(value.tolist())
+    if isinstance(value, dict):
+        return {k: _mitsuba_values(mi, v) for k, v in value.items()}
+    return value
 
 
 def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
@@ -108,16 +105,8 @@ def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPE
         },
     }
     for index, shape in enumerate(scene.shapes):
-        if shape.type == "sphere":
-            out[shape_key(index)] = {"type": "sphere", "center": list(shape.center), "radius": shape.radius}
-        elif shape.type == "plane":
-            centre, (t1, t2, n), radius = plane_disk(shape, scene)
-            matrix = np.eye(4)
-            matrix[:3, 0], matrix[:3, 1], matrix[:3, 2] = t1 * radius, t2 * radius, n * radius
-            matrix[:3, 3] = centre
-            out[shape_key(index)] = {"type": "disk", "to_world": mi.ScalarTransform4f(matrix.tolist())}
-        else:  # pragma: no cover - every registered shape is handled above
-            raise NotImplementedError(f"no Mitsuba counterpart for shape type {shape.type!r}")
+        for part, counterpart in enumerate(shape.mitsuba_shapes(scene)):
+            out[shape_key(index, part)] = _mitsuba_values(mi, counterpart)
     return out
 
 
@@ -127,8 +116,7 @@ def load(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC):
     mi_scene = mi.load_dict(scene_dict(scene, variant, aovs), optimize=False)  # keeps shapes and order
     ids = {}
     for position, shape in enumerate(mi_scene.shapes()):
-        pyclray_id = int(shape.id().removeprefix("shape_"))
-        ids[shape_index_value(mi, shape, position)] = pyclray_id
+        ids[shape_index_value(mi, shape, position)] = pyclray_id(shape.id())
     return mi_scene, ids
 
 
@@ -169,19 +157,17 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     return out
 
 
-def plane_beyond_disk(scene: Scene, origins, directions) -> np.ndarray:
-    """True for rays that would meet a plane farther from its disk's centre than the disk reaches:
-    there Mitsuba's stand-in disk ends and it sees nothing (or what lies behind)."""
-    mask = np.zeros(directions.shape[:-1], bool)
+def beyond_counterparts(scene: Scene, origins, directions) -> np.ndarray:
+    """True for rays that would meet a shape where its Mitsuba counterpart does not reach (the
+    plane beyond its stand-in disk's edge): there Mitsuba sees nothing (or what lies behind)."""
+    origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions))
+    mask = np.zeros(np.shape(directions)[:-1], bool)
     for shape in scene.shapes:
-        if shape.type != "plane":
-            continue
-        centre, _, radius = plane_disk(shape, scene)
-        t = shape.oracle_distance(origins.reshape(-1, 3), directions.reshape(-1, 3)).reshape(mask.shape)
-        with np.errstate(invalid="ignore"):
-            points = origins + np.where(np.isfinite(t), t, 0)[..., None] * directions
-        far = np.isfinite(t) & (np.linalg.norm(points - centre, axis=-1) > radius * (1 - 1e-6))
-        mask |= far
+        t = shape.oracle_distance(origins.reshape(-1, 3), np.reshape(directions, (-1, 3))).reshape(mask.shape)
+        hit = np.isfinite(t)
+        if hit.any():
+            points = origins[hit] + t[hit][:, None] * np.asarray(directions)[hit]
+            mask[hit] |= ~shape.mitsuba_covers(scene, points)
     return mask
 
 
@@ -238,7 +224,7 @@ def intersect(mi_scene, ids: dict, origins, directions) -> dict:
             if si.is_valid():
                 depth[k] = si.t
                 normal[k] = np.array(si.n, np.float64)
-                found[k] = int(si.shape.id().removeprefix("shape_"))
+                found[k] = pyclray_id(si.shape.id())
         return {"depth": depth, "normal": normal, "id": found}
     if count == 0:
         return {"depth": depth, "normal": normal, "id": found}

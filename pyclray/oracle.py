@@ -36,20 +36,34 @@ def camera_rays(scene: Scene):
 
 
 def trace(scene: Scene, origins, directions, aovs=AOVS) -> dict:
-    """Nearest hit with t > 0 of every ray (unit directions), lowest id on an exact tie."""
+    """Nearest hit with t > 0 of every ray (unit directions), lowest id on an exact tie; with
+    "second" in aovs also the second-nearest shape's distance, id and |cos incidence|."""
     shape = directions.shape[:-1]
     O = np.asarray(origins, np.float64).reshape(-1, 3)
     D = np.asarray(directions, np.float64).reshape(-1, 3)
     best = np.full(len(D), np.inf)
     second = np.full(len(D), np.inf)  # the nearest hit of any other shape, to find near-ties
+    second_id = np.full(len(D), -1, np.int32)
     best_id = np.full(len(D), -1, np.int32)
     for index, item in enumerate(scene.shapes):
         t = item.oracle_distance(O, D)
         closer = t < best  # strict: an exact tie keeps the lower id, visited first
-        second = np.where(closer, best, np.minimum(second, t))
+        runner_up = ~closer & (t < second)
+        second_id = np.where(closer, best_id, np.where(runner_up, index, second_id))
+        second = np.where(closer, best, np.where(runner_up, t, second))
         best = np.where(closer, t, best)
         best_id = np.where(closer, index, best_id)
-    out = {"second": second.reshape(shape)} if "second" in aovs else {}
+    out = {}
+    if "second" in aovs:  # the second-nearest shape: its distance, id and |cos incidence|
+        out["second"] = second.reshape(shape)
+        out["second_id"] = second_id.reshape(shape)
+        cos = np.ones(len(D))
+        points = O + np.where(np.isfinite(second), second, 0)[:, None] * D
+        for index, item in enumerate(scene.shapes):
+            mine = second_id == index
+            if mine.any():
+                cos[mine] = np.abs(np.einsum("ij,ij->i", item.oracle_normal(points[mine]), D[mine]))
+        out["second_cos"] = cos.reshape(shape)
     if "depth" in aovs:
         out["depth"] = best.reshape(shape)
     if "normal" in aovs:

@@ -65,9 +65,6 @@ def _fsync(path, *, folder: bool = False) -> None:
     fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if folder else 0))
     try:
         os.fsync(fd)
-    except OSError:
-        if not folder:  # some file systems cannot sync a folder; a file must reach the disk
-            raise
     finally:
         os.close(fd)
 
@@ -130,8 +127,7 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
         with _interrupts_deferred():
             _rename_all(targets, temporaries)
             temporaries = []
-        for folder in {t.parent for t in targets}:
-            _fsync(folder, folder=True)
+        current = None
     except OSError as error:
         name = error.filename if current is None and getattr(error, "filename", None) else current
         if name is not None and str(name) in temporaries:  # a temporary's name means nothing to the user
@@ -144,6 +140,11 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
                 os.unlink(tmp)
             except FileNotFoundError:
                 pass
+    for folder in {t.parent for t in targets}:  # the renames themselves to disk (replaced by now)
+        try:
+            _fsync(folder, folder=True)
+        except OSError:
+            pass
 
 
 def _rename_all(targets, temporaries) -> None:
@@ -603,9 +604,10 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
                  comment: str | None = None) -> list[Path]:
     """Stream the images of a render into OUT.exr and, with previews, OUT.<aov>.png for each AOV
     that has one, all replaced together (see replace_together). bands: name -> (rows, width, ...)
-    arrays, top to bottom, covering the image once. Memory: one band at a time, plus the
-    compressed chunks in flight; a preview that needs the whole image's scale (depth) keeps its
-    AOV in an unnamed temporary file beside the output and makes its rows in a second pass.
+    arrays, top to bottom, covering the image once. Memory: a few bands (the one being made, and
+    at most two waiting per writer while the background compresses); a preview that needs the
+    whole image's scale (depth) keeps its AOV in an unnamed temporary file beside the output and
+    makes its rows in a second pass.
     Returns the paths written."""
     aovs = tuple(aovs)
     pngs = preview_paths(out, aovs) if previews else {}

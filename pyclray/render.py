@@ -180,7 +180,7 @@ def _render_inputs(ctx, scene: Scene, precision: str) -> list:
         ids = [i for i, shape in enumerate(scene.shapes) if shape.type == kind]
         shapes = [scene.shapes[i] for i in ids]
         packed = cls.pack(shapes, ids, scene.camera.eye, rows, precision)
-        start, index = culling.tile_lists(kind, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+        start, index = culling.tile_lists(cls, shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
         shape_args.append([_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)])
         counts.append(np.int32(len(ids)))
         size += packed.nbytes + start.nbytes + index.nbytes

@@ -1,6 +1,6 @@
 """pyclray check: the image and ray-level cross-checks against Mitsuba 3, and the command.
 
-Tolerances are pyclray.check's error model (eps = 2^-24, float32's unit roundoff):
+Tolerances are pyclray.accuracy's error model (eps = 2^-24, float32's unit roundoff):
 
     same rays:  |depth difference| <= 6 eps (t + L) / cos,  normal angle <= 6 eps (1 + (t + L) / (r cos))
     cameras:    direction angle <= 3 eps (1 + S),  origin off our ray <= 2 eps max(|eye|, 1)
@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import check, cli
+from pyclray import accuracy, check, cli
+from pyclray.validation.files import RAMP
 from pyclray.output import read_exr
 
 from conftest import SCENES
@@ -80,7 +81,7 @@ def test_horizon_pixels_beyond_the_disk_are_left_out():
     camera = pyclray.Camera((0, 1, 0), (0, 1 - 10 / 2e6, -10), (0, 1, 0), 30.0)
     scene = pyclray.Scene(camera, pyclray.Image(33, 33), (pyclray.Plane((0, 1, 0), 0.0), pyclray.Sphere((3, 1, -40), 1.0)))
     result = check.cross_check(scene, "scalar_rgb")
-    assert result.counts["plane beyond its disk (left out)"] == 33
+    assert result.counts["beyond a Mitsuba stand-in (left out)"] == 33
     assert_passed(result)
 
 
@@ -121,7 +122,7 @@ def test_ray_level_agrees_within_a_few_ulps(scene, variant):
     assert result.depth_ratio.count > 100
     eye, target = np.array(scene.camera.eye), np.array(scene.camera.target)
     size = max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye)
-    assert result.camera_angle.max <= 3 * check.EPSILON * (1 + size)  # float32 look_at: measured 3.3 eps on tp02
+    assert result.camera_angle.max <= 3 * accuracy.EPSILON["fp32"] * (1 + size)  # float32 look_at: measured 3.3 eps on tp02
     assert result.camera_origin.max <= 2  # Mitsuba's origin: the eye rounded to float32, on the ray
     assert result.ids["unexplained"] == 0
 
@@ -137,8 +138,8 @@ def test_tables_are_printed_and_exit_0_on_tp02(capsys):
 
 def test_exit_1_outside_the_tolerance(capsys, monkeypatch):
     """With a tolerance a thousand times too tight the same check fails with status 1 and says why."""
-    monkeypatch.setattr(check, "K", check.K / 1000)
-    monkeypatch.setattr(check, "CAMERA_K", check.CAMERA_K / 1000)
+    monkeypatch.setattr(accuracy, "K_MITSUBA", accuracy.K_MITSUBA / 1000)
+    monkeypatch.setattr(accuracy, "CAMERA_K", accuracy.CAMERA_K / 1000)
     status = cli.main(["check", str(SCENES / "tp02.toml"), "--size", "48x48", "--rays", "64"])
     out = capsys.readouterr().out
     assert status == 1
@@ -193,7 +194,39 @@ def test_heat_map_colours():
     judged = np.array([[True, True], [True, False]])
     outside = np.array([[False, False], [True, False]])
     rgb = check.heat_map(relative, judged, outside)
-    assert tuple(rgb[0, 0]) == tuple(check._RAMP[0].astype(np.uint8))  # the low end: dark blue
-    assert tuple(rgb[0, 1]) == tuple(check._RAMP[-1].astype(np.uint8))  # the high end: red
+    assert tuple(rgb[0, 0]) == tuple(RAMP[0].astype(np.uint8))  # the low end: dark blue
+    assert tuple(rgb[0, 1]) == tuple(RAMP[-1].astype(np.uint8))  # the high end: red
     assert tuple(rgb[1, 0]) == (255, 255, 255)  # outside the tolerance: white
     assert tuple(rgb[1, 1]) == (0, 0, 0)  # not compared: black
+
+
+@pytest.mark.parametrize("variant", check.VARIANTS)
+@pytest.mark.parametrize("name", ["shapes", "tp02-cylinder"])
+def test_scenes_with_every_shape_agree_with_mitsuba(name, variant):
+    """Images and the very same rays: the cylinder (Mitsuba's open cylinder and two disks, mapped
+    back to one id), the disk, the rectangle and the box (Mitsuba's cube) within the tolerance, in
+    both variants, every id disagreement explained."""
+    scene = pyclray.load_scene(SCENES / f"{name}.toml").with_size(*SMALL)
+    images = check.cross_check(scene, variant)
+    assert_passed(images)
+    assert images.ids["unexplained"] == 0
+    assert set(np.unique(images.images["theirs"]["id"])) == set(range(-1, len(scene.shapes)))
+    rays = check.ray_level(scene, variant, n_rays=384, seed=3)
+    assert rays.passed, rays.failures
+
+
+def random_shapes_scene(seed: int, shift: float = 0.0):
+    """One random shape of every type (from the registry) around the origin, moved by ``shift``."""
+    from pyclray.shapes import REGISTRY
+
+    rng = np.random.default_rng(seed)
+    offset = rng.normal(size=3) * shift
+    shapes = tuple(cls.random(rng, offset) for cls in REGISTRY.values())
+    eye = offset + np.array([rng.uniform(-2, 2), rng.uniform(3, 6), rng.uniform(9, 13)])
+    camera = pyclray.Camera(tuple(eye), tuple(offset), (0, 1, 0), 60.0)
+    return pyclray.Scene(camera, pyclray.Image(*SMALL), shapes, source=f"random shapes {seed}")
+
+
+@pytest.mark.parametrize("seed, shift", [(1, 0.0), (2, 100.0)])
+def test_random_scenes_of_every_shape_agree_with_mitsuba(seed, shift):
+    assert_passed(check.cross_check(random_shapes_scene(seed, shift), "scalar_rgb"))

@@ -1,9 +1,9 @@
 """The Mitsuba 3 bridge (pyclray.mitsuba): lazily imported, clip range, the plane's stand-in disk
 and its horizon mask, shape ids in the scalar and JIT variants, Mitsuba's own primary rays.
 
-Tolerances follow the error model of pyclray.check (eps = 2^-24): Mitsuba intersects in float32
+Tolerances follow the error model of pyclray.accuracy (eps = 2^-24): Mitsuba intersects in float32
 world coordinates, so two of its intersections of (nearly) the same ray differ by up to
-k eps (t + L) / cos, L the size of the world coordinates involved (see check.coordinate_scales).
+k eps (t + L) / cos, L the size of the world coordinates involved (see accuracy.world_sizes).
 Measured k <= 1.5 here (the image's rays against sample_ray's, scalar against llvm); k = 4.
 """
 import subprocess
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import check, mitsuba, oracle
+from pyclray import accuracy, mitsuba, oracle
 
 from conftest import REPO, SCENES
 
@@ -62,29 +62,25 @@ def test_render_and_the_cli_do_not_import_mitsuba(tmp_path):
 @pytest.mark.parametrize("path", sorted(SCENES.glob("*.toml")), ids=lambda p: p.name)
 def test_clip_range_holds_every_hit(path):
     """near_clip is below a thousandth of the nearest surface's distance (the depth offset it
-    adds is then exactly accounted for), far_clip beyond the farthest point of every disk."""
+    adds is then exactly accounted for), far_clip beyond every shape's reach (the plane's
+    stand-in disk: tests/test_plane.py)."""
     scene = pyclray.load_scene(path)
     near, far = mitsuba.clip_range(scene)
     eye = np.array(scene.camera.eye)
     for shape in scene.shapes:
-        if shape.type == "sphere":
-            gap = abs(np.linalg.norm(np.subtract(shape.center, eye)) - shape.radius)
-        else:
-            n, h = shape.unit()
-            gap = abs(n @ eye + h)
-            centre, _, radius = mitsuba.plane_disk(shape, scene)
-            assert far > np.hypot(radius, np.linalg.norm(eye - centre)) * 1.01
+        gap = shape.surface_distance(eye[None])[0]
         assert gap == 0 or near <= 1e-3 * gap
+        assert far > shape.extent_from(eye)
 
 
 def test_horizon_mask_marks_what_the_disk_cannot_show():
     """Looking at the horizon, the middle row meets the floor at 5 disk radii: pyclray sees the
     floor, Mitsuba's disk has ended. Exactly those pixels are masked; everywhere else the ids agree."""
     scene = horizon_scene(2e6)
-    _, _, radius = mitsuba.plane_disk(scene.shapes[0], scene)
+    _, _, radius = scene.shapes[0].mitsuba_disk(scene)
     assert 2e6 > 4 * radius
     origins, directions = oracle.camera_rays(scene)
-    mask = mitsuba.plane_beyond_disk(scene, origins, directions)
+    mask = mitsuba.beyond_counterparts(scene, origins, directions)
     ours = pyclray.render(scene)
     for variant in VARIANTS:
         theirs = mitsuba.render(scene, variant)
@@ -98,7 +94,7 @@ def test_horizon_mask_marks_what_the_disk_cannot_show():
 def test_horizon_within_the_disk_is_not_masked():
     scene = horizon_scene(2e4)
     origins, directions = oracle.camera_rays(scene)
-    assert not mitsuba.plane_beyond_disk(scene, origins, directions).any()
+    assert not mitsuba.beyond_counterparts(scene, origins, directions).any()
     ours, theirs = pyclray.render(scene), mitsuba.render(scene, "scalar_rgb")
     np.testing.assert_array_equal(ours["id"], theirs["id"])
     assert (theirs["id"][16] == 0).sum() >= 20  # the far floor is there in Mitsuba too
@@ -127,7 +123,7 @@ def test_ids_map_back_to_pyclray_ids(scene, variant):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     assert set(np.unique(theirs["id"])) == set(range(-1, len(scene.shapes)))
     differ = ours["id"] != theirs["id"]
-    assert not (differ & (cos >= check.SILHOUETTE_COS)).any()
+    assert not (differ & (cos >= accuracy.SILHOUETTE_COS)).any()
     assert differ.sum() <= 4
 
 
@@ -142,7 +138,7 @@ def test_primary_rays_are_the_images_rays(variant):
     rows, columns = np.divmod(np.arange(40 * 30), 40)
     origins, directions = mitsuba.primary_rays(mi_scene, scene, rows, columns)
     _, pixel_directions = oracle.camera_rays(scene)
-    angle = check.angle_between(directions, pixel_directions.reshape(-1, 3))
+    angle = accuracy.angle_between(directions, pixel_directions.reshape(-1, 3))
     assert angle.max() <= 6 * EPSILON
     near, _ = mitsuba.clip_range(scene)
     eye = np.array(scene.camera.eye)
@@ -158,7 +154,7 @@ def test_primary_rays_are_the_images_rays(variant):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     with np.errstate(invalid="ignore"):  # inf - inf on a miss
         depth_error = np.abs(hits["depth"] + along - image["depth"].ravel())
-    scale = check.coordinate_scales(scene)[np.maximum(hits["id"], 0)]
+    scale = accuracy.world_sizes(scene, scene.camera.eye)[np.maximum(hits["id"], 0)]
     tolerance = 4 * EPSILON * (hits["depth"] + scale) / cos
     assert np.all(depth_error[found] <= tolerance[found])
 
@@ -179,7 +175,7 @@ def test_intersect_in_both_variants_agree():
     found = scalar["id"] >= 0
     truth = oracle.trace(scene, origins, directions / np.linalg.norm(directions, axis=1, keepdims=True))
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
-    scale = check.coordinate_scales(scene)[np.maximum(scalar["id"], 0)]
+    scale = accuracy.world_sizes(scene, scene.camera.eye)[np.maximum(scalar["id"], 0)]
     tolerance = 4 * EPSILON * (scalar["depth"] + scale) / cos
     with np.errstate(invalid="ignore"):  # inf - inf on a miss
         depth_error = np.abs(scalar["depth"] - llvm["depth"])

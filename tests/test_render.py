@@ -17,12 +17,13 @@ from pyclray import accuracy, oracle
 from pyclray.device import Variant, context_for, has_fp64, stats
 from pyclray.shapes import Plane, Sphere
 
-# fp32 bounds: 8 ulps of t x 1/|cos| for depth (sx, sy, the normalization, the basis and the
-# intersection each round once or twice: about 6 roundings in the worst chain), 2e-5 / |cos| for
-# normals (they are normalized from vectors accurate to a few ulps; 2e-5 leaves headroom for the
-# 1/|cos| growth near silhouettes that the error model bounds only to first order).
-DEPTH_ULPS = 8.0
-NORMAL = 2e-5
+# fp32 bounds, the error model's targets (pyclray.accuracy): 8 ulps of t x 1/|cos| for depth (sx,
+# sy, the normalization, the basis and the intersection each round once or twice: about 6
+# roundings in the worst chain), 2e-5 / |cos| for normals (they are normalized from vectors
+# accurate to a few ulps; 2e-5 leaves headroom for the 1/|cos| growth near silhouettes that the
+# error model bounds only to first order).
+DEPTH_ULPS = accuracy.FP32_DEPTH_ULPS
+NORMAL = accuracy.FP32_NORMAL
 
 
 def small(scene, size=96):
@@ -32,14 +33,14 @@ def small(scene, size=96):
 def assert_matches_oracle(scene, frame=None, precision="fp32"):
     ref = accuracy.reference(scene)
     frame = frame if frame is not None else pyclray.render(scene, precision=precision)
-    result = accuracy.compare(frame, ref)
+    result = accuracy.compare(frame, ref, engine=precision)
     assert result["id_mismatch"] == 0, result
     assert result["miss_mismatch"] == 0, result
     if precision == "fp32":
         assert result["depth_ulps_max"] <= DEPTH_ULPS, result
         assert result["normal_cos_max"] <= NORMAL, result
     else:
-        assert result["depth_rel_cos_max"] <= 1e-12, result
+        assert result["depth_rel_cos_max"] <= accuracy.FP64_DEPTH_RELATIVE, result
     # silhouettes and near-ties: ids may differ, but a pixel that hits must hit something real
     assert np.all(np.isfinite(frame["depth"]) == (frame["id"] >= 0))
     return result

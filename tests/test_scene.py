@@ -219,6 +219,12 @@ fov = 45.0
         ('type = "plane"\nnormal = [0.0, 1.0, 0.0]\noffset = 1e39', "offset", True),
         ('type = "sphere"\ncenter = [1e300, 0.0, 0.0]\nradius = 1.0', "center", False),
         ('type = "sphere"\ncenter = [-1.7e308, 0.0, 0.0]\nradius = 1.0', "center", False),
+        ('type = "cylinder"\np0 = [0.0, 0.0, -3e19]\np1 = [0.0, 1.0, -3e19]\nradius = 1.0', "p0", True),
+        ('type = "cylinder"\np0 = [0.0, 0.0, -3.0]\np1 = [0.0, 1.0, -3.0]\nradius = 3e19', "radius", True),
+        ('type = "disk"\ncenter = [0.0, -1e39, 0.0]\nnormal = [0.0, 1.0, 0.0]\nradius = 1.0', "center", True),
+        ('type = "rectangle"\ncenter = [0.0, 0.0, -3.0]\nu = [3e19, 0.0, 0.0]\nv = [0.0, 1.0, 0.0]', "u", True),
+        ('type = "box"\ncenter = [0.0, 0.0, -3.0]\nsize = [1.0, 5e19, 1.0]', "size", True),
+        ('type = "box"\ncenter = [1e300, 0.0, 0.0]\nsize = [1.0, 1.0, 1.0]', "center", False),
     ],
 )
 def test_geometry_beyond_the_precision_is_a_scene_error_naming_the_key(tmp_path, shape, key, fp64_renders):

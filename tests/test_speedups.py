@@ -64,7 +64,7 @@ def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
 
 def without_culling(monkeypatch):
     import pyclray.culling as culling
-    monkeypatch.setattr(culling, "BOUNDS", {})
+    monkeypatch.setattr(culling, "ENABLED", False)
     monkeypatch.setattr(render_module, "_prepared", render_module.OrderedDict())
 
 

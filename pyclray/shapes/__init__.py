@@ -1,13 +1,17 @@
-"""The shape types. One shape = one kernel file (kernels/<type>.cl), one module here (its frozen
-dataclass, its packed struct and its float64 oracle) and one test file (tests/test_<type>.py).
-Adding a shape touches those three places and the registry line below, nothing else.
+"""The shape types. One shape = one module here (its frozen dataclass and everything about it: keys
+and validation, packed struct, float64 oracle, bounds, error-model terms, Mitsuba counterpart; see
+base.py), one kernel file (kernels/<type>.cl), its tests, and one line in the registry below.
 """
 from __future__ import annotations
 
+from .box import Box
+from .cylinder import Cylinder
+from .disk import Disk
 from .plane import Plane
+from .rectangle import Rectangle
 from .sphere import Sphere
 
 # type name in scene files -> shape class, in the order the kernel visits them
-REGISTRY = {cls.type: cls for cls in (Plane, Sphere)}
+REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box)}
 
-__all__ = ["REGISTRY", "Plane", "Sphere"]
+__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Plane", "Rectangle", "Sphere"]

@@ -8,7 +8,11 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape
+from .base import Shape, frame_columns, to_world
+
+# Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
+# disk's error does not depend on its size; a rectangle's, two float32 triangles, does)
+DISK_SCALE = 1e4
 
 
 @dataclass(frozen=True)
@@ -19,6 +23,7 @@ class Plane(Shape):
 
     type = "plane"
     c_type = "Plane"
+    bounded = False
     keys = ("normal", "offset", "point")
     required = ("normal",)
     struct = Struct(
@@ -89,3 +94,46 @@ class Plane(Shape):
     def oracle_normal(self, points):
         n, _ = self.unit()
         return np.broadcast_to(n, points.shape)
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        normal = rng.normal(size=3) * 10 ** rng.uniform(-1, 1)
+        return cls(tuple(normal), float(-normal @ np.broadcast_to(shift, 3) + rng.uniform(-2, 2) * np.linalg.norm(normal)))
+
+    def surface_distance(self, points):
+        n, h = self.unit()
+        return np.abs(np.asarray(points, np.float64) @ n + h)
+
+    # -- the error model -----------------------------------------------------------------------
+    def foot(self, point) -> np.ndarray:
+        """The point of the plane nearest to ``point``."""
+        n, h = self.unit()
+        point = np.asarray(point, np.float64)
+        return point - (point @ n + h) * n
+
+    def anchor(self, point):
+        """The foot of the point on the plane: the kernel's offset h is measured from the frame's
+        origin, Mitsuba's disk is centred at the eye's foot."""
+        return self.foot(point)
+
+    def extent_from(self, point) -> float:
+        return float(self.surface_distance(np.asarray(point, np.float64)[None])[0])
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_disk(self, scene):
+        """(centre, frame columns (t1, t2, n), radius) of the disk standing in for the plane:
+        centred at the eye's foot, DISK_SCALE times the scene's extent."""
+        from ..mitsuba import extent
+
+        n, _ = self.unit()
+        return self.foot(scene.camera.eye), frame_columns(n), DISK_SCALE * extent(scene)
+
+    def mitsuba_shapes(self, scene):
+        centre, (t1, t2, n), radius = self.mitsuba_disk(scene)
+        return [{"type": "disk", "to_world": to_world((t1 * radius, t2 * radius, n * radius), centre)}]
+
+    def mitsuba_covers(self, scene, points):
+        """Within the stand-in disk; beyond its edge (near the horizon) Mitsuba sees nothing."""
+        centre, _, radius = self.mitsuba_disk(scene)
+        return np.linalg.norm(np.asarray(points) - centre, axis=-1) <= radius * (1 - 1e-6)

@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape
+from .base import Shape, distance
 
 
 def eye_term(F, radius):
@@ -27,6 +27,7 @@ class Sphere(Shape):
 
     type = "sphere"
     c_type = "Sphere"
+    solid = True
     keys = ("center", "radius")
     required = ("center", "radius")
     struct = Struct(
@@ -48,8 +49,7 @@ class Sphere(Shape):
         return cls(table["center"], table["radius"], name)
 
     def lengths(self, eye) -> dict[str, float]:
-        with np.errstate(over="ignore"):  # an overflow is an inf, which the range check refuses
-            return {"center": math.hypot(*np.subtract(self.center, eye)), "radius": self.radius}
+        return {"center": distance(self.center, eye), "radius": self.radius}
 
     @classmethod
     def _pack(cls, out, spheres, origin, rotation):
@@ -81,3 +81,37 @@ class Sphere(Shape):
     def oracle_normal(self, points):
         n = points - np.array(self.center)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), float(10 ** rng.uniform(-1.3, 0.5)))
+
+    def surface_distance(self, points):
+        return np.abs(np.linalg.norm(np.asarray(points, np.float64) - np.array(self.center), axis=-1) - self.radius)
+
+    # -- bounds --------------------------------------------------------------------------------
+    @classmethod
+    def world_bounds(cls, spheres):
+        centre, radius = cls.bounding_spheres(spheres)
+        return np.stack([centre - radius[:, None], centre + radius[:, None]], axis=1)
+
+    @classmethod
+    def bounding_spheres(cls, spheres):
+        centre = np.array([s.center for s in spheres], np.float64).reshape(-1, 3)
+        radius = np.array([s.radius for s in spheres], np.float64)
+        return centre, radius * (1 + 1e-12)  # rounding of lo = c - r: one float64 ulp, widened
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point):
+        return np.array(self.center)
+
+    def curvature_radius(self) -> float:
+        return self.radius
+
+    def extent_from(self, point) -> float:
+        return float(np.linalg.norm(np.subtract(self.center, point))) + self.radius
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        return [{"type": "sphere", "center": list(self.center), "radius": self.radius}]

@@ -31,14 +31,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import accuracy, oracle, shading
-from .lighting import DirectionalLight, Material, PointLight, Shading, effective_lights
+from .. import accuracy, shading
+from ..lighting import DirectionalLight, Material, PointLight, Shading, effective_lights
 
 EPSILON = 2.0**-24
 MITSUBA_RAY_EPSILON = 1500 * EPSILON  # Mitsuba 3's math::RayEpsilon<float>
 PYCLRAY_OFFSET_K = 16  # kernels/shading.h's SHADOW_OFFSET_K
 SHADOW_EDGE_K = 4
-K_ORACLE = 4.0
 
 
 def diffuse_version(scene):
@@ -58,7 +57,7 @@ def _emitter(light) -> dict:
 
 def direct_scene_dict(scene, light, variant: str) -> dict:
     """Mitsuba's scene for one light: the shapes with two-sided diffuse BSDFs, the direct integrator."""
-    from . import mitsuba
+    from .. import mitsuba
 
     out = mitsuba.scene_dict(scene, variant)
     out["integrator"] = {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}
@@ -75,7 +74,7 @@ def direct_scene_dict(scene, light, variant: str) -> dict:
 
 def render_direct(scene, variant: str = "scalar_rgb") -> np.ndarray:
     """pi x Mitsuba's direct illumination of the scene's diffuse version, (height, width, 3) float64."""
-    from .mitsuba import import_mitsuba
+    from ..mitsuba import import_mitsuba
 
     mi = import_mitsuba(variant)
     total = np.zeros((scene.image.height, scene.image.width, 3))
@@ -107,15 +106,15 @@ class ShadedCheck:
 
 def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> ShadedCheck:
     """pyclray's shaded image (fp32) against pi x Mitsuba's direct integrator, on the diffuse version."""
-    from . import check
-    from .render import render
+    from ..mitsuba import beyond_counterparts
+    from ..render import render
 
     scene = diffuse_version(scene)
     if variant.startswith("llvm") and any(isinstance(light, DirectionalLight) for light in effective_lights(scene)):
         # Mitsuba 3.9.1's llvm variants abort the process in their LLVM back end on a directional
         # emitter under the direct integrator (AVX-512: "Cannot select" an fma of v16f32)
         variant = "scalar_rgb"
-    ours = render(scene, aovs=("id", "shaded"), device=device)
+    ours = render(scene, aovs=("depth", "id", "shaded"), device=device)
     theirs = render_direct(scene, variant)
     ref = accuracy.reference(scene)
     O, D = ref["origins"], ref["directions"]
@@ -127,29 +126,20 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
-    edge = np.any(edges, axis=0)
-    # the error model's bounds on each engine's hit and normal, made bounds on the colour
-    index = np.maximum(ref["id"], 0)
-    eye = np.array(scene.camera.eye)
-    t = np.where(np.isfinite(ref["depth"]), ref["depth"], 0.0)
-    frame_size = np.array([np.linalg.norm(np.asarray(_anchor(s, eye)) - eye) for s in scene.shapes] or [0.0])[index]
-    radius = np.array([getattr(s, "radius", np.inf) for s in scene.shapes] or [np.inf])[index]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        our_depth = K_ORACLE * EPSILON * (t + frame_size) / ref["cos"]
-        our_normal = K_ORACLE * EPSILON + our_depth / radius
-    their_depth, their_normal = check.tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
+    # the error model's bounds on each engine's hit point and normal, made bounds on the colour
+    our_depth, our_normal = accuracy.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", scene.camera.eye)
+    their_depth, their_normal = accuracy.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
     ours_tol, jump = shading.tolerance(scene, D, ref, our_depth, our_normal, EPSILON)
     theirs_tol, jump2 = shading.tolerance(scene, D, ref, their_depth, their_normal, EPSILON)
     tolerance = ours_tol + theirs_tol
-    from .mitsuba import plane_beyond_disk
-
-    beyond = plane_beyond_disk(scene, O, D)
-    silhouette = ref["silhouette"]
-    other = ours["id"] != ref["id"]
-    terminator = jump | jump2
+    # the rays outside the error model, by either engine's rules (accuracy.judged_pixels)
+    outside = accuracy.judged_pixels(ours, ref, "fp32")
+    for name, mask in accuracy.judged_pixels({}, ref, "mitsuba").items():
+        outside[name] = outside[name] | mask
     left_out = {
-        "silhouette": silhouette, "id differs from the oracle": other & ~silhouette,
-        "terminator": terminator, "shadow edge": edge, "plane beyond Mitsuba's disk": beyond,
+        "silhouette": outside["silhouette"], "near tie": outside["near_tie"], "edge": outside["edge"],
+        "id differs from the oracle": ours["id"] != ref["id"], "terminator": jump | jump2,
+        "shadow edge": np.any(edges, axis=0), "beyond Mitsuba's counterpart": beyond_counterparts(scene, O, D),
     }
     excluded = np.zeros(hit.shape, bool)
     counts = {}
@@ -174,21 +164,11 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
     )
 
 
-def _anchor(shape, eye):
-    """The point a shape's intersection measures from (the sphere's centre; a plane: the eye's foot)."""
-    if hasattr(shape, "anchor"):
-        return shape.anchor(eye)
-    if hasattr(shape, "center"):
-        return shape.center
-    n, h = shape.unit()
-    return eye - (n @ eye + h) * n
-
-
 def format_shaded_check(result: ShadedCheck) -> str:
     lines = [
         f"shaded (diffuse version: specular, ambient, background 0) against pi x Mitsuba's direct integrator ({result.variant})",
         "  tolerance per pixel: pyclray.shading.tolerance of pyclray's (K=4 vs the oracle) and of Mitsuba's",
-        "  (K=6, plus the cameras) hit-point and normal bounds, added; shadow edges: visibility changes",
+        "  (K=6, plus the cameras) hit-point and normal bounds (pyclray.accuracy), added; shadow edges: visibility changes",
         f"  within {SHADOW_EDGE_K} x max(pyclray's 16 eps (|p| + R), Mitsuba's 1500 eps (1 + |p|)) of the hit",
         f"  judged {result.pixels} pixels ({result.lit} lit, {result.shadowed} in shadow); max |difference| "
         f"{result.max_difference:.3g}, median tolerance {result.median_tolerance:.3g}; worst difference / tolerance "

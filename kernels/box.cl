@@ -1,0 +1,103 @@
+/* Box: the slab test in the box's own axes e_k. A ray origin + s D is inside slab k where
+ * lo_k <= s (D . e_k) <= hi_k, with lo_k, hi_k = (C - origin) . e_k -+ size_k / 2 computed on the
+ * host in float64 for the frame origin (an eye next to a face keeps its distance to it). The
+ * entry is the largest slab entry, the exit the smallest slab exit: which slabs those are, and
+ * whether the ray meets the box, is decided from the ray's point nearest the centre (see
+ * box_slabs); the distances come from the packed offsets.
+ *
+ * Exact for rays parallel to a face: D . e_k = +-0 turns lo_k / 0 and hi_k / 0 into infinities of
+ * the right signs (the whole line inside the slab, or none of it). Only an origin exactly on a face
+ * plane, running along it, gives 0 / 0 = NaN for one end of that slab: the slab's other end is
+ * taken (an edge case where either answer is right). A ray starting inside has entry <= 0 < exit
+ * and sees the far side. */
+
+typedef struct {
+    realv entry, exit;  /* along the ray, from the packed offsets (exact for camera rays) */
+    intv entry_axis, exit_axis, overlap;
+    vec3v along;  /* D . e_k */
+} BoxSlabs;
+
+/* one slab k, in the decision's terms (t: along the ray from its point nearest the centre):
+ * its entry and exit kept where they are the largest entry and the smallest exit so far (the first
+ * slab on a tie) */
+inline void box_slab(realv* entry, realv* exit, intv* entry_axis, intv* exit_axis, const int k,
+                     const realv low, const realv high, const realv along)
+{
+    const realv t_low = low / along, t_high = high / along;
+    /* the nearer and the farther end; a NaN end (0 / 0) gives way to the other */
+    const realv near = (t_low < t_high || t_high != t_high) ? t_low : t_high;
+    const realv far = (t_low > t_high || t_high != t_high) ? t_low : t_high;
+    const intv later = SPLAT_INT(k == 0) || near > *entry;
+    const intv sooner = SPLAT_INT(k == 0) || far < *exit;
+    *entry = later ? near : *entry;
+    *entry_axis = later ? SPLAT_INT(k) : *entry_axis;
+    *exit = sooner ? far : *exit;
+    *exit_axis = sooner ? SPLAT_INT(k) : *exit_axis;
+}
+
+/* the distance along the ray to face k's plane (the low or the high one) from the packed offsets */
+inline realv box_plane(const realv low, const realv high, const realv along, const intv high_side)
+{
+    return (high_side ? high : low) / along;
+}
+
+inline BoxSlabs box_slabs(__global const Box* box, const RayPacket* ray)
+{
+    const vec3v D = ray->dir;
+    const vec3v e0 = v3_splat(box->axis0), e1 = v3_splat(box->axis1), e2 = v3_splat(box->axis2);
+    BoxSlabs slabs;
+    slabs.along = v3(v3_dot(D, e0), v3_dot(D, e1), v3_dot(D, e2));
+    /* camera rays (from the frame's origin): the offsets as packed; cast and shadow rays: their origin's */
+    const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    const vec3v F = FROM_EYE(ray) ? v3_splat(box->center) : v3_sub(v3_splat(box->center), ray->origin);
+    const vec3v o = FROM_EYE(ray) ? zero : v3(v3_dot(ray->origin, e0), v3_dot(ray->origin, e1), v3_dot(ray->origin, e2));
+    /* Which faces the ray enters and leaves by, and whether it meets the box at all, decided from
+     * the ray's point nearest the centre, P = -D x (F x D) / a (from the centre): small coordinates
+     * that keep the camera frame's digits, where the slab offsets of a far box are large numbers
+     * whose rounding would blur its edges. */
+    const vec3v P = v3_scale(v3_cross(D, v3_cross(F, D)), SPLAT(-1) / ray->a);
+    const vec3v nearest = v3(v3_dot(P, e0), v3_dot(P, e1), v3_dot(P, e2));
+    realv t_entry = SPLAT(-MISS), t_exit = SPLAT(MISS);
+    slabs.entry_axis = slabs.exit_axis = SPLAT_INT(0);
+    box_slab(&t_entry, &t_exit, &slabs.entry_axis, &slabs.exit_axis, 0, SPLAT(-box->half_size.x) - nearest.x, SPLAT(box->half_size.x) - nearest.x, slabs.along.x);
+    box_slab(&t_entry, &t_exit, &slabs.entry_axis, &slabs.exit_axis, 1, SPLAT(-box->half_size.y) - nearest.y, SPLAT(box->half_size.y) - nearest.y, slabs.along.y);
+    box_slab(&t_entry, &t_exit, &slabs.entry_axis, &slabs.exit_axis, 2, SPLAT(-box->half_size.z) - nearest.z, SPLAT(box->half_size.z) - nearest.z, slabs.along.z);
+    slabs.overlap = t_entry <= t_exit;
+    /* The distances: the entry and exit faces' planes from the packed offsets (exact for camera
+     * rays: an eye next to a face keeps its distance to it). Moving along +e_k the ray enters by the
+     * low face and leaves by the high one. */
+    const realv along_in = slabs.entry_axis == SPLAT_INT(0) ? slabs.along.x : (slabs.entry_axis == SPLAT_INT(1) ? slabs.along.y : slabs.along.z);
+    const realv along_out = slabs.exit_axis == SPLAT_INT(0) ? slabs.along.x : (slabs.exit_axis == SPLAT_INT(1) ? slabs.along.y : slabs.along.z);
+    const realv low0 = SPLAT(box->axis0.w) - o.x, low1 = SPLAT(box->axis1.w) - o.y, low2 = SPLAT(box->axis2.w) - o.z;
+    const realv high0 = SPLAT(box->high.x) - o.x, high1 = SPLAT(box->high.y) - o.y, high2 = SPLAT(box->high.z) - o.z;
+    const realv low_in = slabs.entry_axis == SPLAT_INT(0) ? low0 : (slabs.entry_axis == SPLAT_INT(1) ? low1 : low2);
+    const realv high_in = slabs.entry_axis == SPLAT_INT(0) ? high0 : (slabs.entry_axis == SPLAT_INT(1) ? high1 : high2);
+    const realv low_out = slabs.exit_axis == SPLAT_INT(0) ? low0 : (slabs.exit_axis == SPLAT_INT(1) ? low1 : low2);
+    const realv high_out = slabs.exit_axis == SPLAT_INT(0) ? high0 : (slabs.exit_axis == SPLAT_INT(1) ? high1 : high2);
+    slabs.entry = box_plane(low_in, high_in, along_in, along_in < 0);
+    slabs.exit = box_plane(low_out, high_out, along_out, along_out > 0);
+    return slabs;
+}
+
+/* The entry if it lies ahead, else the exit (from inside: the far side); MISS if the slabs do not
+ * overlap or lie behind. */
+inline realv box_hit(__global const Box* box, const RayPacket* ray)
+{
+    const BoxSlabs slabs = box_slabs(box, ray);
+    const realv s = slabs.entry > 0 ? slabs.entry : slabs.exit;
+    return (slabs.overlap && s > 0 && s < MISS) ? s : SPLAT(MISS);
+}
+/* The outward normal of the face hit: against the ray along the entry slab's axis, with it along
+ * the exit slab's; the box's world axes are packed as is, so an unrotated box's normals are exact. */
+inline vec3v box_normal(__global const Box* box, const RayPacket* ray, __global const Camera* camera)
+{
+    const BoxSlabs slabs = box_slabs(box, ray);
+    const intv entering = slabs.entry > 0;
+    const intv k = entering ? slabs.entry_axis : slabs.exit_axis;
+    const realv along = k == SPLAT_INT(0) ? slabs.along.x : (k == SPLAT_INT(1) ? slabs.along.y : slabs.along.z);
+    const vec3v e = v3_select(v3_select(v3_splat(box->world_axis2), v3_splat(box->world_axis1), k == SPLAT_INT(1)),
+                              v3_splat(box->world_axis0), k == SPLAT_INT(0));
+    /* entering while moving along +e (or leaving while moving along -e): the -e face */
+    const realv sign = (along > 0) == entering ? SPLAT(-1) : SPLAT(1);
+    return v3_scale(e, sign);
+}

@@ -1,0 +1,120 @@
+/* Cylinder: the points within r of the segment p0-p1 (unit axis A), closed by two caps or open.
+ *
+ * Side. With F = p0 - origin, the ray origin + s D meets the infinite tube where
+ * |s D_perp - F_perp|^2 = r^2 (perp: the part across the axis), a s^2 - 2 b s + c = 0 with
+ * a = |D x A|^2, b = (F x A) . (D x A), c = |F x A|^2 - r^2: cross products instead of D - (D.A) A,
+ * which cancels for rays along the axis. For camera rays c is the eye's squared distance from the
+ * axis minus r^2, the same for every pixel: the host computes it once with error-free float64 sums.
+ * The discriminant b^2 - a c equals a r^2 - (F . (D x A))^2 (Lagrange's identity across the axis);
+ * as for the sphere, the kernel takes the form whose terms are smaller, and the stable roots c/q
+ * and q/a with q = b + sign(b) sqrt(disc). A root is on the side where its axial coordinate lies
+ * in [0, |p1 - p0|].
+ * Caps. The planes through p0 and p1 across the axis: s = d0 / (D . A) and d1 / (D . A), with
+ * d0, d1 = (p0 - o) . A, (p1 - o) . A exact from the host for camera rays; a hit where the point is
+ * within r of the cap's centre.
+ * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
+
+typedef struct {
+    vec3v DxA;
+    realv disc, triple;
+    realv best, best_key;
+    intv kind;  /* the winner: 0 none, 1 side (near root), 2 side (far root), 3 cap p0, 4 cap p1 */
+} CylinderHit;
+
+/* a candidate s, kept where it is a hit ahead and nearer than the best so far by its key (the
+ * first on a tie; NaN, of a ray along the axis or in a cap's plane, and +-inf never are) */
+inline void cylinder_candidate(CylinderHit* hit, const realv s, const realv key, const intv on_surface, const int kind)
+{
+    const intv nearer = on_surface && s > 0 && s < MISS && key < hit->best_key;
+    hit->best = nearer ? s : hit->best;
+    hit->best_key = nearer ? key : hit->best_key;
+    hit->kind = nearer ? SPLAT_INT(kind) : hit->kind;
+}
+
+inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const RayPacket* ray)
+{
+    CylinderHit hit;
+    const vec3v A = v3_splat(cylinder->axis);
+    const vec3v D = ray->dir;
+    const realv r2 = SPLAT(cylinder->p0.w);
+    vec3v F, FxA;
+    realv c, d0, d1;
+    if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: the host's terms */
+        F = v3_splat(cylinder->p0);
+        FxA = v3_cross(F, A);
+        c = SPLAT(cylinder->axis.w);
+        d0 = SPLAT(cylinder->world_axis.w);
+        d1 = SPLAT(cylinder->d1);
+    } else {  /* cast and shadow rays */
+        F = v3_sub(v3_splat(cylinder->p0), ray->origin);
+        FxA = v3_cross(F, A);
+        c = v3_dot(FxA, FxA) - r2;
+        d0 = v3_dot(F, A);
+        d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
+    }
+    hit.DxA = v3_cross(D, A);
+    const realv a = v3_dot(hit.DxA, hit.DxA);
+    const realv b = v3_dot(FxA, hit.DxA);
+    hit.triple = v3_dot(F, hit.DxA);
+    const realv perp2 = hit.triple * hit.triple;
+    const realv ac = a * c;
+    const intv from_b = b * b + v_abs(ac) < a * r2 + perp2;
+    hit.disc = from_b ? b * b - ac : a * r2 - perp2;
+    const realv dA = v3_dot(D, A);
+    hit.best = hit.best_key = SPLAT(MISS);
+    hit.kind = SPLAT_INT(0);
+    /* side: the stable roots (NaN where disc < 0), kept between the end planes. A root's axial
+     * coordinate from p0, s (D . A) - d0, cancels for a far cylinder (both terms large); from the
+     * ray's point nearest the axis it is z* -+ sqrt(disc) (D . A) / a, z* = -A . (D x (F x D)) / a,
+     * whose cross products keep the camera frame's digits, but which cancels for a ray along the
+     * axis (a small). Each lane takes the form whose terms are smaller. */
+    const realv q = b + v_copysign(v_sqrt(hit.disc), b);
+    const realv s_q = q / a, s_c = c / q;
+    const realv near = s_q < s_c ? s_q : s_c, far = s_q < s_c ? s_c : s_q;
+    const realv z_star = -v3_dot(A, v3_cross(D, v3_cross(F, D))) / a;
+    const realv spread = v_sqrt(hit.disc) * dA / a;
+    const realv length = SPLAT(cylinder->p1.w);
+    const intv from_nearest = v_abs(z_star) + v_abs(spread) < v_abs(near * dA) + v_abs(d0);
+    const realv z_near = from_nearest ? z_star - spread : near * dA - d0;
+    const realv z_far = from_nearest ? z_star + spread : far * dA - d0;
+    const intv tube = hit.disc >= 0;
+    /* Which candidate is nearest is decided, where z* is well conditioned, on their offsets from
+     * the ray's point nearest the axis (small numbers: -+sqrt(disc) / a for the side,
+     * -z* / (D . A) and (length - z*) / (D . A) for the caps), not on their distances, which for a
+     * far cylinder are large numbers whose rounding would mix up a cap and the side near the rim. */
+    const realv root_offset = v_sqrt(hit.disc) / a;
+    cylinder_candidate(&hit, near, from_nearest ? -root_offset : near, tube && z_near >= 0 && z_near <= length, 1);
+    cylinder_candidate(&hit, far, from_nearest ? root_offset : far, tube && z_far >= 0 && z_far <= length, 2);
+    /* caps: the end planes, kept where the hit point is within r of the cap's centre; that point
+     * is A x (D x F_end) / (A . D) from it (see kernels/disk.cl), not s D - F_end */
+    if (cylinder->caps) {
+        const vec3v F1 = FROM_EYE(ray) ? v3_splat(cylinder->p1) : v3_sub(v3_splat(cylinder->p1), ray->origin);
+        const realv s0 = d0 / dA, s1 = d1 / dA;
+        const vec3v R0 = v3_cross(A, v3_cross(D, F)), R1 = v3_cross(A, v3_cross(D, F1));
+        cylinder_candidate(&hit, s0, from_nearest ? -z_star / dA : s0, v3_dot(R0, R0) <= r2 * dA * dA, 3);
+        cylinder_candidate(&hit, s1, from_nearest ? (length - z_star) / dA : s1, v3_dot(R1, R1) <= r2 * dA * dA, 4);
+    }
+    return hit;
+}
+
+inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ray)
+{
+    return cylinder_intersect(cylinder, ray).best;
+}
+
+/* The outward unit normal in world space. On a cap: the axis out of the solid (packed in world
+ * space, exact). On the side: the hit's offset from the axis R, from the perpendicular without
+ * subtracting large nearly equal vectors, as for the sphere: a R = -+sqrt(disc) D_perp - triple (D x A)
+ * (near root: -, far root: +), D_perp = A x (D x A); the open tube's inner side has the same
+ * outward normal. */
+inline vec3v cylinder_normal(__global const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
+{
+    const CylinderHit hit = cylinder_intersect(cylinder, ray);
+    const realv side = hit.kind == SPLAT_INT(1) ? SPLAT(-1) : SPLAT(1);
+    const vec3v D_perp = v3_cross(v3_splat(cylinder->axis), hit.DxA);
+    const vec3v radial = v3_sub(v3_scale(D_perp, side * v_sqrt(hit.disc)), v3_scale(hit.DxA, hit.triple));
+    const vec3v outward = world_from_frame(camera, v3_normalize(radial));
+    const vec3v axis = v3_splat(cylinder->world_axis);
+    const vec3v cap = v3_scale(axis, hit.kind == SPLAT_INT(3) ? SPLAT(-1) : SPLAT(1));
+    return v3_select(outward, cap, hit.kind >= SPLAT_INT(3));
+}

@@ -1,0 +1,23 @@
+/* Disk: n . (p - C) = 0 and |p - C| <= r. In the frame, h = n . (origin - C) comes from the host in
+ * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D). The hit point
+ * from the centre, s D - F (F = C - origin), cancels for a far disk (s D and F are large, their
+ * difference small); it equals n x (D x F) / (n . D), whose cross product keeps the digits of the
+ * small sideways offsets of the camera frame, so the border is as sharp far away as near. */
+
+inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
+{
+    const vec3v n = v3_splat(disk->normal);
+    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    const vec3v F = FROM_EYE(ray) ? v3_splat(disk->center) : v3_sub(v3_splat(disk->center), ray->origin);
+    const realv h = FROM_EYE(ray) ? SPLAT(disk->normal.w) : SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
+    /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit */
+    const realv s = -h / v3_dot(n, ray->dir);
+    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
+    return (s > 0 && v3_dot(P, P) <= SPLAT(disk->center.w)) ? s : SPLAT(MISS);
+}
+
+/* The disk's own normalized normal in world space (packed as is), never flipped. */
+inline vec3v disk_normal(__global const Disk* disk, const RayPacket* ray, __global const Camera* camera)
+{
+    return v3_splat(disk->world_normal);
+}

@@ -1,0 +1,23 @@
+/* Rectangle: the points C + a u + b v with |a| <= 1 and |b| <= 1. In the frame, h = n . (origin - C)
+ * comes from the host in float64 (normal.w), and a, b of a point P - C are its dot products with the
+ * dual vectors of u and v (host-side float64: exact for sides orthogonal within 1e-6). The hit
+ * point from the centre is n x (D x F) / (n . D) rather than s D - F, which cancels far away (see
+ * kernels/disk.cl). */
+
+inline realv rectangle_hit(__global const Rectangle* rectangle, const RayPacket* ray)
+{
+    const vec3v n = v3_splat(rectangle->normal);
+    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    const vec3v F = FROM_EYE(ray) ? v3_splat(rectangle->center) : v3_sub(v3_splat(rectangle->center), ray->origin);
+    const realv h = FROM_EYE(ray) ? SPLAT(rectangle->normal.w) : SPLAT(rectangle->normal.w) + v3_dot(n, ray->origin);
+    const realv s = -h / v3_dot(n, ray->dir);  /* +-inf or NaN for a parallel ray: not a hit */
+    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
+    const realv a = v3_dot(P, v3_splat(rectangle->u_dual)), b = v3_dot(P, v3_splat(rectangle->v_dual));
+    return (s > 0 && v_abs(a) <= 1 && v_abs(b) <= 1) ? s : SPLAT(MISS);
+}
+
+/* normalize(u x v) in world space (packed as is), never flipped. */
+inline vec3v rectangle_normal(__global const Rectangle* rectangle, const RayPacket* ray, __global const Camera* camera)
+{
+    return v3_splat(rectangle->world_normal);
+}

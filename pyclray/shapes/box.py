@@ -1,0 +1,168 @@
+"""The box: a solid of edge lengths ``size`` along its own axes, the world's axes rotated by
+``angle`` degrees about ``axis`` (right-handed), centred at ``center``."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError, norm3, number, vector3
+from ..exact import dot2
+from ..layout import Struct
+from .base import Shape, padded_bounds, to_world, distance
+
+
+def rotation(axis, angle_degrees) -> np.ndarray:
+    """world_from_box (columns: the box's axes in world space), Rodrigues' formula in float64;
+    the identity, exactly, without an axis or at angle 0."""
+    if axis is None or angle_degrees == 0:
+        return np.eye(3)
+    k = np.asarray(axis, np.float64) / norm3(axis)
+    theta = math.radians(angle_degrees)
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) * math.cos(theta) + math.sin(theta) * cross + (1 - math.cos(theta)) * np.outer(k, k)
+
+
+@dataclass(frozen=True)
+class Box(Shape):
+    center: tuple[float, float, float]
+    size: tuple[float, float, float]
+    axis: tuple[float, float, float] | None = None
+    angle: float = 0.0
+    name: str = "box"
+
+    type = "box"
+    c_type = "Box"
+    keys = ("center", "size", "axis", "angle")
+    required = ("center", "size")
+    solid = True
+    struct = Struct(
+        "Box",
+        (
+            ("axis0", "real4"),  # the box's first axis in the frame; w: its slab's low offset
+            ("axis1", "real4"),
+            ("axis2", "real4"),
+            ("high", "real4"),  # the three slabs' high offsets
+            ("center", "real4"),  # the centre in the frame; w unused
+            ("half_size", "real4"),  # half the edge lengths
+            ("world_axis0", "real4"),  # the box's axes in world space (the faces' normals)
+            ("world_axis1", "real4"),
+            ("world_axis2", "real4"),
+            ("id", "int"),
+        ),
+        "Box: a ray o + s D is inside slab k where lo_k <= s (D . axis_k) <= hi_k, lo_k and hi_k = "
+        "(center - o) . axis_k -+ size_k / 2, exact for the frame origin; center and half for the "
+        "slab test from the ray's point nearest the centre.",
+    )
+
+    def __post_init__(self):
+        object.__setattr__(self, "center", vector3("center", self.center))
+        size = vector3("size", self.size)
+        if not all(s > 0 for s in size):
+            raise SceneError(f"expected three numbers > 0, got {list(size)}", key="size")
+        object.__setattr__(self, "size", size)
+        if self.axis is not None:
+            axis = vector3("axis", self.axis)
+            if norm3(axis) == 0:
+                raise SceneError("expected a non-zero rotation axis, got [0, 0, 0]", key="axis")
+            object.__setattr__(self, "axis", axis)
+        angle = number("angle", self.angle)
+        if self.axis is None and angle != 0:
+            raise SceneError("expected an axis to rotate about (key 'axis') with a non-zero angle", key="angle")
+        object.__setattr__(self, "angle", angle)
+
+    @classmethod
+    def _from_table(cls, table, name):
+        return cls(table["center"], table["size"], table.get("axis"), table.get("angle", 0.0), name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "size": distance(self.size, 0.0)}
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py):
+        axis-aligned one time in four, else rotated."""
+        size = tuple(10 ** rng.uniform(-1, 0.4, 3))
+        centre = tuple(rng.uniform(-3, 3, 3) + shift)
+        if rng.integers(0, 4) == 0:
+            return cls(centre, size)
+        return cls(centre, size, tuple(rng.normal(size=3)), float(rng.uniform(-180, 180)))
+
+    def axes(self) -> np.ndarray:
+        """world_from_box: the box's unit axes as columns, float64."""
+        return rotation(self.axis, self.angle)
+
+    def half(self) -> np.ndarray:
+        return np.array(self.size) / 2
+
+    @classmethod
+    def _pack(cls, out, boxes, origin, rotation_rows):
+        for k, box in enumerate(boxes):
+            R = box.axes()
+            F = np.array(box.center) - origin
+            out["center"][k, :3] = rotation_rows @ F
+            out["half_size"][k, :3] = box.half()
+            for axis in range(3):
+                e = R[:, axis]
+                out[f"axis{axis}"][k, :3] = rotation_rows @ e
+                out[f"world_axis{axis}"][k, :3] = e
+                # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
+                low, high = dot2(np.array([[*F, -box.half()[axis]], [*F, box.half()[axis]]]), np.append(e, 1.0))
+                out[f"axis{axis}"][k, 3] = low
+                out["high"][k, axis] = high
+
+    # -- bounds --------------------------------------------------------------------------------
+    @classmethod
+    def world_bounds(cls, boxes):
+        center = np.array([b.center for b in boxes], np.float64).reshape(-1, 3)
+        reach = np.array([np.abs(b.axes()) @ b.half() for b in boxes]).reshape(-1, 3)
+        return padded_bounds(center - reach, center + reach)
+
+    # -- the float64 oracle --------------------------------------------------------------------
+    def _slabs(self, origins, directions):
+        """(entry, exit, entry axis, exit axis) of the slab test, as the kernel does it."""
+        R = self.axes()
+        F = (np.array(self.center) - origins) @ R  # the centre from the origin, in box coordinates
+        D = directions @ R
+        h = self.half()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_low, t_high = (F - h) / D, (F + h) / D
+        near, far = np.fmin(t_low, t_high), np.fmax(t_low, t_high)
+        return near.max(axis=-1), far.min(axis=-1), near.argmax(axis=-1), far.argmin(axis=-1)
+
+    def oracle_distance(self, origins, directions):
+        entry, exit_, _, _ = self._slabs(origins, directions)
+        t = np.where(entry > 0, entry, exit_)
+        return np.where((entry <= exit_) & (t > 0) & np.isfinite(t), t, np.inf)
+
+    def _local(self, points):
+        return (np.asarray(points, np.float64) - np.array(self.center)) @ self.axes()
+
+    def oracle_normal(self, points):
+        local = self._local(points)
+        beyond = np.abs(local) - self.half()  # ~0 on the face hit, < 0 on the others
+        face = beyond.argmax(axis=-1)
+        sign = np.sign(np.take_along_axis(local, face[..., None], axis=-1))
+        return sign * self.axes().T[face]
+
+    def surface_distance(self, points):
+        beyond = np.abs(self._local(points)) - self.half()
+        outside = np.linalg.norm(np.maximum(beyond, 0), axis=-1)
+        return np.abs(outside + np.minimum(beyond.max(axis=-1), 0))
+
+    def edge_distance(self, points):
+        """For points on the surface: the distance to the nearest edge, where two of the three
+        slab distances vanish."""
+        beyond = np.sort(np.abs(np.abs(self._local(points)) - self.half()), axis=-1)
+        return np.hypot(beyond[..., 0], beyond[..., 1])
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point):
+        return np.array(self.center)
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        """Mitsuba's cube is [-1, 1]^3: columns the half edges along the box's axes."""
+        R = self.axes()
+        return [{"type": "cube", "to_world": to_world((R[:, k] * self.half()[k] for k in range(3)), self.center)}]

@@ -1,0 +1,114 @@
+"""The disk: the points p with normal . (p - center) = 0 and |p - center| <= radius."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError, norm3, number, vector3
+from ..exact import dot2
+from ..layout import Struct
+from .base import Shape, dot_rows, frame_columns, padded_bounds, to_world, unit_rows, distance
+
+
+@dataclass(frozen=True)
+class Disk(Shape):
+    center: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    radius: float
+    name: str = "disk"
+
+    type = "disk"
+    c_type = "Disk"
+    keys = ("center", "normal", "radius")
+    required = ("center", "normal", "radius")
+    struct = Struct(
+        "Disk",
+        (
+            ("center", "real4"),  # centre in the frame; w: radius squared
+            ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
+            ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
+            ("id", "int"),
+        ),
+        "Disk: center.xyz, center.w = r^2; normal.xyz = n, normal.w = h = n.(origin - center).",
+    )
+
+    def __post_init__(self):
+        object.__setattr__(self, "center", vector3("center", self.center))
+        normal = vector3("normal", self.normal)
+        if norm3(normal) == 0:
+            raise SceneError("expected a non-zero normal vector, got [0, 0, 0]", key="normal")
+        object.__setattr__(self, "normal", normal)
+        object.__setattr__(self, "radius", number("radius", self.radius, positive=True))
+
+    @classmethod
+    def _from_table(cls, table, name):
+        return cls(table["center"], table["normal"], table["radius"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "radius": self.radius}
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), tuple(rng.normal(size=3)), float(10 ** rng.uniform(-1, 0.5)))
+
+    def unit_normal(self) -> np.ndarray:
+        return unit_rows(self.normal)
+
+    @classmethod
+    def _pack(cls, out, disks, origin, rotation):
+        center = np.array([d.center for d in disks])
+        n = np.array([d.unit_normal() for d in disks])
+        F = center - origin
+        out["center"][:, :3] = F @ rotation.T
+        out["center"][:, 3] = np.array([d.radius for d in disks]) ** 2
+        out["normal"][:, :3] = n @ rotation.T
+        out["normal"][:, 3] = -dot2(n, F)  # the frame origin's signed distance to the disk's plane
+        out["world_normal"][:, :3] = n
+
+    # -- bounds --------------------------------------------------------------------------------
+    @classmethod
+    def world_bounds(cls, disks):
+        center = np.array([d.center for d in disks], np.float64).reshape(-1, 3)
+        n = np.array([d.unit_normal() for d in disks]).reshape(-1, 3)
+        # a circle of radius r around n reaches r sqrt(1 - n_k^2) along axis k
+        reach = np.array([d.radius for d in disks])[:, None] * np.sqrt(np.clip(1 - n * n, 0, 1))
+        return padded_bounds(center - reach, center + reach)
+
+    # -- the float64 oracle --------------------------------------------------------------------
+    def oracle_distance(self, origins, directions):
+        n = self.unit_normal()
+        F = np.array(self.center) - origins
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (F @ n) / (directions @ n)
+            P = t[..., None] * directions - F  # the hit point from the centre
+            inside = dot_rows(P, P) <= self.radius**2
+        return np.where((t > 0) & np.isfinite(t) & inside, t, np.inf)
+
+    def oracle_normal(self, points):
+        return np.broadcast_to(self.unit_normal(), np.shape(points))
+
+    def _plane_coordinates(self, points):
+        """(distance from the disk's plane, distance from the centre within the plane)."""
+        P = np.asarray(points, np.float64) - np.array(self.center)
+        height = P @ self.unit_normal()
+        return height, np.linalg.norm(P - height[..., None] * self.unit_normal(), axis=-1)
+
+    def surface_distance(self, points):
+        height, rho = self._plane_coordinates(points)
+        return np.hypot(height, np.maximum(rho - self.radius, 0.0))
+
+    def edge_distance(self, points):
+        height, rho = self._plane_coordinates(points)
+        return np.hypot(height, rho - self.radius)
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point):
+        return np.array(self.center)
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        t1, t2, n = frame_columns(self.unit_normal())
+        r = self.radius
+        return [{"type": "disk", "to_world": to_world((t1 * r, t2 * r, n * r), self.center)}]

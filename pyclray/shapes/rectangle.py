@@ -1,0 +1,143 @@
+"""The rectangle: the points center + a u + b v with |a| <= 1 and |b| <= 1 (u, v: half sides)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError, norm3, vector3
+from ..exact import dot2
+from ..layout import Struct
+from .base import Shape, padded_bounds, to_world, unit_rows, distance
+
+# u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
+ORTHOGONAL = 1e-6
+
+
+@dataclass(frozen=True)
+class Rectangle(Shape):
+    center: tuple[float, float, float]
+    u: tuple[float, float, float]
+    v: tuple[float, float, float]
+    name: str = "rectangle"
+
+    type = "rectangle"
+    c_type = "Rectangle"
+    keys = ("center", "u", "v")
+    required = ("center", "u", "v")
+    struct = Struct(
+        "Rectangle",
+        (
+            ("center", "real4"),  # centre in the frame
+            ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
+            ("u_dual", "real4"),  # (P - centre) . u_dual = a: the dual basis of (u, v) in the plane
+            ("v_dual", "real4"),  # (P - centre) . v_dual = b
+            ("world_normal", "real4"),  # normalize(u x v) in world space
+            ("id", "int"),
+        ),
+        "Rectangle: hit where |a| <= 1 and |b| <= 1, a and b from the dual vectors of u and v.",
+    )
+
+    def __post_init__(self):
+        object.__setattr__(self, "center", vector3("center", self.center))
+        for key in ("u", "v"):
+            side = vector3(key, getattr(self, key))
+            if norm3(side) == 0:
+                raise SceneError(f"expected a non-zero half side, got [0, 0, 0]", key=key)
+            object.__setattr__(self, key, side)
+        u, v = np.array(self.u), np.array(self.v)
+        if norm3(np.cross(u / norm3(u), v / norm3(v))) == 0:
+            raise SceneError("expected v not parallel to u", key="v")
+        cosine = abs(u @ v) / (norm3(u) * norm3(v))
+        if cosine > ORTHOGONAL:
+            raise SceneError(f"expected v orthogonal to u (|u.v| <= {ORTHOGONAL:g} |u| |v|), got |u.v| = "
+                             f"{cosine:.3g} |u| |v|", key="v")
+
+    @classmethod
+    def _from_table(cls, table, name):
+        return cls(table["center"], table["u"], table["v"], name)
+
+    def lengths(self, eye) -> dict[str, float]:
+        return {"center": distance(self.center, eye), "u": distance(self.u, 0.0), "v": distance(self.v, 0.0)}
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A random instance near ``shift`` (for the generic property tests, tests/test_shapes.py)."""
+        u = rng.normal(size=3)
+        v = np.cross(u, rng.normal(size=3))
+        u *= 10 ** rng.uniform(-1, 0.3) / np.linalg.norm(u)
+        v *= 10 ** rng.uniform(-1, 0.3) / np.linalg.norm(v)
+        return cls(tuple(rng.uniform(-3, 3, 3) + shift), tuple(u), tuple(v))
+
+    def unit_normal(self) -> np.ndarray:
+        return unit_rows(np.cross(self.u, self.v))
+
+    def dual(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u*, v*): u*.u = v*.v = 1, u*.v = v*.u = 0, both in the plane (float64)."""
+        u, v, n = np.array(self.u), np.array(self.v), self.unit_normal()
+        vn, nu = np.cross(v, n), np.cross(n, u)
+        return vn / (u @ vn), nu / (v @ nu)
+
+    @classmethod
+    def _pack(cls, out, rectangles, origin, rotation):
+        center = np.array([r.center for r in rectangles])
+        n = np.array([r.unit_normal() for r in rectangles])
+        duals = [r.dual() for r in rectangles]
+        F = center - origin
+        out["center"][:, :3] = F @ rotation.T
+        out["normal"][:, :3] = n @ rotation.T
+        out["normal"][:, 3] = -dot2(n, F)
+        out["u_dual"][:, :3] = np.array([d[0] for d in duals]) @ rotation.T
+        out["v_dual"][:, :3] = np.array([d[1] for d in duals]) @ rotation.T
+        out["world_normal"][:, :3] = n
+
+    # -- bounds --------------------------------------------------------------------------------
+    @classmethod
+    def world_bounds(cls, rectangles):
+        center = np.array([r.center for r in rectangles], np.float64).reshape(-1, 3)
+        reach = np.array([np.abs(r.u) + np.abs(r.v) for r in rectangles]).reshape(-1, 3)
+        return padded_bounds(center - reach, center + reach)
+
+    # -- the float64 oracle --------------------------------------------------------------------
+    def _coordinates(self, points):
+        """(height above the plane, a, b) of points."""
+        P = np.asarray(points, np.float64) - np.array(self.center)
+        u_dual, v_dual = self.dual()
+        return P @ self.unit_normal(), P @ u_dual, P @ v_dual
+
+    def oracle_distance(self, origins, directions):
+        n = self.unit_normal()
+        F = np.array(self.center) - origins
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (F @ n) / (directions @ n)
+            P = t[..., None] * directions - F
+            u_dual, v_dual = self.dual()
+            inside = (np.abs(P @ u_dual) <= 1) & (np.abs(P @ v_dual) <= 1)
+        return np.where((t > 0) & np.isfinite(t) & inside, t, np.inf)
+
+    def oracle_normal(self, points):
+        return np.broadcast_to(self.unit_normal(), np.shape(points))
+
+    def _border(self, points):
+        """(height, signed distances beyond the two pairs of sides, in scene units)."""
+        height, a, b = self._coordinates(points)
+        return height, (np.abs(a) - 1) * norm3(self.u), (np.abs(b) - 1) * norm3(self.v)
+
+    def surface_distance(self, points):
+        height, qa, qb = self._border(points)
+        return np.hypot(height, np.hypot(np.maximum(qa, 0), np.maximum(qb, 0)))
+
+    def edge_distance(self, points):
+        height, qa, qb = self._border(points)
+        inside = (qa <= 0) & (qb <= 0)
+        within = np.where(inside, np.minimum(-qa, -qb), np.hypot(np.maximum(qa, 0), np.maximum(qb, 0)))
+        return np.hypot(height, within)
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point):
+        return np.array(self.center)
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        """Mitsuba's rectangle is [-1, 1]^2 in z = 0 with normal +z: columns u, v and the normal."""
+        return [{"type": "rectangle", "to_world": to_world((self.u, self.v, self.unit_normal()), self.center)}]
