@@ -152,11 +152,18 @@ inline vec3v v3_normalize(vec3v v)
     return v3_scale(v, SPLAT(1) / v_sqrt(l2));
 }
 
-/* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir. */
+/* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
+ * cast traces one ray per work-item (LANES 1) from each shape's own anchor (kernels/pyclray.cl) and
+ * keeps the ray as given in float64: its world origin (unbounded shapes, which have no anchor, read
+ * it) and its unit direction, of which dir is the rounding. */
 typedef struct {
     vec3v origin;
     vec3v dir;
     realv a;
+#ifdef PYCLRAY_CAST
+    double3 world;
+    double3 dir_exact;
+#endif
 #ifdef PYCLRAY_SHADOWS
     int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
 #endif

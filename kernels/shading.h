@@ -23,8 +23,8 @@
  * with SHADOW_OFFSET_K = 16, about twice the sum of those terms: from there no test of the surface
  * itself can return a hit in front of the ray (a flat or convex surface left on its outer side),
  * whatever the scene's scale, and no other surface is skipped unless it lies within delta of p, which
- * is within rounding of touching it. A point light's shadow ray ends at the light: its direction is
- * light - origin and a hit counts for s < 1.
+ * is within rounding of touching it. A point light's shadow ray ends at the light: a hit counts
+ * below the distance from the origin to the light.
  */
 
 #ifdef PYCLRAY_FP64
@@ -77,24 +77,82 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
 }
 
 #ifdef PYCLRAY_SHADOWS
-/* any hit before the light: the lanes still open (lit, no hit found yet) test each shape of the
- * type, and close where one is hit at s < limit; the loop ends when every lane is closed */
+/* Any hit before the light: the lanes still open (lit, no hit found yet) test a shape and close
+ * where it is hit at s < limit (s along the unit direction toward the light; limit: the distance to
+ * a point light, +inf for a directional one). Without a BVH every shape of every type is tested;
+ * with it (large scenes) the unbounded types (planes) are, and the bounded ones are reached through
+ * the BVH's any-hit packet traversal, which drops a lane once it is closed and ends when all are. */
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
         const realv s = type##_hit(&type##s[q], &shadow);                             \
         open = open && !(s < limit);                                                  \
     }
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
+/* The shadow packet for box tests, in the BVH's frame (world axes around the eye): its unit
+ * directions, its per-lane origins, and a margin over their rounding and over a shape test's error
+ * from an origin of that size (2^-20 |o|_1, as cast's box rays). */
+typedef struct {
+    BoxPacket box;
+    vec3v origin;
+    realv margin;
+} ShadowBoxes;
+
+/* per lane, where the ray from its own origin enters the node's box before limit, else +inf
+ * (kernels/bvh.h's box_entries, with the faces taken relative to the origin and the margin) */
+inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
+{
+    const BoxPacket* b = &s->box;
+    const float4 lo = node->lo, hi = node->hi;
+    const realv m = s->margin;
+    const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
+    const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
+    const realv near_z = (b->negative_z ? SPLAT(hi.z) + m : SPLAT(lo.z) - m) - s->origin.z;
+    const realv far_x = (b->negative_x ? SPLAT(lo.x) - m : SPLAT(hi.x) + m) - s->origin.x;
+    const realv far_y = (b->negative_y ? SPLAT(lo.y) - m : SPLAT(hi.y) + m) - s->origin.y;
+    const realv far_z = (b->negative_z ? SPLAT(lo.z) - m : SPLAT(hi.z) + m) - s->origin.z;
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+#define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
+    if (kind == KIND_##Type) {                                                        \
+        const realv s = type##_hit(&type##s[k], &shadow);                             \
+        open = open && !(s < limit);                                                  \
+    }
+#define PYCLRAY_SHADOW_VISIT(q)                                                       \
+    {                                                                                 \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
+        reach = open ? reach : SPLAT(-INFINITY);                                      \
+    }
+#define PYCLRAY_SHADOW_SHAPES                                                         \
+    PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
+    if (ANY(open)) {                                                                  \
+        ShadowBoxes boxes;                                                            \
+        boxes.box = box_packet(world_from_frame(camera, shadow.dir));                 \
+        boxes.origin = world_from_frame(camera, shadow.origin);                       \
+        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)); \
+        realv reach = open ? limit : SPLAT(-INFINITY);                                \
+        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
+    }
+#else
+#define PYCLRAY_SHADOW_SHAPES PYCLRAY_SHAPES(PYCLRAY_SHADOW_TEST)
+#endif
 #define PYCLRAY_SHADOW_RAY                                                            \
     if (point) {                                                                      \
-        shadow.dir = v3_sub(v3_splat(light.position), shadow.origin);                 \
-        limit = SPLAT(1);                                                             \
+        const vec3v to = v3_sub(v3_splat(light.position), shadow.origin);             \
+        limit = v_sqrt(v3_dot(to, to));                                               \
+        shadow.dir = v3_scale(to, SPLAT(1) / limit);                                  \
     } else {                                                                          \
         shadow.dir = L;                                                               \
         limit = SPLAT(MISS);                                                          \
     }                                                                                 \
     shadow.a = v3_dot(shadow.dir, shadow.dir);                                        \
     intv open = lit;                                                                  \
-    PYCLRAY_SHAPES(PYCLRAY_SHADOW_TEST)                                               \
+    PYCLRAY_SHADOW_SHAPES                                                             \
     lit = open;
 #define PYCLRAY_SHADOW_ORIGIN                                                         \
     RayPacket shadow;                                                                 \

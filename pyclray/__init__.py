@@ -18,18 +18,20 @@ def _quiet_interrupt(number, frame):
 if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.argv else False:
     _signal.signal(_signal.SIGINT, _quiet_interrupt)
 
+from .animate import render_animation
+from .animation import Animation, Key
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .lighting import DirectionalLight, Material, PointLight, Shading
-from .render import Frame, cast, render
+from .render import Frame, cast, occluded, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
 from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame", "Image",
-    "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle", "RequestError",
-    "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
-    "scene_from_dict", "select_device",
+    "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
+    "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
+    "RequestError", "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
+    "render_animation", "occluded", "scene_from_dict", "select_device",
 ]

@@ -45,6 +45,16 @@ def _size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def _time(text: str) -> float:
+    try:
+        value = float(text)
+        if not value >= 0 or value == float("inf"):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a time in seconds >= 0, got {text!r}") from None
+    return value
+
+
 def _aovs(text: str) -> tuple[str, ...]:
     from .device import RENDER_AOVS
 
@@ -58,11 +68,12 @@ def _aovs(text: str) -> tuple[str, ...]:
     return names
 
 
-def _load(path: str, size=None):
+def _load(path: str, size=None, t=None):
     from .scene import load_scene
 
     scene = load_scene(path)
-    return scene.with_size(*size) if size else scene
+    scene = scene.with_size(*size) if size else scene
+    return scene if t is None else scene.at(t)  # the static scene at that time of its animation
 
 
 def _band_renderer(scene, aovs, precision, device):
@@ -77,7 +88,7 @@ def cmd_render(args) -> int:
     from .progress import progress, seconds
 
     out = Path(args.output)
-    scene = _load(args.scene, args.size)
+    scene = _load(args.scene, args.size, args.time)
     targets = [out, *(output.preview_paths(out, args.aov).values() if args.png else ())]
     for target in targets:  # before the render: a path that cannot be written costs no time
         output.check_target(target)
@@ -168,6 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--size", type=_size, metavar="WxH",
                         help="override the scene's image size (each side at most 65536)")
+    render.add_argument("--time", type=_time, metavar="T", help="render the scene at time T (seconds) of its [animation]")
     render.add_argument(
         "--device", metavar="DEV",
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
@@ -184,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # modules that add a subcommand with add_command(subparsers); each imports its heavy parts lazily
-COMMAND_MODULES = ("check", "stability")
+COMMAND_MODULES = ("check", "stability", "animate")
 
 
 def _extra_commands():
@@ -246,4 +258,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # run the package's module, not this __main__ copy: the commands raise pyclray.cli.BadInput
+    from pyclray.cli import main as package_main
+
+    sys.exit(package_main())

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from .bvh import NODE, WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
 from .shading import STRUCTS as SHADING_STRUCTS
@@ -153,22 +154,39 @@ def lanes_for(device: cl.Device, precision: str) -> int:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render" (camera rays, a packet of pixels per work-item) or "cast" (rays given)
+    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
+    # work-item) or "occluded" (cast's any-hit query)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
     lanes: int = 1
     shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
+    bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
+
+    def bounded_types(self) -> tuple[str, ...]:
+        return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in kernels/pyclray.cl."""
-        listed = " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in self.shape_types)
-        lines = [f"#define PYCLRAY_SHAPES(X) {listed}", f"#define PYCLRAY_LANES {self.lanes}"]
+
+        def listed(types):
+            return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
+
+        bounded = self.bounded_types()
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
+        lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
+        if bounded:
+            lines.append("#define PYCLRAY_HAS_BOUNDED 1")
+        if self.bvh and self.kind == "render":
+            lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
-        if self.kind == "cast":
+        if self.kind in ("cast", "occluded"):
             lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "occluded":
+            lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         return lines
@@ -186,9 +204,9 @@ class Variant:
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        structs = [CAMERA] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        structs = [CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read("camera.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
         if shading:  # materials, lights and shadows: only in the programs that shade
             parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .animation import Animation, scene_at
 from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, text, vector3
 from .lighting import Shading, check_lights, lights_from_list
 from .shapes import REGISTRY
@@ -101,6 +102,7 @@ class Scene:
     source: str | None = None  # the file it was read from, for messages
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.lighting); none: the headlight
     shading: Shading = field(default_factory=Shading)
+    animation: Animation | None = None  # keyframes (pyclray/animation.py); None: a static scene
 
     def __post_init__(self):
         object.__setattr__(self, "shapes", tuple(self.shapes))
@@ -123,6 +125,12 @@ class Scene:
                 key="fov",
                 file=self.source,
             )
+        if self.animation is not None:
+            self.animation.bind(self)  # known targets and keys, and every frame's scene valid
+
+    def at(self, t: float) -> "Scene":
+        """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
+        return scene_at(self, t)
 
     def with_size(self, width: int, height: int) -> "Scene":
         return replace(self, image=Image(width, height))
@@ -180,7 +188,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     if not isinstance(data, dict):
         raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
-        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading"), required=())
+        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading", "animation"), required=())
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
     try:
@@ -219,7 +227,11 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         shading = Shading.from_table(_table(data, "shading", required=False))
     except SceneError as error:
         raise error.within(file=source, table="[shading]") from None
-    return Scene(camera, image, tuple(shapes), source, lights, shading)
+    try:
+        animation = Animation.from_table(data["animation"]) if "animation" in data else None
+    except SceneError as error:
+        raise error.within(file=source, table="[animation]") from None
+    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation)
 
 
 def load_scene(path) -> Scene:

@@ -206,3 +206,22 @@ def test_cast_raises_only_pyclray_errors(rays, aovs, precision):
     count = np.asarray(directions, np.float64).reshape(-1, 3).shape[0]
     for name, array in frame.items():
         assert array.shape[0] == count, name
+
+
+@pytest.mark.parametrize("normal,point,expected", [
+    ((1.7976931348623157e308, 0.0, 0.0), (2.0, 0.0, 0.0), ((1.0, 0.0, 0.0), -2.0)),
+    ((1.7976931348623157e308, 0.0, 0.0), (0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), 0.0)),
+    ((1.0, 0.0, 0.0), (1.7976931348623157e308, 0.0, 0.0), ((1.0, 0.0, 0.0), -1.7976931348623157e308)),
+    ((1.0, 1.0, 0.0), (1.7976931348623157e308, 1.7976931348623157e308, 0.0), None),
+])
+def test_a_plane_through_a_point_at_the_edge_of_float64(normal, point, expected):
+    """Found by the document fuzzing: normal . point beyond float64 (or the error-free product's
+    splitting overflowing) raised a numpy RuntimeWarning. Now the same plane with a unit normal,
+    or a SceneError naming 'point' where even that overflows."""
+    with strict_warnings():
+        if expected is None:
+            with pytest.raises(SceneError, match="'point': expected normal . point within the range of float64"):
+                pyclray.Plane.through(point, normal)
+        else:
+            plane = pyclray.Plane.through(point, normal)
+            assert (plane.normal, plane.offset) == expected

@@ -358,3 +358,27 @@ def test_shaded_equals_mitsuba_direct_up_to_pi(scenes_dir, name, variant):
     assert result.left_out["shadow edge"] < 0.01 * 64 * 48
     if name == "tp02-lit":
         assert result.shadowed > 50
+
+
+@pytest.mark.parametrize("name", ["tp02-lit", "shapes-lit", "sun"])
+def test_shadows_through_the_bvh_equal_the_tested_every_shape(scenes_dir, name):
+    """With the BVH (large scenes) shadow rays find their occluders through its any-hit packet
+    traversal; with tile lists they test every shape. The shape tests are the same, and the BVH must
+    drop none that a ray would hit: the images are equal bit for bit (also with many spheres)."""
+    scene = pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(64, 48)
+    tiles = pyclray.render(scene, aovs=("id", "shaded"), acceleration="tiles")
+    through_bvh = pyclray.render(scene, aovs=("id", "shaded"), acceleration="bvh")
+    np.testing.assert_array_equal(tiles["id"], through_bvh["id"])
+    np.testing.assert_array_equal(tiles["shaded"], through_bvh["shaded"])
+
+
+def test_shadows_of_many_spheres_through_the_bvh():
+    rng = np.random.default_rng(7)
+    shapes = [ground()] + [ball(rng.uniform([-6, 0.2, -12], [6, 3, 0]), float(rng.uniform(0.1, 0.6))) for _ in range(300)]
+    lights = ({"type": "point", "position": [3.0, 8.0, 2.0], "intensity": 80.0},
+              {"type": "directional", "direction": [-0.5, -1.0, -0.3], "irradiance": 0.5})
+    scene = lit_scene(shapes, lights, ((0, 4, 6), (0, 1, -5)), size=64)
+    tiles = pyclray.render(scene, aovs=("shaded",), acceleration="tiles")["shaded"]
+    through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh")["shaded"]
+    np.testing.assert_array_equal(tiles, through_bvh)
+    assert (tiles == 0).all(axis=-1).mean() > 0.05  # shadows there are

@@ -39,6 +39,9 @@ class Shape:
     kernel functions are ``<type>_hit`` and ``<type>_normal`` in ``kernels/<type>.cl``), ``struct``
     (its packed layout, declared once) and ``keys`` (the keys of its scene table besides type and
     name), and implements the methods below that raise NotImplementedError.
+
+    ``_pack(out, shapes, origin, rotation)`` must accept ``origin`` of shape (3,) (one frame for
+    every shape: render) or (N, 3) (one frame per shape, each at its own anchor: cast).
     """
 
     type: ClassVar[str]
