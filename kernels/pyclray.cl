@@ -361,9 +361,12 @@ __kernel void render(__global const Camera* camera, const int col0, const int ro
     {                                                                               \
         const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
         double s0;                                                                  \
-        const RayPacket moved = moved_ray(&ray, anchors[q], &s0);                   \
-        PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                    \
-        PYCLRAY_CAST_LIMIT                                                          \
+        bool near;                                                                  \
+        const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \
+        if (near && s0 <= PYCLRAY_CAST_REACH) {                                     \
+            PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                \
+            PYCLRAY_CAST_LIMIT                                                      \
+        }                                                                           \
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
@@ -383,15 +386,24 @@ inline double3 unit_direction(const double3 d)
     return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
-/* The ray from O + s0 D, s0 = max(0, (A - O).D - R), relative to anchor A: see above. */
-inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0)
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m), relative to anchor A: see above. m = 2^-50
+ * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
+ * shape's near side, however far O is (at 1e40 the rounding of (A - O).D alone exceeds a unit R).
+ * near: whether the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without
+ * cancellation); where it does not, it misses the shape by more than 2^-12 R, far more than the
+ * shape's test, which rounds quantities of the size of G, could err by: the test is skipped. */
+inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0, bool* near)
 {
     const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
-    const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w;
+    const double size = (fabs(F.x) + fabs(F.y)) + fabs(F.z);
+    const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w - 0x1p-50 * size;
     *s0 = along > 0 ? along : 0;
+    const double3 G = F - *s0 * D;
+    const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
+    *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
     RayPacket moved = *ray;
-    moved.origin = v3_round(*s0 * D - F);
+    moved.origin = v3_round(-G);
     return moved;
 }
 
@@ -411,10 +423,25 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \
-    const float3 o = convert_float3(ray.world - scene_anchor.xyz);                  \
+    const double3 from_anchor = ray.world - scene_anchor.xyz;                       \
+    const float3 o = convert_float3(from_anchor);                                   \
     const float3 size = select(o, -o, o < (float3)(0.0f));                          \
     const float margin = 0x1p-20f * ((size.x + size.y) + size.z);                   \
     const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
+
+/* The box tests are in float: an origin beyond 2^100 from the scene's anchor (possible in fp64),
+ * or a scene that large (scene_anchor.w != 0), would overflow them; such a ray tests every bounded
+ * shape instead, one after the other (exactly as through the BVH, only slower). */
+#define PYCLRAY_CAST_BOUNDED(VISIT)                                                 \
+    if (scene_anchor.w != 0 || !(fabs(from_anchor.x) < 0x1p100 && fabs(from_anchor.y) < 0x1p100 \
+                                  && fabs(from_anchor.z) < 0x1p100)) {              \
+        int n_bounded = 0;                                                          \
+        PYCLRAY_BOUNDED(PYCLRAY_CAST_COUNT)                                         \
+        for (int q = 0; q < n_bounded; ++q) { VISIT(q) }                            \
+    } else {                                                                        \
+        PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                  \
+    }
+#define PYCLRAY_CAST_COUNT(Type, type) n_bounded += n_##type##s;
 
 #ifndef PYCLRAY_OCCLUDED
 
@@ -428,6 +455,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
 #endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
+#define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
 #define PYCLRAY_CAST_NORMAL(Type, type) \
     if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
 
@@ -446,7 +474,7 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
     {
         PYCLRAY_CAST_BOX
         float limit = float_above_wide(best);
-        PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_CAST_VISIT)
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT)
     }
 #endif
     const bool hit = best <= t_max && best < INFINITY;
@@ -459,7 +487,8 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #ifdef PYCLRAY_HAS_BOUNDED
         if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
             double s0;
-            ray = moved_ray(&ray, anchors[best_q], &s0);
+            bool near;
+            ray = moved_ray(&ray, anchors[best_q], &s0, &near);
         }
 #endif
         vec3v normal = v3(0, 0, 0);
@@ -479,6 +508,7 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 /* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
+#define PYCLRAY_CAST_REACH t_max
 
 PYCLRAY_KERNELS_BEGIN
 __kernel void occluded(const int n_rays, __global const double* origins, const int origin_stride,
@@ -493,7 +523,7 @@ __kernel void occluded(const int n_rays, __global const double* origins, const i
     if (!found) {
         PYCLRAY_CAST_BOX
         float limit = float_above_wide(t_max);
-        PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_CAST_VISIT)
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT)
     }
 #endif
     occluded_out[r] = found ? 1 : 0;

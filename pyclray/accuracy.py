@@ -135,7 +135,8 @@ def cast_frames(scene: Scene, origins, directions, ids):
     index = np.maximum(ids, 0)
     A, R, b = centre[index], radius[index], bounded[index]
     F = A - origins
-    s0 = np.where(b, np.maximum(0.0, np.einsum("...k,...k", F, directions) - R), 0.0)
+    margin = 2.0**-50 * np.abs(F).sum(axis=-1)  # the kernel's bound on the rounding of (A - O).D
+    s0 = np.where(b, np.maximum(0.0, np.einsum("...k,...k", F, directions) - R - margin), 0.0)
     frame = np.where(b, np.linalg.norm(F - s0[..., None] * directions, axis=-1) + R, 0.0)
     return frame, s0, A
 

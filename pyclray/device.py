@@ -1,10 +1,12 @@
 """OpenCL devices, contexts and the program cache (in-process and on disk)."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
 import threading
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -247,19 +249,32 @@ def is_pocl_cpu(device: cl.Device) -> bool:
     return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 
+@contextlib.contextmanager
+def _quiet_compiler():
+    """pyopencl warns (CompilerWarning) whenever a successful build left a log, as PoCL's often does
+    (e.g. notes on vector arguments): a user can do nothing about it, and a warnings filter that
+    makes warnings errors would turn it into an exception inside the build, after the driver made
+    the program (PoCL then crashes at its release). A failed build still raises with its log."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        yield
+
+
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
     source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
     folder = cache_dir()
     path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
     if path is not None and path.is_file():
         try:
-            program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
+            with _quiet_compiler():
+                program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
             stats["from_disk"] += 1
             return program
         except (cl.Error, OSError):
             pass  # a stale or foreign binary: build from source below
     try:
-        program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
+        with _quiet_compiler():
+            program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
     except cl.RuntimeError as error:
         raise BuildError(f"the OpenCL compiler rejected pyclray's kernel for {variant}:\n{error}") from None
     stats["compiled"] += 1

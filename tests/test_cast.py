@@ -331,3 +331,56 @@ def test_bad_tmax_is_a_clear_error(tmax, words):
     assert words in str(error.value)
     with pytest.raises(pyclray.PyclrayError, match="tmax"):
         pyclray.occluded(scene, (0, 1, 5), np.ones((4, 3)), tmax)
+
+
+def test_origins_beyond_the_float32_boxes_are_refused_not_lost():
+    """The BVH's boxes are float32 around the scene's anchor: an fp64 ray from 1e30 away still hits
+    (distance 1e30, the sphere's id); from beyond float32's range (where a box coordinate would overflow, and
+    the ray was silently lost or the kernel crashed) it is one clear error."""
+    if not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+    scene = pyclray.Scene(pyclray.Camera((0.0, 2.0, 6.0), (0.0, 0.5, 0.0)), pyclray.Image(8, 8),
+                          (pyclray.Plane((0.0, 1.0, 0.0), 0.0), pyclray.Sphere((0.0, 1.0, 0.0), 1.0)))
+    near = pyclray.cast(scene, (0.0, 1.0, 1e30), (0.0, 0.0, -1.0), precision="fp64")
+    assert near["id"] == 1 and near["depth"] == pytest.approx(1e30, rel=1e-15)
+    for far in (1e39, 1e153):
+        with pytest.raises(pyclray.PyclrayError, match="too far"):
+            pyclray.cast(scene, (0.0, 1.0, far), (0.0, 0.0, -1.0), precision="fp64")
+
+
+def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
+    """From render.COHERENT_FROM rays on, cast runs them in a Morton order of their origins (or of
+    their directions, sharing one origin) and puts the results back: the same bits as batches too
+    small to be reordered, for cast and occluded."""
+    import sys
+
+    render_module = sys.modules["pyclray.render"]
+    scene, origins, directions = random_scene(12)
+    rng = np.random.default_rng(12)
+    count = render_module.COHERENT_FROM + 1000
+    origins = rng.uniform(-6, 6, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    tmax = rng.uniform(0.5, 10.0, count)
+    chunks = range(0, count, 1000)
+    for shared in (False, True):
+        o = origins[0] if shared else origins
+        whole = pyclray.cast(scene, o, directions, tmax=tmax)
+        blocked = pyclray.occluded(scene, o, directions, tmax)
+        parts = [pyclray.cast(scene, o if shared else o[c: c + 1000], directions[c: c + 1000], tmax=tmax[c: c + 1000]) for c in chunks]
+        for name in pyclray.AOVS:
+            assert np.array_equal(whole[name], np.concatenate([p[name] for p in parts]))
+        assert np.array_equal(blocked, whole["id"] >= 0)
+
+
+def test_origins_beyond_the_float_box_tests_still_hit():
+    """fp64 accepts origins far beyond float32's range from the scene (up to sqrt of double's
+    largest / 4); the BVH's box tests are in float, so such rays test every bounded shape instead
+    (kernels/pyclray.cl): the same hits, from 1e40 away as from 10."""
+    need_precision("fp64")
+    scene = pyclray.Scene(pyclray.Camera((0, 0, 10), (0, 0, 0)), pyclray.Image(4, 4),
+                          (pyclray.Sphere((0.0, 0.0, 0.0), 1.0), pyclray.Sphere((0.0, 3.0, 0.0), 1.0)))
+    origins = np.array([[1e40, 0.0, 0.0], [10.0, 0.0, 0.0], [1e40, 3.0, 0.0], [1e40, 5.0, 0.0]])
+    result = pyclray.cast(scene, origins, [[-1.0, 0.0, 0.0]] * 4, precision="fp64")
+    np.testing.assert_array_equal(result["id"], [0, 0, 1, -1])
+    np.testing.assert_allclose(result["depth"][:3], [1e40 - 1.0, 9.0, 1e40 - 1.0], rtol=1e-15)
+    np.testing.assert_array_equal(result["normal"][:3], [[1.0, 0.0, 0.0]] * 3)
