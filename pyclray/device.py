@@ -16,9 +16,13 @@ import pyopencl as cl
 from .bvh import NODE, WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
+from .shading import STRUCTS as SHADING_STRUCTS
 from .shapes import REGISTRY
 
+# the images of every render and cast (and their default), and every image a render can make, in the
+# kernels' order
 AOVS = ("depth", "normal", "id")
+RENDER_AOVS = AOVS + ("zdepth", "position", "shaded")
 # Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
 BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
@@ -158,6 +162,7 @@ class Variant:
     aovs: tuple[str, ...]
     precision: str
     lanes: int = 1
+    shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
 
     def bounded_types(self) -> tuple[str, ...]:
@@ -184,6 +189,8 @@ class Variant:
             lines.append("#define PYCLRAY_CAST 1")
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
+        if self.shadows and "shaded" in self.aovs:
+            lines.append("#define PYCLRAY_SHADOWS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
@@ -198,8 +205,12 @@ class Variant:
         parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("lanes.h"), c_header([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
+        shading = "shaded" in self.aovs
+        structs = [CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        parts += [_read("lanes.h"), c_header(structs, self.precision)]
         parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if shading:  # materials, lights and shadows: only in the programs that shade
+            parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 

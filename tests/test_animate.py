@@ -107,7 +107,7 @@ def test_folder_holds_every_frame_as_exr_and_png(tmp_path, scene_file):
     result = animate(scene_file, "-o", f"{out}/")
     assert result.returncode == 0, result.stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == sorted(f"frame_{k:05d}{ext}" for k in range(FRAMES) for ext in (".exr", ".depth.png", ".normal.png"))
+    assert names == sorted(f"frame_{k:05d}{ext}" for k in range(FRAMES) for ext in (".exr", ".depth.png", ".normal.png", ".id.png"))
     scene = pyclray.load_scene(scene_file)
     for k in range(FRAMES):
         images = read_exr(out / f"frame_{k:05d}.exr")
