@@ -2,9 +2,10 @@
  *
  * Precision: `real` is float (fp32) or double (fp64, -D PYCLRAY_FP64).
  * Frames: the render kernel works in the camera's frame (origin at the eye, axes u, v, w), the cast
- * kernel in the world's axes around a reference point. The host subtracts that origin in float64
- * before packing, so no large coordinate ever reaches the device: far or translated scenes keep
- * float32's full relative precision.
+ * kernel in the world's axes around each shape's own anchor. The host subtracts that origin in
+ * float64 before packing (and cast subtracts its rays' origins in float64 on the device), so no
+ * large coordinate ever reaches a shape's test: far or translated scenes keep float32's full
+ * relative precision.
  */
 #ifdef PYCLRAY_FP64
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
@@ -14,6 +15,7 @@ typedef double4 real4;
 #define PYCLRAY_REAL_NAME double
 #define PYCLRAY_INT_NAME long      /* the integer type of a real's size: a vector comparison's lanes */
 #define PYCLRAY_UINT_NAME ulong
+#define convert_real3 convert_double3
 #else
 typedef float real;
 typedef float3 real3;
@@ -21,6 +23,12 @@ typedef float4 real4;
 #define PYCLRAY_REAL_NAME float
 #define PYCLRAY_INT_NAME int
 #define PYCLRAY_UINT_NAME uint
+#define convert_real3 convert_float3
 #endif
 
 #define MISS ((real)INFINITY)
+
+#ifdef PYCLRAY_CAST
+/* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/pyclray.cl) */
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif

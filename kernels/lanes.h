@@ -152,9 +152,31 @@ inline vec3v v3_normalize(vec3v v)
     return v3_scale(v, SPLAT(1) / v_sqrt(l2));
 }
 
-/* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir. */
+/* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
+ * cast traces one ray per work-item (LANES 1) from each shape's own anchor (kernels/pyclray.cl) and
+ * keeps the ray as given in float64: its world origin (unbounded shapes, which have no anchor, read
+ * it) and its unit direction, of which dir is the rounding. */
 typedef struct {
     vec3v origin;
     vec3v dir;
     realv a;
+#ifdef PYCLRAY_CAST
+    double3 world;
+    double3 dir_exact;
+#endif
+#ifdef PYCLRAY_SHADOWS
+    int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
+#endif
 } RayPacket;
+
+/* FROM_EYE(ray): whether the packet starts at the frame's origin, the eye, where the terms the host
+ * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). Cast's rays never
+ * do; a render's camera rays always, and its shadow rays (only compiled with shadows) never: a
+ * constant wherever the shape functions are inlined into the kernel. */
+#if defined(PYCLRAY_CAST)
+#define FROM_EYE(ray) 0
+#elif defined(PYCLRAY_SHADOWS)
+#define FROM_EYE(ray) ((ray)->from_eye)
+#else
+#define FROM_EYE(ray) 1
+#endif

@@ -2,8 +2,15 @@
  * camera.h and the file of each shape type present, and selects what is compiled with -D options:
  *   PYCLRAY_FP64                        double precision
  *   PYCLRAY_LANES                       rays per work-item, in vector lanes (lanes.h)
- *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel
+ *   PYCLRAY_CAST                        the batch-ray kernel instead of the camera kernel (LANES 1)
+ *   PYCLRAY_OCCLUDED                    (with PYCLRAY_CAST) the any-hit kernel instead
+ *   PYCLRAY_BVH                         render: the bounded shapes through the BVH, not tile lists
+ *   PYCLRAY_BOUNDED(X), PYCLRAY_UNBOUNDED(X)  the shape types present with and without bounds
+ *   PYCLRAY_HAS_BOUNDED                 some bounded type is present (the BVH's buffers are passed)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
+ *   PYCLRAY_AOV_ZDEPTH/_POSITION        render: depth along the optical axis, world hit points
+ *   PYCLRAY_AOV_SHADED                  render: the shading model (kernels/shading.h, put before this file)
+ *   PYCLRAY_SHADOWS                     render, with SHADED: shadow rays (without it none are cast)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
  *
@@ -12,26 +19,58 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
+#define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
+#endif
+/* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
+#ifndef PYCLRAY_AOV_SHADED
+#define PYCLRAY_SHADED_ARGS
+#define PYCLRAY_MATERIALS_BEGIN
+#define PYCLRAY_MATERIAL_OF(lane, mine)
+#define PYCLRAY_WRITE_SHADED(index, first, end)
+#endif
 
-#ifdef PYCLRAY_CAST
-/* one argument pair per shape type present: the packed array and its length */
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
+/* one argument pair per shape type present: the packed array and its length; the bounded types'
+ * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray */
 #define PYCLRAY_SHAPE_ARG(Type, type) , __global const Type* type##s, const int n_##type##s
-/* every shape of the type, in order */
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
 #define PYCLRAY_SHAPE_AT(type, q) (q)
+#define PYCLRAY_LINEAR(X) PYCLRAY_UNBOUNDED(X)
+#ifdef PYCLRAY_HAS_BOUNDED
+#ifdef PYCLRAY_CAST
+/* the wide BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding
+ * radius (w) */
+#define PYCLRAY_BVH_ARGS , __global const WideNode* nodes, __global const int* refs, __global const double4* anchors
+#else
+/* the binary BVH (packets traverse it) */
+#define PYCLRAY_BVH_ARGS , __global const BvhNode* nodes, __global const int* refs
+#endif
+#else
+#define PYCLRAY_BVH_ARGS
+#endif
 #else
 /* per shape type: the packed array, and for each tile of the image the shapes that can be seen
  * in it (type##_tile_list[type##_tile_start[tile] .. type##_tile_start[tile + 1]], increasing;
  * the host's conservative screen bounds, pyclray/culling.py): the others miss every ray there */
+#ifdef PYCLRAY_SHADOWS
+/* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
+#define PYCLRAY_SHAPE_ARG(Type, type) \
+    , __global const Type* type##s, __global const int* type##_tile_start, __global const int* type##_tile_list, \
+    const int n_##type##s
+#else
 #define PYCLRAY_SHAPE_ARG(Type, type) \
     , __global const Type* type##s, __global const int* type##_tile_start, __global const int* type##_tile_list
+#endif
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
 #define PYCLRAY_END(type) type##_tile_start[tile + 1]
 #define PYCLRAY_SHAPE_AT(type, q) type##_tile_list[q]
+#define PYCLRAY_LINEAR(X) PYCLRAY_SHAPES(X)
+#define PYCLRAY_BVH_ARGS
 #endif
 #define PYCLRAY_KIND(Type, type) KIND_##Type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
@@ -40,31 +79,45 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit). */
 #ifdef PYCLRAY_TRACK_ID
-#define PYCLRAY_NEAREST(Type, type)                                                   \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
-        const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
-        const realv s = type##_hit(&type##s[k], &ray);                                \
-        const intv id = SPLAT_INT(type##s[k].id);                                     \
+#define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
+    {                                                                                 \
+        const intv id = SPLAT_INT(shape_id);                                          \
         const intv nearer = s < best || (s == best && s < MISS && id < best_id);      \
         if (ANY(nearer)) {                                                            \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_kind = nearer ? SPLAT_INT(KIND_##Type) : best_kind;                  \
+            best_kind = nearer ? SPLAT_INT(kind) : best_kind;                         \
             best_k = nearer ? SPLAT_INT(k) : best_k;                                  \
         }                                                                             \
     }
-#define PYCLRAY_FIND_NEAREST                                                          \
+#define PYCLRAY_BEST                                                                  \
     realv best = SPLAT(MISS);                                                         \
-    intv best_id = SPLAT_INT(-1), best_kind = SPLAT_INT(KIND_NONE), best_k = SPLAT_INT(0); \
-    PYCLRAY_SHAPES(PYCLRAY_NEAREST)
+    intv best_id = SPLAT_INT(-1), best_kind = SPLAT_INT(KIND_NONE), best_k = SPLAT_INT(0);
 #else
-#define PYCLRAY_NEAREST(Type, type)                                                   \
-    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q)          \
-        best = v_min(type##_hit(&type##s[PYCLRAY_SHAPE_AT(type, q)], &ray), best);
-#define PYCLRAY_FIND_NEAREST                                                          \
-    realv best = SPLAT(MISS);                                                         \
-    PYCLRAY_SHAPES(PYCLRAY_NEAREST)
+#define PYCLRAY_CONSIDER(s, shape_id, kind, k) best = v_min(s, best);
+#define PYCLRAY_BEST realv best = SPLAT(MISS);
 #endif
+#define PYCLRAY_NEAREST(Type, type)                                                   \
+    for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
+        const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
+        const realv s = type##_hit(&type##s[k], &ray);                                \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
+    }
+#define PYCLRAY_FIND_NEAREST                                                          \
+    PYCLRAY_BEST                                                                      \
+    PYCLRAY_LINEAR(PYCLRAY_NEAREST)
+
+/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
+#define PYCLRAY_VISIT_KIND(Type, type)                                                \
+    if (kind == KIND_##Type) {                                                        \
+        const realv s = type##_hit(&type##s[k], &ray);                                \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
+    }
+#define PYCLRAY_VISIT(q)                                                              \
+    {                                                                                 \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
+    }
 
 /* -- the images: distance along the unit ray, the winner's world normal, its id -----------------
  * MISS (+inf), (0, 0, 0) and -1 on a miss. Lane l of the packet is element index + l of the images,
@@ -79,14 +132,15 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_DEPTH(index, first, end)
 #endif
 
-#ifdef PYCLRAY_AOV_NORMAL
-#define PYCLRAY_NORMAL_ARG , __global real* normal_out
+#ifdef PYCLRAY_WINNER_NORMAL
 /* the normal of one winning shape for the whole packet, kept in the lanes it won */
 #define PYCLRAY_NORMAL(Type, type) \
     if (kind == KIND_##Type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
-#define PYCLRAY_WRITE_NORMAL(index, first, end)                                            \
+/* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
+#define PYCLRAY_WINNERS                                                               \
+    vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
+    PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
-        vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                              \
         /* each distinct winner once, in the order of the first lane it won */        \
         intv pending = best_kind != SPLAT_INT(KIND_NONE);                             \
         while (ANY(pending)) {                                                        \
@@ -94,10 +148,17 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             const int kind = lane_of(best_kind, lane), k = lane_of(best_k, lane);     \
             const intv mine = pending && best_kind == SPLAT_INT(kind) && best_k == SPLAT_INT(k); \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            PYCLRAY_MATERIAL_OF(lane, mine)                                           \
             pending = pending && !mine;                                               \
         }                                                                             \
-        write_vec3s(normal, index, first, end, normal_out);                                \
     }
+#else
+#define PYCLRAY_WINNERS
+#endif
+
+#ifdef PYCLRAY_AOV_NORMAL
+#define PYCLRAY_NORMAL_ARG , __global real* normal_out
+#define PYCLRAY_WRITE_NORMAL(index, first, end) write_vec3s(normal, index, first, end, normal_out);
 #else
 #define PYCLRAY_NORMAL_ARG
 #define PYCLRAY_WRITE_NORMAL(index, first, end)
@@ -111,9 +172,42 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_ID(index, first, end)
 #endif
 
+/* render only: depth along the optical axis, the frame's z axis (w): the ray's s times its z */
+#ifdef PYCLRAY_AOV_ZDEPTH
+#define PYCLRAY_ZDEPTH_ARG , __global real* zdepth_out
+#define PYCLRAY_WRITE_ZDEPTH(index, first, end) \
+    write_reals(best < MISS ? best * ray.dir.z : SPLAT(MISS), index, first, end, zdepth_out);
+#else
+#define PYCLRAY_ZDEPTH_ARG
+#define PYCLRAY_WRITE_ZDEPTH(index, first, end)
+#endif
+
+/* render only: the world hit point, eye + world_from_frame(s D). The eye comes as a float64 sum
+ * eye_high + eye_low of two reals, added to the (small) offset from the eye high part first, so that
+ * a scene far from the world's origin loses no more than the output's own rounding. */
+#ifdef PYCLRAY_AOV_POSITION
+#define PYCLRAY_POSITION_ARG , const real4 eye_high, const real4 eye_low, __global real* position_out
+#define PYCLRAY_WRITE_POSITION(index, first, end)                                     \
+    {                                                                                 \
+        const intv hit = best < MISS;                                                 \
+        const vec3v offset = world_from_frame(camera, v3_scale(ray.dir, hit ? best : SPLAT(0))); \
+        const vec3v world = v3_add(v3_add(v3_splat(eye_high), offset), v3_splat(eye_low)); \
+        const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                          \
+        write_vec3s(v3_select(zero, world, hit), index, first, end, position_out);    \
+    }
+#else
+#define PYCLRAY_POSITION_ARG
+#define PYCLRAY_WRITE_POSITION(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS PYCLRAY_DEPTH_ARG PYCLRAY_NORMAL_ARG PYCLRAY_ID_ARG
+#define PYCLRAY_RENDER_OUTPUT_ARGS PYCLRAY_OUTPUT_ARGS PYCLRAY_ZDEPTH_ARG PYCLRAY_POSITION_ARG PYCLRAY_SHADED_ARGS
 #define PYCLRAY_WRITE(index, first, end) \
+    PYCLRAY_WINNERS \
     PYCLRAY_WRITE_DEPTH(index, first, end) PYCLRAY_WRITE_NORMAL(index, first, end) PYCLRAY_WRITE_ID(index, first, end)
+#define PYCLRAY_RENDER_WRITE(index, first, end) \
+    PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
+    PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int
@@ -209,6 +303,9 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
     ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_SHADOWS
+    ray.from_eye = 1;
+#endif
     return ray;
 }
 
@@ -219,7 +316,7 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 PYCLRAY_KERNELS_BEGIN
 __kernel void render(__global const Camera* camera, const int col0, const int row0, const int cols, const int rows,
                      const int tile_shift, const int tiles_x
-                     PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+                     PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_RENDER_OUTPUT_ARGS)
 {
     /* packets start at multiples of LANES in the image, so that none straddles two tiles */
     const int i0 = (col0 / LANES + (int)get_global_id(0)) * LANES, r = get_global_id(1), j = row0 + r;
@@ -229,28 +326,209 @@ __kernel void render(__global const Camera* camera, const int col0, const int ro
     const RayPacket ray = camera_rays(camera, i0, j);
 
     PYCLRAY_FIND_NEAREST
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir));
+    PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
+#endif
     /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
-    PYCLRAY_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
+    PYCLRAY_RENDER_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
 }
 
 #else
 
-/* One work-item per packet of LANES rays: origins relative to the frame's reference point, unit
- * directions, in structure-of-arrays form (rays[c * stride + r] is component c of ray r: origin x, y,
- * z, direction x, y, z; stride a multiple of LANES). */
-PYCLRAY_KERNELS_BEGIN
-__kernel void cast(__global const Camera* camera, const int n_rays, const int stride, __global const real* rays
-                   PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
-{
-    const int packet = get_global_id(0), r0 = packet * LANES;
-    if (r0 >= n_rays) return;
-    RayPacket ray;
-    ray.origin = v3(VLOAD(packet, rays), VLOAD(packet, rays + stride), VLOAD(packet, rays + 2 * stride));
-    ray.dir = v3(VLOAD(packet, rays + 3 * stride), VLOAD(packet, rays + 4 * stride), VLOAD(packet, rays + 5 * stride));
-    ray.a = v3_dot(ray.dir, ray.dir);
+#if LANES != 1
+#error "cast traces one ray per work-item (LANES 1)"
+#endif
 
-    PYCLRAY_FIND_NEAREST
-    PYCLRAY_WRITE((size_t)r0, 0, min(LANES, n_rays - r0))
+/* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
+ * the largest distance that counts (float64, limits[r * limit_stride]).
+ *
+ * Exact and independent of the other rays: each shape is tested from a point of the ray just
+ * before it. For a bounded shape of anchor A and bounding radius R (its packed data is relative
+ * to A), the ray's origin O moves along the unit direction D to O + s0 D, s0 = max(0, (A - O).D - R),
+ * which no point of the shape precedes; the new origin relative to A, s0 D - (A - O), is taken in
+ * float64 and rounded once. A ray from 1e8 away thus meets a sphere of radius 1e-4 with errors
+ * relative to the sphere's size, as a camera next to it would; its distance is s0 + s (s: the
+ * shape's own, from the new origin). Unbounded shapes (planes) take the world origin in float64. */
+#define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
+    if (kind == KIND_##Type) {                                                      \
+        const real s = type##_hit(&type##s[k], &moved);                             \
+        const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
+        PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##Type, k, q)                      \
+    }
+#define PYCLRAY_CAST_VISIT(q)                                                       \
+    {                                                                               \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        double s0;                                                                  \
+        bool near;                                                                  \
+        const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \
+        if (near && s0 <= PYCLRAY_CAST_REACH) {                                     \
+            PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                \
+            PYCLRAY_CAST_LIMIT                                                      \
+        }                                                                           \
+    }
+#define PYCLRAY_CAST_LINEAR(Type, type)                                             \
+    for (int q = 0; q < n_##type##s; ++q) {                                         \
+        const real s = type##_hit(&type##s[q], &ray);                               \
+        const double t = s < MISS ? (double)s * length : INFINITY;                  \
+        PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##Type, q, -1)                     \
+    }
+
+inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v.z); }
+
+/* d / |d| in float64, d scaled by its largest component first (a power of two would change no
+ * bit), so that neither a tiny nor a huge finite direction under- or overflows in the length */
+inline double3 unit_direction(const double3 d)
+{
+    const double3 size = select(d, -d, d < (double3)(0.0));
+    const double3 scaled = d / (size.x > size.y ? (size.x > size.z ? size.x : size.z) : (size.y > size.z ? size.y : size.z));
+    return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
+
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m), relative to anchor A: see above. m = 2^-50
+ * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
+ * shape's near side, however far O is (at 1e40 the rounding of (A - O).D alone exceeds a unit R).
+ * near: whether the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without
+ * cancellation); where it does not, it misses the shape by more than 2^-12 R, far more than the
+ * shape's test, which rounds quantities of the size of G, could err by: the test is skipped. */
+inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0, bool* near)
+{
+    const double3 O = ray->world, D = ray->dir_exact;
+    const double3 F = anchor.xyz - O;
+    const double size = (fabs(F.x) + fabs(F.y)) + fabs(F.z);
+    const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w - 0x1p-50 * size;
+    *s0 = along > 0 ? along : 0;
+    const double3 G = F - *s0 * D;
+    const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
+    *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
+    RayPacket moved = *ray;
+    moved.origin = v3_round(-G);
+    return moved;
+}
+
+/* the setup shared by cast and occluded: the ray (origins and directions: 3 doubles per ray; one
+ * origin for every ray where origin_stride is 0), its direction made unit */
+#define PYCLRAY_CAST_RAY                                                            \
+    const int r = get_global_id(0);                                                 \
+    if (r >= n_rays) return;                                                        \
+    RayPacket ray;                                                                  \
+    ray.world = vload3(r * origin_stride, origins);                                 \
+    ray.dir_exact = unit_direction(vload3(r, directions));                          \
+    ray.dir = v3_round(ray.dir_exact);                                              \
+    ray.a = v3_dot(ray.dir, ray.dir);                                               \
+    ray.origin = v3_round(ray.world);                                               \
+    const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
+    const double t_max = limits[(size_t)r * (size_t)limit_stride];
+
+/* its box ray around the scene's anchor, with a margin over the rounding of its origin */
+#define PYCLRAY_CAST_BOX                                                            \
+    const double3 from_anchor = ray.world - scene_anchor.xyz;                       \
+    const float3 o = convert_float3(from_anchor);                                   \
+    const float3 size = select(o, -o, o < (float3)(0.0f));                          \
+    const float margin = 0x1p-20f * ((size.x + size.y) + size.z);                   \
+    const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
+
+/* The box tests are in float: an origin beyond 2^100 from the scene's anchor (possible in fp64),
+ * or a scene that large (scene_anchor.w != 0), would overflow them; such a ray tests every bounded
+ * shape instead, one after the other (exactly as through the BVH, only slower). */
+#define PYCLRAY_CAST_BOUNDED(VISIT)                                                 \
+    if (scene_anchor.w != 0 || !(fabs(from_anchor.x) < 0x1p100 && fabs(from_anchor.y) < 0x1p100 \
+                                  && fabs(from_anchor.z) < 0x1p100)) {              \
+        int n_bounded = 0;                                                          \
+        PYCLRAY_BOUNDED(PYCLRAY_CAST_COUNT)                                         \
+        for (int q = 0; q < n_bounded; ++q) { VISIT(q) }                            \
+    } else {                                                                        \
+        PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                  \
+    }
+#define PYCLRAY_CAST_COUNT(Type, type) n_bounded += n_##type##s;
+
+#ifndef PYCLRAY_OCCLUDED
+
+/* the nearest hit so far (float64 distance), on an exact tie the lowest id */
+#ifdef PYCLRAY_TRACK_ID
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q)                                        \
+    if ((t) < best || ((t) == best && (t) < INFINITY && (id) < best_id)) {          \
+        best = (t); best_id = (id); best_kind = (kind); best_k = (k); best_q = (q); \
+    }
+#else
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
+#endif
+#define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
+#define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
+#define PYCLRAY_CAST_NORMAL(Type, type) \
+    if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
+
+PYCLRAY_KERNELS_BEGIN
+__kernel void cast(__global const Camera* camera, const int n_rays,
+                   __global const double* origins, const int origin_stride, __global const double* directions,
+                   __global const double* limits, const int limit_stride, const double4 scene_anchor
+                   PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+{
+    PYCLRAY_CAST_RAY
+    /* hits up to t_max count: best starts just above it */
+    double best = nextafter(t_max, (double)INFINITY);
+    int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
+    PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
+#ifdef PYCLRAY_HAS_BOUNDED
+    {
+        PYCLRAY_CAST_BOX
+        float limit = float_above_wide(best);
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT)
+    }
+#endif
+    const bool hit = best <= t_max && best < INFINITY;
+    const size_t index = (size_t)r;
+#ifdef PYCLRAY_AOV_DEPTH
+    depth[index] = hit ? (real)best : MISS;
+#endif
+#ifdef PYCLRAY_AOV_NORMAL
+    {
+#ifdef PYCLRAY_HAS_BOUNDED
+        if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
+            double s0;
+            bool near;
+            ray = moved_ray(&ray, anchors[best_q], &s0, &near);
+        }
+#endif
+        vec3v normal = v3(0, 0, 0);
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_NORMAL) }
+        normal_out[3 * index] = normal.x;
+        normal_out[3 * index + 1] = normal.y;
+        normal_out[3 * index + 2] = normal.z;
+    }
+#endif
+#ifdef PYCLRAY_AOV_ID
+    id_out[index] = hit ? best_id : -1;
+#endif
+}
+
+#else
+
+/* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
+#define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
+#define PYCLRAY_CAST_REACH t_max
+
+PYCLRAY_KERNELS_BEGIN
+__kernel void occluded(const int n_rays, __global const double* origins, const int origin_stride,
+                       __global const double* directions,
+                       __global const double* limits, const int limit_stride, const double4 scene_anchor
+                       PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG), __global char* occluded_out)
+{
+    PYCLRAY_CAST_RAY
+    bool found = false;
+    PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
+#ifdef PYCLRAY_HAS_BOUNDED
+    if (!found) {
+        PYCLRAY_CAST_BOX
+        float limit = float_above_wide(t_max);
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT)
+    }
+#endif
+    occluded_out[r] = found ? 1 : 0;
+}
+
+#endif
 
 #endif

@@ -15,8 +15,9 @@ seen from a centre of curvature of radius r it turns the normal by that error ov
 - camera: Mitsuba's float32 look_at camera turns its rays by up to alpha = 3 eps (1 + S),
   S = max(|eye|, |target|) / |target - eye|, and its origins lie within 2 eps max(|eye|, 1) of the
   eye: alpha t + 2 eps max(|eye|, 1) (images against Mitsuba only);
-- L: pyclray subtracts the eye (render) or the rays' mean origin (cast) in float64 on the host, so
-  its L is the size of frame coordinates: |origin - ref| + |anchor - ref|; Mitsuba works in
+- L: pyclray subtracts the eye in float64 on the host (render), so its L is the size of frame
+  coordinates: |origin - eye| + |anchor - eye|; a cast traces each ray on its own, from a point of
+  it next to each bounded shape, relative to the shape's box centre (``cast_frames``); Mitsuba works in
   float32 world coordinates: L = max(|eye|, |anchor|, |eye - anchor|). The anchor is the point a
   shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
 - k: K_ORACLE = 4 against the oracle (measured <= 2.4 for depths over random scenes of every
@@ -93,35 +94,70 @@ def world_sizes(scene: Scene, point) -> np.ndarray:
 
 
 # -- the bounds ------------------------------------------------------------------------------------
-def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach=0.0):
+def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach=0.0, travelled=None):
     """(depth tolerance, normal angle tolerance in radians) per ray: the formula of the module's
-    docstring. t, cos, radius, scale (L), oracle_scale (W) and camera_reach are per ray."""
+    docstring. t, cos, radius, scale (L), oracle_scale (W) and camera_reach are per ray; travelled:
+    how far the engine moved the ray's origin along it (in float64) before intersecting (cast), so
+    that its own rounding, and the normal's angle, grow with t - travelled only."""
     t = np.where(np.isfinite(t), t, 0.0)
+    local = t if travelled is None else np.maximum(t - travelled, 0.0)
     reach = k * eps * (t + scale)
+    reach_local = k * eps * (local + scale)
     angle = k * eps
     if oracle_scale is not None:
         reach = reach + k * ORACLE_EPSILON * (t + oracle_scale)
+        reach_local = reach_local + k * ORACLE_EPSILON * (t + oracle_scale)
         angle = angle + k * ORACLE_EPSILON
     reach = reach + camera_reach
+    reach_local = reach_local + camera_reach
     with np.errstate(invalid="ignore", divide="ignore"):
         depth = reach / cos
-        normal = angle + depth / radius
+        normal = angle + reach_local / cos / radius
     return depth, normal
 
 
-def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None):
-    """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
-    for rays from ``origins``; the kernel's frame is centred on ``reference_point`` (the eye for
-    renders, the rays' mean origin for cast; default: the origins' mean)."""
+def cast_frames(scene: Scene, origins, directions, ids):
+    """(L, travelled, anchor) per ray of a cast: cast tests a bounded shape of box centre A and
+    bounding radius R from the point O + s0 D of the ray, s0 = max(0, (A - O).D - R) (float64), in
+    coordinates relative to A, so what it rounds is of size L = |O + s0 D - A| + R; an unbounded
+    shape (a plane) from the ray's world origin in float64 (its signed distance rounded once: L = 0)."""
     origins = np.asarray(origins, np.float64)
-    flat = origins.reshape(-1, 3)
-    ref = flat.mean(axis=0) if reference_point is None else np.asarray(reference_point, np.float64)
+    directions = np.asarray(directions, np.float64)
+    count = max(len(scene.shapes), 1)
+    centre, radius, bounded = np.zeros((count, 3)), np.zeros(count), np.zeros(count, bool)
+    mean = origins.reshape(-1, 3).mean(axis=0) if origins.size else np.zeros(3)
+    for i, shape in enumerate(scene.shapes):
+        if shape.bounded:
+            lo, hi = type(shape).world_bounds([shape])[0]
+            centre[i], radius[i], bounded[i] = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo), True
+        else:
+            centre[i] = shape.anchor(mean)
+    index = np.maximum(ids, 0)
+    A, R, b = centre[index], radius[index], bounded[index]
+    F = A - origins
+    margin = 2.0**-50 * np.abs(F).sum(axis=-1)  # the kernel's bound on the rounding of (A - O).D
+    s0 = np.where(b, np.maximum(0.0, np.einsum("...k,...k", F, directions) - R - margin), 0.0)
+    frame = np.where(b, np.linalg.norm(F - s0[..., None] * directions, axis=-1) + R, 0.0)
+    return frame, s0, A
+
+
+def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None):
+    """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
+    for rays from ``origins``. A render's kernel works in a frame centred on ``reference_point``
+    (the eye); without one, the rays are a cast's, each traced on its own (``cast_frames``, which
+    needs their unit ``directions``)."""
+    origins = np.asarray(origins, np.float64)
     index = np.maximum(truth["id"], 0)
-    anchor = anchors(scene, ref)[index]
-    frame = np.linalg.norm(origins - ref, axis=-1) + np.linalg.norm(anchor - ref, axis=-1)
+    if reference_point is not None:
+        ref = np.asarray(reference_point, np.float64)
+        anchor = anchors(scene, ref)[index]
+        frame = np.linalg.norm(origins - ref, axis=-1) + np.linalg.norm(anchor - ref, axis=-1)
+        travelled = None
+    else:
+        frame, travelled, anchor = cast_frames(scene, origins, directions, truth["id"])
     world = np.linalg.norm(origins, axis=-1) + np.linalg.norm(anchor, axis=-1)
     return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=frame,
-                      k=K_ORACLE, oracle_scale=world)
+                      k=K_ORACLE, oracle_scale=world, travelled=travelled)
 
 
 def camera_angle_tolerance(scene: Scene) -> float:

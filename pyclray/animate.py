@@ -25,11 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .device import AOVS
+from .device import AOVS, RENDER_AOVS
 
-# The contract's default AOV for videos is "shaded", which arrives with the shading issue; until
-# "shaded" is in pyclray.device.AOVS the default is depth. Flip to DEFAULT_AOV = "shaded" then.
-DEFAULT_AOV = "depth"
+# the image a video or GIF shows unless --aov says otherwise (the contract's default)
+DEFAULT_AOV = "shaded"
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 FRAME_NAME = re.compile(r"frame_\d+(\.[a-z]+)?\.(exr|png)")  # what an animate folder holds
@@ -367,7 +366,7 @@ def add_command(subparsers) -> None:
                         help="a video (.mp4), a GIF (.gif), or a folder (a name ending in / or without a suffix)")
     parser.add_argument("--aov", type=_aovs, metavar="LIST",
                         help=f"images to compute: one for a video or GIF (default {DEFAULT_AOV}); any of "
-                        f"{','.join(AOVS)} for a folder (default all)")
+                        f"{','.join(RENDER_AOVS)} for a folder (default {','.join(AOVS)})")
     parser.add_argument("--frames", metavar="A:B", help="render frames A to B-1 only (either end may be left out), or K")
     parser.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     parser.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")
@@ -415,7 +414,7 @@ def run(args) -> int:
     else:
         aovs = args.aov or (DEFAULT_AOV,)
         if len(aovs) != 1 or not _has_preview(aovs[0]):
-            with_preview = [a for a in AOVS if _has_preview(a)]
+            with_preview = [a for a in RENDER_AOVS if _has_preview(a)]
             raise BadInput(f"--aov: a {kind} shows one image with a preview ({', '.join(with_preview)}), got {','.join(aovs)}")
     try:
         if kind == "mp4":

@@ -66,12 +66,12 @@ def _count(text: str) -> int:
 
 
 def _aovs(text: str) -> tuple[str, ...]:
-    from .device import AOVS
+    from .device import RENDER_AOVS
 
     names = tuple(a.strip() for a in text.split(",") if a.strip())
-    bad = [a for a in names if a not in AOVS]
+    bad = [a for a in names if a not in RENDER_AOVS]
     if bad or not names:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(AOVS)}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(RENDER_AOVS)}, got {text!r}")
     repeated = sorted({a for a in names if names.count(a) > 1})
     if repeated:
         raise argparse.ArgumentTypeError(f"expected each image once, got {text!r} ({', '.join(repeated)} more than once)")
@@ -203,8 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="render a scene to a multi-channel OpenEXR file (and PNG previews)",
         description="Render SCENE with one ray per pixel centre and write one OpenEXR file with "
         "the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z (unit world normal, "
-        "0 on a miss) and id (UINT holding the int32 shape id; 4294967295 = -1 on a miss). Z and N are "
-        "32-bit FLOAT channels also for --precision fp64 (rounded to float32): OpenEXR has no 64-bit "
+        "0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), and as asked "
+        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear RGB). "
+        "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
+        "float32): OpenEXR has no 64-bit "
         "float channel type. Large images are rendered and written in bands of rows, so memory stays "
         "bounded; a progress bar shows on a terminal.",
         epilog=EXIT_STATUS_HELP,
@@ -213,11 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
     render.add_argument(
         "--aov", type=_aovs, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id (default: all); fewer is faster",
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded "
+        "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",
-        help="also write OUT.depth.png (near bright, far dark, misses black) and OUT.normal.png (n*0.5+0.5)",
+        help="also write a PNG preview of each image: OUT.depth.png and OUT.zdepth.png (near bright, far "
+        "dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a colour per shape, misses black), "
+        "OUT.shaded.png (clamped, sRGB)",
     )
     render.add_argument(
         "--precision", choices=("fp32", "fp64"), default="fp32",

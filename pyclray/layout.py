@@ -19,6 +19,7 @@ import numpy as np
 _SCALARS = {
     "int": np.int32,
     "uint": np.uint32,
+    "ulong": np.uint64,
     "float": np.float32,
     "double": np.float64,
 }

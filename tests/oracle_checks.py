@@ -11,16 +11,17 @@ def judge(scene, origins, directions, result, precision, reference_point=None):
     unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     truth = oracle.trace(scene, origins, unit, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
-    depth_tolerance, normal_tolerance = accuracy.pyclray_tolerances(scene, truth, cos, origins, precision, reference_point)
+    depth_tolerance, normal_tolerance = accuracy.pyclray_tolerances(scene, truth, cos, origins, precision, reference_point, unit)
     with np.errstate(invalid="ignore"):
         farthest = np.fmax(np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0),
                            np.where(np.isfinite(result["depth"]), result["depth"].astype(np.float64), 0.0))
-    band, _ = accuracy.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision, reference_point)
+    band, _ = accuracy.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision,
+                                          reference_point, unit)
     edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])],
                              band * cos)
     truth["cos"] = cos
     near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.pyclray_tolerances(
-        scene, {"depth": t, "id": ids}, c, origins, precision, reference_point)[0])
+        scene, {"depth": t, "id": ids}, c, origins, precision, reference_point, unit)[0])
     radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
     explained = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) | near_tie | edge
     judged = (result["id"] == truth["id"]) & (truth["id"] >= 0) & ~explained

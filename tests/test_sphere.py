@@ -41,7 +41,7 @@ def test_nearest_of_many_is_the_nearest():
     cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
     truth["cos"] = cos
     near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.pyclray_tolerances(
-        scene, {"depth": t, "id": ids}, c, origins, "fp32")[0])
+        scene, {"depth": t, "id": ids}, c, origins, "fp32", directions=unit)[0])
     clear = ~near_tie & ~accuracy.silhouettes(truth["id"], cos)
     assert clear.mean() > 0.9
     assert np.array_equal(frame["id"][clear], np.where(np.isinf(all_t.min(axis=0)), -1, np.argmin(all_t, axis=0))[clear])

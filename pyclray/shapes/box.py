@@ -98,9 +98,10 @@ class Box(Shape):
 
     @classmethod
     def _pack(cls, out, boxes, origin, rotation_rows):
+        origins = np.broadcast_to(origin, (len(boxes), 3))  # one frame for all, or one per box (cast)
         for k, box in enumerate(boxes):
             R = box.axes()
-            F = np.array(box.center) - origin
+            F = np.array(box.center) - origins[k]
             out["center"][k, :3] = rotation_rows @ F
             out["half_size"][k, :3] = box.half()
             for axis in range(3):

@@ -1,6 +1,7 @@
 """The infinite plane: the points p with normal . p + offset = 0."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,7 @@ class Plane(Shape):
             ("normal", "real4"),  # unit normal in the frame; w: signed distance of the frame origin
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
+            ("exact", "ulong4"),  # unit normal and offset in world space, the bits of float64 numbers
         ),
         "Plane n.p + h = 0: normal.xyz = n in the frame, normal.w = h at the frame's origin.",
     )
@@ -48,7 +50,21 @@ class Plane(Shape):
         """The plane with this normal through this point."""
         normal = vector3("normal", normal)
         point = vector3("point", point)
-        return cls(normal, -float(dot2(np.array(normal), np.array(point))), name)
+        cls(normal, 0.0, name)  # the normal's own checks come first
+        with np.errstate(over="ignore", invalid="ignore"):
+            offset = -float(dot2(np.array(normal), np.array(point)))
+            if not math.isfinite(offset):
+                # beyond float64 (or beyond the ~1e292 where error-free products overflow in their
+                # splitting): the same plane with a unit normal (normal and offset scale together),
+                # and if even that overflows, an error rather than an inf offset
+                length = norm3(normal)
+                normal = tuple(component / length for component in normal)
+                offset = -float(dot2(np.array(normal), np.array(point)))
+                if not math.isfinite(offset):
+                    offset = -float(np.dot(normal, point))
+        if not math.isfinite(offset):
+            raise SceneError("expected normal . point within the range of float64, got an overflow", key="point")
+        return cls(normal, offset, name)
 
     @classmethod
     def _from_table(cls, table, name):
@@ -78,10 +94,11 @@ class Plane(Shape):
         h = np.array([p.unit()[1] for p in planes])
         # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
         n_h = np.concatenate([n, h[:, None]], axis=1)
-        origin_1 = np.broadcast_to(np.append(origin, 1.0), n_h.shape)
+        origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(planes), 1))], axis=1)
         out["normal"][:, :3] = n @ rotation.T
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
+        out["exact"] = n_h.view(np.uint64)
 
     # -- float64 oracle ----------------------------------------------------------------------
     def oracle_distance(self, origins, directions):

@@ -1,0 +1,268 @@
+/* The BVH's traversal (pyclray/bvh.py builds it, pyclray/render.py packs it).
+ *
+ * Two trees of the same boxes: render's packets of camera rays traverse the binary tree (a node's
+ * box against all the packet's lanes at once), cast's single rays the wide tree.
+ *
+ * A binary node: its box lo.xyz .. hi.xyz (float, as below); first = as_int(lo.w), count =
+ * as_int(hi.w): a leaf of count shapes at positions first .. first + count - 1 of refs, else an
+ * internal node with children first and first + 1.
+ *
+ * A wide node holds up to 8 children's boxes (float, rounded outward from float64 and kept
+ * within the float range, so that no test meets inf - inf or 0 * inf; an empty slot has lo > hi)
+ * in the box frame (world axes around the eye for render, around the scene's anchor for cast),
+ * and their codes: a wide node's index, or ~(first * 8 + count) for a leaf of count shapes at
+ * positions first .. first + count - 1 of refs (ref = index in its type's array * 8 + kind). All
+ * eight boxes are tested at once, in float8 lanes.
+ *
+ * A box test must never drop a shape that the shape's own test would hit: the shape tests round,
+ * so a hit may lie a little outside the exact shape. Each shape's box is widened on the host by
+ * BVH_WIDEN times its size, and here the ray is widened into a cone: a point at distance t along
+ * the ray matches a box that it misses by up to BVH_WIDEN t on each axis. BVH_WIDEN = 2^-12 is 4096
+ * float32 ulps, far above the few ulps of t (and of the shape's size) a shape test errs by, and it
+ * also covers the rounding of the box test itself (the 1 + 2 gamma(3) widening of pbrt-v4 / Ize's
+ * "Robust BVH ray traversal" is applied to the exit distance as well, for the record). The cone
+ * costs little: 2.4e-4 of the distance is a fraction of a pixel at any usual field of view.
+ */
+#define BVH_WIDEN 0x1p-12f
+#define BVH_GAMMA3_2 (1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f))
+#define BVH_STACK 256  /* 7 entries per level of the wide tree at most: the host checks its depth */
+#define BVH_BINARY_STACK 64  /* one per level of the binary tree, at most its keys' 63 bits deep */
+
+/* A ray for box tests: per axis, the entry and exit distances of a slab are
+ * (face - origin -+ margin) * inverse (+ exit_add): see box_ray. */
+typedef struct {
+    float3 near_origin, far_origin;   /* origin moved by the margin toward each slab's near and far face */
+    float3 near_inverse, far_inverse; /* sign / (|d| + widen) and sign / (|d| - widen) (0 where |d| <= widen) */
+    float3 far_add;                    /* +inf where |d| <= widen: the cone never leaves that slab */
+    int3 negative;                     /* direction component < 0: the near face is hi */
+} BoxRay;
+
+/* The box ray of origin o and direction d (unit or nearly) in the box frame, with an absolute
+ * margin (the rounding of o). With s = sign(d_k), a point o + t d lies within margin + BVH_WIDEN t
+ * of the slab [near, far] (in s's direction) when
+ *   t (|d_k| + BVH_WIDEN) >= s (near - o) - margin   and   t (|d_k| - BVH_WIDEN) <= s (far - o) + margin. */
+inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
+{
+    BoxRay b;
+    b.negative = d < (float3)(0.0f);
+    const float3 s = select((float3)(1.0f), (float3)(-1.0f), b.negative);
+    const float3 size = s * d;
+    b.near_origin = o + s * margin;
+    b.far_origin = o - s * margin;
+    b.near_inverse = s / (size + BVH_WIDEN);
+    const int3 steep = size > (float3)(BVH_WIDEN);
+    b.far_inverse = select((float3)(0.0f), s / (size - BVH_WIDEN), steep);
+    b.far_add = select((float3)(INFINITY), (float3)(0.0f), steep);
+    return b;
+}
+
+inline float bvh_max(const float a, const float b) { return a > b ? a : b; }
+inline float bvh_min(const float a, const float b) { return a < b ? a : b; }
+
+#ifdef PYCLRAY_CAST
+/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
+inline float float_above_wide(const double x)
+{
+    const float f = (float)x;
+    return (double)f < x ? nextafter(f, (float)INFINITY) : f;
+}
+#endif
+
+/* The children of a wide node the ray enters before limit: their entry distances, +inf for the
+ * others (one float8 test of all eight boxes). */
+inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const float limit)
+{
+    const float8 near_x = b->negative.x ? node->hi_x : node->lo_x, far_x = b->negative.x ? node->lo_x : node->hi_x;
+    const float8 near_y = b->negative.y ? node->hi_y : node->lo_y, far_y = b->negative.y ? node->lo_y : node->hi_y;
+    const float8 near_z = b->negative.z ? node->hi_z : node->lo_z, far_z = b->negative.z ? node->lo_z : node->hi_z;
+    const float8 enter_x = (near_x - b->near_origin.x) * b->near_inverse.x;
+    const float8 enter_y = (near_y - b->near_origin.y) * b->near_inverse.y;
+    const float8 enter_z = (near_z - b->near_origin.z) * b->near_inverse.z;
+    const float8 leave_x = (far_x - b->far_origin.x) * b->far_inverse.x + b->far_add.x;
+    const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
+    const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
+    /* max and min by comparison: no NaN reaches here (kernels/bvh.h's box frame) */
+    float8 enter = select(enter_x, enter_y, enter_y > enter_x);
+    enter = select(enter, enter_z, enter_z > enter);
+    enter = select(enter, (float8)(0.0f), enter < (float8)(0.0f));
+    float8 leave = select(leave_x, leave_y, leave_y < leave_x);
+    leave = select(leave, leave_z, leave_z < leave);
+    leave = select(leave, (float8)(limit), (float8)(limit) < leave) * BVH_GAMMA3_2;
+    return select((float8)(INFINITY), enter, enter <= leave);
+}
+
+/* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
+ * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf. The stack holds
+ * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
+ * go on it farthest first, so that the nearest is visited next. */
+#define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
+    {                                                                                   \
+        int stack_child[BVH_STACK];                                                     \
+        float stack_entry[BVH_STACK];                                                   \
+        int top = 0;                                                                    \
+        stack_child[top] = 0;                                                           \
+        stack_entry[top++] = 0.0f;                                                      \
+        while (top > 0) {                                                               \
+            --top;                                                                      \
+            if (!(stack_entry[top] <= limit)) continue;                                 \
+            const int code = stack_child[top];                                          \
+            if (code < 0) {                                                             \
+                const int first = (~code) >> 3, count = (~code) & 7;                    \
+                for (int q = first; q < first + count; ++q) { VISIT(q) }                \
+                continue;                                                               \
+            }                                                                           \
+            float entries[8];                                                           \
+            vstore8(wide_entries(&nodes[code], &box, limit), 0, entries);               \
+            const int bottom = top;                                                     \
+            for (int slot = 0; slot < 8; ++slot) {                                      \
+                const float entry = entries[slot];                                      \
+                if (entry < INFINITY) {                                                 \
+                    /* insert among this node's pushed children, farthest deepest */    \
+                    const int child = nodes[code].child[slot];                          \
+                    int at = top++;                                                     \
+                    while (at > bottom && stack_entry[at - 1] < entry) {                \
+                        stack_entry[at] = stack_entry[at - 1];                          \
+                        stack_child[at] = stack_child[at - 1];                          \
+                        --at;                                                           \
+                    }                                                                   \
+                    stack_entry[at] = entry;                                            \
+                    stack_child[at] = child;                                            \
+                }                                                                       \
+            }                                                                           \
+        }                                                                               \
+    }
+
+
+/* -- packets (render): the binary tree, one box against all the lanes ---------------------------- */
+
+/* A packet's rays from the box frame's origin (the eye), per axis: sign / (|d| + widen), sign /
+ * (|d| - widen) or 0, and +inf where |d| <= widen (see box_ray). */
+typedef struct {
+    vec3v near_inverse, far_inverse, far_add;
+    intv negative_x, negative_y, negative_z;
+} BoxPacket;
+
+inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, intv* negative)
+{
+    *negative = d < SPLAT(0);
+    const realv s = *negative ? SPLAT(-1) : SPLAT(1);
+    const realv size = v_abs(d);
+    const intv steep = size > SPLAT(BVH_WIDEN);
+    *near_inverse = s / (size + SPLAT(BVH_WIDEN));
+    *far_inverse = steep ? s / (size - SPLAT(BVH_WIDEN)) : SPLAT(0);
+    *far_add = steep ? SPLAT(0) : SPLAT(INFINITY);
+}
+
+inline BoxPacket box_packet(const vec3v d)
+{
+    BoxPacket b;
+    box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.negative_x);
+    box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.negative_y);
+    box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.negative_z);
+    return b;
+}
+
+/* Per lane, the distance at which the ray (widened, from the origin) enters node's box, or +inf
+ * where it misses the box before limit. */
+inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const realv limit)
+{
+    const float4 lo = node->lo, hi = node->hi;
+    const realv near_x = b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x), far_x = b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x);
+    const realv near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
+    const realv near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+/* the smallest and the largest lane, by halving the vector (no trip through memory) */
+#define BVH_HALVE(v, op) ((v).lo op (v).hi ? (v).lo : (v).hi)
+inline real lane_min(const realv v)
+{
+#if LANES == 1
+    return v;
+#elif LANES == 2
+    return BVH_HALVE(v, <);
+#elif LANES == 4
+    const __typeof__(v.lo) h = BVH_HALVE(v, <);
+    return BVH_HALVE(h, <);
+#elif LANES == 8
+    const __typeof__(v.lo) h = BVH_HALVE(v, <);
+    const __typeof__(h.lo) q = BVH_HALVE(h, <);
+    return BVH_HALVE(q, <);
+#else
+    const __typeof__(v.lo) h = BVH_HALVE(v, <);
+    const __typeof__(h.lo) q = BVH_HALVE(h, <);
+    const __typeof__(q.lo) e = BVH_HALVE(q, <);
+    return BVH_HALVE(e, <);
+#endif
+}
+
+inline real lane_max(const realv v)
+{
+#if LANES == 1
+    return v;
+#elif LANES == 2
+    return BVH_HALVE(v, >);
+#elif LANES == 4
+    const __typeof__(v.lo) h = BVH_HALVE(v, >);
+    return BVH_HALVE(h, >);
+#elif LANES == 8
+    const __typeof__(v.lo) h = BVH_HALVE(v, >);
+    const __typeof__(h.lo) q = BVH_HALVE(h, >);
+    return BVH_HALVE(q, >);
+#else
+    const __typeof__(v.lo) h = BVH_HALVE(v, >);
+    const __typeof__(h.lo) q = BVH_HALVE(h, >);
+    const __typeof__(q.lo) e = BVH_HALVE(q, >);
+    return BVH_HALVE(e, >);
+#endif
+}
+
+/* Visit, nearest child first (by its nearest lane), every leaf whose box some lane of the packet
+ * enters before its own best (a realv variable VISIT lowers): VISIT(q) for each shape of each such
+ * leaf, tested against the whole packet. */
+#define PYCLRAY_TRAVERSE_PACKET(nodes, box, best, VISIT) \
+    PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &(box), best, VISIT)
+/* the same with another box test: ENTRIES(node, boxes, limit) (shadow rays: kernels/shading.h) */
+#define PYCLRAY_TRAVERSE_PACKET_WITH(nodes, ENTRIES, boxes, best, VISIT)                \
+    {                                                                                   \
+        int stack_node[BVH_BINARY_STACK];                                               \
+        real stack_entry[BVH_BINARY_STACK];                                             \
+        int top = 0, k = 0;                                                             \
+        bool going = ANY(ENTRIES(&nodes[0], boxes, best) < SPLAT(INFINITY));         \
+        while (going) {                                                                 \
+            const int first = as_int(nodes[k].lo.w), count = as_int(nodes[k].hi.w);     \
+            if (count > 0) {                                                            \
+                for (int q = first; q < first + count; ++q) { VISIT(q) }                \
+            } else {                                                                    \
+                const realv t0 = ENTRIES(&nodes[first], boxes, best);                   \
+                const realv t1 = ENTRIES(&nodes[first + 1], boxes, best);               \
+                const real near0 = lane_min(t0), near1 = lane_min(t1);                  \
+                if (near0 < INFINITY || near1 < INFINITY) {                             \
+                    const bool left = near0 <= near1;                                   \
+                    k = left ? first : first + 1;                                       \
+                    const real other = left ? near1 : near0;                            \
+                    if (other < INFINITY) {                                             \
+                        stack_node[top] = left ? first + 1 : first;                     \
+                        stack_entry[top++] = other;                                     \
+                    }                                                                   \
+                    continue;                                                           \
+                }                                                                       \
+            }                                                                           \
+            going = false;                                                              \
+            if (top > 0) {                                                              \
+                const real farthest = lane_max(best);                                   \
+                while (top > 0) {                                                       \
+                    --top;                                                              \
+                    if (stack_entry[top] <= farthest) {                                 \
+                        k = stack_node[top];                                            \
+                        going = true;                                                   \
+                        break;                                                          \
+                    }                                                                   \
+                }                                                                       \
+            }                                                                           \
+        }                                                                               \
+    }
