@@ -14,9 +14,8 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import cli, cluster, device
+from pyclray import cli, cluster, device, output
 from pyclray.errors import DeviceError, SceneError
-from pyclray.output import read_exr
 
 from conftest import REPO
 from test_animate import SCENE
@@ -137,7 +136,9 @@ def test_animate_on_a_cluster_writes_the_local_files_bit_for_bit(client, tmp_pat
     assert status == 0, err
     assert "2 workers at tcp://" in out and "on the workers" in out
     names = sorted(p.name for p in local.iterdir())
-    assert names == sorted(p.name for p in remote.iterdir()) and len(names) == 8 * 3
+    # each frame: its EXR and a PNG preview of every image that has one (pyclray.output.PREVIEWS)
+    per_frame = 1 + sum(aov in output.PREVIEWS for aov in pyclray.AOVS)
+    assert names == sorted(p.name for p in remote.iterdir()) and len(names) == 8 * per_frame
     for name in names:
         assert (local / name).read_bytes() == (remote / name).read_bytes(), name
         assert (local / name).stat().st_mode == (remote / name).stat().st_mode, name
