@@ -516,9 +516,6 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
     return args, anchor
 
 
-BOX_REACH = float(np.finfo(np.float32).max)
-
-
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
     scene = as_scene(scene)
     ctx = context_for(device)
@@ -537,10 +534,8 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     shape_types = _shape_kinds(scene)[0]
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
-    # the largest real; and, whatever the precision, below float32's range, in which the BVH's
-    # traversal works (kernels/bvh.h: an fp64 ray from 1e39 away was lost in an infinite box
-    # coordinate, or crashed the cast kernel)
-    bound = min(np.sqrt(np.finfo(real).max), BOX_REACH) / 4
+    # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
+    bound = np.sqrt(np.finfo(real).max) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.abs(origins - anchor[:3]).max(axis=-1, initial=0.0)
     if not (reach <= bound).all():
