@@ -55,6 +55,16 @@ def _time(text: str) -> float:
     return value
 
 
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+        if value < 1:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    return value
+
+
 def _aovs(text: str) -> tuple[str, ...]:
     from .device import RENDER_AOVS
 
@@ -92,6 +102,8 @@ def cmd_render(args) -> int:
     targets = [out, *(output.preview_paths(out, args.aov).values() if args.png else ())]
     for target in targets:  # before the render: a path that cannot be written costs no time
         output.check_target(target)
+    if args.workers is not None or args.scheduler is not None:
+        return _render_on_cluster(args, scene, out)
     width, height = scene.image.width, scene.image.height
     render_band = _band_renderer(scene, args.aov, args.precision, args.device)
     rows = output.band_rows(width)
@@ -119,6 +131,45 @@ def cmd_render(args) -> int:
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
         f"wrote {', '.join(map(str, written))} [{channels}]"
+    )
+    return 0
+
+
+def _render_on_cluster(args, scene, out) -> int:
+    """`pyclray render --workers N | --scheduler ADDRESS`: the image's bands of whole rows are the
+    tasks (pyclray/cluster.py); they come back in order and are streamed into the files as a local
+    render streams its bands, so the files are the same bytes."""
+    from . import output
+    from .animate import cluster_module
+    from .progress import progress, seconds
+
+    cluster = cluster_module()
+    width, height = scene.image.width, scene.image.height
+    start = time.perf_counter()
+    try:
+        with cluster.connect(args.workers, args.scheduler) as client:
+            start_time = time.perf_counter() - start
+            where = cluster.describe(client)
+            rows = cluster.band_rows(width, height)
+            devices = []
+
+            def bands():
+                for band in cluster.render_bands(client, scene, args.aov, args.precision, args.device, rows, bar):
+                    devices.append(band.device)
+                    yield band
+
+            with progress(-(-height // rows), desc="pyclray render", unit="band") as bar:
+                written = output.write_images(out, bands(), width=width, height=height, aovs=args.aov,
+                                              previews=args.png, comment=f"pyclray render of {args.scene}")
+    except cluster.ClusterError as error:
+        raise BadInput(str(error)) from None
+    total = time.perf_counter() - start
+    channels = ", ".join(output.exr_channel_arrays(output.empty_images(args.aov)))
+    count = -(-height // rows)
+    print(
+        f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
+        f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
+        f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} [{channels}]"
     )
     return 0
 
@@ -185,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
         "$PYOPENCL_CTX, else PoCL's CPU device",
     )
+    from .animate import add_cluster_options
+
+    add_cluster_options(render, "the image's bands of rows")
     render.set_defaults(run=cmd_render)
 
     devices = commands.add_parser("devices", help="list the OpenCL devices", description="List the OpenCL devices and their selectors.")

@@ -277,4 +277,5 @@ def test_an_fp64_cast_from_beyond_float32s_range_is_refused_not_a_crash():
 
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, (result.returncode, result.stderr[-2000:])
-    assert result.stdout.splitlines() == ["-1", "origins: row 0", "origins: row 0"], result.stdout
+    # beyond the float32 box tests' reach such rays test every bounded shape (they miss here)
+    assert result.stdout.splitlines() == ["-1", "-1", "-1"], result.stdout
