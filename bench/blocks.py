@@ -32,7 +32,10 @@ GROUPS = {
     "grid64 512": ("grid64", 512, ("floor", "all", "depth", "llvm")),
     "grid1024 512": ("grid1024", 512, ("floor", "all", "depth", "llvm")),
     "shapes 512": ("shapes", 512, ("floor", "all", "depth", "llvm")),  # every shape type
+    # tp02 with two point lights and shadows (scenes/tp02-lit.toml)
+    "tp02-lit 512": ("tp02-lit", 512, ("unshaded", "shaded", "shaded no-shadows", "direct llvm")),
 }
+UNSHADED = ("depth", "normal", "id", "zdepth", "position")  # every AOV but shaded
 
 FLOOR_SOURCE = """
 __kernel void floor_kernel(__global float* depth, __global float* normal, __global int* id, const int width, const int height)
@@ -69,6 +72,25 @@ def floor_in_place(ctx, size: int):
     return run
 
 
+def mitsuba_direct(scene):
+    """Mitsuba llvm_ad_rgb's direct integrator on the scene (its diffuse version: two-sided diffuse
+    BSDFs, the same lights as emitters), one pixel-centre sample per pixel and as many emitter
+    samples as the scene has lights: the same number of shadow rays per pixel as pyclray casts."""
+    from pyclray import mitsuba as pm
+    from pyclray.validation import shaded as shaded_check
+    from pyclray.lighting import effective_lights
+
+    mi = pm.import_mitsuba("llvm_ad_rgb")
+    lights = effective_lights(scene)
+    description = shaded_check.direct_scene_dict(shaded_check.diffuse_version(scene), lights[0], "llvm_ad_rgb")
+    description["integrator"]["emitter_samples"] = len(lights)
+    for k, light in enumerate(lights[1:]):
+        description[f"light{k + 1}"] = shaded_check._emitter(light)
+    mi_scene = mi.load_dict(description, optimize=False)
+    sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
+    return lambda: np.array(integrator.render(mi_scene, sensor))
+
+
 def calls_of(group: str) -> dict:
     """label -> a call of the group's cases."""
     import pyclray
@@ -81,6 +103,16 @@ def calls_of(group: str) -> dict:
         label = f"{name} {size} {case}"
         if case == "floor":
             calls[label] = floor_in_place(device.context_for(None), size)
+        elif case == "direct llvm":
+            calls[label] = mitsuba_direct(scene)
+        elif case == "unshaded":
+            calls[label] = lambda: pyclray.render(scene, UNSHADED)
+        elif case.startswith("shaded"):
+            from dataclasses import replace
+
+            shadows = case == "shaded"
+            lit = replace(scene, shading=replace(scene.shading, shadows=shadows))
+            calls[label] = lambda lit=lit: pyclray.render(lit, ("shaded",))
         elif case == "llvm":
             from pyclray import mitsuba as pm
 
@@ -143,6 +175,9 @@ TARGETS = {
     "grid1024 512 all AOVs: llvm / pyclray": ("grid1024 512 llvm", "grid1024 512 all", None, ""),
     "shapes 512 all AOVs: pyclray / floor": ("shapes 512 all", "shapes 512 floor", None, ""),
     "shapes 512 all AOVs: llvm / pyclray": ("shapes 512 llvm", "shapes 512 all", None, ""),
+    "tp02-lit 512 shaded: Mitsuba direct llvm / pyclray": ("tp02-lit 512 direct llvm", "tp02-lit 512 shaded", 5.0, ">="),
+    "tp02-lit 512: shaded with shadows / all AOVs unshaded": ("tp02-lit 512 shaded", "tp02-lit 512 unshaded", 2.0, "<="),
+    "tp02-lit 512: shaded without shadows / all AOVs unshaded": ("tp02-lit 512 shaded no-shadows", "tp02-lit 512 unshaded", None, ""),
 }
 
 

@@ -47,13 +47,10 @@ inline BoxSlabs box_slabs(__global const Box* box, const RayPacket* ray)
     const vec3v e0 = v3_splat(box->axis0), e1 = v3_splat(box->axis1), e2 = v3_splat(box->axis2);
     BoxSlabs slabs;
     slabs.along = v3(v3_dot(D, e0), v3_dot(D, e1), v3_dot(D, e2));
-#ifdef PYCLRAY_CAST
-    const vec3v F = v3_sub(v3_splat(box->center), ray->origin);
-    const vec3v o = v3(v3_dot(ray->origin, e0), v3_dot(ray->origin, e1), v3_dot(ray->origin, e2));
-#else
-    const vec3v F = v3_splat(box->center);
-    const vec3v o = v3(SPLAT(0), SPLAT(0), SPLAT(0));  /* camera rays: the offsets as packed */
-#endif
+    /* camera rays (from the frame's origin): the offsets as packed; cast and shadow rays: their origin's */
+    const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    const vec3v F = FROM_EYE(ray) ? v3_splat(box->center) : v3_sub(v3_splat(box->center), ray->origin);
+    const vec3v o = FROM_EYE(ray) ? zero : v3(v3_dot(ray->origin, e0), v3_dot(ray->origin, e1), v3_dot(ray->origin, e2));
     /* Which faces the ray enters and leaves by, and whether it meets the box at all, decided from
      * the ray's point nearest the centre, P = -D x (F x D) / a (from the centre): small coordinates
      * that keep the camera frame's digits, where the slab offsets of a far box are large numbers

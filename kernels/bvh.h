@@ -224,19 +224,22 @@ inline real lane_max(const realv v)
 /* Visit, nearest child first (by its nearest lane), every leaf whose box some lane of the packet
  * enters before its own best (a realv variable VISIT lowers): VISIT(q) for each shape of each such
  * leaf, tested against the whole packet. */
-#define PYCLRAY_TRAVERSE_PACKET(nodes, box, best, VISIT)                                \
+#define PYCLRAY_TRAVERSE_PACKET(nodes, box, best, VISIT) \
+    PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &(box), best, VISIT)
+/* the same with another box test: ENTRIES(node, boxes, limit) (shadow rays: kernels/shading.h) */
+#define PYCLRAY_TRAVERSE_PACKET_WITH(nodes, ENTRIES, boxes, best, VISIT)                \
     {                                                                                   \
         int stack_node[BVH_BINARY_STACK];                                               \
         real stack_entry[BVH_BINARY_STACK];                                             \
         int top = 0, k = 0;                                                             \
-        bool going = ANY(box_entries(&nodes[0], &box, best) < SPLAT(INFINITY));         \
+        bool going = ANY(ENTRIES(&nodes[0], boxes, best) < SPLAT(INFINITY));         \
         while (going) {                                                                 \
             const int first = as_int(nodes[k].lo.w), count = as_int(nodes[k].hi.w);     \
             if (count > 0) {                                                            \
                 for (int q = first; q < first + count; ++q) { VISIT(q) }                \
             } else {                                                                    \
-                const realv t0 = box_entries(&nodes[first], &box, best);                \
-                const realv t1 = box_entries(&nodes[first + 1], &box, best);            \
+                const realv t0 = ENTRIES(&nodes[first], boxes, best);                   \
+                const realv t1 = ENTRIES(&nodes[first + 1], boxes, best);               \
                 const real near0 = lane_min(t0), near1 = lane_min(t1);                  \
                 if (near0 < INFINITY || near1 < INFINITY) {                             \
                     const bool left = near0 <= near1;                                   \

@@ -37,17 +37,21 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
     const vec3v A = v3_splat(cylinder->axis);
     const vec3v D = ray->dir;
     const realv r2 = SPLAT(cylinder->p0.w);
-#ifdef PYCLRAY_CAST
-    const vec3v F = v3_sub(v3_splat(cylinder->p0), ray->origin);
-    const vec3v FxA = v3_cross(F, A);
-    const realv c = v3_dot(FxA, FxA) - r2;
-    const realv d0 = v3_dot(F, A), d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
-#else
-    const vec3v F = v3_splat(cylinder->p0);  /* the ray's origin is the frame's */
-    const vec3v FxA = v3_cross(F, A);
-    const realv c = SPLAT(cylinder->axis.w);
-    const realv d0 = SPLAT(cylinder->world_axis.w), d1 = SPLAT(cylinder->d1);
-#endif
+    vec3v F, FxA;
+    realv c, d0, d1;
+    if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: the host's terms */
+        F = v3_splat(cylinder->p0);
+        FxA = v3_cross(F, A);
+        c = SPLAT(cylinder->axis.w);
+        d0 = SPLAT(cylinder->world_axis.w);
+        d1 = SPLAT(cylinder->d1);
+    } else {  /* cast and shadow rays */
+        F = v3_sub(v3_splat(cylinder->p0), ray->origin);
+        FxA = v3_cross(F, A);
+        c = v3_dot(FxA, FxA) - r2;
+        d0 = v3_dot(F, A);
+        d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
+    }
     hit.DxA = v3_cross(D, A);
     const realv a = v3_dot(hit.DxA, hit.DxA);
     const realv b = v3_dot(FxA, hit.DxA);
@@ -84,11 +88,7 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
     /* caps: the end planes, kept where the hit point is within r of the cap's centre; that point
      * is A x (D x F_end) / (A . D) from it (see kernels/disk.cl), not s D - F_end */
     if (cylinder->caps) {
-#ifdef PYCLRAY_CAST
-        const vec3v F1 = v3_sub(v3_splat(cylinder->p1), ray->origin);
-#else
-        const vec3v F1 = v3_splat(cylinder->p1);
-#endif
+        const vec3v F1 = FROM_EYE(ray) ? v3_splat(cylinder->p1) : v3_sub(v3_splat(cylinder->p1), ray->origin);
         const realv s0 = d0 / dA, s1 = d1 / dA;
         const vec3v R0 = v3_cross(A, v3_cross(D, F)), R1 = v3_cross(A, v3_cross(D, F1));
         cylinder_candidate(&hit, s0, from_nearest ? -z_star / dA : s0, v3_dot(R0, R0) <= r2 * dA * dA, 3);

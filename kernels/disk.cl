@@ -7,13 +7,9 @@
 inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 {
     const vec3v n = v3_splat(disk->normal);
-#ifdef PYCLRAY_CAST
-    const vec3v F = v3_sub(v3_splat(disk->center), ray->origin);
-    const realv h = SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
-#else
-    const vec3v F = v3_splat(disk->center);  /* the ray's origin is the frame's */
-    const realv h = SPLAT(disk->normal.w);
-#endif
+    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    const vec3v F = FROM_EYE(ray) ? v3_splat(disk->center) : v3_sub(v3_splat(disk->center), ray->origin);
+    const realv h = FROM_EYE(ray) ? SPLAT(disk->normal.w) : SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
     /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit */
     const realv s = -h / v3_dot(n, ray->dir);
     const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));

@@ -164,4 +164,19 @@ typedef struct {
     double3 world;
     double3 dir_exact;
 #endif
+#ifdef PYCLRAY_SHADOWS
+    int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
+#endif
 } RayPacket;
+
+/* FROM_EYE(ray): whether the packet starts at the frame's origin, the eye, where the terms the host
+ * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). Cast's rays never
+ * do; a render's camera rays always, and its shadow rays (only compiled with shadows) never: a
+ * constant wherever the shape functions are inlined into the kernel. */
+#if defined(PYCLRAY_CAST)
+#define FROM_EYE(ray) 0
+#elif defined(PYCLRAY_SHADOWS)
+#define FROM_EYE(ray) ((ray)->from_eye)
+#else
+#define FROM_EYE(ray) 1
+#endif

@@ -12,7 +12,8 @@ inline realv plane_hit(__global const Plane* plane, const RayPacket* ray)
     const double4 exact = as_double4(plane->exact);
     const realv h = (real)((exact.x * ray->world.x + exact.y * ray->world.y) + exact.z * ray->world.z + exact.w);
 #else
-    const realv h = SPLAT(plane->normal.w);
+    /* the signed distance of the ray's origin (the host's, for camera rays from the frame's origin) */
+    const realv h = FROM_EYE(ray) ? SPLAT(plane->normal.w) : SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
 #endif
     /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit */
     const realv s = -h / v3_dot(n, ray->dir);

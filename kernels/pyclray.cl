@@ -8,6 +8,9 @@
  *   PYCLRAY_BOUNDED(X), PYCLRAY_UNBOUNDED(X)  the shape types present with and without bounds
  *   PYCLRAY_HAS_BOUNDED                 some bounded type is present (the BVH's buffers are passed)
  *   PYCLRAY_AOV_DEPTH/_NORMAL/_ID       which images are written (no buffer, no code for the others)
+ *   PYCLRAY_AOV_ZDEPTH/_POSITION        render: depth along the optical axis, world hit points
+ *   PYCLRAY_AOV_SHADED                  render: the shading model (kernels/shading.h, put before this file)
+ *   PYCLRAY_SHADOWS                     render, with SHADED: shadow rays (without it none are cast)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
  *
@@ -16,8 +19,18 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
+#endif
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
+#define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
+#endif
+/* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
+#ifndef PYCLRAY_AOV_SHADED
+#define PYCLRAY_SHADED_ARGS
+#define PYCLRAY_MATERIALS_BEGIN
+#define PYCLRAY_MATERIAL_OF(lane, mine)
+#define PYCLRAY_WRITE_SHADED(index, first, end)
 #endif
 
 #if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
@@ -44,8 +57,15 @@
 /* per shape type: the packed array, and for each tile of the image the shapes that can be seen
  * in it (type##_tile_list[type##_tile_start[tile] .. type##_tile_start[tile + 1]], increasing;
  * the host's conservative screen bounds, pyclray/culling.py): the others miss every ray there */
+#ifdef PYCLRAY_SHADOWS
+/* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
+#define PYCLRAY_SHAPE_ARG(Type, type) \
+    , __global const Type* type##s, __global const int* type##_tile_start, __global const int* type##_tile_list, \
+    const int n_##type##s
+#else
 #define PYCLRAY_SHAPE_ARG(Type, type) \
     , __global const Type* type##s, __global const int* type##_tile_start, __global const int* type##_tile_list
+#endif
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
 #define PYCLRAY_END(type) type##_tile_start[tile + 1]
 #define PYCLRAY_SHAPE_AT(type, q) type##_tile_list[q]
@@ -112,14 +132,15 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_DEPTH(index, first, end)
 #endif
 
-#ifdef PYCLRAY_AOV_NORMAL
-#define PYCLRAY_NORMAL_ARG , __global real* normal_out
+#ifdef PYCLRAY_WINNER_NORMAL
 /* the normal of one winning shape for the whole packet, kept in the lanes it won */
 #define PYCLRAY_NORMAL(Type, type) \
     if (kind == KIND_##Type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
-#define PYCLRAY_WRITE_NORMAL(index, first, end)                                            \
+/* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
+#define PYCLRAY_WINNERS                                                               \
+    vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
+    PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
-        vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                              \
         /* each distinct winner once, in the order of the first lane it won */        \
         intv pending = best_kind != SPLAT_INT(KIND_NONE);                             \
         while (ANY(pending)) {                                                        \
@@ -127,10 +148,17 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             const int kind = lane_of(best_kind, lane), k = lane_of(best_k, lane);     \
             const intv mine = pending && best_kind == SPLAT_INT(kind) && best_k == SPLAT_INT(k); \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            PYCLRAY_MATERIAL_OF(lane, mine)                                           \
             pending = pending && !mine;                                               \
         }                                                                             \
-        write_vec3s(normal, index, first, end, normal_out);                                \
     }
+#else
+#define PYCLRAY_WINNERS
+#endif
+
+#ifdef PYCLRAY_AOV_NORMAL
+#define PYCLRAY_NORMAL_ARG , __global real* normal_out
+#define PYCLRAY_WRITE_NORMAL(index, first, end) write_vec3s(normal, index, first, end, normal_out);
 #else
 #define PYCLRAY_NORMAL_ARG
 #define PYCLRAY_WRITE_NORMAL(index, first, end)
@@ -144,9 +172,42 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_ID(index, first, end)
 #endif
 
+/* render only: depth along the optical axis, the frame's z axis (w): the ray's s times its z */
+#ifdef PYCLRAY_AOV_ZDEPTH
+#define PYCLRAY_ZDEPTH_ARG , __global real* zdepth_out
+#define PYCLRAY_WRITE_ZDEPTH(index, first, end) \
+    write_reals(best < MISS ? best * ray.dir.z : SPLAT(MISS), index, first, end, zdepth_out);
+#else
+#define PYCLRAY_ZDEPTH_ARG
+#define PYCLRAY_WRITE_ZDEPTH(index, first, end)
+#endif
+
+/* render only: the world hit point, eye + world_from_frame(s D). The eye comes as a float64 sum
+ * eye_high + eye_low of two reals, added to the (small) offset from the eye high part first, so that
+ * a scene far from the world's origin loses no more than the output's own rounding. */
+#ifdef PYCLRAY_AOV_POSITION
+#define PYCLRAY_POSITION_ARG , const real4 eye_high, const real4 eye_low, __global real* position_out
+#define PYCLRAY_WRITE_POSITION(index, first, end)                                     \
+    {                                                                                 \
+        const intv hit = best < MISS;                                                 \
+        const vec3v offset = world_from_frame(camera, v3_scale(ray.dir, hit ? best : SPLAT(0))); \
+        const vec3v world = v3_add(v3_add(v3_splat(eye_high), offset), v3_splat(eye_low)); \
+        const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                          \
+        write_vec3s(v3_select(zero, world, hit), index, first, end, position_out);    \
+    }
+#else
+#define PYCLRAY_POSITION_ARG
+#define PYCLRAY_WRITE_POSITION(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS PYCLRAY_DEPTH_ARG PYCLRAY_NORMAL_ARG PYCLRAY_ID_ARG
+#define PYCLRAY_RENDER_OUTPUT_ARGS PYCLRAY_OUTPUT_ARGS PYCLRAY_ZDEPTH_ARG PYCLRAY_POSITION_ARG PYCLRAY_SHADED_ARGS
 #define PYCLRAY_WRITE(index, first, end) \
+    PYCLRAY_WINNERS \
     PYCLRAY_WRITE_DEPTH(index, first, end) PYCLRAY_WRITE_NORMAL(index, first, end) PYCLRAY_WRITE_ID(index, first, end)
+#define PYCLRAY_RENDER_WRITE(index, first, end) \
+    PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
+    PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int
@@ -242,6 +303,9 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
     ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_SHADOWS
+    ray.from_eye = 1;
+#endif
     return ray;
 }
 
@@ -252,7 +316,7 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 PYCLRAY_KERNELS_BEGIN
 __kernel void render(__global const Camera* camera, const int col0, const int row0, const int cols, const int rows,
                      const int tile_shift, const int tiles_x
-                     PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_OUTPUT_ARGS)
+                     PYCLRAY_BVH_ARGS PYCLRAY_SHAPES(PYCLRAY_SHAPE_ARG) PYCLRAY_RENDER_OUTPUT_ARGS)
 {
     /* packets start at multiples of LANES in the image, so that none straddles two tiles */
     const int i0 = (col0 / LANES + (int)get_global_id(0)) * LANES, r = get_global_id(1), j = row0 + r;
@@ -268,7 +332,7 @@ __kernel void render(__global const Camera* camera, const int col0, const int ro
     PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
     /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
-    PYCLRAY_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
+    PYCLRAY_RENDER_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
 }
 
 #else

@@ -7,13 +7,9 @@
 inline realv rectangle_hit(__global const Rectangle* rectangle, const RayPacket* ray)
 {
     const vec3v n = v3_splat(rectangle->normal);
-#ifdef PYCLRAY_CAST
-    const vec3v F = v3_sub(v3_splat(rectangle->center), ray->origin);
-    const realv h = SPLAT(rectangle->normal.w) + v3_dot(n, ray->origin);
-#else
-    const vec3v F = v3_splat(rectangle->center);
-    const realv h = SPLAT(rectangle->normal.w);
-#endif
+    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    const vec3v F = FROM_EYE(ray) ? v3_splat(rectangle->center) : v3_sub(v3_splat(rectangle->center), ray->origin);
+    const realv h = FROM_EYE(ray) ? SPLAT(rectangle->normal.w) : SPLAT(rectangle->normal.w) + v3_dot(n, ray->origin);
     const realv s = -h / v3_dot(n, ray->dir);  /* +-inf or NaN for a parallel ray: not a hit */
     const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
     const realv a = v3_dot(P, v3_splat(rectangle->u_dual)), b = v3_dot(P, v3_splat(rectangle->v_dual));

@@ -15,17 +15,14 @@ typedef struct {
 inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* ray)
 {
     SphereTerms t;
-#ifdef PYCLRAY_CAST
-    t.F = v3_sub(v3_splat(sphere->center), ray->origin);
-#else
-    t.F = v3_splat(sphere->center);  /* the ray's origin is the frame's */
-#endif
     const realv r2 = SPLAT(sphere->center.w);
-#ifdef PYCLRAY_CAST
-    t.c = v3_dot(t.F, t.F) - r2;
-#else
-    t.c = SPLAT(sphere->c);
-#endif
+    if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: c from the host, exact */
+        t.F = v3_splat(sphere->center);
+        t.c = SPLAT(sphere->c);
+    } else {
+        t.F = v3_sub(v3_splat(sphere->center), ray->origin);
+        t.c = v3_dot(t.F, t.F) - r2;
+    }
     const vec3v D = ray->dir;
     const realv a = ray->a;
     t.b = v3_dot(t.F, D);

@@ -22,6 +22,7 @@ from .animate import render_animation
 from .animation import Animation, Key
 from .device import AOVS, list_devices, select_device
 from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
+from .lighting import DirectionalLight, Material, PointLight, Shading
 from .render import Frame, cast, occluded, render
 from .scene import Camera, Image, Scene, load_scene, scene_from_dict
 from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
@@ -29,8 +30,8 @@ from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 __version__ = "0.1.0"
 
 __all__ = [
-    "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "Disk", "Frame", "Image", "Key",
-    "OutputError", "Plane", "PyclrayError", "PyclrayWarning", "Rectangle", "RequestError", "Scene", "SceneError",
-    "Sphere", "cast", "list_devices", "load_scene", "render", "render_animation",
-    "occluded", "scene_from_dict", "select_device",
+    "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
+    "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
+    "RequestError", "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
+    "render_animation", "occluded", "scene_from_dict", "select_device",
 ]

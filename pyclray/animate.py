@@ -19,16 +19,16 @@ import subprocess
 import tempfile
 import threading
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, closing
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .device import AOVS
+from .device import AOVS, RENDER_AOVS
 
-# The contract's default AOV for videos is "shaded", which arrives with the shading issue; until
-# "shaded" is in pyclray.device.AOVS the default is depth. Flip to DEFAULT_AOV = "shaded" then.
-DEFAULT_AOV = "depth"
+# the image a video or GIF shows unless --aov says otherwise (the contract's default)
+DEFAULT_AOV = "shaded"
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 FRAME_NAME = re.compile(r"frame_\d+(\.[a-z]+)?\.(exr|png)")  # what an animate folder holds
@@ -91,6 +91,30 @@ def _preview(aov: str, image) -> np.ndarray:
 
 
 # -- sinks: where frames go --------------------------------------------------------------------
+# A sink writes a frame with write(k, frame). Its encoder() is a picklable function of a Frame alone
+# (the compression and the previews, most of a frame's writing time), and store(k, encoder()(frame))
+# does what write(k, frame) does: a cluster's workers encode (pyclray/cluster.py), the client stores.
+@dataclass(frozen=True)
+class _FrameFiles:
+    """A frame's files in an animate folder: FRAME.exr (every AOV asked) and its previews FRAME.AOV.png,
+    as `pyclray render --png` writes them. Called on a Frame: [(suffix, bytes)] of those files,
+    written by the same writer into a scratch folder and read back: the stored files are the same bytes."""
+
+    comment: str
+
+    def write(self, exr: Path, frame):
+        from . import output
+
+        height, width = next(iter(frame.values())).shape[:2]
+        output.write_images(exr, output.frame_bands(frame), width=width, height=height, aovs=tuple(frame),
+                            previews=True, comment=self.comment)
+
+    def __call__(self, frame) -> list[tuple[str, bytes]]:
+        with tempfile.TemporaryDirectory(prefix="pyclray-frame-") as scratch:
+            self.write(Path(scratch, "frame.exr"), frame)
+            return [(name[len("frame"):], Path(scratch, name).read_bytes()) for name in sorted(os.listdir(scratch))]
+
+
 class _Folder:
     """Per-frame EXR (every AOV asked) and a PNG preview of each AOV that has one, in a temporary
     folder beside OUTDIR that replaces OUTDIR at the end."""
@@ -99,13 +123,22 @@ class _Folder:
         self.out, self.digits, self.comment = out, digits, comment
         self.tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
 
-    def write(self, k, frame):
-        from . import output
+    def _stem(self, k) -> str:
+        return str(self.tmp / f"frame_{k:0{self.digits}d}")
 
-        height, width = next(iter(frame.values())).shape[:2]
+    def encoder(self):
+        return _FrameFiles(self.comment)
+
+    def write(self, k, frame):
         # frame_K.exr and its previews frame_K.AOV.png, as `pyclray render --png` writes them
-        output.write_images(self.tmp / f"frame_{k:0{self.digits}d}.exr", output.frame_bands(frame), width=width,
-                            height=height, aovs=tuple(frame), previews=True, comment=self.comment)
+        self.encoder().write(Path(self._stem(k) + ".exr"), frame)
+
+    def store(self, k, files):
+        for suffix, data in files:
+            with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writer's
+                file.write(data)
+                file.flush()
+                os.fsync(file.fileno())  # on disk before the folder is renamed, as write_images leaves its files
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~_umask())  # as an ordinary new folder, not mkdtemp's 0700
@@ -149,9 +182,15 @@ class _Video:
         self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                         stderr=self.log, start_new_session=True)
 
+    def encoder(self):
+        return _PreviewOf(self.aov)
+
     def write(self, k, frame):
+        self.store(k, self.encoder()(frame))
+
+    def store(self, k, rgb):
         try:
-            self.process.stdin.write(_preview(self.aov, frame[self.aov]).data)
+            self.process.stdin.write(rgb.data)
         except BrokenPipeError:
             raise OSError(f"ffmpeg stopped: {self._log()}") from None
 
@@ -190,14 +229,14 @@ class _Gif:
         self.duration_ms = 10 * max(2, round(100 / fps))
         self.images = []
 
-    def write(self, k, frame):
-        from PIL import Image
+    def encoder(self):
+        return _PaletteImageOf(self.aov)
 
-        rgb = _preview(self.aov, frame[self.aov])
-        if (rgb == rgb[..., :1]).all():
-            self.images.append(Image.fromarray(rgb[..., 0], mode="L"))  # grey: 256 levels, exact
-        else:
-            self.images.append(Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE))
+    def write(self, k, frame):
+        self.store(k, self.encoder()(frame))
+
+    def store(self, k, image):
+        self.images.append(image)
 
     def finish(self):
         first, *rest = self.images
@@ -205,6 +244,31 @@ class _Gif:
 
     def abort(self):
         self.images.clear()
+
+
+@dataclass(frozen=True)
+class _PreviewOf:
+    """A frame's preview of one AOV: (H, W, 3) uint8, contiguous (a video's raw frame)."""
+
+    aov: str
+
+    def __call__(self, frame) -> np.ndarray:
+        return _preview(self.aov, frame[self.aov])
+
+
+@dataclass(frozen=True)
+class _PaletteImageOf:
+    """A frame's preview of one AOV as a GIF frame: a Pillow image of 256 grey levels, or a palette."""
+
+    aov: str
+
+    def __call__(self, frame):
+        from PIL import Image
+
+        rgb = _preview(self.aov, frame[self.aov])
+        if (rgb == rgb[..., :1]).all():
+            return Image.fromarray(rgb[..., 0], mode="L")  # grey: 256 levels, exact
+        return Image.fromarray(rgb, mode="RGB").quantize(256, method=Image.Quantize.FASTOCTREE)
 
 
 def _umask() -> int:
@@ -217,9 +281,10 @@ class _Writer(threading.Thread):
     """Writes frames to a sink in its own thread, so encoding overlaps the next renders; put()
     blocks while QUEUE_FRAMES frames wait, and re-raises in the caller an error of the writer."""
 
-    def __init__(self, sink):
+    def __init__(self, sink, encoded: bool = False):
         super().__init__(name="pyclray-animate-writer", daemon=True)
         self.sink = sink
+        self.write = sink.store if encoded else sink.write  # encoded: items are the sink's encoder()'s
         self.frames = queue.Queue(maxsize=QUEUE_FRAMES)
         self.error = None
         self.busy = 0.0  # seconds spent writing
@@ -229,7 +294,7 @@ class _Writer(threading.Thread):
             if self.error is None:
                 start = time.perf_counter()
                 try:
-                    self.sink.write(*item)
+                    self.write(*item)
                 except BaseException as error:  # handed to the rendering thread
                     self.error = error
                 self.busy += time.perf_counter() - start
@@ -301,12 +366,37 @@ def add_command(subparsers) -> None:
                         help="a video (.mp4), a GIF (.gif), or a folder (a name ending in / or without a suffix)")
     parser.add_argument("--aov", type=_aovs, metavar="LIST",
                         help=f"images to compute: one for a video or GIF (default {DEFAULT_AOV}); any of "
-                        f"{','.join(AOVS)} for a folder (default all)")
+                        f"{','.join(RENDER_AOVS)} for a folder (default {','.join(AOVS)})")
     parser.add_argument("--frames", metavar="A:B", help="render frames A to B-1 only (either end may be left out), or K")
     parser.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     parser.add_argument("--size", type=_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--device", metavar="DEV", help="OpenCL device (as for pyclray render)")
+    add_cluster_options(parser, "the frames")
     parser.set_defaults(run=run)
+
+
+def add_cluster_options(parser, what: str) -> None:
+    """--workers N | --scheduler ADDRESS (pyclray/cluster.py; needs the cluster extra)."""
+    from .cli import _count
+
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--workers", type=_count, metavar="N",
+                       help=f"render {what} on a local Dask cluster of N worker processes (pip install 'pyclray[cluster]')")
+    group.add_argument("--scheduler", metavar="ADDRESS",
+                       help=f"render {what} on a running Dask cluster, e.g. tcp://host:8786 (see README, Clusters)")
+
+
+def cluster_module():
+    """pyclray.cluster, or a BadInput saying how to install what it needs."""
+    from .cli import BadInput
+
+    try:
+        from . import cluster
+    except ModuleNotFoundError as error:
+        if error.name not in ("distributed", "dask"):
+            raise
+        raise BadInput("--workers and --scheduler need Dask distributed: pip install 'pyclray[cluster]'") from None
+    return cluster
 
 
 def run(args) -> int:
@@ -324,7 +414,7 @@ def run(args) -> int:
     else:
         aovs = args.aov or (DEFAULT_AOV,)
         if len(aovs) != 1 or not _has_preview(aovs[0]):
-            with_preview = [a for a in AOVS if _has_preview(a)]
+            with_preview = [a for a in RENDER_AOVS if _has_preview(a)]
             raise BadInput(f"--aov: a {kind} shows one image with a preview ({', '.join(with_preview)}), got {','.join(aovs)}")
     try:
         if kind == "mp4":
@@ -351,26 +441,43 @@ def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
     manages its own temporary folder (_Folder). On any error or Ctrl-C both threads stop and the
     temporaries go: nothing partial is left, and an earlier output stays as it was."""
     from . import output
+    from .cli import BadInput
     from .errors import OutputError
     from .progress import progress, seconds
 
+    on_cluster = args.workers is not None or args.scheduler is not None
+    cluster = cluster_module() if on_cluster else None
     sink = writer = None
-    render_time = 0.0
+    render_time = start_time = 0.0
     start = time.perf_counter()
     with ExitStack() as files:
         tmp = None if kind == "folder" else files.enter_context(output.replace_together([out]))[0]
         try:
             sink = make_sink(tmp)
-            writer = _Writer(sink)
+            writer = _Writer(sink, encoded=on_cluster)
             writer.start()
             with progress(len(frames), desc="pyclray animate", unit="frame") as bar:
-                sequence = render_animation(scene, aovs, args.precision, args.device, frames)
-                for k in frames:
-                    before = time.perf_counter()
-                    _, frame = next(sequence)
-                    render_time += time.perf_counter() - before
-                    writer.put(k, frame)
-                    bar.update()
+                if on_cluster:
+                    # the workers render and encode each frame (sink.encoder()); this thread hands
+                    # the encoded frames over in order and the writer stores them
+                    with cluster.connect(args.workers, args.scheduler) as client:
+                        start_time = time.perf_counter() - start
+                        where = cluster.describe(client)
+                        before = time.perf_counter()
+                        sequence = cluster.render_animation(client, scene, aovs, args.precision, args.device, frames,
+                                                            encode=sink.encoder(), progress=bar)
+                        with closing(sequence):  # on an error here: the tasks in flight are cancelled
+                            for k, (_, encoded) in zip(frames, sequence):
+                                writer.put(k, encoded)
+                        render_time = time.perf_counter() - before
+                else:
+                    sequence = render_animation(scene, aovs, args.precision, args.device, frames)
+                    for k in frames:
+                        before = time.perf_counter()
+                        _, frame = next(sequence)
+                        render_time += time.perf_counter() - before
+                        writer.put(k, frame)
+                        bar.update()
                 writer.close()
                 finish_start = time.perf_counter()
                 sink.finish()
@@ -381,15 +488,24 @@ def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
                 sink.abort()
             if kind == "folder" and isinstance(error, OSError) and not isinstance(error, (OutputError, InterruptedError)):
                 raise OutputError(f"cannot write {out}: {output._reason(error)}; nothing was replaced") from None
+            if on_cluster and isinstance(error, cluster.ClusterError):
+                raise BadInput(str(error)) from None
             raise
     finish_time = time.perf_counter() - finish_start  # with the rename of a video or GIF
     total = time.perf_counter() - start
     count = len(frames)
+    rate = f"{count / render_time:.1f} frames/s"
+    if on_cluster:
+        work = (f"cluster start {seconds(start_time)} ({where}), render and encode on the workers "
+                f"{seconds(render_time)} ({rate}), write {seconds(writer.busy + finish_time)} "
+                f"({seconds(writer.busy)} alongside, {seconds(finish_time)} at the end)")
+    else:
+        work = (f"render {seconds(render_time)} ({rate}), {'write' if kind == 'folder' else 'encode'} "
+                f"{seconds(writer.busy + finish_time)} ({seconds(writer.busy)} alongside the renders, "
+                f"{seconds(finish_time)} at the end)")
     print(
         f"animated {args.scene}: {count} frame{'s' if count != 1 else ''} ({frames.start}:{frames.stop}) of "
         f"{scene.image.width}x{scene.image.height} {','.join(aovs)} in {seconds(total)} ({count / total:.1f} frames/s): "
-        f"render {seconds(render_time)} ({count / render_time:.1f} frames/s), "
-        f"{'write' if kind == 'folder' else 'encode'} {seconds(writer.busy + finish_time)} "
-        f"({seconds(writer.busy)} alongside the renders, {seconds(finish_time)} at the end); wrote {out}"
+        f"{work}; wrote {out}"
     )
     return 0

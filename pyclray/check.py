@@ -62,8 +62,8 @@ def add_command(subparsers) -> None:
         "check",
         help="cross-check pyclray's images against Mitsuba 3 (exit 1 outside the tolerance)",
         description="Render SCENE with pyclray (fp32) and Mitsuba 3 and print one table per image "
-        "(depth, normal, id, misses) and the ray-level comparison (Mitsuba's own primary rays cast "
-        "through both). Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
+        "(depth, normal, id, misses), the ray-level comparison (Mitsuba's own primary rays cast "
+        "through both) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
     parser.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
@@ -102,10 +102,14 @@ def run(args) -> int:
 
     from .progress import step, steps
 
-    with steps(4, desc="pyclray check"):
+    with steps(5, desc="pyclray check"):
         images = cross_check(scene, args.variant, device=args.device)
         step("ray level")
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+        step("shaded")
+        from .validation.shaded import cross_check_shaded, format_shaded_check
+
+        shaded = cross_check_shaded(scene, args.variant, device=args.device) if scene.shading.shadows else None
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
         f"against Mitsuba {mi.__version__} {args.variant}"
@@ -115,12 +119,14 @@ def run(args) -> int:
     print(format_image_check(images))
     print()
     print(format_ray_check(rays))
+    print()
+    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
     if folder is not None:
         folder.mkdir(exist_ok=True)
         written = save(images, folder, Path(args.scene).stem)
         print()
         print("wrote " + ", ".join(map(str, written)))
-    failures = images.failures + rays.failures
+    failures = images.failures + rays.failures + (shaded.failures if shaded else [])
     print()
     if failures:
         print("FAILED: " + "; ".join(failures))

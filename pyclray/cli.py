@@ -55,13 +55,23 @@ def _time(text: str) -> float:
     return value
 
 
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+        if value < 1:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    return value
+
+
 def _aovs(text: str) -> tuple[str, ...]:
-    from .device import AOVS
+    from .device import RENDER_AOVS
 
     names = tuple(a.strip() for a in text.split(",") if a.strip())
-    bad = [a for a in names if a not in AOVS]
+    bad = [a for a in names if a not in RENDER_AOVS]
     if bad or not names:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(AOVS)}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(RENDER_AOVS)}, got {text!r}")
     repeated = sorted({a for a in names if names.count(a) > 1})
     if repeated:
         raise argparse.ArgumentTypeError(f"expected each image once, got {text!r} ({', '.join(repeated)} more than once)")
@@ -92,6 +102,8 @@ def cmd_render(args) -> int:
     targets = [out, *(output.preview_paths(out, args.aov).values() if args.png else ())]
     for target in targets:  # before the render: a path that cannot be written costs no time
         output.check_target(target)
+    if args.workers is not None or args.scheduler is not None:
+        return _render_on_cluster(args, scene, out)
     width, height = scene.image.width, scene.image.height
     render_band = _band_renderer(scene, args.aov, args.precision, args.device)
     rows = output.band_rows(width)
@@ -119,6 +131,45 @@ def cmd_render(args) -> int:
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
         f"wrote {', '.join(map(str, written))} [{channels}]"
+    )
+    return 0
+
+
+def _render_on_cluster(args, scene, out) -> int:
+    """`pyclray render --workers N | --scheduler ADDRESS`: the image's bands of whole rows are the
+    tasks (pyclray/cluster.py); they come back in order and are streamed into the files as a local
+    render streams its bands, so the files are the same bytes."""
+    from . import output
+    from .animate import cluster_module
+    from .progress import progress, seconds
+
+    cluster = cluster_module()
+    width, height = scene.image.width, scene.image.height
+    start = time.perf_counter()
+    try:
+        with cluster.connect(args.workers, args.scheduler) as client:
+            start_time = time.perf_counter() - start
+            where = cluster.describe(client)
+            rows = cluster.band_rows(width, height)
+            devices = []
+
+            def bands():
+                for band in cluster.render_bands(client, scene, args.aov, args.precision, args.device, rows, bar):
+                    devices.append(band.device)
+                    yield band
+
+            with progress(-(-height // rows), desc="pyclray render", unit="band") as bar:
+                written = output.write_images(out, bands(), width=width, height=height, aovs=args.aov,
+                                              previews=args.png, comment=f"pyclray render of {args.scene}")
+    except cluster.ClusterError as error:
+        raise BadInput(str(error)) from None
+    total = time.perf_counter() - start
+    channels = ", ".join(output.exr_channel_arrays(output.empty_images(args.aov)))
+    count = -(-height // rows)
+    print(
+        f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
+        f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
+        f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} [{channels}]"
     )
     return 0
 
@@ -152,8 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="render a scene to a multi-channel OpenEXR file (and PNG previews)",
         description="Render SCENE with one ray per pixel centre and write one OpenEXR file with "
         "the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z (unit world normal, "
-        "0 on a miss) and id (UINT holding the int32 shape id; 4294967295 = -1 on a miss). Z and N are "
-        "32-bit FLOAT channels also for --precision fp64 (rounded to float32): OpenEXR has no 64-bit "
+        "0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), and as asked "
+        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear RGB). "
+        "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
+        "float32): OpenEXR has no 64-bit "
         "float channel type. Large images are rendered and written in bands of rows, so memory stays "
         "bounded; a progress bar shows on a terminal.",
         epilog=EXIT_STATUS_HELP,
@@ -162,11 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
     render.add_argument(
         "--aov", type=_aovs, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id (default: all); fewer is faster",
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded "
+        "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",
-        help="also write OUT.depth.png (near bright, far dark, misses black) and OUT.normal.png (n*0.5+0.5)",
+        help="also write a PNG preview of each image: OUT.depth.png and OUT.zdepth.png (near bright, far "
+        "dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a colour per shape, misses black), "
+        "OUT.shaded.png (clamped, sRGB)",
     )
     render.add_argument(
         "--precision", choices=("fp32", "fp64"), default="fp32",
@@ -180,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="OpenCL device: P:D indices (see `pyclray devices`) or part of its name; default "
         "$PYOPENCL_CTX, else PoCL's CPU device",
     )
+    from .animate import add_cluster_options
+
+    add_cluster_options(render, "the image's bands of rows")
     render.set_defaults(run=cmd_render)
 
     devices = commands.add_parser("devices", help="list the OpenCL devices", description="List the OpenCL devices and their selectors.")

@@ -1,10 +1,12 @@
 """OpenCL devices, contexts and the program cache (in-process and on disk)."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
 import threading
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -14,9 +16,13 @@ import pyopencl as cl
 from .bvh import NODE, WIDE_NODE
 from .errors import BuildError, DeviceError
 from .layout import CAMERA, c_header
+from .shading import STRUCTS as SHADING_STRUCTS
 from .shapes import REGISTRY
 
+# the images of every render and cast (and their default), and every image a render can make, in the
+# kernels' order
 AOVS = ("depth", "normal", "id")
+RENDER_AOVS = AOVS + ("zdepth", "position", "shaded")
 # Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
 BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
@@ -156,6 +162,7 @@ class Variant:
     aovs: tuple[str, ...]
     precision: str
     lanes: int = 1
+    shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
 
     def bounded_types(self) -> tuple[str, ...]:
@@ -182,6 +189,8 @@ class Variant:
             lines.append("#define PYCLRAY_CAST 1")
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
+        if self.shadows and "shaded" in self.aovs:
+            lines.append("#define PYCLRAY_SHADOWS 1")
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
@@ -196,8 +205,12 @@ class Variant:
         parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("lanes.h"), c_header([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes], self.precision)]
+        shading = "shaded" in self.aovs
+        structs = [CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        parts += [_read("lanes.h"), c_header(structs, self.precision)]
         parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if shading:  # materials, lights and shadows: only in the programs that shade
+            parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
@@ -236,19 +249,32 @@ def is_pocl_cpu(device: cl.Device) -> bool:
     return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 
+@contextlib.contextmanager
+def _quiet_compiler():
+    """pyopencl warns (CompilerWarning) whenever a successful build left a log, as PoCL's often does
+    (e.g. notes on vector arguments): a user can do nothing about it, and a warnings filter that
+    makes warnings errors would turn it into an exception inside the build, after the driver made
+    the program (PoCL then crashes at its release). A failed build still raises with its log."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        yield
+
+
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
     source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
     folder = cache_dir()
     path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
     if path is not None and path.is_file():
         try:
-            program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
+            with _quiet_compiler():
+                program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
             stats["from_disk"] += 1
             return program
         except (cl.Error, OSError):
             pass  # a stale or foreign binary: build from source below
     try:
-        program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
+        with _quiet_compiler():
+            program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
     except cl.RuntimeError as error:
         raise BuildError(f"the OpenCL compiler rejected pyclray's kernel for {variant}:\n{error}") from None
     stats["compiled"] += 1

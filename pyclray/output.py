@@ -6,6 +6,9 @@ EXR channels (one part, scanlines, ZIP compression, 32-bit):
   N.X, N.Y, N.Z  FLOAT  unit world-space normal (0 on a miss)
   id             UINT   the shape id's int32 bit pattern: read it with .view(numpy.int32),
                         which gives -1 (stored as 4294967295) on a miss
+  zdepth         FLOAT  depth along the camera's optical axis (+inf on a miss)
+  P.X, P.Y, P.Z  FLOAT  world-space hit point (0 on a miss)
+  R, G, B        FLOAT  the shaded image, linear RGB (the background colour on a miss)
 An fp64 render is stored as 32-bit floats: OpenEXR has no 64-bit float channel type (its pixel
 types are UINT, HALF and FLOAT).
 
@@ -36,7 +39,10 @@ import numpy as np
 
 from .errors import OutputError
 
-EXR_CHANNELS = {"depth": ("Z",), "normal": ("N.X", "N.Y", "N.Z"), "id": ("id",)}
+EXR_CHANNELS = {
+    "depth": ("Z",), "normal": ("N.X", "N.Y", "N.Z"), "id": ("id",),
+    "zdepth": ("zdepth",), "position": ("P.X", "P.Y", "P.Z"), "shaded": ("R", "G", "B"),
+}
 ID_MISS_UINT = 0xFFFFFFFF
 
 
@@ -381,6 +387,11 @@ def read_exr(path) -> dict:
         out["normal"] = np.stack([channels[c] for c in EXR_CHANNELS["normal"]], axis=-1)
     if "id" in channels:
         out["id"] = channels["id"].view(np.int32)
+    if "zdepth" in channels:
+        out["zdepth"] = channels["zdepth"]
+    for aov in ("position", "shaded"):
+        if all(name in channels for name in EXR_CHANNELS[aov]):
+            out[aov] = np.stack([channels[c] for c in EXR_CHANNELS[aov]], axis=-1)
     return out
 
 
@@ -506,6 +517,69 @@ def normal_preview(normal: np.ndarray) -> np.ndarray:
     return NormalPreview().rgb(normal)
 
 
+def srgb_preview(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB clamped to [0, 1] and encoded with the sRGB transfer curve (IEC 61966-2-1)."""
+    c = np.clip(np.nan_to_num(np.asarray(linear, np.float64), nan=0.0), 0.0, 1.0)
+    encoded = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    return np.round(encoded * 255).astype(np.uint8)
+
+
+def id_colors(count: int) -> np.ndarray:
+    """(count, 3) uint8: distinct, bright colours, one per shape id: hues stepped by the golden
+    angle (neighbouring ids far apart on the colour wheel), saturation and value alternating in a
+    short cycle so that ids many hues apart still differ; never black (black is a miss)."""
+    k = np.arange(count)
+    hue = (k * 0.618033988749895) % 1.0
+    saturation = np.array([0.85, 0.55, 0.95])[k % 3]
+    value = np.array([0.95, 0.8, 0.65, 0.9])[(k // 3) % 4]
+    sector = np.floor(hue * 6).astype(int) % 6
+    f = hue * 6 - np.floor(hue * 6)
+    p, q, t = value * (1 - saturation), value * (1 - f * saturation), value * (1 - (1 - f) * saturation)
+    rgb = np.select(
+        [sector[:, None] == s for s in range(6)],
+        [np.stack(c, axis=-1) for c in ((value, t, p), (q, value, p), (p, value, t), (p, q, value), (t, p, value), (value, p, q))],
+    )
+    return np.round(rgb * 255).astype(np.uint8)
+
+
+def id_preview(ids: np.ndarray) -> np.ndarray:
+    """Each shape id in its own colour (id_colors), misses (-1) black."""
+    ids = np.asarray(ids)
+    rgb = np.zeros(ids.shape + (3,), np.uint8)
+    hit = ids >= 0
+    if hit.any():
+        rgb[hit] = id_colors(int(ids.max()) + 1)[ids[hit]]
+    return rgb
+
+
+class IdPreview:
+    """Each shape id in its own colour (id_colors), misses black: one pass (a colour per id)."""
+
+    two_pass = False
+
+    def measure(self, ids) -> None:
+        pass
+
+    def rgb(self, ids) -> np.ndarray:
+        return id_preview(ids)
+
+
+class ShadedPreview:
+    """The shaded image clamped to [0, 1] and sRGB-encoded (srgb_preview): one pass."""
+
+    two_pass = False
+
+    def measure(self, linear) -> None:
+        pass
+
+    def rgb(self, linear) -> np.ndarray:
+        return srgb_preview(linear)
+
+
+# AOV -> its preview, in the order of the files (zdepth is shown like depth; positions have none)
+PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview})
+
+
 def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:
     """OUT.exr -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs given that have one)."""
     out = Path(out)
@@ -576,7 +650,7 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
 
 def empty_images(aovs) -> dict:
     """Zero-size arrays of the AOVs' dtypes and channels (what exr_channel_arrays needs to know)."""
-    shapes = {"normal": (0, 0, 3)}
+    shapes = {"normal": (0, 0, 3), "position": (0, 0, 3), "shaded": (0, 0, 3)}
     kinds = {"id": np.int32}
     return {aov: np.zeros(shapes.get(aov, (0, 0)), kinds.get(aov, np.float32)) for aov in aovs}
 

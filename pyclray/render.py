@@ -7,8 +7,8 @@ from collections import OrderedDict
 import numpy as np
 import pyopencl as cl
 
-from . import bvh, culling
-from .device import AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
+from . import bvh, culling, shading
+from .device import AOVS, RENDER_AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
 from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
 from .scene import Scene, as_scene, check_renderable
@@ -22,6 +22,8 @@ class Frame(dict):
 
     depth: distance from the ray origin along the unit ray, +inf on a miss (float32; float64 with
     precision "fp64"); normal: unit world normal, (0, 0, 0) on a miss; id: int32, -1 on a miss.
+    Renders may add zdepth (depth along the optical axis, +inf on a miss), position (world hit
+    point, (0, 0, 0) on a miss) and shaded (linear RGB, the background on a miss).
     """
 
     def __init__(self, arrays, *, precision: str, device: str):
@@ -34,16 +36,16 @@ class Frame(dict):
         return f"Frame({shapes}; {self.precision} on {self.device})"
 
 
-def _check_request(aovs, precision: str, ctx: DeviceContext) -> tuple[str, ...]:
+def _check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple[str, ...]:
     if isinstance(aovs, str):
         aovs = tuple(a.strip() for a in aovs.split(","))
     try:
         aovs = tuple(aovs)
     except TypeError:
-        raise RequestError(f"aovs: expected a selection of {', '.join(AOVS)}, got {type(aovs).__name__}") from None
-    unknown = [a for a in aovs if not isinstance(a, str) or a not in AOVS]
+        raise RequestError(f"aovs: expected a selection of {', '.join(known)}, got {type(aovs).__name__}") from None
+    unknown = [a for a in aovs if not isinstance(a, str) or a not in known]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
-        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(AOVS)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(known)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
     if not isinstance(precision, str) or precision not in PRECISIONS:
         raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "fp64" and not has_fp64(ctx.device):
@@ -51,7 +53,7 @@ def _check_request(aovs, precision: str, ctx: DeviceContext) -> tuple[str, ...]:
             f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
             "use precision fp32 or another device"
         )
-    return tuple(a for a in AOVS if a in aovs)  # canonical order: one program per set
+    return tuple(a for a in known if a in aovs)  # canonical order: one program per set
 
 
 def _camera_struct(rows, tan_x, tan_y, width, height, precision):
@@ -71,7 +73,7 @@ def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
     """Device buffers for the asked images, kept per device and size and reused by every render
     (renders are serialized by _render_lock, and each copies its images out before the next)."""
     real = np.dtype(_REAL[precision]).itemsize
-    itemsize = {"depth": real, "normal": 3 * real, "id": 4}
+    itemsize = {"depth": real, "normal": 3 * real, "id": 4, "zdepth": real, "position": 3 * real, "shaded": 3 * real}
     buffers = []
     for aov in aovs:
         key = (ctx.device.int_ptr, aov, max(count * itemsize[aov], 1))
@@ -84,18 +86,29 @@ def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
     return buffers
 
 
+def _interleave(aovs, buffers, extra) -> list:
+    """Each image's buffer, preceded by the arguments that image's code takes (extra[aov])."""
+    out = []
+    for aov, buffer in zip(aovs, buffers):
+        out += (extra or {}).get(aov, []) + [buffer]
+    return out
+
+
 def _zero_copy(ctx) -> bool:
     """Whether the kernel writes the images straight into the returned arrays (CPU devices)."""
     return bool(ctx.device.type & cl.device_type.CPU)
 
 
-def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None):
+def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None, extra=None):
     """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
     real = _REAL[precision]
     empty = {
         "depth": lambda: np.empty(count, real),
         "normal": lambda: np.empty((count, 3), real),
         "id": lambda: np.empty(count, np.int32),
+        "zdepth": lambda: np.empty(count, real),
+        "position": lambda: np.empty((count, 3), real),
+        "shaded": lambda: np.empty((count, 3), real),
     }
     outputs = {k: empty[k]() for k in aovs}
     kernel = kernel_for(ctx, variant)
@@ -104,7 +117,7 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
         # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
         flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
         buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
-        kernel(ctx.queue, global_size, local_size, *args, *buffers)
+        kernel(ctx.queue, global_size, local_size, *args, *_interleave(aovs, buffers, extra))
         maps = [
             cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
             for array, buffer in zip(outputs.values(), buffers)
@@ -116,7 +129,7 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
     else:  # other devices: device buffers kept and reused, and a copy of each image
         with _render_lock:
             buffers = _output_buffers(ctx, count, aovs, precision)
-            kernel(ctx.queue, global_size, local_size, *args, *buffers)
+            kernel(ctx.queue, global_size, local_size, *args, *_interleave(aovs, buffers, extra))
             for array, buffer in zip(outputs.values(), buffers):
                 cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
             ctx.queue.finish()
@@ -280,9 +293,27 @@ def _render_inputs(ctx, scene: Scene, precision: str, acceleration: str) -> list
             packed = cls.pack(shapes, ids, eye, rows, precision)
             start, index = culling.tile_lists(cls, shapes, eye, rows, tan_x, tan_y, width, height)
             arrays += [packed, start, index]
-            shape_args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index)]
+            # shadow rays test every shape of a type: its count follows its tile lists (kernels/pyclray.cl)
+            shape_args += [_input_buffer(ctx, packed), _input_buffer(ctx, start), _input_buffer(ctx, index),
+                           (np.int32(len(ids)),)]
+    # what shading needs (kernels/shading.h): materials by id, lights in the frame, [shading]
+    materials = shading.pack_materials(scene, precision)
+    lights = shading.pack_lights(scene, precision)
+    arrays += [materials, lights]
+    real = _REAL[precision]
+    eye_high = eye.astype(real)
+    lighting = {
+        "materials": _input_buffer(ctx, materials),
+        "lights": _input_buffer(ctx, lights),
+        "n_lights": np.int32(len(lights)),
+        "ambient": np.array((*scene.shading.ambient, 0), real),
+        "background": np.array((*scene.shading.background, 0), real),
+        # the eye as a sum of two reals, for the position image (kernels/pyclray.cl)
+        "eye_high": np.array((*eye_high, 0), real),
+        "eye_low": np.array((*(eye - eye_high.astype(np.float64)), 0), real),
+    }
     size = sum(a.nbytes for a in arrays)
-    args = [camera, shape_args]
+    args = [camera, shape_args, lighting]
     with _render_lock:
         _prepared[key] = (scene, args, size)
         # bounded: at most _PREPARED_MAX scenes and _PREPARED_BYTES of inputs (the newest always stays)
@@ -314,7 +345,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
     SceneError (see scene.check_renderable).
-    aovs: which images (a subset of depth, normal, id: only those are computed);
+    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded: only those are
+    computed; shaded casts shadow rays where the scene's [shading] asks for them);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
     window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
     rendered into images of that size, the same pixels as in the whole image; default: all of it;
@@ -324,17 +356,25 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     """
     scene = as_scene(scene)
     ctx = context_for(device)
-    aovs = _check_request(aovs, precision, ctx)
+    aovs = _check_request(aovs, precision, ctx, RENDER_AOVS)
     _check_renderable(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
-    camera, shape_args = _render_inputs(ctx, scene, precision, acceleration)
+    camera, shape_args, lighting = _render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
-    variant = Variant("render", _shape_kinds(scene)[0], aovs, precision, lanes, bvh=acceleration == "bvh")
+    shadows = "shaded" in aovs and scene.shading.shadows
+    variant = Variant("render", _shape_kinds(scene)[0], aovs, precision, lanes, shadows, bvh=acceleration == "bvh")
+    # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
+    shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]
     tile = culling.TILE
     tiles_x = -(-scene.image.width // tile)
     args = [camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
             np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
+    # the arguments before each image's buffer, in the kernel's order (kernels/pyclray.cl)
+    extra = {
+        "position": [lighting["eye_high"], lighting["eye_low"]],
+        "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")],
+    }
     # one packet of `lanes` pixels per work-item, packets aligned to multiples of lanes in the image;
     # work-groups of one tile (tile / lanes packets by tile rows) where the device allows (the kernel
     # needs none)
@@ -342,7 +382,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     group = (tile // lanes, tile)
     global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
     local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
-    images = _run(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size)
+    images = _run(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
     return Frame(images, precision=precision, device=ctx.device.name.strip())
 
 
@@ -381,7 +421,7 @@ def _cast_rays(origins, directions, tmax):
         )
     for name, array in (("directions", directions), ("origins", origins)):
         if not np.isfinite(array).all():
-            rows = np.broadcast_to(array, directions.shape) if directions.size else array
+            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
             _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
     if not directions.any(axis=-1).all():
         _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
@@ -494,7 +534,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     shape_types = _shape_kinds(scene)[0]
     args, anchor = _cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
-    # the largest real
+    # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.abs(origins - anchor[:3]).max(axis=-1, initial=0.0)

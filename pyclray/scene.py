@@ -12,6 +12,7 @@ import numpy as np
 
 from .animation import Animation, scene_at
 from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, text, vector3
+from .lighting import Shading, check_lights, lights_from_list
 from .shapes import REGISTRY
 from .shapes.base import Shape
 
@@ -99,10 +100,15 @@ class Scene:
     image: Image = field(default_factory=Image)
     shapes: tuple[Shape, ...] = ()
     source: str | None = None  # the file it was read from, for messages
+    lights: tuple = ()  # PointLight, DirectionalLight (pyclray.lighting); none: the headlight
+    shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/animation.py); None: a static scene
 
     def __post_init__(self):
         object.__setattr__(self, "shapes", tuple(self.shapes))
+        object.__setattr__(self, "lights", check_lights(self.lights, self.source))
+        if not isinstance(self.shading, Shading):
+            raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
         for index, shape in enumerate(self.shapes):
             if not isinstance(shape, Shape):
                 raise SceneError(
@@ -182,7 +188,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     if not isinstance(data, dict):
         raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
-        no_unknown_keys(data, ("camera", "image", "shapes", "animation"), required=())
+        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading", "animation"), required=())
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
     try:
@@ -216,11 +222,16 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
             shapes.append(REGISTRY[kind].from_table(entry, index))
         except SceneError as error:
             raise error.within(file=source, table=where) from None
+    lights = lights_from_list(data.get("lights", []), source)
+    try:
+        shading = Shading.from_table(_table(data, "shading", required=False))
+    except SceneError as error:
+        raise error.within(file=source, table="[shading]") from None
     try:
         animation = Animation.from_table(data["animation"]) if "animation" in data else None
     except SceneError as error:
         raise error.within(file=source, table="[animation]") from None
-    return Scene(camera, image, tuple(shapes), source, animation=animation)
+    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation)
 
 
 def load_scene(path) -> Scene:

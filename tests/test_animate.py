@@ -107,7 +107,7 @@ def test_folder_holds_every_frame_as_exr_and_png(tmp_path, scene_file):
     result = animate(scene_file, "-o", f"{out}/")
     assert result.returncode == 0, result.stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == sorted(f"frame_{k:05d}{ext}" for k in range(FRAMES) for ext in (".exr", ".depth.png", ".normal.png"))
+    assert names == sorted(f"frame_{k:05d}{ext}" for k in range(FRAMES) for ext in (".exr", ".depth.png", ".normal.png", ".id.png"))
     scene = pyclray.load_scene(scene_file)
     for k in range(FRAMES):
         images = read_exr(out / f"frame_{k:05d}.exr")
@@ -165,7 +165,7 @@ def test_gif_has_every_frame_and_each_is_the_depth_preview(tmp_path, scene_file)
     from PIL import Image
 
     out = tmp_path / "anim.gif"
-    result = animate(scene_file, "-o", out)
+    result = animate(scene_file, "-o", out, "--aov", "depth")
     assert result.returncode == 0, result.stderr
     scene = pyclray.load_scene(scene_file)
     with Image.open(out) as gif:
@@ -177,6 +177,17 @@ def test_gif_has_every_frame_and_each_is_the_depth_preview(tmp_path, scene_file)
             expected = output.depth_preview(pyclray.render(scene.at(k / 4.0), aovs=("depth",))["depth"])
             assert np.array_equal(np.asarray(gif.convert("RGB")), expected), k
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.gif", "anim.toml"]
+
+
+def test_a_video_shows_the_shaded_image_by_default(tmp_path, scene_file):
+    """The contract's default image of a video or GIF is `shaded`: the same file as --aov shaded."""
+    default, shaded = tmp_path / "default" / "anim.gif", tmp_path / "shaded" / "anim.gif"
+    default.parent.mkdir(), shaded.parent.mkdir()
+    assert animate(scene_file, "-o", default).returncode == 0
+    assert animate(scene_file, "-o", shaded, "--aov", "shaded").returncode == 0
+    depth = tmp_path / "depth.gif"
+    assert animate(scene_file, "-o", depth, "--aov", "depth").returncode == 0
+    assert default.read_bytes() == shaded.read_bytes() != depth.read_bytes()
 
 
 def test_mp4_decodes_to_every_frame_at_the_image_size(tmp_path, scene_file):

@@ -333,6 +333,18 @@ def test_bad_tmax_is_a_clear_error(tmax, words):
         pyclray.occluded(scene, (0, 1, 5), np.ones((4, 3)), tmax)
 
 
+def test_origins_beyond_double_range_are_refused():
+    """An fp64 ray from 1e30 away hits (distance 1e30, the sphere's id); from 1e155, where the
+    kernel's squared distances would overflow even in double, it is one clear error."""
+    need_precision("fp64")
+    scene = pyclray.Scene(pyclray.Camera((0.0, 2.0, 6.0), (0.0, 0.5, 0.0)), pyclray.Image(8, 8),
+                          (pyclray.Plane((0.0, 1.0, 0.0), 0.0), pyclray.Sphere((0.0, 1.0, 0.0), 1.0)))
+    near = pyclray.cast(scene, (0.0, 1.0, 1e30), (0.0, 0.0, -1.0), precision="fp64")
+    assert near["id"] == 1 and near["depth"] == pytest.approx(1e30, rel=1e-15)
+    with pytest.raises(pyclray.PyclrayError, match="too far"):
+        pyclray.cast(scene, (0.0, 1.0, 1e155), (0.0, 0.0, -1.0), precision="fp64")
+
+
 def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
     """From render.COHERENT_FROM rays on, cast runs them in a Morton order of their origins (or of
     their directions, sharing one origin) and puts the results back: the same bits as batches too

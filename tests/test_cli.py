@@ -24,13 +24,13 @@ def test_render_writes_exr_and_previews(tmp_path):
     result = cli("render", REPO / "scenes/tp02.toml", "-o", out, "--png", "--size", "64x48")
     assert result.returncode == 0, result.stderr
     assert out.is_file() and (tmp_path / "tp02.depth.png").is_file() and (tmp_path / "tp02.normal.png").is_file()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["tp02.depth.png", "tp02.exr", "tp02.normal.png"]  # no temporaries
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tp02.depth.png", "tp02.exr", "tp02.id.png", "tp02.normal.png"]  # no temporaries
     images = read_exr(out)
     expected = pyclray.render(pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(64, 48))
     for name in ("depth", "normal", "id"):
         assert np.array_equal(images[name], expected[name]), name
     assert (images["id"] == -1).any()  # the sky round-trips as -1
-    for png in ("tp02.depth.png", "tp02.normal.png"):
+    for png in ("tp02.depth.png", "tp02.normal.png", "tp02.id.png"):
         data = (tmp_path / png).read_bytes()
         assert data.startswith(b"\x89PNG\r\n\x1a\n") and b"IEND" in data[-12:]
 
@@ -183,7 +183,7 @@ def test_a_full_disk_is_one_line_exit_2_and_old_files_kept(tmp_path):
     (tmp_path / "o.exr").write_bytes(b"old")
     result = wrapped(patch, "render", REPO / "scenes/tp02.toml", "-o", tmp_path / "o.exr", "--png", "--size", "16x16")
     assert result.returncode == 2
-    written = ", ".join(str(tmp_path / n) for n in ("o.exr", "o.depth.png", "o.normal.png"))
+    written = ", ".join(str(tmp_path / n) for n in ("o.exr", "o.depth.png", "o.normal.png", "o.id.png"))
     assert one_error_line(result) == f"pyclray render: error: cannot write {written}: no space left on device; nothing was replaced"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.exr"] and (tmp_path / "o.exr").read_bytes() == b"old"
 

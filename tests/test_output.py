@@ -110,9 +110,10 @@ def test_streamed_previews_equal_the_whole_image_previews(tmp_path):
     frame = pyclray.render(scene)
     out = tmp_path / "p.exr"
     written = write_images(out, frame_bands(frame, 16), width=40, height=70, aovs=tuple(frame), previews=True)
-    assert written == [out, tmp_path / "p.depth.png", tmp_path / "p.normal.png"]
+    assert written == [out, tmp_path / "p.depth.png", tmp_path / "p.normal.png", tmp_path / "p.id.png"]
     assert np.array_equal(read_png(tmp_path / "p.depth.png"), output.depth_preview(frame["depth"]))
     assert np.array_equal(read_png(tmp_path / "p.normal.png"), output.normal_preview(frame["normal"]))
+    assert np.array_equal(read_png(tmp_path / "p.id.png"), output.id_preview(frame["id"]))
     assert no_temporaries(tmp_path)  # the depth preview's spill file is gone too
 
 

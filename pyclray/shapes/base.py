@@ -18,16 +18,22 @@ from __future__ import annotations
 
 import math
 
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
 
 from ..errors import no_unknown_keys, text
 from ..layout import Struct, layout
+from ..lighting import MATERIAL_KEYS, Material
 
 
+@dataclass(frozen=True, kw_only=True)
 class Shape:
     """Base of the shape dataclasses.
+
+    Every shape has a ``material`` (keyword only; its scene-file keys color, specular and shininess
+    belong to every shape type and are read here, not by the shape's module).
 
     Each subclass sets ``type`` (its name in scene files), ``c_type`` (its struct in OpenCL C; the
     kernel functions are ``<type>_hit`` and ``<type>_normal`` in ``kernels/<type>.cl``), ``struct``
@@ -43,6 +49,7 @@ class Shape:
     struct: ClassVar[Struct]
     keys: ClassVar[tuple[str, ...]]
     required: ClassVar[tuple[str, ...]] = ()
+    material: Material = field(default=Material(), compare=True)
     # False for shapes without finite bounds (the plane): visited by every ray, outside the BVH
     bounded: ClassVar[bool] = True
     # a solid has an inside: a ray starting there sees its far side (only t > 0 counts)
@@ -51,9 +58,11 @@ class Shape:
     # -- scene file ----------------------------------------------------------------------------
     @classmethod
     def from_table(cls, table: dict, index: int):
-        no_unknown_keys(table, ("type", "name") + cls.keys, required=cls.required)
+        no_unknown_keys(table, ("type", "name") + cls.keys + MATERIAL_KEYS, required=cls.required)
         name = text("name", table.get("name", f"{cls.type}{index}"))
-        return cls._from_table(table, name)
+        material = Material.from_table(table)
+        shape = cls._from_table({k: v for k, v in table.items() if k not in MATERIAL_KEYS}, name)
+        return replace(shape, material=material) if material != Material() else shape
 
     @classmethod
     def _from_table(cls, table: dict, name: str):

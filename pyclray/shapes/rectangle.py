@@ -48,7 +48,7 @@ class Rectangle(Shape):
         u, v = np.array(self.u), np.array(self.v)
         if norm3(np.cross(u / norm3(u), v / norm3(v))) == 0:
             raise SceneError("expected v not parallel to u", key="v")
-        cosine = abs(u @ v) / (norm3(u) * norm3(v))
+        cosine = abs((u / norm3(u)) @ (v / norm3(v)))  # of unit vectors: u . v may overflow float64
         if cosine > ORTHOGONAL:
             raise SceneError(f"expected v orthogonal to u (|u.v| <= {ORTHOGONAL:g} |u| |v|), got |u.v| = "
                              f"{cosine:.3g} |u| |v|", key="v")

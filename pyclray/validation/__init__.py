@@ -3,7 +3,8 @@
 - ``summary``: Summary (max, p99, median) and plain text tables;
 - ``images``: ``cross_check``, the image comparison (pyclray's render against Mitsuba's);
 - ``rays``: ``ray_level``, Mitsuba's own primary rays cast through both;
-- ``files``: the depth-difference heat map and the files ``--save`` writes.
+- ``files``: the depth-difference heat map and the files ``--save`` writes;
+- ``shaded``: ``cross_check_shaded``, the shaded image against Mitsuba's direct integrator.
 
 The error model they judge by is ``pyclray.accuracy``; the command is ``pyclray.check``.
 """

@@ -1,0 +1,202 @@
+/* The shaded image (scene-format.md, "Shading"): compiled in only when it is asked for, and its shadow
+ * rays only with PYCLRAY_SHADOWS. The host puts this file before kernels/pyclray.cl, whose render
+ * kernel expands the macros below (they use the kernel's arguments: the shapes, the camera).
+ *
+ * Everything is computed in the camera's frame, where the hit point is p = s D (D the camera ray's
+ * direction, s its distance): the host packs the lights there (in float64), and each winner's world
+ * normal is turned into the frame. At a hit with normal n seen along the unit direction D:
+ *   n_s = n if n.D < 0 else -n                                    (the side facing the viewer)
+ *   shaded = albedo ambient + sum over lights of V E (albedo max(0, n_s.L)
+ *            + (specular max(0, n_s.H)^shininess if n_s.L > 0 else 0)),   H = normalize(L - D),
+ * E = intensity / |light - p|^2 (point) or the irradiance (directional), V = 0 where the shadow ray
+ * from p toward the light meets a shape before the light, else 1.
+ *
+ * Shadow rays without acne or leaks, at any scale (pbrt-v4's OffsetRayOrigin): a float hit point is
+ * off the true surface by a rounding error, and a shadow ray's test of the surface it leaves errs by the
+ * rounding of the coordinates that test works with: p's own (|p|: the frame's origin is the eye) and
+ * the shape's (its extent R: a sphere's c = |F|^2 - r^2 carries an error of about eps r^2, that is a
+ * position error of eps r; a plane's h one of eps |p|). The error model bounds both by a few eps
+ * (|p| + R): the error along the ray is a few eps t / cos, which the cosine takes back across the
+ * surface; the shadow test's own roundings add about 4 eps (|p| + R) (F's rounding, the dot and the
+ * subtraction, over 2r). The ray therefore starts at p + delta n_s, on the lit side,
+ *   delta = SHADOW_OFFSET_K eps (|p| + R),
+ * with SHADOW_OFFSET_K = 16, about twice the sum of those terms: from there no test of the surface
+ * itself can return a hit in front of the ray (a flat or convex surface left on its outer side),
+ * whatever the scene's scale, and no other surface is skipped unless it lies within delta of p, which
+ * is within rounding of touching it. A point light's shadow ray ends at the light: a hit counts
+ * below the distance from the origin to the light.
+ */
+
+#ifdef PYCLRAY_FP64
+#define SHADING_EPSILON 0x1p-53
+#else
+#define SHADING_EPSILON 0x1p-24f
+#endif
+#define SHADOW_OFFSET_K 16
+
+#define PYCLRAY_SHADED_ARGS                                                           \
+    , __global const Material* materials, __global const Light* lights, const int n_lights, \
+    const real4 ambient, const real4 background, __global real* shaded_out
+
+/* per lane: the winner's material (albedo, specular, shininess) and extent R, gathered in the
+ * winners' loop of kernels/pyclray.cl (each distinct winner once) */
+#define PYCLRAY_MATERIALS_BEGIN                                                       \
+    vec3v albedo = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
+    realv specular = SPLAT(0), shininess = SPLAT(1), extent = SPLAT(0);
+#define PYCLRAY_MATERIAL_OF(lane, mine)                                               \
+    {                                                                                 \
+        __global const Material* m = &materials[lane_of(best_id, lane)];              \
+        albedo = v3_select(albedo, v3_splat(m->color), mine);                         \
+        specular = (mine) ? SPLAT(m->color.w) : specular;                             \
+        shininess = (mine) ? SPLAT(m->shininess) : shininess;                         \
+        extent = (mine) ? SPLAT(m->extent) : extent;                                  \
+    }
+
+inline vec3v v3_mul(const vec3v a, const vec3v b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
+
+/* a world direction in the camera's frame: its components along u, v, w */
+inline vec3v frame_from_world(__global const Camera* camera, const vec3v n)
+{
+    return v3(v3_dot(n, v3_splat(camera->u)), v3_dot(n, v3_splat(camera->v)), v3_dot(n, v3_splat(camera->w)));
+}
+
+/* Blinn-Phong from one light: E (albedo cos + specular max(0, n_s.H)^shininess) where cos > 0.
+ * x^k as exp2(k log2 x): pow itself is several times slower on PoCL's CPU device and was most of the
+ * cost of shading; log2 and exp2 (3 ulps each) make a relative error of about ln 2 |log2 x^k| 7 eps
+ * + 6 eps (pyclray.shading.tolerance counts it). Packets without a specular surface skip it. */
+inline vec3v shade_light(const vec3v albedo, const realv specular, const realv shininess, const vec3v n_s,
+                         const vec3v L, const vec3v D, const realv cos_l, const vec3v E)
+{
+    realv glossy = SPLAT(0);
+    if (ANY(specular > 0)) {
+        const vec3v H = v3_normalize(v3_sub(L, D));
+        const realv n_h = v_max(v3_dot(n_s, H), SPLAT(0));
+        glossy = specular * exp2(shininess * log2(n_h));  /* log2(0) = -inf: 0 */
+    }
+    return v3_mul(E, v3(albedo.x * cos_l + glossy, albedo.y * cos_l + glossy, albedo.z * cos_l + glossy));
+}
+
+#ifdef PYCLRAY_SHADOWS
+/* Any hit before the light: the lanes still open (lit, no hit found yet) test a shape and close
+ * where it is hit at s < limit (s along the unit direction toward the light; limit: the distance to
+ * a point light, +inf for a directional one). Without a BVH every shape of every type is tested;
+ * with it (large scenes) the unbounded types (planes) are, and the bounded ones are reached through
+ * the BVH's any-hit packet traversal, which drops a lane once it is closed and ends when all are. */
+#define PYCLRAY_SHADOW_TEST(Type, type)                                               \
+    for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
+        const realv s = type##_hit(&type##s[q], &shadow);                             \
+        open = open && !(s < limit);                                                  \
+    }
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
+/* The shadow packet for box tests, in the BVH's frame (world axes around the eye): its unit
+ * directions, its per-lane origins, and a margin over their rounding and over a shape test's error
+ * from an origin of that size (2^-20 |o|_1, as cast's box rays). */
+typedef struct {
+    BoxPacket box;
+    vec3v origin;
+    realv margin;
+} ShadowBoxes;
+
+/* per lane, where the ray from its own origin enters the node's box before limit, else +inf
+ * (kernels/bvh.h's box_entries, with the faces taken relative to the origin and the margin) */
+inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
+{
+    const BoxPacket* b = &s->box;
+    const float4 lo = node->lo, hi = node->hi;
+    const realv m = s->margin;
+    const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
+    const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
+    const realv near_z = (b->negative_z ? SPLAT(hi.z) + m : SPLAT(lo.z) - m) - s->origin.z;
+    const realv far_x = (b->negative_x ? SPLAT(lo.x) - m : SPLAT(hi.x) + m) - s->origin.x;
+    const realv far_y = (b->negative_y ? SPLAT(lo.y) - m : SPLAT(hi.y) + m) - s->origin.y;
+    const realv far_z = (b->negative_z ? SPLAT(lo.z) - m : SPLAT(hi.z) + m) - s->origin.z;
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+#define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
+    if (kind == KIND_##Type) {                                                        \
+        const realv s = type##_hit(&type##s[k], &shadow);                             \
+        open = open && !(s < limit);                                                  \
+    }
+#define PYCLRAY_SHADOW_VISIT(q)                                                       \
+    {                                                                                 \
+        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
+        reach = open ? reach : SPLAT(-INFINITY);                                      \
+    }
+#define PYCLRAY_SHADOW_SHAPES                                                         \
+    PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
+    if (ANY(open)) {                                                                  \
+        ShadowBoxes boxes;                                                            \
+        boxes.box = box_packet(world_from_frame(camera, shadow.dir));                 \
+        boxes.origin = world_from_frame(camera, shadow.origin);                       \
+        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)); \
+        realv reach = open ? limit : SPLAT(-INFINITY);                                \
+        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
+    }
+#else
+#define PYCLRAY_SHADOW_SHAPES PYCLRAY_SHAPES(PYCLRAY_SHADOW_TEST)
+#endif
+#define PYCLRAY_SHADOW_RAY                                                            \
+    if (point) {                                                                      \
+        const vec3v to = v3_sub(v3_splat(light.position), shadow.origin);             \
+        limit = v_sqrt(v3_dot(to, to));                                               \
+        shadow.dir = v3_scale(to, SPLAT(1) / limit);                                  \
+    } else {                                                                          \
+        shadow.dir = L;                                                               \
+        limit = SPLAT(MISS);                                                          \
+    }                                                                                 \
+    shadow.a = v3_dot(shadow.dir, shadow.dir);                                        \
+    intv open = lit;                                                                  \
+    PYCLRAY_SHADOW_SHAPES                                                             \
+    lit = open;
+#define PYCLRAY_SHADOW_ORIGIN                                                         \
+    RayPacket shadow;                                                                 \
+    shadow.from_eye = 0;                                                              \
+    {                                                                                 \
+        const realv delta = SPLAT(SHADOW_OFFSET_K * SHADING_EPSILON) * (v_sqrt(v3_dot(p, p)) + extent); \
+        shadow.origin = v3_add(p, v3_scale(n_s, delta));                              \
+    }                                                                                 \
+    realv limit;
+#else
+#define PYCLRAY_SHADOW_RAY
+#define PYCLRAY_SHADOW_ORIGIN
+#endif
+
+/* the shaded colour of each lane (the background on a miss), written as R, G, B */
+#define PYCLRAY_WRITE_SHADED(index, first, end)                                       \
+    {                                                                                 \
+        const intv hit = best < MISS;                                                 \
+        const vec3v p = v3_scale(ray.dir, hit ? best : SPLAT(0));                     \
+        const vec3v D = v3_scale(ray.dir, SPLAT(1) / v_sqrt(ray.a));                  \
+        const vec3v n = frame_from_world(camera, normal);                             \
+        const intv front = v3_dot(n, D) < 0;                                          \
+        const vec3v n_s = v3_select(v3_scale(n, SPLAT(-1)), n, front);                \
+        vec3v color = v3_mul(albedo, v3_splat(ambient));                              \
+        PYCLRAY_SHADOW_ORIGIN                                                         \
+        for (int l = 0; l < n_lights; ++l) {                                          \
+            const Light light = lights[l];                                            \
+            const int point = light.position.w != 0;                                  \
+            vec3v L, E = v3_splat(light.power);                                       \
+            if (point) {                                                              \
+                const vec3v to = v3_sub(v3_splat(light.position), p);                 \
+                const realv d2 = v3_dot(to, to);                                      \
+                L = v3_scale(to, SPLAT(1) / v_sqrt(d2));                              \
+                E = v3_scale(E, SPLAT(1) / d2);                                       \
+            } else {                                                                  \
+                L = v3_splat(light.position);                                         \
+            }                                                                         \
+            const realv cos_l = v3_dot(n_s, L);                                       \
+            intv lit = hit && cos_l > 0;                                              \
+            if (!ANY(lit)) continue;                                                  \
+            PYCLRAY_SHADOW_RAY                                                        \
+            const vec3v add = shade_light(albedo, specular, shininess, n_s, L, D, cos_l, E); \
+            const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                      \
+            color = v3_add(color, v3_select(zero, add, lit));                         \
+        }                                                                             \
+        write_vec3s(v3_select(v3_splat(background), color, hit), index, first, end, shaded_out); \
+    }
