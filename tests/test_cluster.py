@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import cli, cluster, device, output
+from pyclray import cli, cluster, device
 from pyclray.errors import DeviceError, SceneError
+from pyclray.output import read_exr
 
 from conftest import REPO
 from test_animate import SCENE
@@ -136,9 +137,7 @@ def test_animate_on_a_cluster_writes_the_local_files_bit_for_bit(client, tmp_pat
     assert status == 0, err
     assert "2 workers at tcp://" in out and "on the workers" in out
     names = sorted(p.name for p in local.iterdir())
-    # each frame: its EXR and a PNG preview of every image that has one (pyclray.output.PREVIEWS)
-    per_frame = 1 + sum(aov in output.PREVIEWS for aov in pyclray.AOVS)
-    assert names == sorted(p.name for p in remote.iterdir()) and len(names) == 8 * per_frame
+    assert names == sorted(p.name for p in remote.iterdir()) and len(names) == 8 * 4  # exr, depth, normal and id previews
     for name in names:
         assert (local / name).read_bytes() == (remote / name).read_bytes(), name
         assert (local / name).stat().st_mode == (remote / name).stat().st_mode, name
@@ -161,7 +160,7 @@ def test_render_with_workers_writes_the_local_exr_bit_for_bit(tmp_path, capsys, 
     assert status == 0, err
     assert "5 bands of 7 rows on 2 workers" in out
     assert pyclray_cli(capsys, "render", scene, "-o", tmp_path / "whole.exr", "--size", "40x30", "--png")[0] == 0
-    for suffix in (".exr", ".depth.png", ".normal.png"):
+    for suffix in (".exr", ".depth.png", ".normal.png", ".id.png"):
         assert (tmp_path / f"tiled{suffix}").read_bytes() == (tmp_path / f"whole{suffix}").read_bytes(), suffix
 
 
