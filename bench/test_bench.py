@@ -236,7 +236,8 @@ def test_breakdown(benchmark, scenes_dir, part):
     ctx = device.context_for(None)
     width = height = ERROR_SIZE
     pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
-    camera, shape_args = render_module._render_inputs(ctx, scene, "fp32")
+    camera, shape_args, _ = render_module._render_inputs(ctx, scene, "fp32", "tiles")
+    shape_args = [a for a in shape_args if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
     lanes = device.lanes_for(ctx.device, "fp32")
     kernel = device.kernel_for(ctx, device.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
     buffers = render_module._output_buffers(ctx, width * height, aovs, "fp32")

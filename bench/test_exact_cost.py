@@ -12,22 +12,22 @@ from pyclray import device
 
 SIMPLE_SPHERE = """
 /* The textbook sphere, for the cost comparison only: b^2 - a c, (b -+ sqrt) / a, p - C. */
-inline real sphere_hit(__global const Sphere* sphere, const Ray* ray)
+inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
 {
-    const real3 F = sphere->center.xyz - ray->origin;
-    const real c = dot(F, F) - sphere->center.w;
-    const real b = dot(F, ray->dir);
-    const real disc = b * b - ray->a * c;
-    if (!(disc >= 0)) return MISS;
-    const real root = sqrt(disc);
-    const real near = (b - root) / ray->a, far = (b + root) / ray->a;
-    return near > 0 ? near : (far > 0 ? far : MISS);
+    const vec3v F = v3_sub(v3_splat(sphere->center), ray->origin);
+    const realv c = v3_dot(F, F) - SPLAT(sphere->center.w);
+    const realv b = v3_dot(F, ray->dir);
+    const realv disc = b * b - ray->a * c;
+    const realv root = v_sqrt(disc);
+    const realv near = (b - root) / ray->a, far = (b + root) / ray->a;
+    const realv s = near > 0 ? near : (far > 0 ? far : SPLAT(MISS));
+    return disc >= 0 ? s : SPLAT(MISS);
 }
 
-inline real3 sphere_normal(__global const Sphere* sphere, const Ray* ray, __global const Camera* camera)
+inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
 {
-    const real s = sphere_hit(sphere, ray);
-    return world_from_frame(camera, normalize(s * ray->dir - (sphere->center.xyz - ray->origin)));
+    const realv s = sphere_hit(sphere, ray);
+    return world_from_frame(camera, v3_normalize(v3_sub(v3_scale(ray->dir, s), v3_sub(v3_splat(sphere->center), ray->origin))));
 }
 """
 
