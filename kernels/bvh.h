@@ -177,50 +177,6 @@ inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const
     return enter <= leave ? enter : SPLAT(INFINITY);
 }
 
-/* the smallest and the largest lane, by halving the vector (no trip through memory) */
-#define BVH_HALVE(v, op) ((v).lo op (v).hi ? (v).lo : (v).hi)
-inline real lane_min(const realv v)
-{
-#if LANES == 1
-    return v;
-#elif LANES == 2
-    return BVH_HALVE(v, <);
-#elif LANES == 4
-    const __typeof__(v.lo) h = BVH_HALVE(v, <);
-    return BVH_HALVE(h, <);
-#elif LANES == 8
-    const __typeof__(v.lo) h = BVH_HALVE(v, <);
-    const __typeof__(h.lo) q = BVH_HALVE(h, <);
-    return BVH_HALVE(q, <);
-#else
-    const __typeof__(v.lo) h = BVH_HALVE(v, <);
-    const __typeof__(h.lo) q = BVH_HALVE(h, <);
-    const __typeof__(q.lo) e = BVH_HALVE(q, <);
-    return BVH_HALVE(e, <);
-#endif
-}
-
-inline real lane_max(const realv v)
-{
-#if LANES == 1
-    return v;
-#elif LANES == 2
-    return BVH_HALVE(v, >);
-#elif LANES == 4
-    const __typeof__(v.lo) h = BVH_HALVE(v, >);
-    return BVH_HALVE(h, >);
-#elif LANES == 8
-    const __typeof__(v.lo) h = BVH_HALVE(v, >);
-    const __typeof__(h.lo) q = BVH_HALVE(h, >);
-    return BVH_HALVE(q, >);
-#else
-    const __typeof__(v.lo) h = BVH_HALVE(v, >);
-    const __typeof__(h.lo) q = BVH_HALVE(h, >);
-    const __typeof__(q.lo) e = BVH_HALVE(q, >);
-    return BVH_HALVE(e, >);
-#endif
-}
-
 /* Visit, nearest child first (by its nearest lane), every leaf whose box some lane of the packet
  * enters before its own best (a realv variable VISIT lowers): VISIT(q) for each shape of each such
  * leaf, tested against the whole packet. */

@@ -27,7 +27,6 @@
 typedef real realv;
 typedef int intv;                       /* scalar comparisons give int, also for double */
 typedef int intlane;
-#define VLOAD(i, p) ((p)[(i)])
 #define VSTORE(v, i, p) ((p)[(i)] = (v))
 #define TO_REALV(x) ((real)(x))
 #define TO_INTV(x) ((int)(x))
@@ -39,13 +38,11 @@ typedef int intlane;
 typedef PYCLRAY_CAT(PYCLRAY_REAL_NAME, LANES) realv;
 typedef PYCLRAY_CAT(PYCLRAY_INT_NAME, LANES) intv;   /* int for float lanes, long for double lanes */
 typedef PYCLRAY_INT_NAME intlane;
-#define VLOAD(i, p) PYCLRAY_CAT(vload, LANES)((i), (p))
 #define VSTORE(v, i, p) PYCLRAY_CAT(vstore, LANES)((v), (i), (p))
 #define TO_REALV(x) PYCLRAY_CAT(PYCLRAY_CAT(convert_, PYCLRAY_REAL_NAME), LANES)(x)
 #define TO_INTV(x) PYCLRAY_CAT(PYCLRAY_CAT(convert_, PYCLRAY_INT_NAME), LANES)(x)
 #define TO_INT32V(x) PYCLRAY_CAT(convert_int, LANES)(x)
-#define ANY(mask) any(mask)
-#define ALL(mask) all(mask)
+/* ANY and ALL: see the reductions below */
 #if LANES == 2
 #define LANE_INDEX ((intv)(0, 1))
 #elif LANES == 4
@@ -62,6 +59,79 @@ typedef PYCLRAY_INT_NAME intlane;
 /* the same value in every lane */
 #define SPLAT(x) ((realv)(x))
 #define SPLAT_INT(x) ((intv)(x))
+
+/* the lanes one by one: X(lane, component) for each; and F(x) of each lane, as a packet */
+#if LANES == 1
+#define PYCLRAY_LANEWISE(F, x) F(x)
+#elif LANES == 2
+#define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1)
+#define PYCLRAY_LANEWISE(F, x) ((realv)(F((x).s0), F((x).s1)))
+#elif LANES == 4
+#define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1) X(2, s2) X(3, s3)
+#define PYCLRAY_LANEWISE(F, x) ((realv)(F((x).s0), F((x).s1), F((x).s2), F((x).s3)))
+#elif LANES == 8
+#define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1) X(2, s2) X(3, s3) X(4, s4) X(5, s5) X(6, s6) X(7, s7)
+#define PYCLRAY_LANEWISE(F, x) \
+    ((realv)(F((x).s0), F((x).s1), F((x).s2), F((x).s3), F((x).s4), F((x).s5), F((x).s6), F((x).s7)))
+#else
+#define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1) X(2, s2) X(3, s3) X(4, s4) X(5, s5) X(6, s6) X(7, s7) \
+    X(8, s8) X(9, s9) X(10, sA) X(11, sB) X(12, sC) X(13, sD) X(14, sE) X(15, sF)
+#define PYCLRAY_LANEWISE(F, x)                                                          \
+    ((realv)(F((x).s0), F((x).s1), F((x).s2), F((x).s3), F((x).s4), F((x).s5), F((x).s6), F((x).s7), \
+             F((x).s8), F((x).s9), F((x).sA), F((x).sB), F((x).sC), F((x).sD), F((x).sE), F((x).sF)))
+#endif
+
+/* A whole packet stored at p (its first lane's element): on PoCL's CPU device one move instruction
+ * through a vector type of the element's alignment (see v_sqrt), else vstoren. */
+#if LANES > 1
+#ifdef PYCLRAY_INLINE_BUILTINS
+typedef realv realv_unaligned __attribute__((aligned(sizeof(real))));
+typedef PYCLRAY_CAT(int, LANES) int32v_unaligned __attribute__((aligned(sizeof(int))));
+#define STORE_REALS(v, p) (*(__global realv_unaligned*)(p) = (v))
+#define STORE_INT32S(v, p) (*(__global int32v_unaligned*)(p) = (v))
+#else
+#define STORE_REALS(v, p) VSTORE((v), 0, (p))
+#define STORE_INT32S(v, p) VSTORE((v), 0, (p))
+#endif
+#endif
+
+/* -- reductions over the lanes, in registers: the two halves combined until one lane is left -----
+ * (OpenCL's any() and all() would be calls into PoCL's library: see v_sqrt) */
+#define PYCLRAY_OR(a, b) ((a) | (b))
+#define PYCLRAY_AND(a, b) ((a) & (b))
+#define PYCLRAY_MIN(a, b) ((a) < (b) ? (a) : (b))
+#define PYCLRAY_MAX(a, b) ((a) > (b) ? (a) : (b))
+#if LANES == 1
+#define PYCLRAY_REDUCE(scalar, v, OP) return (v);
+#elif LANES == 2
+#define PYCLRAY_REDUCE(scalar, v, OP) return (scalar)OP((v).s0, (v).s1);
+#elif LANES == 4
+#define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
+    const __typeof__((v).lo) h2 = OP((v).lo, (v).hi);                                   \
+    return (scalar)OP(h2.s0, h2.s1);
+#elif LANES == 8
+#define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
+    const __typeof__((v).lo) h4 = OP((v).lo, (v).hi);                                   \
+    const __typeof__(h4.lo) h2 = OP(h4.lo, h4.hi);                                      \
+    return (scalar)OP(h2.s0, h2.s1);
+#else
+#define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
+    const __typeof__((v).lo) h8 = OP((v).lo, (v).hi);                                   \
+    const __typeof__(h8.lo) h4 = OP(h8.lo, h8.hi);                                      \
+    const __typeof__(h4.lo) h2 = OP(h4.lo, h4.hi);                                      \
+    return (scalar)OP(h2.s0, h2.s1);
+#endif
+inline intlane lanes_or(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_OR) }
+inline intlane lanes_and(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_AND) }
+inline intlane lanes_max_int(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_MAX) }
+/* the smallest and the largest lane of reals that are not NaN */
+inline real lane_min(const realv v) { PYCLRAY_REDUCE(real, v, PYCLRAY_MIN) }
+inline real lane_max(const realv v) { PYCLRAY_REDUCE(real, v, PYCLRAY_MAX) }
+#if LANES > 1
+/* whether any lane's, or every lane's, mask is set (-1: the sign bit) */
+#define ANY(mask) (lanes_or(mask) < 0)
+#define ALL(mask) (lanes_and(mask) < 0)
+#endif
 
 /* -- lane-wise functions (exactly IEEE: no approximations) -------------------------------------- */
 #ifdef PYCLRAY_FP64
@@ -87,8 +157,22 @@ inline realv v_copysign(const realv x, const realv sign)
 inline realv v_min(const realv a, const realv b) { return a < b ? a : b; }
 inline realv v_max(const realv a, const realv b) { return a > b ? a : b; }
 /* correctly rounded square root, lane by lane (the -cl-fp32-correctly-rounded-divide-sqrt build
- * option makes it so on every device) */
+ * option makes OpenCL's so on every device).
+ * On PoCL's CPU device (PYCLRAY_INLINE_BUILTINS) every built-in of its library is a real call in
+ * the kernel: the library is compiled for another CPU model than the kernel, and LLVM does not
+ * inline across the mismatch (objdump of the kernel's .so shows the calls). The compiler's own
+ * square root, one per lane, compiles to one vector instruction and is correctly rounded too, so
+ * the bits are the same; the vector loads and stores below are written for the same reason. */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#ifdef PYCLRAY_FP64
+#define PYCLRAY_SQRT_LANE(x) __builtin_sqrt(x)
+#else
+#define PYCLRAY_SQRT_LANE(x) __builtin_sqrtf(x)
+#endif
+inline realv v_sqrt(const realv x) { return PYCLRAY_LANEWISE(PYCLRAY_SQRT_LANE, x); }
+#else
 inline realv v_sqrt(const realv x) { return sqrt(x); }
+#endif
 
 /* -- packets of 3-vectors ------------------------------------------------------------------------ */
 typedef struct {

@@ -34,18 +34,18 @@
 #endif
 #define SHADOW_OFFSET_K 16
 
-#define PYCLRAY_SHADED_ARGS                                                           \
-    , __global const Material* materials, __global const Light* lights, const int n_lights, \
-    const real4 ambient, const real4 background, __global real* shaded_out
+#define PYCLRAY_SHADED_ARGS(P)                                                        \
+    P(__global const Material*, materials) P(__global const Light*, lights) P(const int, n_lights) \
+    P(const real4, ambient) P(const real4, background) P(__global real*, shaded_out)
 
 /* per lane: the winner's material (albedo, specular, shininess) and extent R, gathered in the
  * winners' loop of kernels/pyclray.cl (each distinct winner once) */
 #define PYCLRAY_MATERIALS_BEGIN                                                       \
     vec3v albedo = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
     realv specular = SPLAT(0), shininess = SPLAT(1), extent = SPLAT(0);
-#define PYCLRAY_MATERIAL_OF(lane, mine)                                               \
+#define PYCLRAY_MATERIAL_OF(id, mine)                                                 \
     {                                                                                 \
-        __global const Material* m = &materials[lane_of(best_id, lane)];              \
+        __global const Material* m = &materials[id];                                  \
         albedo = v3_select(albedo, v3_splat(m->color), mine);                         \
         specular = (mine) ? SPLAT(m->color.w) : specular;                             \
         shininess = (mine) ? SPLAT(m->shininess) : shininess;                         \
