@@ -296,6 +296,17 @@ inline void write_vec3s(const vec3v v, const size_t index, const int first, cons
 #define PYCLRAY_KERNELS_BEGIN
 #endif
 
+/* Each kernel calls one function per work-item (a packet, or cast's ray). On PoCL's CPU device that
+ * function is not inlined into the kernel: PoCL copies a kernel's body into each of the three
+ * functions it makes of it (the work-item loops and two launchers), and the compile time of a first
+ * render grows with that code (measured: 0.26 s -> 0.12 s for tp02's default images); a call per
+ * work-item costs nothing measurable. Elsewhere it is inlined as usual. */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define PYCLRAY_WORK_ITEM_FUNCTION __attribute__((noinline))
+#else
+#define PYCLRAY_WORK_ITEM_FUNCTION inline
+#endif
+
 #ifndef PYCLRAY_CAST
 
 /* The camera rays of a packet: LANES pixels of row j from column i0 on, in the camera frame. */
@@ -330,20 +341,9 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     P(const int, tile_shift) P(const int, tiles_x)                                    \
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_RENDER_OUTPUT_ARGS(P)
 
-/* The kernel calls one function per packet. On PoCL's CPU device that function is not inlined into
- * the kernel: PoCL copies a kernel's body into each of the three functions it makes of it (the
- * work-item loops and two launchers), and a first render's compile time grows with that code
- * (measured: 0.26 s -> 0.12 s for tp02's default images); the call per packet costs nothing
- * measurable. Elsewhere it is inlined as usual. */
-#ifdef PYCLRAY_INLINE_BUILTINS
-#define PYCLRAY_PACKET_FUNCTION __attribute__((noinline))
-#else
-#define PYCLRAY_PACKET_FUNCTION inline
-#endif
-
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_PACKET_FUNCTION void render_packet(const int packet, const int r, __global const Camera* camera
-                                           PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __global const Camera* camera
+                                              PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     /* packets start at multiples of LANES in the image, so that none straddles two tiles */
     const int i0 = (col0 / LANES + packet) * LANES, j = row0 + r;
@@ -440,11 +440,9 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     return moved;
 }
 
-/* the setup shared by cast and occluded: the ray (origins and directions: 3 doubles per ray; one
+/* the setup shared by cast and occluded: ray r (origins and directions: 3 doubles per ray; one
  * origin for every ray where origin_stride is 0), its direction made unit */
 #define PYCLRAY_CAST_RAY                                                            \
-    const int r = get_global_id(0);                                                 \
-    if (r >= n_rays) return;                                                        \
     RayPacket ray;                                                                  \
     ray.world = vload3(r * origin_stride, origins);                                 \
     ray.dir_exact = unit_direction(vload3(r, directions));                          \
@@ -492,12 +490,16 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_NORMAL(Type, type) \
     if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
 
+/* the cast kernel's arguments after the camera (SHAPE as for render) */
+#define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \
+    P(const int, n_rays) P(__global const double*, origins) P(const int, origin_stride) \
+    P(__global const double*, directions) P(__global const double*, limits)           \
+    P(const int, limit_stride) P(const double4, scene_anchor)                         \
+    PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_OUTPUT_ARGS(P)
+
 PYCLRAY_KERNELS_BEGIN
-__kernel void cast(__global const Camera* camera, const int n_rays,
-                   __global const double* origins, const int origin_stride, __global const double* directions,
-                   __global const double* limits, const int limit_stride, const double4 scene_anchor
-                   PYCLRAY_BVH_ARGS(PYCLRAY_DECLARE) PYCLRAY_SHAPES(PYCLRAY_SHAPE_PARAMETERS)
-                   PYCLRAY_OUTPUT_ARGS(PYCLRAY_DECLARE))
+PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int r, __global const Camera* camera
+                                         PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
@@ -537,6 +539,12 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #endif
 }
 
+__kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+{
+    const int r = get_global_id(0);
+    if (r < n_rays) cast_ray(r, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+}
+
 #else
 
 /* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
@@ -544,12 +552,16 @@ __kernel void cast(__global const Camera* camera, const int n_rays,
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
 #define PYCLRAY_CAST_REACH t_max
 
+/* the occluded kernel's arguments after the first (SHAPE as for render) */
+#define PYCLRAY_OCCLUDED_ARGS(P, SHAPE)                                               \
+    P(__global const double*, origins) P(const int, origin_stride)                    \
+    P(__global const double*, directions) P(__global const double*, limits)           \
+    P(const int, limit_stride) P(const double4, scene_anchor)                         \
+    PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) P(__global char*, occluded_out)
+
 PYCLRAY_KERNELS_BEGIN
-__kernel void occluded(const int n_rays, __global const double* origins, const int origin_stride,
-                       __global const double* directions,
-                       __global const double* limits, const int limit_stride, const double4 scene_anchor
-                       PYCLRAY_BVH_ARGS(PYCLRAY_DECLARE) PYCLRAY_SHAPES(PYCLRAY_SHAPE_PARAMETERS),
-                       __global char* occluded_out)
+PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int r, const int n_rays
+                                             PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
     bool found = false;
@@ -562,6 +574,12 @@ __kernel void occluded(const int n_rays, __global const double* origins, const i
     }
 #endif
     occluded_out[r] = found ? 1 : 0;
+}
+
+__kernel void occluded(const int n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+{
+    const int r = get_global_id(0);
+    if (r < n_rays) occluded_ray(r, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #endif
