@@ -196,9 +196,12 @@ class Variant:
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
 
-        inline_builtins: on PoCL's CPU device, the lanes' square root as the compiler's own, and the
-        camera's and the shapes' functions always inlined (PoCL's inliner leaves some out of the
-        kernel, just above its threshold): see kernels/lanes.h. Inlining changes no result."""
+        inline_builtins: on PoCL's CPU device, no call into PoCL's built-in library (which LLVM does
+        not inline there): the square root, reductions and vector stores written with the compiler's
+        own operations (kernels/lanes.h); the camera's and the shapes' functions always inlined
+        (PoCL's inliner leaves some out, just above its threshold), and each kernel's per-work-item
+        function kept out of the kernel, whose body PoCL copies three times (kernels/pyclray.cl).
+        None of it changes a bit of the results (tests/test_speedups.py)."""
         shapes = [REGISTRY[t] for t in self.shape_types]
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines)]
