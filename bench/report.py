@@ -26,8 +26,11 @@ WHERE_THE_TIME_GOES = [
     "the float3 shape code one pixel at a time (its work-item loop vectorizer rejects vector-typed",
     "code), and every pixel waited on the latency of its divisions and square roots. The depth-only",
     "render is now near the floor; all AOVs add each winner's normal (the sphere's terms again, two cross",
-    "products, a normalization and the rotation to world space, once per distinct winner of a packet),",
-    "the interleaved 12-byte normal stores and the id and kind selects.",
+    "products, a normalization and the rotation to world space, once per distinct winner of a packet,",
+    "found by a max-reduction over the lanes' winner keys), the interleaved 12-byte normal stores and the",
+    "id and winner-key selects. On PoCL's CPU device the kernel calls nothing in PoCL's built-in library,",
+    "which LLVM does not inline there (square root, any(), vector stores were calls): that took tp02's",
+    "all-AOV render from 1.12 to 0.88 ms (min).",
 ]
 
 
