@@ -49,10 +49,8 @@ typedef PYCLRAY_INT_NAME intlane;
 #define LANE_INDEX ((intv)(0, 1, 2, 3))
 #elif LANES == 8
 #define LANE_INDEX ((intv)(0, 1, 2, 3, 4, 5, 6, 7))
-#elif LANES == 16
-#define LANE_INDEX ((intv)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
 #else
-#error "PYCLRAY_LANES must be 1, 2, 4, 8 or 16"
+#error "PYCLRAY_LANES must be 1, 2, 4 or 8"
 #endif
 #endif
 
@@ -73,12 +71,6 @@ typedef PYCLRAY_INT_NAME intlane;
 #define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1) X(2, s2) X(3, s3) X(4, s4) X(5, s5) X(6, s6) X(7, s7)
 #define PYCLRAY_LANEWISE(F, x) \
     ((realv)(F((x).s0), F((x).s1), F((x).s2), F((x).s3), F((x).s4), F((x).s5), F((x).s6), F((x).s7)))
-#else
-#define PYCLRAY_EACH_LANE(X) X(0, s0) X(1, s1) X(2, s2) X(3, s3) X(4, s4) X(5, s5) X(6, s6) X(7, s7) \
-    X(8, s8) X(9, s9) X(10, sA) X(11, sB) X(12, sC) X(13, sD) X(14, sE) X(15, sF)
-#define PYCLRAY_LANEWISE(F, x)                                                          \
-    ((realv)(F((x).s0), F((x).s1), F((x).s2), F((x).s3), F((x).s4), F((x).s5), F((x).s6), F((x).s7), \
-             F((x).s8), F((x).s9), F((x).sA), F((x).sB), F((x).sC), F((x).sD), F((x).sE), F((x).sF)))
 #endif
 
 /* A whole packet stored at p (its first lane's element): on PoCL's CPU device one move instruction
@@ -109,15 +101,9 @@ typedef PYCLRAY_CAT(int, LANES) int32v_unaligned __attribute__((aligned(sizeof(i
 #define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
     const __typeof__((v).lo) h2 = OP((v).lo, (v).hi);                                   \
     return (scalar)OP(h2.s0, h2.s1);
-#elif LANES == 8
-#define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
-    const __typeof__((v).lo) h4 = OP((v).lo, (v).hi);                                   \
-    const __typeof__(h4.lo) h2 = OP(h4.lo, h4.hi);                                      \
-    return (scalar)OP(h2.s0, h2.s1);
 #else
 #define PYCLRAY_REDUCE(scalar, v, OP)                                                  \
-    const __typeof__((v).lo) h8 = OP((v).lo, (v).hi);                                   \
-    const __typeof__(h8.lo) h4 = OP(h8.lo, h8.hi);                                      \
+    const __typeof__((v).lo) h4 = OP((v).lo, (v).hi);                                   \
     const __typeof__(h4.lo) h2 = OP(h4.lo, h4.hi);                                      \
     return (scalar)OP(h2.s0, h2.s1);
 #endif

@@ -130,26 +130,27 @@ def _read(name: str) -> str:
 # Rays per work-item (vector lanes) the kernels are built for: the device's preferred vector width for
 # its precision (GPUs: 1), in vectors of at most 256 bits (8 floats, 4 doubles). PoCL reports 16 floats
 # and 8 doubles on an AVX-512 CPU, but its kernel compiler targets AVX2 there: it warns that 512-bit
-# arguments change the ABI, and a kernel with 512-bit lanes is not found in the built program
-# (CL_INVALID_KERNEL_NAME), with PoCL 3.0 on this project's machines. $PYCLRAY_LANES overrides the
-# choice (1, 2, 4, 8 or 16).
-LANE_WIDTHS = (1, 2, 4, 8, 16)
+# arguments change the ABI, and with PoCL 3.0 on this project's machines a kernel with 512-bit lanes
+# was missing from the built program (CL_INVALID_KERNEL_NAME), then after the kernels' own square roots
+# and reductions (kernels/lanes.h) LLVM's code generator aborted the process on it. $PYCLRAY_LANES
+# overrides the choice within the same bound.
+LANE_WIDTHS = (1, 2, 4, 8)
 MAX_LANE_BITS = 256
+_REAL_BITS = {"fp32": 32, "fp64": 64}
 
 
 def lanes_for(device: cl.Device, precision: str) -> int:
     """The packet width of the kernels on this device at this precision."""
+    bits = _REAL_BITS[precision]
+    widths = [w for w in LANE_WIDTHS if w * bits <= MAX_LANE_BITS]
     value = os.environ.get("PYCLRAY_LANES", "").strip()
     if value:
-        if not value.isdigit() or int(value) not in LANE_WIDTHS:
-            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, LANE_WIDTHS))}, got {value!r}")
+        if not value.isdigit() or int(value) not in widths:
+            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, widths))} for {precision} "
+                              f"(vectors of at most {MAX_LANE_BITS} bits), got {value!r}")
         return int(value)
-    if precision == "fp64":
-        preferred, bits = device.preferred_vector_width_double, 64
-    else:
-        preferred, bits = device.preferred_vector_width_float, 32
-    most = min(max(int(preferred), 1), MAX_LANE_BITS // bits)
-    return max(w for w in LANE_WIDTHS if w <= most)
+    preferred = device.preferred_vector_width_double if precision == "fp64" else device.preferred_vector_width_float
+    return max(w for w in widths if w <= max(int(preferred), 1))
 
 
 @dataclass(frozen=True)
