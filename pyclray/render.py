@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import bvh, culling, shading
-from .device import AOVS, RENDER_AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for
+from .device import AOVS, RENDER_AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for, launch
 from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
 from .scene import Scene, as_scene, check_renderable
@@ -117,7 +117,7 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
         # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
         flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
         buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
-        kernel(ctx.queue, global_size, local_size, *args, *_interleave(aovs, buffers, extra))
+        launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
         maps = [
             cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
             for array, buffer in zip(outputs.values(), buffers)
@@ -129,7 +129,7 @@ def _run(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, 
     else:  # other devices: device buffers kept and reused, and a copy of each image
         with _render_lock:
             buffers = _output_buffers(ctx, count, aovs, precision)
-            kernel(ctx.queue, global_size, local_size, *args, *_interleave(aovs, buffers, extra))
+            launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
             for array, buffer in zip(outputs.values(), buffers):
                 cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
             ctx.queue.finish()
@@ -562,7 +562,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
         variant = Variant("occluded", shape_types, (), precision)
         out = np.empty(count, np.int8)
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-        kernel_for(ctx, variant)(ctx.queue, (count,), None, *head, *args, buffer)
+        launch(ctx, kernel_for(ctx, variant), (count,), None, [*head, *args, buffer])
         cl.enqueue_copy(ctx.queue, out, buffer)
         return _unsorted(out.astype(bool), order).reshape(shape)
     identity = np.eye(3)
