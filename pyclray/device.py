@@ -31,6 +31,7 @@ INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` fo
 # counters of program builds, for tests and the curious
 stats = {"compiled": 0, "from_disk": 0, "from_memory": 0}
 _lock = threading.Lock()
+_launch_lock = threading.Lock()  # see launch
 _programs: dict = {}
 _contexts: dict = {}
 
@@ -311,13 +312,16 @@ def kernel_for(ctx: DeviceContext, variant: Variant) -> cl.Kernel:
 def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> None:
     """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument through its
     generic path, about 10 us each (60 us of a 1 ms render of tp02); declared once per kernel as
-    scalar types (a kernel's arguments keep their types), its invoker packs them in microseconds."""
+    scalar types (a kernel's arguments keep their types), its invoker packs them in microseconds.
+    A kernel object is shared by every render of its variant, and OpenCL's argument setting is not
+    thread-safe: setting the arguments and enqueueing happen under one lock (the kernel then runs
+    on its own; the lock is held for the enqueue only)."""
     dtypes = [a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iuf" else None for a in args]
-    with _lock:
+    with _launch_lock:
         if getattr(kernel, "_pyclray_scalar_types", None) != dtypes:
             kernel.set_scalar_arg_dtypes(dtypes)
             kernel._pyclray_scalar_types = dtypes
-    kernel(ctx.queue, global_size, local_size, *args)
+        kernel(ctx.queue, global_size, local_size, *args)
 
 
 def list_devices() -> list[dict]:

@@ -298,3 +298,29 @@ def test_the_ball_cut_by_the_image_border_is_cut_by_it(scenes_dir):
     mine = ids == edge
     assert mine.sum() > 1000 and mine[:, -1].sum() > 50  # seen, and running into the right border
     assert not mine[:, 0].any() and not mine[0].any() and not mine[-1].any()
+
+
+def test_renders_from_several_threads_are_those_of_one_thread(scenes_dir):
+    """Renders of one program variant share its kernel object, whose arguments OpenCL does not guard:
+    threads rendering different cameras at once (a Dask worker with several threads) must each get
+    their own scene's images (device.launch sets the arguments and enqueues under one lock)."""
+    import threading
+    from dataclasses import replace
+
+    base = pyclray.load_scene(scenes_dir / "tp02.toml").with_size(48, 40)
+    scenes = [replace(base, camera=replace(base.camera, eye=(0.5 * k, 2.0 + 0.3 * k, 6.0 - 0.2 * k))) for k in range(4)]
+    expected = [pyclray.render(scene) for scene in scenes]
+    wrong = []
+
+    def work(k):
+        for _ in range(40):
+            frame = pyclray.render(scenes[k])
+            if any(frame[a].tobytes() != expected[k][a].tobytes() for a in ("depth", "normal", "id")):
+                wrong.append(k)
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not wrong
