@@ -11,7 +11,7 @@ from . import bvh, culling, shading
 from .device import AOVS, RENDER_AOVS, DeviceContext, Variant, context_for, has_fp64, kernel_for, lanes_for, launch
 from .errors import DeviceError, PyclrayError, RequestError
 from .layout import CAMERA, PRECISIONS, layout
-from .scene import Scene, as_scene, check_renderable
+from .scene import Scene, as_scene, check_renderable, check_shape_count
 from .shapes import REGISTRY
 
 _REAL = {"fp32": np.float32, "fp64": np.float64}
@@ -518,6 +518,7 @@ def _cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, 
 
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
     scene = as_scene(scene)
+    check_shape_count(scene)
     ctx = context_for(device)
     if kind == "cast":
         aovs = _check_request(aovs, precision, ctx)

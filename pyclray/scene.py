@@ -141,6 +141,19 @@ class Scene:
         return tuple(t for t in REGISTRY if t in present)
 
 
+# The kernels keep a shape as 8 x its index in its type's array + its type (the BVH's refs, the
+# winner key of a packet's lanes) in a 32-bit int.
+MAX_SHAPES = (2**31 - 1) // 8
+
+
+def check_shape_count(scene: Scene) -> None:
+    """Refuse more shapes than the kernels can index (a SceneError)."""
+    if len(scene.shapes) > MAX_SHAPES:
+        where = f"{scene.source}: [[shapes]]" if scene.source else "shapes"
+        raise SceneError(f"{where}: {len(scene.shapes)} shapes; pyclray renders at most {MAX_SHAPES} "
+                         "(the kernels index a shape by 8 x its position + its type in 32 bits)")
+
+
 def check_renderable(scene: Scene, precision: str) -> None:
     """Refuse geometry beyond the precision's range (a SceneError naming the shape and the key, and
     whether fp64 would do) rather than render it as silent misses; warn about a scene with no
@@ -148,6 +161,7 @@ def check_renderable(scene: Scene, precision: str) -> None:
     if not scene.shapes:
         where = f"{scene.source}: no [[shapes]]" if scene.source else "the scene has no shapes"
         warnings.warn(f"{where}: every pixel is a miss", PyclrayWarning, stacklevel=3)
+    check_shape_count(scene)
     limit = MAX_LENGTH[precision]
     for index, shape in enumerate(scene.shapes):
         for key, length in shape.lengths(scene.camera.eye).items():

@@ -324,3 +324,18 @@ def test_renders_from_several_threads_are_those_of_one_thread(scenes_dir):
     for thread in threads:
         thread.join()
     assert not wrong
+
+
+def test_more_shapes_than_the_kernels_can_index_is_a_scene_error(scenes_dir, monkeypatch):
+    """A shape is 8 x its index + its type in a 32-bit int on the device (BVH refs, winner keys):
+    beyond that the render refuses with a clear error instead of wrapping around (the limit,
+    268 million shapes, is lowered here to tp02's four)."""
+    import pyclray.scene as scene_module
+
+    monkeypatch.setattr(scene_module, "MAX_SHAPES", 3)
+    scene = pyclray.load_scene(scenes_dir / "tp02.toml")
+    with pytest.raises(pyclray.errors.SceneError, match="4 shapes; pyclray renders at most 3"):
+        pyclray.render(scene)
+    if has_fp64(context_for(None).device):
+        with pytest.raises(pyclray.errors.SceneError, match="4 shapes; pyclray renders at most 3"):
+            pyclray.cast(scene, (0, 2, 6), (0, 0, -1))
