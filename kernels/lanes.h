@@ -29,20 +29,17 @@ typedef int intv;                       /* scalar comparisons give int, also for
 typedef int intlane;
 #define VSTORE(v, i, p) ((p)[(i)] = (v))
 #define TO_REALV(x) ((real)(x))
-#define TO_INTV(x) ((int)(x))
 #define TO_INT32V(x) ((int)(x))
 #define LANE_INDEX 0
 #define ANY(mask) ((mask) != 0)
-#define ALL(mask) ((mask) != 0)
 #else
 typedef PYCLRAY_CAT(PYCLRAY_REAL_NAME, LANES) realv;
 typedef PYCLRAY_CAT(PYCLRAY_INT_NAME, LANES) intv;   /* int for float lanes, long for double lanes */
 typedef PYCLRAY_INT_NAME intlane;
 #define VSTORE(v, i, p) PYCLRAY_CAT(vstore, LANES)((v), (i), (p))
 #define TO_REALV(x) PYCLRAY_CAT(PYCLRAY_CAT(convert_, PYCLRAY_REAL_NAME), LANES)(x)
-#define TO_INTV(x) PYCLRAY_CAT(PYCLRAY_CAT(convert_, PYCLRAY_INT_NAME), LANES)(x)
 #define TO_INT32V(x) PYCLRAY_CAT(convert_int, LANES)(x)
-/* ANY and ALL: see the reductions below */
+/* ANY: see the reductions below */
 #if LANES == 2
 #define LANE_INDEX ((intv)(0, 1))
 #elif LANES == 4
@@ -88,9 +85,8 @@ typedef PYCLRAY_CAT(int, LANES) int32v_unaligned __attribute__((aligned(sizeof(i
 #endif
 
 /* -- reductions over the lanes, in registers: the two halves combined until one lane is left -----
- * (OpenCL's any() and all() would be calls into PoCL's library: see v_sqrt) */
+ * (OpenCL's any() would be a call into PoCL's library: see v_sqrt) */
 #define PYCLRAY_OR(a, b) ((a) | (b))
-#define PYCLRAY_AND(a, b) ((a) & (b))
 #define PYCLRAY_MIN(a, b) ((a) < (b) ? (a) : (b))
 #define PYCLRAY_MAX(a, b) ((a) > (b) ? (a) : (b))
 #if LANES == 1
@@ -108,15 +104,13 @@ typedef PYCLRAY_CAT(int, LANES) int32v_unaligned __attribute__((aligned(sizeof(i
     return (scalar)OP(h2.s0, h2.s1);
 #endif
 inline intlane lanes_or(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_OR) }
-inline intlane lanes_and(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_AND) }
 inline intlane lanes_max_int(const intv v) { PYCLRAY_REDUCE(intlane, v, PYCLRAY_MAX) }
 /* the smallest and the largest lane of reals that are not NaN */
 inline real lane_min(const realv v) { PYCLRAY_REDUCE(real, v, PYCLRAY_MIN) }
 inline real lane_max(const realv v) { PYCLRAY_REDUCE(real, v, PYCLRAY_MAX) }
 #if LANES > 1
-/* whether any lane's, or every lane's, mask is set (-1: the sign bit) */
+/* whether any lane's mask is set (-1: the sign bit) */
 #define ANY(mask) (lanes_or(mask) < 0)
-#define ALL(mask) (lanes_and(mask) < 0)
 #endif
 
 /* -- lane-wise functions (exactly IEEE: no approximations) -------------------------------------- */
