@@ -316,11 +316,11 @@ def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args)
     A kernel object is shared by every render of its variant, and OpenCL's argument setting is not
     thread-safe: setting the arguments and enqueueing happen under one lock (the kernel then runs
     on its own; the lock is held for the enqueue only)."""
-    dtypes = [a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iuf" else None for a in args]
     with _launch_lock:
-        if getattr(kernel, "_pyclray_scalar_types", None) != dtypes:
-            kernel.set_scalar_arg_dtypes(dtypes)
-            kernel._pyclray_scalar_types = dtypes
+        if not getattr(kernel, "_pyclray_scalar_types_set", False):
+            kernel.set_scalar_arg_dtypes(
+                [a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iuf" else None for a in args])
+            kernel._pyclray_scalar_types_set = True
         kernel(ctx.queue, global_size, local_size, *args)
 
 
