@@ -116,6 +116,19 @@ def text(key: str, value) -> str:
     return value
 
 
+def typed_table(entry, types, noun: str) -> str:
+    """The type of one table of an array of tables ([[shapes]], [[lights]]): the entry must be a
+    table whose "type" names one of types (the noun says what they are in the messages)."""
+    if not isinstance(entry, dict):
+        raise SceneError(f"expected a table, got {type(entry).__name__}")
+    if "type" not in entry:
+        raise SceneError(f"missing required key (one of: {', '.join(types)})", key="type")
+    kind = text("type", entry["type"])
+    if kind not in types:
+        raise SceneError(f"unknown {noun} type {kind!r} (expected one of: {', '.join(types)})", key="type")
+    return kind
+
+
 def no_unknown_keys(table: dict, known, *, required=()) -> None:
     for key in table:
         if key not in known:

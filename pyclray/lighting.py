@@ -14,7 +14,7 @@ from numbers import Real
 
 import numpy as np
 
-from .errors import SceneError, _shown, no_unknown_keys, norm3, number, text, vector3
+from .errors import SceneError, _shown, no_unknown_keys, norm3, number, text, typed_table, vector3
 
 MATERIAL_KEYS = ("color", "specular", "shininess")
 DEFAULT_COLOR = (0.8, 0.8, 0.8)
@@ -147,13 +147,7 @@ def lights_from_list(entries, source=None) -> tuple:
     for index, entry in enumerate(entries):
         where = f"[[lights]] #{index}"
         try:
-            if not isinstance(entry, dict):
-                raise SceneError(f"expected a table, got {type(entry).__name__}")
-            if "type" not in entry:
-                raise SceneError(f"missing required key (one of: {', '.join(LIGHT_TYPES)})", key="type")
-            kind = text("type", entry["type"])
-            if kind not in LIGHT_TYPES:
-                raise SceneError(f"unknown light type {kind!r} (expected one of: {', '.join(LIGHT_TYPES)})", key="type")
+            kind = typed_table(entry, LIGHT_TYPES, "light")
             where = f"[[lights]] #{index} ({kind})"
             name = text("name", entry.get("name", f"light{index}"))
             if name in seen:

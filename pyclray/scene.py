@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .animation import Animation, scene_at
-from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, text, vector3
+from .errors import PyclrayWarning, RequestError, SceneError, integer, no_unknown_keys, norm3, number, typed_table, vector3
 from .lighting import Shading, check_lights, lights_from_list
 from .shapes import REGISTRY
 from .shapes.base import Shape
@@ -225,13 +225,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     for index, entry in enumerate(entries):
         where = f"[[shapes]] #{index}"
         try:
-            if not isinstance(entry, dict):
-                raise SceneError(f"expected a table, got {type(entry).__name__}")
-            if "type" not in entry:
-                raise SceneError(f"missing required key (one of: {', '.join(REGISTRY)})", key="type")
-            kind = text("type", entry["type"])
-            if kind not in REGISTRY:
-                raise SceneError(f"unknown shape type {kind!r} (expected one of: {', '.join(REGISTRY)})", key="type")
+            kind = typed_table(entry, REGISTRY, "shape")
             where = f"[[shapes]] #{index} ({kind})"
             shapes.append(REGISTRY[kind].from_table(entry, index))
         except SceneError as error:
