@@ -24,6 +24,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import no_unknown_keys, text
+from ..exact import dot2
 from ..layout import Struct, layout
 from ..lighting import MATERIAL_KEYS, Material
 
@@ -184,6 +185,28 @@ def to_world(columns, origin) -> np.ndarray:
         matrix[:3, k] = column
     matrix[:3, 3] = origin
     return matrix
+
+
+def pack_flat(out, center, normal, origin, rotation) -> None:
+    """The fields a flat shape (disk, rectangle) packs alike: its centre and unit normal in the frame,
+    the frame origin's signed distance to its plane (normal.w, from float64 with an exact dot), and
+    its world normal, packed as is."""
+    F = center - origin
+    out["center"][:, :3] = F @ rotation.T
+    out["normal"][:, :3] = normal @ rotation.T
+    out["normal"][:, 3] = -dot2(normal, F)
+    out["world_normal"][:, :3] = normal
+
+
+def flat_hits(center, normal, origins, directions, inside) -> np.ndarray:
+    """A flat shape's float64 oracle: the distance t > 0 at which each ray meets the plane through
+    center with unit normal, where inside(P) holds (P the hit point from the centre), else +inf."""
+    F = np.array(center) - origins
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (F @ normal) / (directions @ normal)
+        P = t[..., None] * directions - F
+        hit = (t > 0) & np.isfinite(t) & inside(P)
+    return np.where(hit, t, np.inf)
 
 
 def dot_rows(a, b) -> np.ndarray:

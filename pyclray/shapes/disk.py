@@ -6,9 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
-from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, dot_rows, frame_columns, padded_bounds, to_world, unit_rows, distance
+from .base import Shape, distance, dot_rows, flat_hits, frame_columns, pack_flat, padded_bounds, to_world, unit_rows
 
 
 @dataclass(frozen=True)
@@ -59,13 +58,8 @@ class Disk(Shape):
     @classmethod
     def _pack(cls, out, disks, origin, rotation):
         center = np.array([d.center for d in disks])
-        n = np.array([d.unit_normal() for d in disks])
-        F = center - origin
-        out["center"][:, :3] = F @ rotation.T
+        pack_flat(out, center, np.array([d.unit_normal() for d in disks]), origin, rotation)
         out["center"][:, 3] = np.array([d.radius for d in disks]) ** 2
-        out["normal"][:, :3] = n @ rotation.T
-        out["normal"][:, 3] = -dot2(n, F)  # the frame origin's signed distance to the disk's plane
-        out["world_normal"][:, :3] = n
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
@@ -78,13 +72,8 @@ class Disk(Shape):
 
     # -- the float64 oracle --------------------------------------------------------------------
     def oracle_distance(self, origins, directions):
-        n = self.unit_normal()
-        F = np.array(self.center) - origins
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (F @ n) / (directions @ n)
-            P = t[..., None] * directions - F  # the hit point from the centre
-            inside = dot_rows(P, P) <= self.radius**2
-        return np.where((t > 0) & np.isfinite(t) & inside, t, np.inf)
+        return flat_hits(self.center, self.unit_normal(), origins, directions,
+                         lambda P: dot_rows(P, P) <= self.radius**2)
 
     def oracle_normal(self, points):
         return np.broadcast_to(self.unit_normal(), np.shape(points))

@@ -6,9 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError, norm3, vector3
-from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, padded_bounds, to_world, unit_rows, distance
+from .base import Shape, distance, flat_hits, pack_flat, padded_bounds, to_world, unit_rows
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -81,15 +80,10 @@ class Rectangle(Shape):
     @classmethod
     def _pack(cls, out, rectangles, origin, rotation):
         center = np.array([r.center for r in rectangles])
-        n = np.array([r.unit_normal() for r in rectangles])
+        pack_flat(out, center, np.array([r.unit_normal() for r in rectangles]), origin, rotation)
         duals = [r.dual() for r in rectangles]
-        F = center - origin
-        out["center"][:, :3] = F @ rotation.T
-        out["normal"][:, :3] = n @ rotation.T
-        out["normal"][:, 3] = -dot2(n, F)
         out["u_dual"][:, :3] = np.array([d[0] for d in duals]) @ rotation.T
         out["v_dual"][:, :3] = np.array([d[1] for d in duals]) @ rotation.T
-        out["world_normal"][:, :3] = n
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
@@ -106,14 +100,9 @@ class Rectangle(Shape):
         return P @ self.unit_normal(), P @ u_dual, P @ v_dual
 
     def oracle_distance(self, origins, directions):
-        n = self.unit_normal()
-        F = np.array(self.center) - origins
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (F @ n) / (directions @ n)
-            P = t[..., None] * directions - F
-            u_dual, v_dual = self.dual()
-            inside = (np.abs(P @ u_dual) <= 1) & (np.abs(P @ v_dual) <= 1)
-        return np.where((t > 0) & np.isfinite(t) & inside, t, np.inf)
+        u_dual, v_dual = self.dual()
+        return flat_hits(self.center, self.unit_normal(), origins, directions,
+                         lambda P: (np.abs(P @ u_dual) <= 1) & (np.abs(P @ v_dual) <= 1))
 
     def oracle_normal(self, points):
         return np.broadcast_to(self.unit_normal(), np.shape(points))
