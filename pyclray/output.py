@@ -485,13 +485,17 @@ class DepthPreview:
         return np.repeat(grey[..., None], 3, axis=-1)
 
 
-class NormalPreview:
-    """n * 0.5 + 0.5 as RGB; misses (zero normal) black."""
+class OnePassPreview:
+    """A preview whose rows depend on their band alone: rgb() turns each band as it comes."""
 
     two_pass = False
 
-    def measure(self, normal) -> None:
+    def measure(self, band) -> None:
         pass
+
+
+class NormalPreview(OnePassPreview):
+    """n * 0.5 + 0.5 as RGB; misses (zero normal) black."""
 
     def rgb(self, normal) -> np.ndarray:
         normal = np.asarray(normal)
@@ -552,25 +556,15 @@ def id_preview(ids: np.ndarray) -> np.ndarray:
     return rgb
 
 
-class IdPreview:
+class IdPreview(OnePassPreview):
     """Each shape id in its own colour (id_colors), misses black: one pass (a colour per id)."""
-
-    two_pass = False
-
-    def measure(self, ids) -> None:
-        pass
 
     def rgb(self, ids) -> np.ndarray:
         return id_preview(ids)
 
 
-class ShadedPreview:
+class ShadedPreview(OnePassPreview):
     """The shaded image clamped to [0, 1] and sRGB-encoded (srgb_preview): one pass."""
-
-    two_pass = False
-
-    def measure(self, linear) -> None:
-        pass
 
     def rgb(self, linear) -> np.ndarray:
         return srgb_preview(linear)
