@@ -148,45 +148,48 @@ _outputs: dict = {}
 _render_lock = threading.RLock()
 
 
+class _PerObject:
+    """Values computed from an object (a scene or its shapes tuple), the `most` most recently used:
+    keyed by the object's id and holding the object itself, so that neither an equal object nor a
+    new one at a recycled id takes another's value. The value is computed outside the lock."""
+
+    def __init__(self, most: int):
+        self.most = most
+        self.entries: OrderedDict = OrderedDict()
+
+    def get(self, obj, compute):
+        key = id(obj)
+        with _render_lock:
+            entry = self.entries.get(key)
+            if entry is not None and entry[0] is obj:
+                self.entries.move_to_end(key)
+                return entry[1]
+        value = compute()
+        with _render_lock:
+            self.entries[key] = (obj, value)
+            while len(self.entries) > self.most:
+                self.entries.popitem(last=False)
+        return value
+
+
 # The BVH of a scene's shapes is kept per shapes tuple (a moved camera keeps the scene's tuple, so
 # it reuses the tree: only the boxes are re-expressed around the new eye); an entry holds its tuple.
-_BVHS_MAX = 8
-_bvhs: OrderedDict = OrderedDict()
+_bvhs = _PerObject(8)
 
 
 def scene_bvh(scene: Scene) -> bvh.SceneBVH:
     """The BVH over the scene's bounded shapes, built once per shapes tuple."""
-    key = id(scene.shapes)
-    with _render_lock:
-        entry = _bvhs.get(key)
-        if entry is not None and entry[0] is scene.shapes:
-            _bvhs.move_to_end(key)
-            return entry[1]
-    built = bvh.scene_bvh(scene.shapes, REGISTRY)
-    with _render_lock:
-        _bvhs[key] = (scene.shapes, built)
-        while len(_bvhs) > _BVHS_MAX:
-            _bvhs.popitem(last=False)
-    return built
+    return _bvhs.get(scene.shapes, lambda: bvh.scene_bvh(scene.shapes, REGISTRY))
 
 
-_kinds: OrderedDict = OrderedDict()
+_kinds = _PerObject(_PREPARED_MAX)
 
 
 def _shape_kinds(scene: Scene) -> tuple[tuple[str, ...], int]:
     """(the shape types present, the number of bounded shapes), once per shapes tuple: a warm
-    render of a scene of a million shapes must not walk them (an entry holds its tuple)."""
-    key = id(scene.shapes)
-    with _render_lock:
-        entry = _kinds.get(key)
-        if entry is not None and entry[0] is scene.shapes:
-            return entry[1]
-    kinds = (scene.shape_types(), sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded))
-    with _render_lock:
-        _kinds[key] = (scene.shapes, kinds)
-        while len(_kinds) > _PREPARED_MAX:
-            _kinds.popitem(last=False)
-    return kinds
+    render of a scene of a million shapes must not walk them."""
+    return _kinds.get(scene.shapes, lambda: (
+        scene.shape_types(), sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded)))
 
 
 # Render visits the bounded shapes through tile lists (pyclray/culling.py) or through the BVH,
@@ -198,7 +201,7 @@ def _shape_kinds(scene: Scene) -> tuple[tuple[str, ...], int]:
 # shapes has short lists, and computing them costs more than building the tree.
 TILE_LIST_MAX = 16.0
 TILES_MAX_SHAPES = 20_000
-_choices: OrderedDict = OrderedDict()
+_choices = _PerObject(_PREPARED_MAX)
 
 
 def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
@@ -207,30 +210,24 @@ def acceleration_for(scene: Scene, acceleration: str = "auto") -> str:
         raise PyclrayError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
     if acceleration != "auto":
         return acceleration
-    key = id(scene)
-    with _render_lock:
-        entry = _choices.get(key)
-        if entry is not None and entry[0] is scene:
-            return entry[1]
+    return _choices.get(scene, lambda: _cheaper_acceleration(scene))
+
+
+def _cheaper_acceleration(scene: Scene) -> str:
+    """Tile lists while they average at most TILE_LIST_MAX shapes a tile, else the BVH."""
     shape_types, bounded = _shape_kinds(scene)
     if bounded > TILES_MAX_SHAPES:
-        choice = "bvh"
-    else:
-        width, height = scene.image.width, scene.image.height
-        rows = scene.camera.basis()
-        tan_x, tan_y = scene.camera.tangents(width, height)
-        pairs = 0
-        for kind in shape_types:
-            if REGISTRY[kind].bounded:
-                shapes = [shape for shape in scene.shapes if shape.type == kind]
-                start, _ = culling.tile_lists(REGISTRY[kind], shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
-                pairs += int(start[-1])
-        choice = "tiles" if pairs <= TILE_LIST_MAX * (len(start) - 1 if bounded else 1) else "bvh"
-    with _render_lock:
-        _choices[key] = (scene, choice)
-        while len(_choices) > _PREPARED_MAX:
-            _choices.popitem(last=False)
-    return choice
+        return "bvh"
+    width, height = scene.image.width, scene.image.height
+    rows = scene.camera.basis()
+    tan_x, tan_y = scene.camera.tangents(width, height)
+    pairs = 0
+    for kind in shape_types:
+        if REGISTRY[kind].bounded:
+            shapes = [shape for shape in scene.shapes if shape.type == kind]
+            start, _ = culling.tile_lists(REGISTRY[kind], shapes, scene.camera.eye, rows, tan_x, tan_y, width, height)
+            pairs += int(start[-1])
+    return "tiles" if pairs <= TILE_LIST_MAX * (len(start) - 1 if bounded else 1) else "bvh"
 
 
 _checked: OrderedDict = OrderedDict()
