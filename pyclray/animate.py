@@ -82,12 +82,9 @@ def _has_preview(aov: str) -> bool:
 
 
 def _preview(aov: str, image) -> np.ndarray:
-    """The (H, W, 3) uint8 preview of one AOV's whole image, as `pyclray render --png` makes it."""
     from . import output
 
-    maker = output.PREVIEWS[aov]()
-    maker.measure(image)
-    return np.ascontiguousarray(maker.rgb(image))
+    return output.preview(aov, image)
 
 
 # -- sinks: where frames go --------------------------------------------------------------------

@@ -509,16 +509,21 @@ class NormalPreview(OnePassPreview):
 PREVIEWS = {"depth": DepthPreview, "normal": NormalPreview}
 
 
+def preview(aov: str, image: np.ndarray) -> np.ndarray:
+    """The (H, W, 3) uint8 preview of one AOV's whole image, as `pyclray render --png` writes it."""
+    maker = PREVIEWS[aov]()
+    maker.measure(image)
+    return np.ascontiguousarray(maker.rgb(image))
+
+
 def depth_preview(depth: np.ndarray) -> np.ndarray:
     """The depth preview of a whole image (see DepthPreview)."""
-    preview = DepthPreview()
-    preview.measure(depth)
-    return preview.rgb(depth)
+    return preview("depth", depth)
 
 
 def normal_preview(normal: np.ndarray) -> np.ndarray:
     """The normal preview of a whole image (see NormalPreview)."""
-    return NormalPreview().rgb(normal)
+    return preview("normal", normal)
 
 
 def srgb_preview(linear: np.ndarray) -> np.ndarray:
