@@ -22,7 +22,8 @@ REPO = Path(__file__).resolve().parent.parent
 
 def main(argv=None) -> None:
     import pyclray
-    from pyclray import animate, cli
+    from pyclray.apps import cli
+    from pyclray.io import video
 
     parser = argparse.ArgumentParser(prog="python -m bench.animation")
     parser.add_argument("scene", nargs="?", default=str(REPO / "scenes" / "tp02_orbit.toml"))
@@ -44,11 +45,11 @@ def main(argv=None) -> None:
                 out = Path(folder) / f"x{suffix}"
                 tmp = str(out) + ".tmp"
                 if suffix == ".mp4":
-                    sink = animate._Video(tmp, out, "depth", scene.animation.fps, args.size, args.size)
+                    sink = video.Video(tmp, out, "depth", scene.animation.fps, args.size, args.size)
                 elif suffix == ".gif":
-                    sink = animate._Gif(tmp, "depth", scene.animation.fps)
+                    sink = video.Gif(tmp, "depth", scene.animation.fps)
                 else:
-                    sink = animate._Folder(out, 5, "bench")
+                    sink = video.Folder(out, 5, "bench")
                 for k, frame in enumerate(frames):
                     sink.write(k, frame)
                 sink.finish()

@@ -76,11 +76,12 @@ def mitsuba_direct(scene):
     """Mitsuba llvm_ad_rgb's direct integrator on the scene (its diffuse version: two-sided diffuse
     BSDFs, the same lights as emitters), one pixel-centre sample per pixel and as many emitter
     samples as the scene has lights: the same number of shadow rays per pixel as pyclray casts."""
-    from pyclray import mitsuba as pm
-    from pyclray.validation import shaded as shaded_check
-    from pyclray.lighting import effective_lights
+    from pyclray.engine import device
+    from pyclray.reference import mitsuba
+    from pyclray.reference.validation import shaded as shaded_check
+    from pyclray.model.lights import effective_lights
 
-    mi = pm.import_mitsuba("llvm_ad_rgb")
+    mi = mitsuba.import_mitsuba("llvm_ad_rgb")
     lights = effective_lights(scene)
     description = shaded_check.direct_scene_dict(shaded_check.diffuse_version(scene), lights[0], "llvm_ad_rgb")
     description["integrator"]["emitter_samples"] = len(lights)
@@ -94,7 +95,7 @@ def mitsuba_direct(scene):
 def calls_of(group: str) -> dict:
     """label -> a call of the group's cases."""
     import pyclray
-    import pyclray.device as device
+    from pyclray.engine import device
 
     name, size, cases = GROUPS[group]
     scene = pyclray.load_scene(SCENES / f"{name}.toml").with_size(size, size)
@@ -114,10 +115,11 @@ def calls_of(group: str) -> dict:
             lit = replace(scene, shading=replace(scene.shading, shadows=shadows))
             calls[label] = lambda lit=lit: pyclray.render(lit, ("shaded",))
         elif case == "llvm":
-            from pyclray import mitsuba as pm
+            from pyclray.engine import device
+            from pyclray.reference import mitsuba
 
-            pm.import_mitsuba("llvm_ad_rgb")
-            mi_scene, _ = pm.load(scene, "llvm_ad_rgb")
+            mitsuba.import_mitsuba("llvm_ad_rgb")
+            mi_scene, _ = mitsuba.load(scene, "llvm_ad_rgb")
             sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
             calls[label] = lambda s=mi_scene, c=sensor, i=integrator: np.array(i.render(s, c))
         else:

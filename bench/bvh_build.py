@@ -7,7 +7,7 @@ The binned SAH here is the usual one (Wald 2007), level-synchronous so that nump
 node of a level at once: per node, 16 bins along the longest axis of its centres' bounds, the
 bins' boxes by one sort and reduceat, the best of the 15 splits by prefix and suffix scans, a leaf
 where splitting costs more (or at most LEAF_SIZE shapes remain). The quality measure is the SAH
-cost of the finished tree (pyclray.bvh.sah_cost's definition: traversal 1 per internal node and 1
+cost of the finished tree (pyclray.engine.bvh.sah_cost's definition: traversal 1 per internal node and 1
 per shape of a leaf, weighted by area relative to the root's), which predicts the work of a random
 ray through it.
 """
@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from pyclray import bvh
+from pyclray.engine import bvh
 
 from . import scale
 

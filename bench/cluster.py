@@ -49,7 +49,7 @@ def _same_tree(left: Path, right: Path) -> bool:
 
 def commands(args, folder: Path) -> dict[str, list[str]]:
     out = "{folder}/%s" + ("/" if args.output == "folder" else ".mp4")
-    base = [sys.executable, "-m", "pyclray.cli", "animate", args.scene, "--frames", f"0:{args.frames}",
+    base = [sys.executable, "-m", "pyclray", "animate", args.scene, "--frames", f"0:{args.frames}",
             "--size", f"{args.size}x{args.size}"] + ([] if args.output == "folder" else ["--aov", "depth"])
     return {
         "local": base + ["-o", out.format(folder=folder) % "local"],
@@ -156,7 +156,7 @@ def sessions(args) -> None:
         folder = Path(tmp)
         clusters = {n: _start_cluster(n, folder) for n in (1, 2)}
         try:
-            base = [sys.executable, "-m", "pyclray.cli", "animate", args.scene, "--frames", f"0:{args.frames}",
+            base = [sys.executable, "-m", "pyclray", "animate", args.scene, "--frames", f"0:{args.frames}",
                     "--size", f"{args.size}x{args.size}"] + ([] if args.output == "folder" else ["--aov", "depth"])
             suffix = "/" if args.output == "folder" else ".mp4"
             names = {1: "1 worker", 2: "2 workers"}
@@ -192,7 +192,7 @@ def sessions(args) -> None:
 
 def overhead(args) -> None:
     import pyclray
-    from pyclray import cluster
+    from pyclray.apps import cluster
 
     scene = pyclray.load_scene(args.scene).with_size(8, 8)
     frames = list(range(scene.animation.frame_count()))

@@ -2,7 +2,7 @@
 pyclray's own error model (pyclray.accuracy), so the benchmarks and the tests judge alike."""
 from __future__ import annotations
 
-from pyclray import accuracy
+from pyclray.reference import error_model
 
 
 def compare(scene, images: dict, reference: dict, exclude=None, engine: str = "fp32") -> dict:
@@ -10,8 +10,8 @@ def compare(scene, images: dict, reference: dict, exclude=None, engine: str = "f
     error |n - n_ref| times |cos| (max) and id mismatches (depth only: hit/miss disagreements),
     over the pixels that are neither silhouettes (|cos| < 0.02) nor near-ties nor at edges by the
     error model of ``engine`` ("fp32", "fp64" or a Mitsuba variant), nor in ``exclude`` (e.g. Mitsuba's plane beyond its stand-in disk). ``reference`` comes from
-    pyclray.accuracy.reference(scene)."""
-    result = accuracy.compare(images, reference, exclude=exclude, engine=engine)
+    pyclray.reference.error_model.reference(scene)."""
+    result = error_model.compare(images, reference, exclude=exclude, engine=engine)
     out = {
         "pixels": result["pixels"],
         "excluded": int(reference["id"].size) - result["pixels"],

@@ -30,7 +30,11 @@ from pathlib import Path
 import numpy as np
 
 import pyclray
-from pyclray import bvh
+from pyclray.engine import bvh
+from pyclray.model.shapes import REGISTRY
+from pyclray.engine import bvh_wide
+from pyclray.engine import prepared
+from pyclray.engine.scene_bvh import scene_bvh as build_scene_bvh
 
 from . import scale
 
@@ -38,7 +42,7 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "open3d_results.json"
 REPORT = HERE / "REPORT.md"
 BEGIN, END = "<!-- scale:begin -->", "<!-- scale:end -->"
-render_module = sys.modules["pyclray.render"]
+render_module = sys.modules["pyclray.engine.prepared"]
 
 
 def blocks(systems: dict, rounds: int, block: int, pause: float = 0.05) -> dict:
@@ -114,9 +118,9 @@ def scaling(counts, rounds: int, block: int) -> dict:
         build = min(once(lambda: bvh.build(widened)) for _ in range(3))
         build_cpu = min(cpu_once(lambda: bvh.build(widened)) for _ in range(3))
         tree = bvh.build(widened)
-        collapse = min(once(lambda: bvh.collapse(tree)) for _ in range(3))
-        collapse_cpu = min(cpu_once(lambda: bvh.collapse(tree)) for _ in range(3))
-        prepare = once(lambda: bvh.scene_bvh(scene.shapes, pyclray.shapes.REGISTRY))
+        collapse = min(once(lambda: bvh_wide.collapse(tree)) for _ in range(3))
+        collapse_cpu = min(cpu_once(lambda: bvh_wide.collapse(tree)) for _ in range(3))
+        prepare = once(lambda: build_scene_bvh(scene.shapes, REGISTRY))
         first = once(lambda: pyclray.render(scene))
         timing = blocks(
             {"render": lambda: pyclray.render(scene, acceleration="bvh"), "auto": lambda: pyclray.render(scene)}, rounds, block
@@ -124,7 +128,7 @@ def scaling(counts, rounds: int, block: int) -> dict:
         # a moved camera: the same shapes tuple, so the tree is reused; the shapes are packed again
         moved = replace(scene, camera=pyclray.Camera((4.0, 10.0, 24.0), scale.TARGET, fov=scale.FOV))
         camera_move = once(lambda: pyclray.render(moved))
-        scene_bvh = render_module.scene_bvh(scene)
+        scene_bvh = prepared.scene_bvh(scene)
         memory = {
             "binary nodes": scene_bvh.binary_nodes(np.zeros(3)).nbytes,
             "wide nodes": scene_bvh.nodes(np.zeros(3)).nbytes,
@@ -136,7 +140,7 @@ def scaling(counts, rounds: int, block: int) -> dict:
             "tree from bounds cpu ms": build_cpu,
             "wide tree ms": collapse,
             "wide tree cpu ms": collapse_cpu,
-            "auto": render_module.acceleration_for(scene),
+            "auto": prepared.acceleration_for(scene),
             "render auto ms": timing["auto"],
             "scene BVH ms (bounds from the shapes, tree, wide tree)": prepare,
             "first render ms (BVH, packing, upload, render)": first,

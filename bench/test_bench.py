@@ -19,10 +19,8 @@ import pyopencl as cl
 import pytest
 
 import pyclray
-import pyclray.device as device
-from pyclray import accuracy, culling
-from pyclray import mitsuba as pm
-from pyclray import oracle
+from pyclray.engine import culling, device, programs
+from pyclray.reference import error_model, mitsuba, oracle
 
 from . import blocks
 from .metrics import compare
@@ -53,7 +51,7 @@ def timed(fn):
 def reference(scenes_dir, name: str) -> dict:
     """The oracle's images of a scene at ERROR_SIZE (computed once, by test_oracle if it ran)."""
     if name not in _references:
-        _references[name] = accuracy.reference(load(scenes_dir, name, ERROR_SIZE))
+        _references[name] = error_model.reference(load(scenes_dir, name, ERROR_SIZE))
     return _references[name]
 
 
@@ -146,7 +144,7 @@ def test_pyclray_cold(benchmark, scenes_dir, name, aovs, precision):
     folders = []
 
     def setup():
-        device._programs.clear()
+        programs._programs.clear()
         folders.append(tempfile.mkdtemp(prefix="pyclray-cold-"))
         os.environ["PYCLRAY_CACHE_DIR"] = folders[-1]
 
@@ -165,14 +163,14 @@ def test_pyclray_cold(benchmark, scenes_dir, name, aovs, precision):
 
 # -- Mitsuba 3 ---------------------------------------------------------------------------------
 def mitsuba_images(scene, image, ids) -> dict:
-    """Mitsuba's aov image in pyclray's conventions (as pyclray.mitsuba.render converts it)."""
+    """Mitsuba's aov image in pyclray's conventions (as pyclray.reference.mitsuba.render converts it)."""
     image = np.asarray(image, dtype=np.float64)
-    near, _ = pm.clip_range(scene)
+    near, _ = mitsuba.clip_range(scene)
     index = np.rint(image[..., 7]).astype(np.int64)
     hit = index > 0
     lookup = np.vectorize(lambda k: ids.get(int(k), -1), otypes=[np.int32])
     return {
-        "depth": np.where(hit, image[..., 0] + near / pm.axis_cosines(scene), np.inf),
+        "depth": np.where(hit, image[..., 0] + near / mitsuba.axis_cosines(scene), np.inf),
         "normal": np.where(hit[..., None], image[..., 1:4], 0.0),
         "id": np.where(hit, lookup(np.where(hit, index, 0)) if hit.any() else -1, -1).astype(np.int32),
     }
@@ -180,8 +178,8 @@ def mitsuba_images(scene, image, ids) -> dict:
 
 def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, least_rounds=3):
     scene = load(scenes_dir, name, size)
-    mi = pm.import_mitsuba(variant)
-    mi_scene, ids = pm.load(scene, variant)
+    mi = mitsuba.import_mitsuba(variant)
+    mi_scene, ids = mitsuba.load(scene, variant)
     sensor = mi_scene.sensors()[0]
     integrator = mi_scene.integrator()
 
@@ -194,7 +192,7 @@ def _mitsuba(benchmark, scenes_dir, name, size, variant, kind, most_rounds=100, 
     benchmark.pedantic(run, rounds=rounds_for(seconds, most=most_rounds, least=least_rounds), iterations=1)
     if size == ERROR_SIZE:  # after the timing, as for pyclray
         origins, directions = oracle.camera_rays(scene)
-        mask = pm.beyond_counterparts(scene, origins, directions)
+        mask = mitsuba.beyond_counterparts(scene, origins, directions)
         # on the pixels pyclray fp32 is judged on: the same pixels for every engine
         errors = compare(scene, mitsuba_images(scene, image, ids), reference(scenes_dir, name), exclude=mask,
                          engine="fp32")
@@ -228,7 +226,8 @@ BREAKDOWN = {
 def test_breakdown(benchmark, scenes_dir, part):
     import importlib
 
-    render_module = importlib.import_module("pyclray.render")
+    render_module = importlib.import_module("pyclray.engine.prepared")
+    request_module = importlib.import_module("pyclray.engine.request")
     scene = load(scenes_dir, "tp02", ERROR_SIZE)
     if part == "kernel only, all AOVs, plane only":
         scene = dataclasses.replace(scene, shapes=scene.shapes[:1])
@@ -236,11 +235,11 @@ def test_breakdown(benchmark, scenes_dir, part):
     ctx = device.context_for(None)
     width = height = ERROR_SIZE
     pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
-    camera, shape_args, _ = render_module._render_inputs(ctx, scene, "fp32", "tiles")
+    camera, shape_args, _ = render_module.render_inputs(ctx, scene, "fp32", "tiles")
     shape_args = [a for a in shape_args if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
-    lanes = device.lanes_for(ctx.device, "fp32")
-    kernel = device.kernel_for(ctx, device.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
-    buffers = render_module._output_buffers(ctx, width * height, aovs, "fp32")
+    lanes = programs.lanes_for(ctx.device, "fp32")
+    kernel = programs.kernel_for(ctx, programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
+    buffers = request_module._output_buffers(ctx, width * height, aovs, "fp32")
     tile = culling.TILE
     whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
     args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]

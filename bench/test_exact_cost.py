@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import pyclray
-from pyclray import device
+from pyclray.engine import programs
 
 SIMPLE_SPHERE = """
 /* The textbook sphere, for the cost comparison only: b^2 - a c, (b -+ sqrt) / a, p - C. */
@@ -36,9 +36,9 @@ SCENE = Path(__file__).resolve().parent.parent / "scenes" / "tp02.toml"
 
 @pytest.fixture
 def simple_sphere(monkeypatch):
-    read = device._read
-    monkeypatch.setattr(device, "_read", lambda name: SIMPLE_SPHERE if name == "sphere.cl" else read(name))
-    monkeypatch.setattr(device, "_programs", {})
+    read = programs._read
+    monkeypatch.setattr(programs, "_read", lambda name: SIMPLE_SPHERE if name == "sphere.cl" else read(name))
+    monkeypatch.setattr(programs, "_programs", {})
     monkeypatch.setenv("PYCLRAY_CACHE_DIR", "off")
 
 

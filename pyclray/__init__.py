@@ -14,24 +14,40 @@ def _quiet_interrupt(number, frame):
 
 
 # Run as the command line (the pyclray script, or python -m pyclray while the package is found),
-# Ctrl-C during these imports exits quietly with status 130; cli.main takes over from there.
+# Ctrl-C during these imports exits quietly with status 130; apps.cli.main takes over from there.
 if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.argv else False:
     _signal.signal(_signal.SIGINT, _quiet_interrupt)
 
-from .animate import render_animation
-from .animation import Animation, Key
-from .device import AOVS, list_devices, select_device
-from .errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
-from .lighting import DirectionalLight, Material, PointLight, Shading
-from .render import Frame, cast, occluded, render
-from .scene import Camera, Image, Scene, load_scene, scene_from_dict
-from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
+from .engine.cast import cast, occluded
+from .engine.device import list_devices, select_device
+from .engine.render import render, render_animation
+from .engine.request import Frame
+from .io.bands import write_exr
+from .io.exr import read_exr
+from .model.animation import Animation, Key
+from .model.aovs import AOVS
+from .model.camera import Camera, Image
+from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
+from .model.lights import DirectionalLight, Material, PointLight, Shading
+from .model.loader import load_scene, scene_from_dict
+from .model.scene import Scene
+from .model.shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
+from .version import __version__
 
-__version__ = "0.1.0"
 
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "RequestError", "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
-    "render_animation", "occluded", "scene_from_dict", "select_device",
+    "read_exr", "render_animation", "occluded", "scene_from_dict", "select_device", "write_exr",
 ]
+
+
+def __getattr__(name: str):
+    """``pyclray.cluster`` (``from pyclray import cluster``): the Dask scale-out, imported when first
+    asked for (it needs the cluster extra, and importing distributed takes a while)."""
+    if name == "cluster":
+        from importlib import import_module
+
+        return import_module(".apps.cluster", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

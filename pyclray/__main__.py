@@ -1,6 +1,6 @@
 """python -m pyclray: the command line (as the pyclray script)."""
 import sys
 
-from .cli import main
+from .apps.cli import main
 
 sys.exit(main())

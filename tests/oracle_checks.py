@@ -1,9 +1,10 @@
 """The one agreement check of cast results against the float64 oracle, shared by the tests: the
-bounds are pyclray.accuracy's (pyclray_tolerances: K_ORACLE eps (t + L) plus the oracle's own
+bounds are pyclray.reference.error_model's (pyclray_tolerances: K_ORACLE eps (t + L) plus the oracle's own
 eps64 (t + W), over |cos|), and the rays set apart are its silhouettes, near ties and edges."""
 import numpy as np
 
-from pyclray import accuracy, oracle
+from pyclray.reference import error_model
+from pyclray.reference import oracle
 
 
 def judge(scene, origins, directions, result, precision, reference_point=None):
@@ -11,19 +12,19 @@ def judge(scene, origins, directions, result, precision, reference_point=None):
     unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     truth = oracle.trace(scene, origins, unit, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
-    depth_tolerance, normal_tolerance = accuracy.pyclray_tolerances(scene, truth, cos, origins, precision, reference_point, unit)
+    depth_tolerance, normal_tolerance = error_model.pyclray_tolerances(scene, truth, cos, origins, precision, reference_point, unit)
     with np.errstate(invalid="ignore"):
         farthest = np.fmax(np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0),
                            np.where(np.isfinite(result["depth"]), result["depth"].astype(np.float64), 0.0))
-    band, _ = accuracy.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision,
+    band, _ = error_model.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision,
                                           reference_point, unit)
-    edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])],
+    edge = error_model.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])],
                              band * cos)
     truth["cos"] = cos
-    near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.pyclray_tolerances(
+    near_tie = error_model.near_ties(truth, lambda t, ids, c: error_model.pyclray_tolerances(
         scene, {"depth": t, "id": ids}, c, origins, precision, reference_point, unit)[0])
-    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
-    explained = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) | near_tie | edge
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    explained = error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) | near_tie | edge
     judged = (result["id"] == truth["id"]) & (truth["id"] >= 0) & ~explained
     return truth, cos, judged, explained, depth_tolerance, normal_tolerance
 
@@ -39,12 +40,12 @@ def assert_agrees_with_oracle(scene, origins, directions, result, precision, min
         depth_error = np.abs(result["depth"].astype(np.float64) - truth["depth"])
     ratio = np.where(judged, depth_error / depth_tolerance, 0.0)
     assert ratio.max() <= 1.0, f"depth off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
-    angle = accuracy.angle_between(result["normal"], truth["normal"])
+    angle = error_model.angle_between(result["normal"], truth["normal"])
     ratio = np.where(judged, angle / normal_tolerance, 0.0)
     assert ratio.max() <= 1.0, f"normal off by {ratio.max():.3g} x the tolerance at ray {np.argmax(ratio)}"
     miss = result["id"] < 0
     assert np.all(np.isinf(result["depth"][miss])) and np.all(result["normal"][miss] == 0)
     assert np.all(np.isfinite(result["depth"][~miss])) and np.all(result["depth"][~miss] > 0)
-    eps = accuracy.EPSILON[precision]
+    eps = error_model.EPSILON[precision]
     assert np.allclose(np.linalg.norm(result["normal"][~miss].astype(np.float64), axis=1), 1.0, rtol=0, atol=8 * eps)
     return truth, cos, judged, depth_tolerance

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import cli, device, output
-from pyclray.output import read_exr
+from pyclray.apps import cli
+from pyclray.engine import programs
+from pyclray.io import png
+from pyclray.io.exr import read_exr
 
 from conftest import REPO
 
@@ -73,7 +75,7 @@ def scene_file(tmp_path):
 
 
 def animate(*args):
-    return subprocess.run([sys.executable, "-m", "pyclray.cli", "animate", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "pyclray", "animate", *map(str, args)],
                           capture_output=True, text=True, env=dict(os.environ))
 
 
@@ -93,11 +95,11 @@ def test_one_program_serves_every_frame():
     """Builds (compiled or read from the disk cache) happen for the first frame only; each later
     frame of the orbiting camera fetches one kernel, the render's, from memory."""
     scene = pyclray.load_scene(REPO / "scenes/tp02_orbit.toml").with_size(32, 32)
-    builds = lambda: device.stats["compiled"] + device.stats["from_disk"]
+    builds = lambda: programs.stats["compiled"] + programs.stats["from_disk"]
     counts, fetched = [], []
     for _ in pyclray.render_animation(scene, aovs=("depth", "id"), frames=range(0, 100, 10)):
         counts.append(builds())
-        fetched.append(device.stats["from_memory"])
+        fetched.append(programs.stats["from_memory"])
     assert counts[1:] == [counts[0]] * 9, counts
     assert np.diff(fetched).tolist() == [1] * 9, fetched
 
@@ -127,7 +129,7 @@ def test_a_progress_bar_is_drawn_on_a_terminal(tmp_path, scene_file):
     import struct
     import termios
 
-    run = ("import sys, pyclray.progress as p\np.DELAY = 0\nfrom pyclray.cli import main\nsys.exit(main())")
+    run = ("import sys, pyclray.io.progress as p\np.DELAY = 0\nfrom pyclray.apps.cli import main\nsys.exit(main())")
     controller, terminal = pty.openpty()
     fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns, as a terminal has
     try:
@@ -174,7 +176,7 @@ def test_gif_has_every_frame_and_each_is_the_depth_preview(tmp_path, scene_file)
         for k in range(FRAMES):
             gif.seek(k)
             # grey previews go into the GIF exactly (256 grey levels)
-            expected = output.depth_preview(pyclray.render(scene.at(k / 4.0), aovs=("depth",))["depth"])
+            expected = png.depth_preview(pyclray.render(scene.at(k / 4.0), aovs=("depth",))["depth"])
             assert np.array_equal(np.asarray(gif.convert("RGB")), expected), k
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.gif", "anim.toml"]
 
@@ -203,14 +205,14 @@ def test_mp4_decodes_to_every_frame_at_the_image_size(tmp_path, scene_file):
     # lossy (H.264, 4:2:0) but close: the mean error of frame k's preview is a few grey levels
     scene = pyclray.load_scene(scene_file)
     for k, frame in enumerate(decoded):
-        expected = output.normal_preview(pyclray.render(scene.at(k / 4.0), aovs=("normal",))["normal"])
+        expected = png.normal_preview(pyclray.render(scene.at(k / 4.0), aovs=("normal",))["normal"])
         assert np.abs(frame.astype(int) - expected).mean() < 12, k
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.mp4", "anim.toml"]
 
 
 def test_render_time_renders_the_scene_at_that_time(tmp_path, scene_file):
     out = tmp_path / "t.exr"
-    result = subprocess.run([sys.executable, "-m", "pyclray.cli", "render", scene_file, "-o", out, "--time", "0.6"],
+    result = subprocess.run([sys.executable, "-m", "pyclray", "render", scene_file, "-o", out, "--time", "0.6"],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     expected = pyclray.render(pyclray.load_scene(scene_file).at(0.6))
@@ -254,7 +256,7 @@ def test_a_scene_without_animation_or_with_a_bad_one_exits_2(tmp_path, scene_fil
 def test_ctrl_c_or_a_failure_mid_sequence_leaves_the_old_output_and_no_temporaries(tmp_path, scene_file, monkeypatch, capsys, name):
     """Frame 3's render is interrupted (KeyboardInterrupt, as Ctrl-C raises it) or fails: animate
     exits 130 (quietly) or 1, the earlier output is untouched and nothing else is left."""
-    render_module = sys.modules["pyclray.render"]  # the module (pyclray.render is the function)
+    render_module = sys.modules["pyclray.engine.render"]  # the module (pyclray.render is the function)
 
     out = tmp_path / name
     if name == "out":
@@ -289,7 +291,7 @@ def test_sigint_during_animate_exits_130_and_leaves_no_partial_video(tmp_path):
     long = tmp_path / "long.toml"
     long.write_text(SCENE.format(duration=500.0))  # 2000 frames: far longer than the test waits
     out = tmp_path / "long.mp4"
-    process = subprocess.Popen([sys.executable, "-m", "pyclray.cli", "animate", str(long), "-o", str(out)],
+    process = subprocess.Popen([sys.executable, "-m", "pyclray", "animate", str(long), "-o", str(out)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60

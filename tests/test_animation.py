@@ -8,7 +8,7 @@ import pytest
 
 import pyclray
 from pyclray import Animation, Camera, Image, Plane, Scene, SceneError, Sphere
-from pyclray.scene import scene_from_dict
+from pyclray.model.loader import scene_from_dict
 
 from conftest import SCENES
 

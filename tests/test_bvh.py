@@ -1,4 +1,4 @@
-"""The BVH (pyclray/bvh.py): its structure, and traversal against float64 brute force; in the
+"""The BVH (pyclray/engine/bvh.py): its structure, and traversal against float64 brute force; in the
 kernels, render through the BVH gives the tile-culled render's images bit for bit.
 
 Exact where exactness is possible: a node's box holds its children's boxes exactly (min/max of
@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import bvh
-from pyclray.device import context_for, has_fp64
-from pyclray.shapes import REGISTRY
+from pyclray.engine import bvh
+from pyclray.engine import bvh_wide
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.model.shapes import REGISTRY
 
 from conftest import SCENES
 
@@ -176,7 +177,7 @@ def test_a_moved_camera_reuses_the_tree():
     import sys
     from dataclasses import replace
 
-    render_module = sys.modules["pyclray.render"]
+    render_module = sys.modules["pyclray.engine.prepared"]
 
     scene = crowded_scene(7, size=16)
     first = render_module.scene_bvh(scene)
@@ -213,24 +214,24 @@ def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
     it is long: tp02's three spheres, and 3,000 spheres filling a small image."""
     import sys
 
-    render_module = sys.modules["pyclray.render"]
+    render_module = sys.modules["pyclray.engine.prepared"]
     tp02 = pyclray.load_scene(SCENES / "tp02.toml").with_size(64, 64)
     assert render_module.acceleration_for(tp02) == "tiles"
     assert render_module.acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"
     assert render_module.acceleration_for(tp02, "bvh") == "bvh"
 
 
-@pytest.mark.parametrize("struct", [bvh.NODE, bvh.WIDE_NODE], ids=lambda s: s.name)
+@pytest.mark.parametrize("struct", [bvh.NODE, bvh_wide.WIDE_NODE], ids=lambda s: s.name)
 def test_node_layouts_are_the_devices(struct):
     from test_layout import measure_on_device
 
-    from pyclray.layout import layout
+    from pyclray.model.layout import layout
 
     spec = layout(struct, "fp32")
     assert measure_on_device(struct, "fp32") == [spec.dtype.itemsize] + [spec.dtype.fields[name][1] for name, _ in struct.fields]
 
 
-@pytest.mark.parametrize("case", __import__("pyclray.stability", fromlist=["CASES"]).CASES, ids=lambda c: c.name)
+@pytest.mark.parametrize("case", __import__("pyclray.reference.stability", fromlist=["CASES"]).CASES, ids=lambda c: c.name)
 def test_the_stiff_cases_render_the_same_through_the_bvh(case):
     """pyclray stability's scenes (far, huge, tiny, grazing, coincident shapes...) give the very
     same bits through the BVH as through tile lists: the BVH changes no exactness result."""

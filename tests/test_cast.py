@@ -16,14 +16,15 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy, oracle
-from pyclray.device import context_for, has_fp64
-from pyclray.validation.images import next_to_id_change
+from pyclray.reference import error_model
+from pyclray.reference import oracle
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.reference.validation.images import next_to_id_change
 
 from conftest import SCENES
 from oracle_checks import assert_agrees_with_oracle
 
-EPSILON = accuracy.EPSILON
+EPSILON = error_model.EPSILON
 
 
 def random_scene(seed: int):
@@ -198,16 +199,16 @@ def test_camera_rays_match_render(scene):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
 
     def both(t, ids, c):  # render's bounds plus cast's
-        rendered = accuracy.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", scene.camera.eye)
-        cast = accuracy.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", directions=directions)
+        rendered = error_model.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", scene.camera.eye)
+        cast = error_model.pyclray_tolerances(scene, {"depth": t, "id": ids}, c, origins, "fp32", directions=directions)
         return rendered[0] + cast[0], rendered[1] + cast[1]
 
     depth_tolerance, normal_tolerance = both(truth["depth"], truth["id"], cos)
-    edge = accuracy.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (image["id"], image["depth"])],
+    edge = error_model.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (image["id"], image["depth"])],
                              depth_tolerance * cos)
-    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
-    explained = (accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) | next_to_id_change(truth["id"]) | edge
-                 | accuracy.near_ties(dict(truth, cos=cos), lambda t, ids, c: both(t, ids, c)[0])).ravel()
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    explained = (error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) | next_to_id_change(truth["id"]) | edge
+                 | error_model.near_ties(dict(truth, cos=cos), lambda t, ids, c: both(t, ids, c)[0])).ravel()
     ids = image["id"].ravel()
     assert not ((result["id"] != ids) & ~explained).any()
     judged = (result["id"] == ids) & (ids >= 0) & ~explained
@@ -215,7 +216,7 @@ def test_camera_rays_match_render(scene):
     with np.errstate(invalid="ignore"):  # inf - inf where both miss
         depth_error = np.abs(result["depth"].astype(np.float64) - image["depth"].ravel())
     assert np.all(depth_error[judged] <= depth_tolerance.ravel()[judged])
-    angle = accuracy.angle_between(result["normal"], image["normal"].reshape(-1, 3))
+    angle = error_model.angle_between(result["normal"], image["normal"].reshape(-1, 3))
     assert np.all(angle[judged] <= normal_tolerance.ravel()[judged])
     misses = (ids < 0) & (result["id"] < 0)
     assert np.all(np.isinf(result["depth"][misses])) and np.all(np.isinf(image["depth"].ravel()[misses]))
@@ -351,7 +352,7 @@ def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
     small to be reordered, for cast and occluded."""
     import sys
 
-    render_module = sys.modules["pyclray.render"]
+    render_module = sys.modules["pyclray.engine.cast"]
     scene, origins, directions = random_scene(12)
     rng = np.random.default_rng(12)
     count = render_module.COHERENT_FROM + 1000

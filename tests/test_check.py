@@ -1,6 +1,6 @@
 """pyclray check: the image and ray-level cross-checks against Mitsuba 3, and the command.
 
-Tolerances are pyclray.accuracy's error model (eps = 2^-24, float32's unit roundoff):
+Tolerances are pyclray.reference.error_model's error model (eps = 2^-24, float32's unit roundoff):
 
     same rays:  |depth difference| <= 6 eps (t + L) / cos,  normal angle <= 6 eps (1 + (t + L) / (r cos))
     cameras:    direction angle <= 3 eps (1 + S),  origin off our ray <= 2 eps max(|eye|, 1)
@@ -18,9 +18,11 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy, check, cli
-from pyclray.validation.files import RAMP
-from pyclray.output import read_exr
+from pyclray.apps import cli
+from pyclray.reference import check
+from pyclray.reference import error_model
+from pyclray.reference.validation.files import RAMP
+from pyclray.io.exr import read_exr
 
 from conftest import SCENES
 
@@ -122,7 +124,7 @@ def test_ray_level_agrees_within_a_few_ulps(scene, variant):
     assert result.depth_ratio.count > 100
     eye, target = np.array(scene.camera.eye), np.array(scene.camera.target)
     size = max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye)
-    assert result.camera_angle.max <= 3 * accuracy.EPSILON["fp32"] * (1 + size)  # float32 look_at: measured 3.3 eps on tp02
+    assert result.camera_angle.max <= 3 * error_model.EPSILON["fp32"] * (1 + size)  # float32 look_at: measured 3.3 eps on tp02
     assert result.camera_origin.max <= 2  # Mitsuba's origin: the eye rounded to float32, on the ray
     assert result.ids["unexplained"] == 0
 
@@ -138,8 +140,8 @@ def test_tables_are_printed_and_exit_0_on_tp02(capsys):
 
 def test_exit_1_outside_the_tolerance(capsys, monkeypatch):
     """With a tolerance a thousand times too tight the same check fails with status 1 and says why."""
-    monkeypatch.setattr(accuracy, "K_MITSUBA", accuracy.K_MITSUBA / 1000)
-    monkeypatch.setattr(accuracy, "CAMERA_K", accuracy.CAMERA_K / 1000)
+    monkeypatch.setattr(error_model, "K_MITSUBA", error_model.K_MITSUBA / 1000)
+    monkeypatch.setattr(error_model, "CAMERA_K", error_model.CAMERA_K / 1000)
     status = cli.main(["check", str(SCENES / "tp02.toml"), "--size", "48x48", "--rays", "64"])
     out = capsys.readouterr().out
     assert status == 1
@@ -217,7 +219,7 @@ def test_scenes_with_every_shape_agree_with_mitsuba(name, variant):
 
 def random_shapes_scene(seed: int, shift: float = 0.0):
     """One random shape of every type (from the registry) around the origin, moved by ``shift``."""
-    from pyclray.shapes import REGISTRY
+    from pyclray.model.shapes import REGISTRY
 
     rng = np.random.default_rng(seed)
     offset = rng.normal(size=3) * shift

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.output import read_exr
+from pyclray.io.exr import read_exr
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "pyclray.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "pyclray", *map(str, args)], capture_output=True, text=True, cwd=cwd,
                           env=dict(os.environ))
 
 
@@ -159,7 +159,7 @@ WRAPPER = """
 import os, signal, sys
 {patch}
 sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "pyclray")  # as the console script runs
-from pyclray.cli import main
+from pyclray.apps.cli import main
 sys.exit(main())
 """
 
@@ -173,7 +173,7 @@ def wrapped(patch, *args):
 def test_a_full_disk_is_one_line_exit_2_and_old_files_kept(tmp_path):
     """Defect 2: ENOSPC while writing (injected in the EXR writer after its first band)."""
     patch = (
-        "import errno, pyclray.output as o\n"
+        "import errno, pyclray.io.exr as o\n"
         "real = o.ExrWriter.write\n"
         "def full(self, band):\n"
         "    real(self, band)\n"
@@ -193,7 +193,7 @@ def test_ctrl_c_exits_quietly_with_130_and_replaces_nothing(tmp_path, where):
     """Defect 5: Ctrl-C while the package's modules are imported, or while the outputs are being
     written (after the EXR, before the previews), exits with 130, no traceback, old files kept."""
     if where == "writing":
-        patch = ("import pyclray.output as o\n"
+        patch = ("import pyclray.io.png as o\n"
                  "o.PngWriter.close = lambda self: os.kill(os.getpid(), signal.SIGINT)\n")
     else:  # SIGINT as the module starts to load
         module = where.split()[1]
@@ -263,7 +263,7 @@ def test_version_and_python_dash_m():
 
 def test_the_readme_command_block_lists_every_command():
     """Defect 7: the README's command-line block names every subcommand the parser has."""
-    from pyclray.cli import build_parser
+    from pyclray.apps.cli import build_parser
 
     readme = (REPO / "README.md").read_text()
     block = readme.split("## Command line", 1)[1].split("```", 2)[1]
@@ -276,26 +276,29 @@ def test_a_render_in_many_bands_is_the_whole_render(tmp_path, monkeypatch, capsy
     """Defect 4: pyclray render renders and writes bands of rows (bounded memory); cut into bands
     of 16 rows here (4 Mpx in real use), the EXR holds exactly the whole image's pixels and the
     previews are those of the whole image."""
-    from pyclray import cli as cli_module, output
+    from pyclray.apps import cli
+    from pyclray.io import png
 
     from test_output import read_png
 
-    monkeypatch.setattr(output, "band_rows", lambda width: 16)
+    from pyclray.io import bands
+
+    monkeypatch.setattr(bands, "band_rows", lambda width: 16)
     out = tmp_path / "b.exr"
-    assert cli_module.main(["render", str(REPO / "scenes/tp02.toml"), "-o", str(out), "--png", "--size", "40x70"]) == 0
+    assert cli.main(["render", str(REPO / "scenes/tp02.toml"), "-o", str(out), "--png", "--size", "40x70"]) == 0
     whole = pyclray.render(pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(40, 70))
     images = read_exr(out)
     for name in ("depth", "normal", "id"):
         assert np.array_equal(images[name], whole[name]), name
-    assert np.array_equal(read_png(tmp_path / "b.depth.png"), output.depth_preview(whole["depth"]))
-    assert np.array_equal(read_png(tmp_path / "b.normal.png"), output.normal_preview(whole["normal"]))
+    assert np.array_equal(read_png(tmp_path / "b.depth.png"), png.depth_preview(whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "b.normal.png"), png.normal_preview(whole["normal"]))
     assert "wrote" in capsys.readouterr().out
 
 
 def test_a_progress_bar_on_a_terminal_only(tmp_path):
     """Progress: on a terminal (stderr a pty) a tqdm bar counts the rows (shown from the start
     here: the delay of 1 s is set to 0); the stdout's last line is the same as without one."""
-    patch = "import pyclray.progress as p\np.DELAY = 0\nimport pyclray.output as o\no.band_rows = lambda width: 16\n"
+    patch = "import pyclray.io.progress as p\np.DELAY = 0\nimport pyclray.io.bands as o\no.band_rows = lambda width: 16\n"
     import fcntl
     import struct
     import termios

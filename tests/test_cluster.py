@@ -14,9 +14,11 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import cli, cluster, device
-from pyclray.errors import DeviceError, SceneError
-from pyclray.output import read_exr
+from pyclray.apps import cli
+from pyclray import cluster
+from pyclray.engine import programs
+from pyclray.model.errors import DeviceError, SceneError
+from pyclray.io.exr import read_exr
 
 from conftest import REPO
 from test_animate import SCENE
@@ -72,8 +74,8 @@ def test_animation_frames_are_the_local_frames_in_order_and_programs_stay_warm(c
     bar advances once per task, and each worker builds (or reads from disk) the program once, in the
     job's setup: every frame then takes it from the worker's memory."""
     scene = pyclray.load_scene(scene_file)
-    builds = lambda: sum(s["compiled"] + s["from_disk"] for s in client.run(lambda: dict(device.stats)).values())
-    fetched = lambda: sum(s["from_memory"] for s in client.run(lambda: dict(device.stats)).values())
+    builds = lambda: sum(s["compiled"] + s["from_disk"] for s in client.run(lambda: dict(programs.stats)).values())
+    fetched = lambda: sum(s["from_memory"] for s in client.run(lambda: dict(programs.stats)).values())
     before_builds, before_fetched = builds(), fetched()
     bar = Count()
     frames = list(cluster.render_animation(client, scene, frames=range(1, 8), progress=bar))
@@ -183,7 +185,7 @@ def test_bad_cluster_input_exits_2_with_one_line_and_writes_nothing(client, tmp_
 
 
 def test_without_distributed_the_options_say_what_to_install(tmp_path, scene_file):
-    code = ("import sys; sys.modules['distributed'] = None; from pyclray.cli import main; "
+    code = ("import sys; sys.modules['distributed'] = None; from pyclray.apps.cli import main; "
             f"sys.exit(main(['animate', {str(scene_file)!r}, '-o', {str(tmp_path / 'x.gif')!r}, '--workers', '2']))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 2 and "pip install 'pyclray[cluster]'" in result.stderr, result.stderr

@@ -72,9 +72,9 @@ def test_both_sides_of_the_rims(precision):
 def test_tall_thin_cylinder_meets_the_targets():
     """Height 100, radius 0.5: the fp32 render meets the stability targets (tests/test_stability.py
     runs the full case; here the axis is tilted and the eye near its foot)."""
-    from pyclray import accuracy
+    from pyclray.reference import error_model
 
     scene = pyclray.Scene(pyclray.Camera((2.0, 0.5, 3.0), (0.5, 50.0, 0.0), (0, 1, 0), 80.0), pyclray.Image(48, 48),
                           (Cylinder((0, 0, 0), (1.0, 100.0, 0.5), 0.5),))
-    result = accuracy.compare(pyclray.render(scene), accuracy.reference(scene))
-    assert result["pixels"] > 300 and accuracy.meets_targets(result, "fp32"), result
+    result = error_model.compare(pyclray.render(scene), error_model.reference(scene))
+    assert result["pixels"] > 300 and error_model.meets_targets(result, "fp32"), result

@@ -29,8 +29,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import pyclray
-from pyclray.errors import PyclrayError, PyclrayWarning, SceneError
-from pyclray.scene import check_renderable, load_scene, scene_from_dict
+from pyclray.model.errors import PyclrayError, PyclrayWarning, SceneError
+from pyclray.model.loader import load_scene, scene_from_dict
+from pyclray.model.scene import check_renderable
 
 DOCUMENTS = 10_000
 FILES = 300

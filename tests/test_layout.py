@@ -3,9 +3,10 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from pyclray.device import context_for, has_fp64, kernel_dir
-from pyclray.layout import CAMERA, Struct, c_header, layout
-from pyclray.shapes import REGISTRY
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.programs import kernel_dir
+from pyclray.model.layout import CAMERA, Struct, c_header, layout
+from pyclray.model.shapes import REGISTRY
 
 STRUCTS = [CAMERA] + [cls.struct for cls in REGISTRY.values()]
 

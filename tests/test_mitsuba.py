@@ -3,7 +3,7 @@ and its horizon mask, shape ids in the scalar and JIT variants, Mitsuba's own pr
 
 Tolerances follow the error model of pyclray.accuracy (eps = 2^-24): Mitsuba intersects in float32
 world coordinates, so two of its intersections of (nearly) the same ray differ by up to
-k eps (t + L) / cos, L the size of the world coordinates involved (see accuracy.world_sizes).
+k eps (t + L) / cos, L the size of the world coordinates involved (see error_model.world_sizes).
 Measured k <= 1.5 here (the image's rays against sample_ray's, scalar against llvm); k = 4.
 """
 import subprocess
@@ -14,7 +14,10 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy, mitsuba, oracle
+from pyclray.apps import cli
+from pyclray.reference import error_model
+from pyclray.reference import mitsuba
+from pyclray.reference import oracle
 
 from conftest import REPO, SCENES
 
@@ -36,17 +39,17 @@ def horizon_scene(distance: float, height: int = 33):
 
 
 def test_render_and_the_cli_do_not_import_mitsuba(tmp_path):
-    """`import pyclray`, pyclray.render and `pyclray render` (whose parser imports pyclray.check)
+    """`import pyclray`, pyclray.render and `pyclray render` (whose parser imports pyclray.reference.check)
     never load mitsuba or drjit: importing them takes about a second."""
     code = textwrap.dedent(f"""
         import sys
         import pyclray
-        from pyclray import cli
+        from pyclray.apps import cli
         scene = pyclray.load_scene({str(SCENES / "tp02.toml")!r}).with_size(8, 8)
         pyclray.render(scene)
         pyclray.cast(scene, scene.camera.eye, [[0.0, -0.2, -1.0]])
         assert cli.main(["render", {str(SCENES / "tp02.toml")!r}, "--size", "8x8", "-o", {str(tmp_path / "x.exr")!r}]) == 0
-        assert "pyclray.check" in sys.modules, "the check command was not registered"
+        assert "pyclray.apps.cli.check" in sys.modules, "the check command was not registered"
         loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("mitsuba", "drjit"))
         assert not loaded, loaded
         print("clean")
@@ -55,7 +58,7 @@ def test_render_and_the_cli_do_not_import_mitsuba(tmp_path):
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().endswith("clean")
     # and the check does load it, so the test above can tell
-    code = "import sys, pyclray.mitsuba as m; m.import_mitsuba(); print('mitsuba' in sys.modules)"
+    code = "import sys, pyclray.reference.mitsuba as m; m.import_mitsuba(); print('mitsuba' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "True"
 
 
@@ -123,7 +126,7 @@ def test_ids_map_back_to_pyclray_ids(scene, variant):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     assert set(np.unique(theirs["id"])) == set(range(-1, len(scene.shapes)))
     differ = ours["id"] != theirs["id"]
-    assert not (differ & (cos >= accuracy.SILHOUETTE_COS)).any()
+    assert not (differ & (cos >= error_model.SILHOUETTE_COS)).any()
     assert differ.sum() <= 4
 
 
@@ -138,7 +141,7 @@ def test_primary_rays_are_the_images_rays(variant):
     rows, columns = np.divmod(np.arange(40 * 30), 40)
     origins, directions = mitsuba.primary_rays(mi_scene, scene, rows, columns)
     _, pixel_directions = oracle.camera_rays(scene)
-    angle = accuracy.angle_between(directions, pixel_directions.reshape(-1, 3))
+    angle = error_model.angle_between(directions, pixel_directions.reshape(-1, 3))
     assert angle.max() <= 6 * EPSILON
     near, _ = mitsuba.clip_range(scene)
     eye = np.array(scene.camera.eye)
@@ -154,7 +157,7 @@ def test_primary_rays_are_the_images_rays(variant):
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     with np.errstate(invalid="ignore"):  # inf - inf on a miss
         depth_error = np.abs(hits["depth"] + along - image["depth"].ravel())
-    scale = accuracy.world_sizes(scene, scene.camera.eye)[np.maximum(hits["id"], 0)]
+    scale = error_model.world_sizes(scene, scene.camera.eye)[np.maximum(hits["id"], 0)]
     tolerance = 4 * EPSILON * (hits["depth"] + scale) / cos
     assert np.all(depth_error[found] <= tolerance[found])
 
@@ -175,7 +178,7 @@ def test_intersect_in_both_variants_agree():
     found = scalar["id"] >= 0
     truth = oracle.trace(scene, origins, directions / np.linalg.norm(directions, axis=1, keepdims=True))
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
-    scale = accuracy.world_sizes(scene, scene.camera.eye)[np.maximum(scalar["id"], 0)]
+    scale = error_model.world_sizes(scene, scene.camera.eye)[np.maximum(scalar["id"], 0)]
     tolerance = 4 * EPSILON * (scalar["depth"] + scale) / cos
     with np.errstate(invalid="ignore"):  # inf - inf on a miss
         depth_error = np.abs(scalar["depth"] - llvm["depth"])

@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import output
-from pyclray.errors import OutputError
-from pyclray.output import (ExrWriter, frame_bands, read_exr, replace_together, write_exr, write_images,
-                            write_together)
+from pyclray.io import files
+from pyclray.io import png
+from pyclray.model.errors import OutputError
+from pyclray.io.bands import frame_bands, write_exr, write_images
+from pyclray.io.exr import ExrWriter, read_exr
+from pyclray.io.files import replace_together, write_together
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -111,9 +113,9 @@ def test_streamed_previews_equal_the_whole_image_previews(tmp_path):
     out = tmp_path / "p.exr"
     written = write_images(out, frame_bands(frame, 16), width=40, height=70, aovs=tuple(frame), previews=True)
     assert written == [out, tmp_path / "p.depth.png", tmp_path / "p.normal.png", tmp_path / "p.id.png"]
-    assert np.array_equal(read_png(tmp_path / "p.depth.png"), output.depth_preview(frame["depth"]))
-    assert np.array_equal(read_png(tmp_path / "p.normal.png"), output.normal_preview(frame["normal"]))
-    assert np.array_equal(read_png(tmp_path / "p.id.png"), output.id_preview(frame["id"]))
+    assert np.array_equal(read_png(tmp_path / "p.depth.png"), png.depth_preview(frame["depth"]))
+    assert np.array_equal(read_png(tmp_path / "p.normal.png"), png.normal_preview(frame["normal"]))
+    assert np.array_equal(read_png(tmp_path / "p.id.png"), png.id_preview(frame["id"]))
     assert no_temporaries(tmp_path)  # the depth preview's spill file is gone too
 
 
@@ -160,13 +162,13 @@ def test_a_full_disk_replaces_nothing(tmp_path, monkeypatch):
     """Defect 2: ENOSPC while the second file is written (a patched writer): one OutputError,
     the old files intact, no temporary left."""
     old = old_files(tmp_path)
-    real_write = output.PngWriter.write
+    real_write = png.PngWriter.write
 
     def full(self, rgb):
         real_write(self, rgb)
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(output.PngWriter, "write", full)
+    monkeypatch.setattr(png.PngWriter, "write", full)
     with pytest.raises(OutputError, match="cannot write .*: no space left on device; nothing was replaced"):
         write_images(tmp_path / "o.exr", frame_bands(small_frame()), width=24, height=20,
                      aovs=("depth", "normal", "id"), previews=True)
@@ -181,7 +183,7 @@ def test_a_read_only_folder_is_one_clear_error(tmp_path, monkeypatch):
         def refuse(*args, **kwargs):
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(tmp_path / ".o.exr.x.tmp"))
 
-        monkeypatch.setattr(output.tempfile, "mkstemp", refuse)
+        monkeypatch.setattr(files.tempfile, "mkstemp", refuse)
     else:
         tmp_path.chmod(0o555)
     try:
@@ -199,7 +201,7 @@ def test_an_interruption_between_writes_replaces_nothing(tmp_path, monkeypatch):
     def interrupt(self):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(output.PngWriter, "close", interrupt)
+    monkeypatch.setattr(png.PngWriter, "close", interrupt)
     with pytest.raises(KeyboardInterrupt):
         write_images(tmp_path / "o.exr", frame_bands(small_frame()), width=24, height=20,
                      aovs=("depth", "normal", "id"), previews=True)
@@ -219,7 +221,7 @@ def test_a_failed_rename_puts_the_renamed_files_back(tmp_path, monkeypatch, fail
             raise failure
         real_replace(source, target)
 
-    monkeypatch.setattr(output.os, "replace", flaky)
+    monkeypatch.setattr(files.os, "replace", flaky)
     with pytest.raises(type(failure) if isinstance(failure, KeyboardInterrupt) else OutputError):
         with replace_together([tmp_path / n for n in ("a", "b", "c")]) as temporaries:
             for tmp in temporaries:

@@ -14,9 +14,9 @@ def test_wheel_ships_the_kernels_and_renders_from_outside_the_repo(tmp_path):
                    check=True, capture_output=True, cwd=tmp_path)
     wheel = next((tmp_path / "dist").glob("pyclray-*.whl"))
     names = zipfile.ZipFile(wheel).namelist()
-    for kernel in sorted(p.name for p in (REPO / "kernels").iterdir() if p.suffix in (".cl", ".h")):
-        assert f"pyclray/kernels/{kernel}" in names
-    assert "pyclray/shapes/sphere.py" in names
+    for kernel in sorted(p.name for p in (REPO / "pyclray" / "engine" / "kernels").iterdir() if p.suffix in (".cl", ".h")):
+        assert f"pyclray/engine/kernels/{kernel}" in names
+    assert "pyclray/model/shapes/sphere.py" in names
     assert not any(n.startswith(("tests/", "bench/", "scenes/")) for n in names)
     site = tmp_path / "site"
     zipfile.ZipFile(wheel).extractall(site)
@@ -37,7 +37,7 @@ def test_rendering_does_not_import_mitsuba():
     code = (
         "import sys, pyclray;"
         f"pyclray.render(pyclray.load_scene({str(REPO / 'scenes/tp02.toml')!r}).with_size(8, 8));"
-        "from pyclray import cli; cli.build_parser();"
+        "from pyclray.apps import cli; cli.build_parser();"
         "print('mitsuba' in sys.modules, 'drjit' in sys.modules)"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import pyclray
-import pyclray.device as device
+from pyclray.engine import device, programs
 from test_render import assert_matches_oracle, small
 from test_speedups import random_scene, same
 
@@ -21,8 +21,8 @@ ALL = ("depth", "normal", "id")
 
 def widths(precision: str) -> list[int]:
     """Every lane width up to the widest this machine's PoCL builds (256-bit vectors), and 1."""
-    most = device.MAX_LANE_BITS // (32 if precision == "fp32" else 64)
-    return [w for w in device.LANE_WIDTHS if w <= most]
+    most = programs.MAX_LANE_BITS // (32 if precision == "fp32" else 64)
+    return [w for w in programs.LANE_WIDTHS if w <= most]
 
 
 def need(precision):
@@ -87,17 +87,17 @@ def test_the_lane_width_follows_the_device_and_the_environment(monkeypatch):
     ctx = device.context_for(None)
     monkeypatch.delenv("PYCLRAY_LANES", raising=False)
     for precision, bits in (("fp32", 32), ("fp64", 64)):
-        lanes = device.lanes_for(ctx.device, precision)
-        assert lanes in device.LANE_WIDTHS and lanes * bits <= device.MAX_LANE_BITS
+        lanes = programs.lanes_for(ctx.device, precision)
+        assert lanes in programs.LANE_WIDTHS and lanes * bits <= programs.MAX_LANE_BITS
     if device.is_pocl_cpu(ctx.device) and ctx.device.preferred_vector_width_float >= 8:  # AVX or wider
-        assert device.lanes_for(ctx.device, "fp32") == 8 and device.lanes_for(ctx.device, "fp64") == 4
+        assert programs.lanes_for(ctx.device, "fp32") == 8 and programs.lanes_for(ctx.device, "fp64") == 4
     monkeypatch.setenv("PYCLRAY_LANES", "2")
-    assert device.lanes_for(ctx.device, "fp32") == 2
+    assert programs.lanes_for(ctx.device, "fp32") == 2
     monkeypatch.setenv("PYCLRAY_LANES", "3")
-    with pytest.raises(pyclray.errors.DeviceError, match="PYCLRAY_LANES: expected one of 1, 2, 4, 8 for fp32"):
-        device.lanes_for(ctx.device, "fp32")
+    with pytest.raises(pyclray.DeviceError, match="PYCLRAY_LANES: expected one of 1, 2, 4, 8 for fp32"):
+        programs.lanes_for(ctx.device, "fp32")
     # 512-bit lanes: PoCL 3.0's code generator aborts the process on them (device.py), so none is built
     for precision, width in (("fp32", "16"), ("fp64", "8")):
         monkeypatch.setenv("PYCLRAY_LANES", width)
-        with pytest.raises(pyclray.errors.DeviceError, match=f"PYCLRAY_LANES: expected one of .* for {precision}"):
-            device.lanes_for(ctx.device, precision)
+        with pytest.raises(pyclray.DeviceError, match=f"PYCLRAY_LANES: expected one of .* for {precision}"):
+            programs.lanes_for(ctx.device, precision)

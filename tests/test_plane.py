@@ -3,8 +3,8 @@ rays and rays from the plane miss it, and its Mitsuba stand-in disk lies within 
 import numpy as np
 
 import pyclray
-from pyclray import mitsuba
-from pyclray.shapes import Plane
+from pyclray.reference import mitsuba
+from pyclray.model.shapes import Plane
 
 
 

@@ -13,17 +13,19 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy, oracle
-from pyclray.device import Variant, context_for, has_fp64, stats
-from pyclray.shapes import Plane, Sphere
+from pyclray.reference import error_model
+from pyclray.reference import oracle
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.programs import Variant, stats
+from pyclray.model.shapes import Plane, Sphere
 
 # fp32 bounds, the error model's targets (pyclray.accuracy): 8 ulps of t x 1/|cos| for depth (sx,
 # sy, the normalization, the basis and the intersection each round once or twice: about 6
 # roundings in the worst chain), 2e-5 / |cos| for normals (they are normalized from vectors
 # accurate to a few ulps; 2e-5 leaves headroom for the 1/|cos| growth near silhouettes that the
 # error model bounds only to first order).
-DEPTH_ULPS = accuracy.FP32_DEPTH_ULPS
-NORMAL = accuracy.FP32_NORMAL
+DEPTH_ULPS = error_model.FP32_DEPTH_ULPS
+NORMAL = error_model.FP32_NORMAL
 
 
 def small(scene, size=96):
@@ -31,16 +33,16 @@ def small(scene, size=96):
 
 
 def assert_matches_oracle(scene, frame=None, precision="fp32"):
-    ref = accuracy.reference(scene)
+    ref = error_model.reference(scene)
     frame = frame if frame is not None else pyclray.render(scene, precision=precision)
-    result = accuracy.compare(frame, ref, engine=precision)
+    result = error_model.compare(frame, ref, engine=precision)
     assert result["id_mismatch"] == 0, result
     assert result["miss_mismatch"] == 0, result
     if precision == "fp32":
         assert result["depth_ulps_max"] <= DEPTH_ULPS, result
         assert result["normal_cos_max"] <= NORMAL, result
     else:
-        assert result["depth_rel_cos_max"] <= accuracy.FP64_DEPTH_RELATIVE, result
+        assert result["depth_rel_cos_max"] <= error_model.FP64_DEPTH_RELATIVE, result
     # silhouettes and near-ties: ids may differ, but a pixel that hits must hit something real
     assert np.all(np.isfinite(frame["depth"]) == (frame["id"] >= 0))
     return result
@@ -176,7 +178,7 @@ def test_only_the_shape_types_present_are_compiled():
 
 def test_a_depth_only_request_has_no_normal_or_id_buffer():
     ctx = context_for()
-    from pyclray.device import kernel_for
+    from pyclray.engine.programs import kernel_for
 
     depth_only = kernel_for(ctx, Variant("render", ("plane", "sphere"), ("depth",), "fp32"))
     everything = kernel_for(ctx, Variant("render", ("plane", "sphere"), ("depth", "normal", "id"), "fp32"))
@@ -218,7 +220,7 @@ def test_moving_the_camera_or_a_shape_never_recompiles():
 
 CROSS_PROCESS = """
 import json, pyclray
-from pyclray.device import stats
+from pyclray.engine.programs import stats
 pyclray.render(pyclray.load_scene("scenes/tp02.toml").with_size(16, 16))
 print(json.dumps(stats))
 """
@@ -240,7 +242,7 @@ def test_a_second_process_loads_the_program_from_the_disk_cache(tmp_path):
 def test_fp64_unavailable_is_a_clear_error(monkeypatch):
     import importlib
 
-    render_module = importlib.import_module("pyclray.render")  # the module, not the function
+    render_module = importlib.import_module("pyclray.engine.request")  # the module, not the function
     monkeypatch.setattr(render_module, "has_fp64", lambda device: False)
     scene = small(pyclray.load_scene("scenes/tp02.toml"), 8)
     with pytest.raises(pyclray.DeviceError, match="cl_khr_fp64"):
@@ -257,7 +259,7 @@ def test_bad_aov_requests(aovs):
 
 
 def test_device_selection():
-    from pyclray.device import select_device
+    from pyclray.engine.device import select_device
 
     default = select_device()
     assert "portable computing language" in default.platform.name.lower()
@@ -330,12 +332,14 @@ def test_more_shapes_than_the_kernels_can_index_is_a_scene_error(scenes_dir, mon
     """A shape is 8 x its index + its type in a 32-bit int on the device (BVH refs, winner keys):
     beyond that the render refuses with a clear error instead of wrapping around (the limit,
     268 million shapes, is lowered here to tp02's four)."""
-    import pyclray.scene as scene_module
+    import pyclray
+
+    from pyclray.model import scene as scene_module
 
     monkeypatch.setattr(scene_module, "MAX_SHAPES", 3)
     scene = pyclray.load_scene(scenes_dir / "tp02.toml")
-    with pytest.raises(pyclray.errors.SceneError, match="4 shapes; pyclray renders at most 3"):
+    with pytest.raises(pyclray.SceneError, match="4 shapes; pyclray renders at most 3"):
         pyclray.render(scene)
     if has_fp64(context_for(None).device):
-        with pytest.raises(pyclray.errors.SceneError, match="4 shapes; pyclray renders at most 3"):
+        with pytest.raises(pyclray.SceneError, match="4 shapes; pyclray renders at most 3"):
             pyclray.cast(scene, (0, 2, 6), (0, 0, -1))

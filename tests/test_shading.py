@@ -3,7 +3,7 @@ lights and materials; what the kernel compiles in.
 
 Tolerances: the error model bounds the hit point along the ray (depth_tolerance: K eps (t + L) / cos,
 L the size of the frame coordinates of the hit shape) and the normal (K eps + that / r); the shading
-model is a smooth function of both, and pyclray.shading.tolerance turns those bounds, term by term,
+model is a smooth function of both, and pyclray.reference.shading.tolerance turns those bounds, term by term,
 into a bound on the shaded colour (its docstring writes the terms out). Pixels outside the model are
 left out, each for its reason: silhouettes and near ties (the error model's rules), the terminator of
 a light with a specular term (where the model itself jumps), and shadow edges (where a hit point moved
@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import SceneError, accuracy, oracle, shading
-from pyclray.device import Variant
-from pyclray.lighting import DirectionalLight, Material, PointLight, Shading
-from pyclray.shapes import REGISTRY, Box, Disk, Plane, Sphere
+from pyclray import SceneError
+from pyclray.engine.shading import shape_extent
+from pyclray.reference import error_model, oracle, shading
+from pyclray.engine.programs import Variant
+from pyclray.model.lights import DirectionalLight, Material, PointLight, Shading
+from pyclray.model.shapes import REGISTRY, Box, Disk, Plane, Sphere
 
 K = 4.0  # the error model's K against the float64 oracle
 EPS = {"fp32": 2.0**-24, "fp64": 2.0**-53}
@@ -28,10 +30,10 @@ def reference(scene, precision="fp32"):
     """The float64 hits, visibility per light and its shadow edges: where the float64 visibility
     changes when the hit point moves by 4 times the kernel's shadow-ray offset, 16 eps (|p| + R)
     (kernels/shading.h; |p| from the eye, R the hit shape's extent)."""
-    ref = accuracy.reference(scene)
+    ref = error_model.reference(scene)
     O, D = ref["origins"], ref["directions"]
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
-    extent = np.array([shading.shape_extent(s) for s in scene.shapes])[np.maximum(ref["id"], 0)]
+    extent = np.array([shape_extent(s) for s in scene.shapes])[np.maximum(ref["id"], 0)]
     blur = 4 * 16 * EPS[precision] * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
     ref["visibility"], ref["shadow_edge"] = V, np.any(edges, axis=0)
@@ -40,8 +42,8 @@ def reference(scene, precision="fp32"):
 
 def bounds(scene, ref, precision="fp32"):
     """(depth, normal) tolerances of pyclray's render per pixel: the error model's
-    (pyclray.accuracy.pyclray_tolerances, the frame centred on the eye)."""
-    return accuracy.pyclray_tolerances(scene, ref, ref["cos"], ref["origins"], precision, scene.camera.eye)
+    (pyclray.reference.error_model.pyclray_tolerances, the frame centred on the eye)."""
+    return error_model.pyclray_tolerances(scene, ref, ref["cos"], ref["origins"], precision, scene.camera.eye)
 
 
 def compare_shaded(scene, precision="fp32"):
@@ -51,7 +53,7 @@ def compare_shaded(scene, precision="fp32"):
     expected = shading.reference_shading(scene, ref["directions"], ref, ref["visibility"])
     depth_tol, normal_tol = bounds(scene, ref, precision)
     tol, jump = shading.tolerance(scene, ref["directions"], ref, depth_tol, normal_tol, EPS[precision])
-    masks = accuracy.judged_pixels(frame, ref, precision)  # silhouettes, near ties, edges
+    masks = error_model.judged_pixels(frame, ref, precision)  # silhouettes, near ties, edges
     outside = masks["silhouette"] | masks["near_tie"] | masks["edge"]
     assert not (frame["id"] != ref["id"])[~outside].any()  # ids are the image tests' business, but hold here
     judged = ~(outside | jump | ref["shadow_edge"])
@@ -117,7 +119,7 @@ def test_defaults_and_the_headlight(tmp_path):
     scene = load(tmp_path, "")
     assert scene.shapes[0].material == Material((0.8, 0.8, 0.8), 0.0, 32.0)
     assert scene.lights == () and scene.shading == Shading((0, 0, 0), (0, 0, 0), True)
-    (light,) = pyclray.lighting.effective_lights(scene)
+    (light,) = pyclray.model.lights.effective_lights(scene)
     np.testing.assert_allclose(light.direction, scene.camera.basis()[2])
     assert light.irradiance == (1.0, 1.0, 1.0)
 
@@ -180,7 +182,8 @@ def test_a_depth_only_render_has_no_shading_code():
 
 
 def test_a_shaded_render_without_shadows_casts_no_shadow_rays(scenes_dir):
-    from pyclray.device import context_for, kernel_for
+    from pyclray.engine.device import context_for
+    from pyclray.engine.programs import kernel_for
 
     scene = pyclray.load_scene(scenes_dir / "tp02-lit.toml").with_size(16, 16)
     no_shadows = Variant("render", scene.shape_types(), ("shaded",), "fp32", 8, shadows=False)
@@ -204,9 +207,9 @@ def test_a_shaded_render_without_shadows_casts_no_shadow_rays(scenes_dir):
 def test_zdepth_and_position_match_the_oracle(scenes_dir, name):
     scene = pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(64, 48)
     frame = pyclray.render(scene, aovs=("depth", "id", "zdepth", "position"))
-    ref = accuracy.reference(scene)
+    ref = error_model.reference(scene)
     w = scene.camera.basis()[2]
-    outside = accuracy.judged_pixels(frame, ref, "fp32")
+    outside = error_model.judged_pixels(frame, ref, "fp32")
     judged = ~(outside["silhouette"] | outside["near_tie"] | outside["edge"]) & (ref["id"] >= 0)
     assert (frame["id"] == ref["id"])[judged].all()
     depth_tol, _ = bounds(scene, ref)
@@ -299,7 +302,7 @@ def test_lit_regions_are_lit_and_shadowed_regions_shadowed(name, shift):
 
 
 def test_fp64_shading_matches_the_float64_model(scenes_dir):
-    from pyclray.device import context_for, has_fp64
+    from pyclray.engine.device import context_for, has_fp64
 
     if not has_fp64(context_for(None).device):
         pytest.skip("device lacks cl_khr_fp64")
@@ -310,15 +313,15 @@ def test_fp64_shading_matches_the_float64_model(scenes_dir):
 
 # -- outputs -------------------------------------------------------------------------------------------
 def test_render_command_writes_the_new_channels_and_previews(scenes_dir, tmp_path):
-    from pyclray import output
-    from pyclray.cli import main
+    from pyclray.apps.cli import main
+    from pyclray.io import exr
 
     out = tmp_path / "lit.exr"
     aovs = "depth,id,zdepth,position,shaded"
     assert main(["render", str(scenes_dir / "tp02-lit.toml"), "-o", str(out), "--aov", aovs, "--png", "--size", "40x30"]) == 0
     scene = pyclray.load_scene(scenes_dir / "tp02-lit.toml").with_size(40, 30)
     frame = pyclray.render(scene, aovs=aovs)
-    back = output.read_exr(out)
+    back = exr.read_exr(out)
     assert set(back) == set(frame)
     for name in frame:  # the file holds the render's images bit for bit
         np.testing.assert_array_equal(back[name], frame[name])
@@ -328,14 +331,14 @@ def test_render_command_writes_the_new_channels_and_previews(scenes_dir, tmp_pat
 
 
 def test_previews():
-    from pyclray import output
+    from pyclray.io import png
 
     # shaded: clamped, sRGB-encoded (0.5 linear -> 188)
-    rgb = output.srgb_preview(np.array([[[-1.0, 0.5, 2.0], [0.0031308, 1.0, np.nan]]]))
+    rgb = png.srgb_preview(np.array([[[-1.0, 0.5, 2.0], [0.0031308, 1.0, np.nan]]]))
     assert rgb.tolist() == [[[0, 188, 255], [10, 255, 0]]]
     # id: misses black, every id its own colour, none black
     ids = np.arange(-1, 64).reshape(5, 13)
-    image = output.id_preview(ids)
+    image = png.id_preview(ids)
     assert (image[ids < 0] == 0).all()
     colours = {tuple(c) for c in image[ids >= 0]}
     assert len(colours) == 64 and (0, 0, 0) not in colours
@@ -347,9 +350,9 @@ def test_previews():
 @pytest.mark.parametrize("name, variant", [("tp02-lit", "llvm_ad_rgb"), ("tp02", "scalar_rgb"), ("shapes-lit", "scalar_rgb")])
 def test_shaded_equals_mitsuba_direct_up_to_pi(scenes_dir, name, variant):
     """Point lights with shadows (tp02-lit) and the headlight, a directional light (tp02): the
-    tolerance is the sum of both engines' bounds (pyclray.validation.shaded)."""
+    tolerance is the sum of both engines' bounds (pyclray.reference.validation.shaded)."""
     pytest.importorskip("mitsuba")
-    from pyclray.validation import shaded as shaded_check
+    from pyclray.reference.validation import shaded as shaded_check
 
     scene = pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(64, 48)
     result = shaded_check.cross_check_shaded(scene, variant)

@@ -3,7 +3,7 @@ random shapes (``Shape.random``) and random rays, some from far away and some st
 solids, through pyclray.cast in fp32 and fp64. Each asserts that
 
 - ids, depths and normals agree with the float64 oracle within the error model
-  (pyclray.accuracy.pyclray_tolerances; silhouettes, near ties and rays within rounding of an edge
+  (pyclray.reference.error_model.pyclray_tolerances; silhouettes, near ties and rays within rounding of an edge
   set apart), which also makes the nearest hit the nearest;
 - hits lie on the surface: the hit point's distance to it is at most the depth tolerance times
   |cos| (a move of d along the ray is a move of d |cos| off the surface), plus the float64
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy
-from pyclray.device import context_for, has_fp64
-from pyclray.shapes import REGISTRY
+from pyclray.reference import error_model
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.model.shapes import REGISTRY
 
 from oracle_checks import assert_agrees_with_oracle
 
@@ -105,7 +105,7 @@ def check_properties(scene, origins, directions, precision, inside=None, min_jud
     hit = result["id"] >= 0
     t = result["depth"].astype(np.float64)
     points = origins + np.where(hit, t, 0)[:, None] * unit
-    rounding = 4 * accuracy.ORACLE_EPSILON * (np.linalg.norm(origins, axis=1) + np.where(hit, t, 0))
+    rounding = 4 * error_model.ORACLE_EPSILON * (np.linalg.norm(origins, axis=1) + np.where(hit, t, 0))
     slack = np.where(judged, depth_tolerance * cos, np.inf) + rounding
     for index, shape in enumerate(scene.shapes):
         mine = hit & judged & (result["id"] == index)

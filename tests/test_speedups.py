@@ -1,6 +1,6 @@
 """The render path's speed-ups change no bit of the results: on PoCL, the compiler's own square root,
 reductions and vector stores, the functions always inlined and the packet's function kept out of the
-kernel (device.Variant.source, kernels/lanes.h), and the cached inputs give the same images as the
+kernel (pyclray.engine.programs.Variant.source, kernels/lanes.h), and the cached inputs give the same images as the
 plain path."""
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import pyclray
-import pyclray.device as device
+from pyclray.engine import device, prepared, programs, request
+from pyclray.model import aovs
 
-render_module = importlib.import_module("pyclray.render")  # the module (pyclray.render is the function)
 from pyclray import Camera, Image, Plane, Scene, Sphere
 
 
@@ -42,8 +42,8 @@ def same(a: dict, b: dict) -> None:
 
 
 def with_plain_builtins(monkeypatch):
-    monkeypatch.setattr(device, "is_pocl_cpu", lambda _device: False)
-    monkeypatch.setattr(device, "_programs", {})
+    monkeypatch.setattr(programs, "is_pocl_cpu", lambda _device: False)
+    monkeypatch.setattr(programs, "_programs", {})
 
 
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
@@ -54,7 +54,7 @@ def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
     scene = random_scene(seed)
     rng = np.random.default_rng(100 + seed)
     origins, directions = rng.normal(0, 3, (500, 3)), rng.normal(0, 1, (500, 3))
-    requests = (("depth", "normal", "id"), ("depth",), ("normal",), device.RENDER_AOVS)
+    requests = (("depth", "normal", "id"), ("depth",), ("normal",), aovs.RENDER_AOVS)
     fast = [pyclray.render(scene, aovs, precision) for aovs in requests]
     fast.append(pyclray.cast(scene, origins, directions, precision=precision))
     with monkeypatch.context() as patch:
@@ -66,9 +66,10 @@ def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
 
 
 def without_culling(monkeypatch):
-    import pyclray.culling as culling
+    from pyclray.engine import culling
+
     monkeypatch.setattr(culling, "ENABLED", False)
-    monkeypatch.setattr(render_module, "_prepared", render_module.OrderedDict())
+    monkeypatch.setattr(prepared, "_prepared", prepared.OrderedDict())
 
 
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
@@ -93,7 +94,7 @@ def test_a_moved_camera_is_a_new_render():
     moved = dataclasses.replace(first, camera=dataclasses.replace(first.camera, eye=tuple(np.add(first.camera.eye, 0.5))))
     a = pyclray.render(first)
     b = pyclray.render(moved)
-    render_module._prepared.clear()
+    prepared._prepared.clear()
     same(pyclray.render(moved), b)
     same(pyclray.render(first), a)
     assert not np.array_equal(a["depth"], b["depth"])
@@ -109,7 +110,7 @@ def test_output_paths_agree(monkeypatch, precision):
     runs = {}
     for zero_copy in (True, False):
         with monkeypatch.context() as patch:
-            patch.setattr(render_module, "_zero_copy", lambda _ctx, value=zero_copy: value)
+            patch.setattr(request, "_zero_copy", lambda _ctx, value=zero_copy: value)
             runs[zero_copy] = [
                 pyclray.render(scene, ("depth", "normal", "id"), precision),
                 pyclray.render(scene, ("normal",), precision),

@@ -4,8 +4,9 @@ here are small exact numbers, so a few float32 ulps of them is the tolerance."""
 import numpy as np
 
 import pyclray
-from pyclray import accuracy, oracle
-from pyclray.shapes import Sphere
+from pyclray.reference import error_model
+from pyclray.reference import oracle
+from pyclray.model.shapes import Sphere
 
 
 
@@ -40,8 +41,8 @@ def test_nearest_of_many_is_the_nearest():
     truth = oracle.trace(scene, origins, unit, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
     truth["cos"] = cos
-    near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.pyclray_tolerances(
+    near_tie = error_model.near_ties(truth, lambda t, ids, c: error_model.pyclray_tolerances(
         scene, {"depth": t, "id": ids}, c, origins, "fp32", directions=unit)[0])
-    clear = ~near_tie & ~accuracy.silhouettes(truth["id"], cos)
+    clear = ~near_tie & ~error_model.silhouettes(truth["id"], cos)
     assert clear.mean() > 0.9
     assert np.array_equal(frame["id"][clear], np.where(np.isinf(all_t.min(axis=0)), -1, np.argmin(all_t, axis=0))[clear])

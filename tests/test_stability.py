@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray import accuracy, stability
-from pyclray.device import context_for, has_fp64
+from pyclray.reference import error_model
+from pyclray.reference import stability
+from pyclray.engine.device import context_for, has_fp64
 
 
 @pytest.mark.parametrize("case", stability.CASES, ids=[c.name for c in stability.CASES])
@@ -39,7 +40,7 @@ def test_translation_invariance():
     assert np.array_equal(here["id"], there["id"])
     hit = here["id"] >= 0
     depth_here, depth_there = here["depth"][hit].astype(np.float64), there["depth"][hit].astype(np.float64)
-    assert np.all(np.abs(depth_here - depth_there) <= 2 * accuracy.ulp32(depth_here))
+    assert np.all(np.abs(depth_here - depth_there) <= 2 * error_model.ulp32(depth_here))
     assert np.abs(here["normal"] - there["normal"]).max() <= 4 * 2.0**-24
 
 
@@ -48,7 +49,7 @@ def test_coincident_shapes_resolve_to_the_lowest_id_everywhere():
     on those that the error model sets apart as near-ties."""
     scene = stability.coincident()
     frame = pyclray.render(scene)
-    ref = accuracy.reference(scene)
+    ref = error_model.reference(scene)
     judged = ~ref["silhouette"]
     assert np.array_equal(frame["id"][judged], ref["id"][judged])
     assert not np.isin(frame["id"], [1, 3]).any()  # the copies never win

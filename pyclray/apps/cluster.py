@@ -7,8 +7,8 @@ Warm workers. A job (the scene, the images asked, precision, device, and what a 
 WorkerPlugin registered once with Client.register_plugin: Dask pickles it once and the scheduler hands
 it to every worker, and to any worker that joins later (one a nanny restarts after a crash). Its setup
 opens the worker's OpenCL context and builds the program (a one-pixel render) before the first task;
-the worker process then keeps them (pyclray.device's caches) and the packed inputs of the scenes it
-renders (pyclray.render's), so a task carries only what changes: a frame's index, a camera, a window.
+the worker process then keeps them (pyclray.engine.programs' caches) and the packed inputs of the scenes it
+renders (pyclray.engine.prepared's), so a task carries only what changes: a frame's index, a camera, a window.
 
 Results come back to the client as tasks complete and are handed over in task order, whatever order
 the workers finish in; a few tasks per worker thread are in flight, and the next is submitted as one
@@ -31,10 +31,12 @@ import dask
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_worker
 from distributed.scheduler import KilledWorker
 
-from .device import AOVS
-from .errors import PyclrayError
-from .render import Frame, render
-from .scene import Camera, Scene
+from ..engine.render import render
+from ..engine.request import Frame
+from ..model.aovs import AOVS
+from ..model.camera import Camera
+from ..model.errors import PyclrayError
+from ..model.scene import Scene
 
 # Seconds to wait for a scheduler to answer, and for a running cluster to have a worker.
 CONNECT_TIMEOUT_S = 10
@@ -228,7 +230,7 @@ def render_animation(client: Client, scene: Scene, aovs=AOVS, precision: str = "
                      frames=None, encode=None, progress=None):
     """As pyclray.render_animation, on the cluster: yield (t, Frame) for the frames (default all),
     in order; frame k is exactly render(scene.at(k / fps)). encode: see Job (then (t, encode(Frame)))."""
-    from .errors import SceneError
+    from ..model.errors import SceneError
 
     animation = scene.animation
     if animation is None:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .layout import Struct, layout
+from ..model.layout import Struct, layout
 
 LEAF_SIZE = 4  # shapes per leaf at most: the kernel tests a leaf's shapes one after the other
 # How much a shape's box is widened, relative to its size, and the ray's cone in the kernel,
@@ -41,6 +41,7 @@ NODE = Struct(
     "A binary BVH node (kernels/bvh.h): count > 0: a leaf of refs[first .. first + count - 1]; else children first, first + 1.",
 )
 _FLOAT_MAX = float(np.finfo(np.float32).max)
+BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK: the deepest binary tree the kernels traverse
 
 
 @dataclass(frozen=True)
@@ -317,167 +318,4 @@ def pack_nodes(tree: BVH, origin) -> np.ndarray:
     out["lo"][:, :3], out["hi"][:, :3] = lo, hi
     out["lo"][:, 3] = tree.first.astype(np.int32).view(np.float32)
     out["hi"][:, 3] = tree.count.astype(np.int32).view(np.float32)
-    return out
-
-
-# -- the BVH of a scene's shapes ------------------------------------------------------------------
-@dataclass(frozen=True)
-class SceneBVH:
-    """The BVH over a scene's bounded shapes, with what the packers need: per leaf position, the
-    shape's type and its index in that type's array, the types' shapes (and ids) in leaf order,
-    and the shapes' unwidened bounds in leaf order (cast's anchors)."""
-
-    tree: BVH
-    wide: WideBVH
-    types: tuple[str, ...]  # the bounded types present, in the registry's order
-    leaf_type: np.ndarray  # (N,) index into types
-    leaf_index: np.ndarray  # (N,) index in its type's array
-    shapes: dict  # type -> list of its shapes in leaf order
-    ids: dict  # type -> int32 array of their ids
-    bounds: np.ndarray  # (N, 2, 3) in leaf order
-
-    def nodes(self, origin) -> np.ndarray:
-        """The wide nodes with their boxes relative to origin (see pack_wide)."""
-        return pack_wide(self.tree, self.wide, origin)
-
-    def binary_nodes(self, origin) -> np.ndarray:
-        """The binary nodes with their boxes relative to origin (see pack_nodes)."""
-        return pack_nodes(self.tree, origin)
-
-    def refs(self, shape_types) -> np.ndarray:
-        """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
-        program's shape types)."""
-        kinds = np.array([1 + list(shape_types).index(t) for t in self.types], np.int64)
-        refs = self.leaf_index * 8 + kinds[self.leaf_type]
-        return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
-
-    def anchors(self) -> np.ndarray:
-        """(N, 4) float64 per leaf position: the centre A of the shape's box (its packing frame in
-        cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
-        shape test's rounding (no hit the test reports lies nearer than (A - O).D - R)."""
-        lo, hi = self.bounds[:, 0], self.bounds[:, 1]
-        out = np.empty((max(len(lo), 1), 4))
-        out[: len(lo), :3] = 0.5 * (lo + hi)
-        out[: len(lo), 3] = 0.5 * np.linalg.norm(hi - lo, axis=1) * (1 + WIDEN)
-        return out
-
-
-def scene_bvh(shapes, registry) -> SceneBVH:
-    """The BVH of these shapes' bounded ones (registry: type name -> shape class)."""
-    types = tuple(t for t, cls in registry.items() if cls.bounded and any(s.type == t for s in shapes))
-    by_type = {t: ([], []) for t in types}
-    for index, shape in enumerate(shapes):
-        if shape.type in by_type:
-            by_type[shape.type][0].append(shape)
-            by_type[shape.type][1].append(index)
-    bounds = [registry[t].world_bounds(by_type[t][0]) for t in types]
-    bounds = np.concatenate(bounds) if bounds else np.zeros((0, 2, 3))
-    type_of = np.concatenate([np.full(len(by_type[t][0]), k) for k, t in enumerate(types)] or [np.zeros(0, int)])
-    within = np.concatenate([np.arange(len(by_type[t][0])) for t in types] or [np.zeros(0, int)])
-    tree = build(widened(bounds))
-    leaf_type = type_of[tree.order]
-    leaf_index = np.zeros(len(tree.order), np.int64)
-    ordered, ids = {}, {}
-    for k, t in enumerate(types):
-        mine = leaf_type == k
-        leaf_index[mine] = np.arange(int(mine.sum()))
-        positions = within[tree.order[mine]]
-        ordered[t] = [by_type[t][0][p] for p in positions]
-        ids[t] = np.array(by_type[t][1], np.int64)[positions].astype(np.int32)
-    if len(bounds):
-        wide = collapse(tree)
-    else:  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
-        wide = WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
-    if tree.depth() > BINARY_STACK or 7 * wide.depth + 1 > STACK:
-        raise ValueError(f"the BVH is {wide.depth} wide levels deep, more than the kernel's stack holds")
-    return SceneBVH(tree, wide, types, leaf_type, leaf_index, ordered, ids, bounds[tree.order])
-
-
-# -- the wide BVH the kernels traverse ---------------------------------------------------------------
-WIDTH = 8  # children per wide node: one float8 box test of all of them per visit
-STACK = 256  # kernels/bvh.h: BVH_STACK
-BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK
-
-WIDE_NODE = Struct(
-    "WideNode",
-    (
-        ("lo_x", "float8"),  # the children's boxes, one lane per child (empty slots: lo > hi)
-        ("lo_y", "float8"),
-        ("lo_z", "float8"),
-        ("hi_x", "float8"),
-        ("hi_y", "float8"),
-        ("hi_z", "float8"),
-        ("child", "int8"),  # >= 0: a wide node; < 0: ~(first * 8 + count), a leaf of refs[first .. first + count - 1]
-    ),
-    "A node of the wide BVH (kernels/bvh.h): up to 8 children's boxes, tested at once.",
-)
-
-
-@dataclass(frozen=True)
-class WideBVH:
-    """The binary tree collapsed three levels at a time: each wide node holds the (up to 8) nodes
-    three binary levels below a binary internal node, stopping early at leaves. Boxes are the
-    binary tree's, unchanged, so its traversal tests exactly the boxes the binary one would."""
-
-    binary: np.ndarray  # (W, 8) the binary node of each child slot, -1 for an empty slot
-    child: np.ndarray  # (W, 8) int32 child codes (see WIDE_NODE)
-    depth: int  # levels of wide nodes
-
-
-def collapse(tree: BVH) -> WideBVH:
-    """The wide BVH of a binary one (root: wide node 0). Each wide node starts from a binary
-    internal node's two children and opens, up to 8 slots, the internal child of largest surface
-    area into its two children (the greedy of Wald et al.'s wide BVHs), all wide nodes of a level
-    at once."""
-    extent = np.maximum(tree.hi - tree.lo, 0.0)
-    area = extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
-    inner_node = tree.count == 0
-    if not inner_node[0]:  # a single leaf: one wide node with one child
-        slots = np.full((1, WIDTH), -1, np.int64)
-        slots[0, 0] = 0
-        levels = [slots]
-    else:
-        levels, frontier = [], np.array([0])
-        while frontier.size:
-            slots = np.full((len(frontier), WIDTH), -1, np.int64)
-            slots[:, 0] = tree.first[frontier]
-            slots[:, 1] = tree.first[frontier] + 1
-            rows = np.arange(len(frontier))
-            for used in range(2, WIDTH):
-                safe = np.maximum(slots, 0)
-                opening = (slots >= 0) & inner_node[safe]
-                if not opening.any():
-                    break
-                pick = np.argmax(np.where(opening, area[safe], -1.0), axis=1)
-                can = opening[rows, pick]
-                chosen = slots[rows, pick]
-                slots[rows[can], pick[can]] = tree.first[chosen[can]]
-                slots[rows[can], used] = tree.first[chosen[can]] + 1
-            levels.append(slots)
-            frontier = slots[(slots >= 0) & inner_node[np.maximum(slots, 0)]]
-    binary = np.concatenate(levels)
-    # wide node numbers in the order made: the internal slots of level L, in order, are the wide
-    # nodes of level L + 1
-    internal = (binary >= 0) & inner_node[np.maximum(binary, 0)]
-    wide_index = np.full(binary.shape, -1, np.int64)
-    wide_index[internal] = 1 + np.arange(int(internal.sum()))
-    leaf = (binary >= 0) & ~internal
-    b = np.maximum(binary, 0)
-    code = np.where(internal, wide_index, np.where(leaf, ~(tree.first[b].astype(np.int64) * 8 + tree.count[b]), 0))
-    return WideBVH(binary, code.astype(np.int32), len(levels))
-
-
-def pack_wide(tree: BVH, wide: WideBVH, origin) -> np.ndarray:
-    """The wide nodes as the kernel reads them (WIDE_NODE), boxes relative to origin (float64,
-    before rounding outward): the eye for render, the scene's anchor for cast."""
-    out = np.zeros(len(wide.binary), dtype=layout(WIDE_NODE, "fp32").dtype)
-    origin = np.asarray(origin, np.float64)
-    b = np.maximum(wide.binary, 0)
-    lo, hi = outward32(tree.lo[b] - origin, tree.hi[b] - origin)
-    empty = wide.binary < 0
-    lo[empty], hi[empty] = _FLOAT_MAX, -_FLOAT_MAX
-    for axis, name in enumerate("xyz"):
-        out[f"lo_{name}"] = lo[..., axis]
-        out[f"hi_{name}"] = hi[..., axis]
-    out["child"] = wide.child
     return out

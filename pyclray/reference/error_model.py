@@ -41,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import oracle
-from .scene import Scene
+from ..model.scene import Scene
 
 EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}  # unit roundoff: half an ulp of 1
 ORACLE_EPSILON = EPSILON["fp64"]

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import Scene
-from .shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
+from ..model.scene import Scene
+from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
 DEFAULT_VARIANT = "scalar_rgb"
 AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index"
@@ -38,18 +38,9 @@ def import_mitsuba(variant: str = DEFAULT_VARIANT):
     return mi
 
 
-def extent(scene: Scene) -> float:
-    """A length that bounds the scene as seen from the eye (at least 1)."""
-    eye = np.array(scene.camera.eye)
-    size = max(1.0, float(np.linalg.norm(np.subtract(scene.camera.target, eye))))
-    for shape in scene.shapes:
-        size = max(size, shape.extent_from(eye))
-    return size
-
-
 def clip_range(scene: Scene) -> tuple[float, float]:
     """(near_clip, far_clip): near small against every distance, far beyond every stand-in's edge."""
-    size = extent(scene)
+    size = scene.extent()
     near = 1e-6 * size
     eye = np.array(scene.camera.eye, np.float64)[None]
     for shape in scene.shapes:  # stay nearer than the nearest surface

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .device import AOVS
-from .scene import Scene
+from ..model.aovs import AOVS
+from ..model.scene import Scene
 
 
 def image_plane(scene: Scene):

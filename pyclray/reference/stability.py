@@ -15,11 +15,12 @@ from typing import Callable
 
 import numpy as np
 
-from .accuracy import FP32_DEPTH_ULPS, FP32_NORMAL, FP64_DEPTH_RELATIVE, compare, meets_targets, reference
-from .scene import Camera, Image, Scene
-from .shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
+from .error_model import FP32_DEPTH_ULPS, FP32_NORMAL, FP64_DEPTH_RELATIVE, compare, meets_targets, reference
+from ..model.camera import Camera, Image
+from ..model.scene import Scene
+from ..model.shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
 
-# The targets (pyclray.accuracy): on pixels that are neither silhouettes nor near-ties nor at edges,
+# The targets (pyclray.reference.error_model): on pixels that are neither silhouettes nor near-ties nor at edges,
 # fp32 depth within 8 float32 ulps of t / |cos|, normals within 2e-5 / |cos|, ids right; fp64 depth
 # within 1e-12 relative / |cos|, normals within 1e-12 / |cos| times the normal's conditioning.
 __all__ = ["CASES", "FP32_DEPTH_ULPS", "FP32_NORMAL", "FP64_DEPTH_RELATIVE", "evaluate", "meets_targets", "run", "table"]
@@ -269,7 +270,7 @@ CASES = (
 
 def evaluate(scene: Scene, engines=("fp32", "fp64"), ref=None) -> dict:
     """engine -> compare() result; engines: "fp32", "fp64", "scalar_rgb", "llvm_ad_rgb"."""
-    from .render import render
+    from ..engine.render import render
 
     ref = ref if ref is not None else reference(scene)
     out = {}
@@ -320,31 +321,3 @@ def run(case_names=None, engines=("fp32", "fp64", "scalar_rgb", "llvm_ad_rgb")) 
             except Exception as error:  # a reference engine may refuse a case; say so in the table
                 results[case.name][engine] = {"error": f"{type(error).__name__}: {error}"[:80]}
     return results
-
-
-def add_command(commands) -> None:
-    parser = commands.add_parser(
-        "stability",
-        help="print the stability report: stiff and extreme cases against the float64 oracle",
-        description="Render each stiff case with pyclray fp32 and fp64 and with Mitsuba 3 (scalar_rgb, "
-        "llvm_ad_rgb) and print, per case and engine, the errors against the float64 oracle on pixels "
-        "that are neither silhouettes (|cos| < 0.02) nor near-ties. Exit status 1 if pyclray misses a target.",
-    )
-    parser.add_argument("--case", action="append", metavar="NAME", choices=[c.name for c in CASES],
-                        help="only this case (repeatable); default all")
-    parser.add_argument("--no-mitsuba", action="store_true", help="pyclray only")
-    parser.set_defaults(run=_cmd)
-
-
-def _cmd(args) -> int:
-    engines = ("fp32", "fp64") if args.no_mitsuba else ("fp32", "fp64", "scalar_rgb", "llvm_ad_rgb")
-    results = run(args.case, engines)
-    print(table(results))
-    print(
-        f"\ntargets: fp32 depth <= {FP32_DEPTH_ULPS:g} ulps x 1/|cos|, normal <= {FP32_NORMAL:g} / |cos|, ids right; "
-        f"fp64 depth <= {FP64_DEPTH_RELATIVE:g} relative x 1/|cos|"
-    )
-    failed = [(c, e) for c, r in results.items() for e in ("fp32", "fp64") if e in r and ("error" in r[e] or not meets_targets(r[e], e))]
-    for case, engine in failed:
-        print(f"MISSED: {case} {engine}")
-    return 1 if failed else 0

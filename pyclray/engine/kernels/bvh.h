@@ -1,4 +1,4 @@
-/* The BVH's traversal (pyclray/bvh.py builds it, pyclray/render.py packs it).
+/* The BVH's traversal (pyclray/engine/bvh.py builds it, pyclray/engine/prepared.py packs it).
  *
  * Two trees of the same boxes: render's packets of camera rays traverse the binary tree (a node's
  * box against all the packet's lanes at once), cast's single rays the wide tree.

@@ -61,7 +61,7 @@
 #else
 /* per shape type: the packed array, and for each tile of the image the shapes that can be seen
  * in it (type##_tile_list[type##_tile_start[tile] .. type##_tile_start[tile + 1]], increasing;
- * the host's conservative screen bounds, pyclray/culling.py): the others miss every ray there */
+ * the host's conservative screen bounds, pyclray/engine/culling.py): the others miss every ray there */
 #ifdef PYCLRAY_SHADOWS
 /* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
@@ -289,7 +289,7 @@ inline void write_vec3s(const vec3v v, const size_t index, const int first, cons
 #endif
 }
 
-/* On PoCL's CPU device every function above is always inlined (device.py), the kernels themselves not. */
+/* On PoCL's CPU device every function above is always inlined (pyclray/engine/programs.py), the kernels themselves not. */
 #ifdef PYCLRAY_INLINE_BUILTINS
 #define PYCLRAY_KERNELS_BEGIN _Pragma("clang attribute pop")
 #else

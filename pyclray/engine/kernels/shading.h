@@ -63,7 +63,7 @@ inline vec3v frame_from_world(__global const Camera* camera, const vec3v n)
 /* Blinn-Phong from one light: E (albedo cos + specular max(0, n_s.H)^shininess) where cos > 0.
  * x^k as exp2(k log2 x): pow itself is several times slower on PoCL's CPU device and was most of the
  * cost of shading; log2 and exp2 (3 ulps each) make a relative error of about ln 2 |log2 x^k| 7 eps
- * + 6 eps (pyclray.shading.tolerance counts it). Packets without a specular surface skip it. */
+ * + 6 eps (pyclray.reference.shading.tolerance counts it). Packets without a specular surface skip it. */
 inline vec3v shade_light(const vec3v albedo, const realv specular, const realv shininess, const vec3v n_s,
                          const vec3v L, const vec3v D, const realv cos_l, const vec3v E)
 {

@@ -1,6 +1,6 @@
-"""What every shape type provides (see pyclray/shapes/__init__.py).
+"""What every shape type provides (see pyclray/model/shapes/__init__.py).
 
-A shape module owns everything about its shape, so that nothing outside pyclray/shapes/ asks which
+A shape module owns everything about its shape, so that nothing outside pyclray/model/shapes/ asks which
 type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 
 - scene file: ``type``, ``keys``, ``required``, ``_from_table`` and the dataclass's validation;
@@ -9,7 +9,7 @@ type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 - bounds: ``bounded`` and ``world_bounds`` (culling, the BVH), ``bounding_spheres``;
 - the float64 oracle: ``oracle_distance``, ``oracle_normal``, ``surface_distance``,
   ``edge_distance`` (where a ray may go either way);
-- the error model (pyclray.accuracy): ``anchor`` (the point its coordinates are measured from)
+- the error model (pyclray.reference.error_model): ``anchor`` (the point its coordinates are measured from)
   and ``curvature_radius`` (how a position error turns the normal);
 - Mitsuba 3 (pyclray.mitsuba): ``mitsuba_shapes`` (its counterpart, one or more Mitsuba shapes that
   all map back to this shape's id) and ``mitsuba_covers`` (where that counterpart ends).
@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import no_unknown_keys, text
 from ..exact import dot2
 from ..layout import Struct, layout
-from ..lighting import MATERIAL_KEYS, Material
+from ..lights import MATERIAL_KEYS, Material
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -141,10 +141,8 @@ class Plane(Shape):
     def mitsuba_disk(self, scene):
         """(centre, frame columns (t1, t2, n), radius) of the disk standing in for the plane:
         centred at the eye's foot, DISK_SCALE times the scene's extent."""
-        from ..mitsuba import extent
-
         n, _ = self.unit()
-        return self.foot(scene.camera.eye), frame_columns(n), DISK_SCALE * extent(scene)
+        return self.foot(scene.camera.eye), frame_columns(n), DISK_SCALE * scene.extent()
 
     def mitsuba_shapes(self, scene):
         centre, (t1, t2, n), radius = self.mitsuba_disk(scene)

@@ -6,7 +6,7 @@
 - ``files``: the depth-difference heat map and the files ``--save`` writes;
 - ``shaded``: ``cross_check_shaded``, the shaded image against Mitsuba's direct integrator.
 
-The error model they judge by is ``pyclray.accuracy``; the command is ``pyclray.check``.
+The error model they judge by is ``pyclray.reference.error_model``; the command is ``pyclray.apps.cli.check``.
 """
 from .images import ImageCheck, cross_check, format_image_check
 from .rays import RayCheck, format_ray_check, ray_level

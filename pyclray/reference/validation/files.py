@@ -27,7 +27,9 @@ def heat_map(relative: np.ndarray, judged: np.ndarray, outside: np.ndarray) -> n
 
 def save(result, folder: Path, stem: str) -> list[Path]:
     """Write both renders of an ImageCheck as EXR and the depth-difference heat map as PNG."""
-    from ..output import write_exr, write_png, write_together
+    from ...io.bands import write_exr
+    from ...io.files import write_together
+    from ...io.png import write_png
 
     ours, theirs = result.images["ours"], result.images["theirs"]
     paths = [

@@ -4,8 +4,8 @@ Both render the scene (pyclray fp32, Mitsuba's aov integrator); the float64 orac
 pixel rays says, per pixel, which shape is hit, at what distance t and at what incidence. Depth
 and normals are compared where both hit the same shape, away from silhouettes and edges; ids and
 misses everywhere, with the pixels whose disagreement the geometry explains counted apart
-(silhouettes, edges, pixels next to an id change, near ties: pyclray.accuracy). Tolerances:
-``accuracy.mitsuba_tolerances`` with the difference of the cameras.
+(silhouettes, edges, pixels next to an id change, near ties: pyclray.reference.error_model). Tolerances:
+``error_model.mitsuba_tolerances`` with the difference of the cameras.
 """
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import accuracy
-from ..accuracy import EPSILON, angle_between
+from .. import error_model
+from ..error_model import EPSILON, angle_between
 from .summary import Summary, disagreement_kinds, table
 
 EPS32 = EPSILON["fp32"]
@@ -62,8 +62,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     mitsuba_scene: the scene Mitsuba renders, if not the same one (tests pass a slightly moved
     scene to see the check fail)."""
     from .. import mitsuba, oracle
-    from ..progress import step
-    from ..render import render
+    from ...engine.render import render
+    from ...io.progress import step
 
     step("pyclray render")
     ours = render(scene, precision="fp32", device=device)
@@ -73,15 +73,15 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     origins, directions = oracle.camera_rays(scene)
     truth = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
-    depth_tolerance, normal_tolerance = accuracy.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
+    depth_tolerance, normal_tolerance = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
 
     # the pixels each comparison covers
     beyond = mitsuba.beyond_counterparts(scene, origins, directions)
-    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
-    silhouette = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    silhouette = error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
-    band, _ = accuracy.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=True)
-    edge = accuracy.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
+    band, _ = error_model.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=True)
+    edge = error_model.at_edges(scene, origins, directions, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
                                                           (theirs["id"], theirs["depth"])], band * cos) & ~beyond
     same = (ours["id"] == theirs["id"]) & (ours["id"] >= 0) & ~beyond
     judged = same & ~silhouette & ~edge
@@ -98,7 +98,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     # ids and misses: explained disagreements counted apart
     disagree = (ours["id"] != theirs["id"]) & ~beyond
     truth["cos"] = cos
-    near_tie = accuracy.near_ties(truth, lambda t, ids, c: accuracy.mitsuba_tolerances(scene, t, ids, c, cameras=True)[0])
+    near_tie = error_model.near_ties(truth, lambda t, ids, c: error_model.mitsuba_tolerances(scene, t, ids, c, cameras=True)[0])
     adjacent = next_to_id_change(truth["id"]) | next_to_id_change(ours["id"])
     reasons = (("silhouette", silhouette), ("edge", edge), ("next to an id change", adjacent), ("near tie", near_tie))
     id_disagree = disagree & (ours["id"] >= 0) & (theirs["id"] >= 0)

@@ -1,15 +1,15 @@
 """The ray-level comparison: Mitsuba's own float32 primary rays (its sensor's ``sample_ray`` at
 pixel centres) cast through ``pyclray.cast`` and through Mitsuba's ``ray_intersect``: first how
 far Mitsuba's camera rays are from pyclray's, then the intersections of the very same rays
-(tolerances: ``accuracy.mitsuba_tolerances`` without the cameras' term)."""
+(tolerances: ``error_model.mitsuba_tolerances`` without the cameras' term)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import accuracy
-from ..accuracy import EPSILON, ORIGIN_K, angle_between
+from .. import error_model
+from ..error_model import EPSILON, ORIGIN_K, angle_between
 from .summary import Summary, disagreement_kinds, table
 
 EPS32 = EPSILON["fp32"]
@@ -46,7 +46,7 @@ def ray_level(
 
     mitsuba_scene: the scene Mitsuba intersects, if not the same one (for tests)."""
     from .. import mitsuba, oracle
-    from ..render import cast
+    from ...engine.cast import cast
 
     width, height = scene.image.width, scene.image.height
     rng = np.random.default_rng(seed)
@@ -65,7 +65,7 @@ def ray_level(
     sideways = offset - np.einsum("nk,nk->n", offset, ours_directions)[:, None] * ours_directions
     camera_angle = angle_between(directions, ours_directions)
     camera_origin = np.linalg.norm(sideways, axis=1) / (EPS32 * max(np.linalg.norm(eye), 1.0))
-    camera_tolerance = accuracy.camera_angle_tolerance(scene)
+    camera_tolerance = error_model.camera_angle_tolerance(scene)
 
     # the same rays through both
     theirs = mitsuba.intersect(mi_scene, ids, origins, directions)
@@ -74,15 +74,15 @@ def ray_level(
     truth = oracle.trace(scene, origins, unit, aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
     origin_scale = np.linalg.norm(origins, axis=1)
-    depth_tolerance, normal_tolerance = accuracy.mitsuba_tolerances(
+    depth_tolerance, normal_tolerance = error_model.mitsuba_tolerances(
         scene, truth["depth"], truth["id"], cos, cameras=False, origin_scale=origin_scale
     )
     beyond = mitsuba.beyond_counterparts(scene, origins, unit)
-    radius = accuracy.curvature_radii(scene)[np.maximum(truth["id"], 0)]
-    silhouette = accuracy.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    silhouette = error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
-    band, _ = accuracy.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=False, origin_scale=origin_scale)
-    edge = accuracy.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
+    band, _ = error_model.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=False, origin_scale=origin_scale)
+    edge = error_model.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (ours["id"], ours["depth"]),
                                                     (theirs["id"], theirs["depth"])], band * cos) & ~beyond
     same = (ours["id"] == theirs["id"]) & (ours["id"] >= 0) & ~beyond
     judged = same & ~silhouette & ~edge
@@ -93,7 +93,7 @@ def ray_level(
     angle = angle_between(ours["normal"], theirs["normal"])
     disagree = (ours["id"] != theirs["id"]) & ~beyond
     truth["cos"] = cos
-    near_tie = accuracy.near_ties(truth, lambda t, i, c: accuracy.mitsuba_tolerances(
+    near_tie = error_model.near_ties(truth, lambda t, i, c: error_model.mitsuba_tolerances(
         scene, t, i, c, cameras=False, origin_scale=origin_scale)[0])
     kinds = {"agree": int((~disagree & ~beyond).sum()),
              **disagreement_kinds(disagree, (("silhouette", silhouette), ("edge", edge), ("near tie", near_tie)))}

@@ -18,7 +18,7 @@ to 0): the geometry, lights, colours and shadows are what is compared.
 
 Tolerance (printed): both images are the shading model at hit points and normals that the error model
 bounds, pyclray's against the float64 oracle (K = 4) and Mitsuba's (K = 6, plus the difference of the
-two cameras); ``pyclray.shading.tolerance`` turns each into a bound on the colour, and the two bounds
+two cameras); ``pyclray.reference.shading.tolerance`` turns each into a bound on the colour, and the two bounds
 add. Left out, each counted: silhouettes and pixels whose ids differ (the image check judges those),
 terminators, and shadow edges: where the float64 visibility changes when the hit point moves by
 SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps (|p| + R);
@@ -31,8 +31,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import accuracy, shading
-from ..lighting import DirectionalLight, Material, PointLight, Shading, effective_lights
+from ...engine.shading import shape_extent
+from ...model.lights import DirectionalLight, Material, PointLight, Shading, effective_lights
+from .. import error_model, shading
 
 EPSILON = 2.0**-24
 MITSUBA_RAY_EPSILON = 1500 * EPSILON  # Mitsuba 3's math::RayEpsilon<float>
@@ -107,7 +108,7 @@ class ShadedCheck:
 def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> ShadedCheck:
     """pyclray's shaded image (fp32) against pi x Mitsuba's direct integrator, on the diffuse version."""
     from ..mitsuba import beyond_counterparts
-    from ..render import render
+    from ...engine.render import render
 
     scene = diffuse_version(scene)
     if variant.startswith("llvm") and any(isinstance(light, DirectionalLight) for light in effective_lights(scene)):
@@ -116,25 +117,25 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
         variant = "scalar_rgb"
     ours = render(scene, aovs=("depth", "id", "shaded"), device=device)
     theirs = render_direct(scene, variant)
-    ref = accuracy.reference(scene)
+    ref = error_model.reference(scene)
     O, D = ref["origins"], ref["directions"]
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
     hit = ref["id"] >= 0
     # per pixel: the larger of the two engines' shadow-ray offsets at its hit point
-    extent = np.array([shading.shape_extent(s) for s in scene.shapes] or [0.0])[np.maximum(ref["id"], 0)]
+    extent = np.array([shape_extent(s) for s in scene.shapes] or [0.0])[np.maximum(ref["id"], 0)]
     ours_offset = PYCLRAY_OFFSET_K * EPSILON * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
     # the error model's bounds on each engine's hit point and normal, made bounds on the colour
-    our_depth, our_normal = accuracy.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", scene.camera.eye)
-    their_depth, their_normal = accuracy.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
+    our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", scene.camera.eye)
+    their_depth, their_normal = error_model.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
     ours_tol, jump = shading.tolerance(scene, D, ref, our_depth, our_normal, EPSILON)
     theirs_tol, jump2 = shading.tolerance(scene, D, ref, their_depth, their_normal, EPSILON)
     tolerance = ours_tol + theirs_tol
-    # the rays outside the error model, by either engine's rules (accuracy.judged_pixels)
-    outside = accuracy.judged_pixels(ours, ref, "fp32")
-    for name, mask in accuracy.judged_pixels({}, ref, "mitsuba").items():
+    # the rays outside the error model, by either engine's rules (error_model.judged_pixels)
+    outside = error_model.judged_pixels(ours, ref, "fp32")
+    for name, mask in error_model.judged_pixels({}, ref, "mitsuba").items():
         outside[name] = outside[name] | mask
     left_out = {
         "silhouette": outside["silhouette"], "near tie": outside["near_tie"], "edge": outside["edge"],
@@ -167,8 +168,8 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
 def format_shaded_check(result: ShadedCheck) -> str:
     lines = [
         f"shaded (diffuse version: specular, ambient, background 0) against pi x Mitsuba's direct integrator ({result.variant})",
-        "  tolerance per pixel: pyclray.shading.tolerance of pyclray's (K=4 vs the oracle) and of Mitsuba's",
-        "  (K=6, plus the cameras) hit-point and normal bounds (pyclray.accuracy), added; shadow edges: visibility changes",
+        "  tolerance per pixel: pyclray.reference.shading.tolerance of pyclray's (K=4 vs the oracle) and of Mitsuba's",
+        "  (K=6, plus the cameras) hit-point and normal bounds (pyclray.reference.error_model), added; shadow edges: visibility changes",
         f"  within {SHADOW_EDGE_K} x max(pyclray's 16 eps (|p| + R), Mitsuba's 1500 eps (1 + |p|)) of the hit",
         f"  judged {result.pixels} pixels ({result.lit} lit, {result.shadowed} in shadow); max |difference| "
         f"{result.max_difference:.3g}, median tolerance {result.median_tolerance:.3g}; worst difference / tolerance "

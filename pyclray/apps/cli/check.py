@@ -1,0 +1,86 @@
+"""`pyclray check`: pyclray's images and rays against Mitsuba 3 (pyclray.reference.check)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .options import BadInput, image_size, load
+
+
+def add_command(subparsers) -> None:
+    from ...reference.check import DEFAULT_RAYS, VARIANTS
+
+    parser = subparsers.add_parser(
+        "check",
+        help="cross-check pyclray's images against Mitsuba 3 (exit 1 outside the tolerance)",
+        description="Render SCENE with pyclray (fp32) and Mitsuba 3 and print one table per image "
+        "(depth, normal, id, misses), the ray-level comparison (Mitsuba's own primary rays cast "
+        "through both) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
+        "2 on bad input.",
+    )
+    parser.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
+    parser.add_argument("--variant", choices=VARIANTS, default="scalar_rgb", help="Mitsuba variant (default scalar_rgb)")
+    parser.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")
+    parser.add_argument("--rays", type=int, default=DEFAULT_RAYS, metavar="N",
+                        help=f"pixels in the ray-level comparison (default {DEFAULT_RAYS})")
+    parser.add_argument("--seed", type=int, default=0, help="seed choosing the ray-level pixels (default 0)")
+    parser.add_argument("--save", metavar="DIR",
+                        help="write DIR/NAME.pyclray.exr, DIR/NAME.mitsuba-VARIANT.exr and DIR/NAME.depth-error.png "
+                        "(log10 relative depth difference, 1e-9 dark blue to 1e-4 red, white outside the "
+                        "tolerance, black where not compared)")
+    parser.add_argument("--device", metavar="DEV", help="OpenCL device (as for pyclray render)")
+    parser.set_defaults(run=run)
+
+
+def run(args) -> int:
+    if args.rays < 1:
+        raise BadInput(f"--rays: expected a whole number >= 1, got {args.rays}")
+    folder = None
+    if args.save is not None:
+        folder = Path(args.save)
+        if folder.exists() and not folder.is_dir():
+            raise BadInput(f"--save {folder}: is not a folder")
+        if not folder.parent.is_dir():
+            raise BadInput(f"--save {folder}: the folder {folder.parent} does not exist")
+    scene = load(args.scene, args.size)
+    try:
+        from ...reference.mitsuba import import_mitsuba
+
+        mi = import_mitsuba(args.variant)
+    except (ImportError, ValueError) as error:
+        raise BadInput(str(error)) from None
+
+    from ...io.progress import step, steps
+    from ...reference.check import (cross_check, format_image_check, format_ray_check, ray_level, save,
+                                    tolerance_text)
+
+    with steps(5, desc="pyclray check"):
+        images = cross_check(scene, args.variant, device=args.device)
+        step("ray level")
+        rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+        step("shaded")
+        from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
+
+        shaded = cross_check_shaded(scene, args.variant, device=args.device) if scene.shading.shadows else None
+    print(
+        f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
+        f"against Mitsuba {mi.__version__} {args.variant}"
+    )
+    print("\n".join(tolerance_text()))
+    print()
+    print(format_image_check(images))
+    print()
+    print(format_ray_check(rays))
+    print()
+    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
+    if folder is not None:
+        folder.mkdir(exist_ok=True)
+        written = save(images, folder, Path(args.scene).stem)
+        print()
+        print("wrote " + ", ".join(map(str, written)))
+    failures = images.failures + rays.failures + (shaded.failures if shaded else [])
+    print()
+    if failures:
+        print("FAILED: " + "; ".join(failures))
+        return 1
+    print("passed: within the tolerance")
+    return 0

@@ -1,0 +1,219 @@
+"""The kernels' programs: the source of a variant (only the shape types, images and precision a
+request needs), built once per device and cached in memory and on disk."""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import tempfile
+import threading
+import warnings
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import pyopencl as cl
+
+from ..model.errors import BuildError, DeviceError
+from ..model.layout import CAMERA, c_header
+from ..model.shapes import REGISTRY
+from .bvh import NODE
+from .bvh_wide import WIDE_NODE
+from .device import DeviceContext, is_pocl_cpu
+from .shading import STRUCTS as SHADING_STRUCTS
+
+# Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
+BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+
+# counters of program builds, for tests and the curious
+stats = {"compiled": 0, "from_disk": 0, "from_memory": 0}
+_lock = threading.Lock()
+_programs: dict = {}
+
+
+# -- sources and programs --------------------------------------------------------------------
+def kernel_dir():
+    """The kernels/ folder: package data of pyclray.engine (in a checkout and in an installed wheel alike)."""
+    folder = resources.files(__package__).joinpath("kernels")
+    if folder.joinpath("pyclray.cl").is_file():
+        return folder
+    raise FileNotFoundError("pyclray's kernels/ folder is missing from this installation")
+
+
+def _read(name: str) -> str:
+    return kernel_dir().joinpath(name).read_text(encoding="utf-8")
+
+
+# Rays per work-item (vector lanes) the kernels are built for: the device's preferred vector width for
+# its precision (GPUs: 1), in vectors of at most 256 bits (8 floats, 4 doubles). PoCL reports 16 floats
+# and 8 doubles on an AVX-512 CPU, but its kernel compiler targets AVX2 there: it warns that 512-bit
+# arguments change the ABI, and with PoCL 3.0 on this project's machines a kernel with 512-bit lanes
+# was missing from the built program (CL_INVALID_KERNEL_NAME), then after the kernels' own square roots
+# and reductions (kernels/lanes.h) LLVM's code generator aborted the process on it. $PYCLRAY_LANES
+# overrides the choice within the same bound.
+LANE_WIDTHS = (1, 2, 4, 8)
+MAX_LANE_BITS = 256
+_REAL_BITS = {"fp32": 32, "fp64": 64}
+
+
+def lanes_for(device: cl.Device, precision: str) -> int:
+    """The packet width of the kernels on this device at this precision."""
+    bits = _REAL_BITS[precision]
+    widths = [w for w in LANE_WIDTHS if w * bits <= MAX_LANE_BITS]
+    value = os.environ.get("PYCLRAY_LANES", "").strip()
+    if value:
+        if not value.isdigit() or int(value) not in widths:
+            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, widths))} for {precision} "
+                              f"(vectors of at most {MAX_LANE_BITS} bits), got {value!r}")
+        return int(value)
+    preferred = device.preferred_vector_width_double if precision == "fp64" else device.preferred_vector_width_float
+    return max(w for w in widths if w <= max(int(preferred), 1))
+
+
+@dataclass(frozen=True)
+class Variant:
+    """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
+
+    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
+    # work-item) or "occluded" (cast's any-hit query)
+    shape_types: tuple[str, ...]
+    aovs: tuple[str, ...]
+    precision: str
+    lanes: int = 1
+    shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
+    bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
+
+    def bounded_types(self) -> tuple[str, ...]:
+        return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
+
+    def defines(self) -> list[str]:
+        """The #defines that select this variant in kernels/pyclray.cl."""
+
+        def listed(types):
+            return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
+
+        bounded = self.bounded_types()
+        lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
+        lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
+        if bounded:
+            lines.append("#define PYCLRAY_HAS_BOUNDED 1")
+        if self.bvh and self.kind == "render":
+            lines.append("#define PYCLRAY_BVH 1")
+        lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
+        if self.precision == "fp64":
+            lines.append("#define PYCLRAY_FP64 1")
+        if self.kind in ("cast", "occluded"):
+            lines.append("#define PYCLRAY_CAST 1")
+        if self.kind == "occluded":
+            lines.append("#define PYCLRAY_OCCLUDED 1")
+        if self.shadows and "shaded" in self.aovs:
+            lines.append("#define PYCLRAY_SHADOWS 1")
+        return lines
+
+    def source(self, inline_builtins: bool = False) -> str:
+        """The whole program: only the shape types present and the images asked for.
+
+        inline_builtins: on PoCL's CPU device, no call into PoCL's built-in library (which LLVM does
+        not inline there): the square root, reductions and vector stores written with the compiler's
+        own operations (kernels/lanes.h); the camera's and the shapes' functions always inlined
+        (PoCL's inliner leaves some out, just above its threshold), and each kernel's per-work-item
+        function kept out of the kernel, whose body PoCL copies three times (kernels/pyclray.cl).
+        None of it changes a bit of the results (tests/test_speedups.py)."""
+        shapes = [REGISTRY[t] for t in self.shape_types]
+        defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
+        parts = ["\n".join(["/* pyclray program variant */"] + defines)]
+        parts += [_read("common.h")]
+        if inline_builtins:
+            parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
+        shading = "shaded" in self.aovs
+        structs = [CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        parts += [_read("lanes.h"), c_header(structs, self.precision)]
+        parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        if shading:  # materials, lights and shadows: only in the programs that shade
+            parts.append(_read("shading.h"))
+        parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
+        return "\n".join(parts)
+
+    def options(self) -> list[str]:
+        return list(BUILD_OPTIONS)
+
+
+def cache_dir() -> Path | None:
+    """$PYCLRAY_CACHE_DIR ("" or "off" disables the disk cache), else ~/.cache/pyclray."""
+    value = os.environ.get("PYCLRAY_CACHE_DIR")
+    if value is not None:
+        return None if value.strip().lower() in ("", "off", "0", "none") else Path(value)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "pyclray"
+
+
+def _disk_key(source: str, options: list[str], device: cl.Device) -> str:
+    h = hashlib.sha256()
+    for part in (
+        source,
+        "\0".join(options),
+        device.platform.name,
+        device.platform.version,
+        device.name,
+        device.version,
+        device.driver_version,
+        cl.VERSION_TEXT,
+    ):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+@contextlib.contextmanager
+def _quiet_compiler():
+    """pyopencl warns (CompilerWarning) whenever a successful build left a log, as PoCL's often does
+    (e.g. notes on vector arguments): a user can do nothing about it, and a warnings filter that
+    makes warnings errors would turn it into an exception inside the build, after the driver made
+    the program (PoCL then crashes at its release). A failed build still raises with its log."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        yield
+
+
+def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
+    source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
+    folder = cache_dir()
+    path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
+    if path is not None and path.is_file():
+        try:
+            with _quiet_compiler():
+                program = cl.Program(ctx.context, [ctx.device], [path.read_bytes()]).build(options=options)
+            stats["from_disk"] += 1
+            return program
+        except (cl.Error, OSError):
+            pass  # a stale or foreign binary: build from source below
+    try:
+        with _quiet_compiler():
+            program = cl.Program(ctx.context, source).build(options=options, devices=[ctx.device], cache_dir=False)
+    except cl.RuntimeError as error:
+        raise BuildError(f"the OpenCL compiler rejected pyclray's kernel for {variant}:\n{error}") from None
+    stats["compiled"] += 1
+    if path is not None:
+        try:
+            binary = program.get_info(cl.program_info.BINARIES)[0]
+            path.parent.mkdir(parents=True, exist_ok=True)
+            handle, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+            with os.fdopen(handle, "wb") as out:
+                out.write(binary)
+            os.replace(tmp, path)
+        except OSError:
+            pass  # an unwritable cache only costs time
+    return program
+
+
+def kernel_for(ctx: DeviceContext, variant: Variant) -> cl.Kernel:
+    """The kernel of this variant on this device: built once, cached in memory and on disk."""
+    key = (ctx.device.int_ptr, variant)
+    with _lock:
+        kernel = _programs.get(key)
+        if kernel is not None:
+            stats["from_memory"] += 1
+            return kernel
+        kernel = _programs[key] = cl.Kernel(_build(ctx, variant), variant.kind)
+        return kernel

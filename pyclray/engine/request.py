@@ -1,0 +1,129 @@
+"""A request's run on the device: the Frame it returns, the checks of its AOVs and precision, the
+camera's struct, and the kernel's launch over output buffers that become the returned arrays."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pyopencl as cl
+
+from ..model.aovs import AOVS, TABLE
+from ..model.errors import DeviceError, RequestError
+from ..model.layout import CAMERA, PRECISIONS, layout
+from .device import DeviceContext, has_fp64, launch
+from .programs import kernel_for
+
+REAL = {"fp32": np.float32, "fp64": np.float64}  # the numpy type of a precision
+_OUTPUTS_MAX = 12
+_outputs: dict = {}
+# renders that reuse the kept output buffers (devices other than CPUs) run one at a time; the
+# caches of prepared inputs take it too
+render_lock = threading.RLock()
+
+
+class Frame(dict):
+    """The images of a render (or the per-ray results of a cast): AOV name -> numpy array.
+
+    depth: distance from the ray origin along the unit ray, +inf on a miss (float32; float64 with
+    precision "fp64"); normal: unit world normal, (0, 0, 0) on a miss; id: int32, -1 on a miss.
+    Renders may add zdepth (depth along the optical axis, +inf on a miss), position (world hit
+    point, (0, 0, 0) on a miss) and shaded (linear RGB, the background on a miss).
+    """
+
+    def __init__(self, arrays, *, precision: str, device: str):
+        super().__init__(arrays)
+        self.precision = precision
+        self.device = device
+
+    def __repr__(self) -> str:
+        shapes = ", ".join(f"{k}: {v.dtype}{list(v.shape)}" for k, v in self.items())
+        return f"Frame({shapes}; {self.precision} on {self.device})"
+
+
+def check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple[str, ...]:
+    if isinstance(aovs, str):
+        aovs = tuple(a.strip() for a in aovs.split(","))
+    try:
+        aovs = tuple(aovs)
+    except TypeError:
+        raise RequestError(f"aovs: expected a selection of {', '.join(known)}, got {type(aovs).__name__}") from None
+    unknown = [a for a in aovs if not isinstance(a, str) or a not in known]
+    if unknown or not aovs or len(set(aovs)) != len(aovs):
+        raise RequestError(f"aovs: expected a non-empty selection of {', '.join(known)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+    if not isinstance(precision, str) or precision not in PRECISIONS:
+        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if precision == "fp64" and not has_fp64(ctx.device):
+        raise DeviceError(
+            f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
+            "use precision fp32 or another device"
+        )
+    return tuple(a for a in known if a in aovs)  # canonical order: one program per set
+
+
+def camera_struct(rows, tan_x, tan_y, width, height, precision):
+    camera = np.zeros(1, dtype=layout(CAMERA, precision).dtype)
+    for name, row in zip("uvw", rows):
+        camera[name][0, :3] = row
+    camera["tan_x"], camera["tan_y"] = tan_x, tan_y
+    camera["width"], camera["height"] = width, height
+    return camera
+
+
+def input_buffer(ctx, array):
+    return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
+
+
+def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
+    """Device buffers for the asked images, kept per device and size and reused by every render
+    (renders are serialized by render_lock, and each copies its images out before the next)."""
+    buffers = []
+    for aov in aovs:
+        key = (ctx.device.int_ptr, aov, max(count * TABLE[aov].itemsize(precision), 1))
+        buffer = _outputs.get(key)
+        if buffer is None:
+            if len(_outputs) >= _OUTPUTS_MAX:
+                _outputs.clear()
+            buffer = _outputs[key] = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, key[2])
+        buffers.append(buffer)
+    return buffers
+
+
+def _interleave(aovs, buffers, extra) -> list:
+    """Each image's buffer, preceded by the arguments that image's code takes (extra[aov])."""
+    out = []
+    for aov, buffer in zip(aovs, buffers):
+        out += (extra or {}).get(aov, []) + [buffer]
+    return out
+
+
+def _zero_copy(ctx) -> bool:
+    """Whether the kernel writes the images straight into the returned arrays (CPU devices)."""
+    return bool(ctx.device.type & cl.device_type.CPU)
+
+
+def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None, extra=None):
+    """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
+    outputs = {k: TABLE[k].empty((count,), precision) for k in aovs}
+    kernel = kernel_for(ctx, variant)
+    if _zero_copy(ctx):
+        # a CPU device writes straight into the new arrays (USE_HOST_PTR: PoCL uses them as the
+        # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
+        flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
+        buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
+        launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
+        maps = [
+            cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
+            for array, buffer in zip(outputs.values(), buffers)
+        ]
+        ctx.queue.finish()
+        for mapped in maps:
+            mapped.base.release()  # unmap
+        ctx.queue.finish()
+    else:  # other devices: device buffers kept and reused, and a copy of each image
+        with render_lock:
+            buffers = _output_buffers(ctx, count, aovs, precision)
+            launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
+            for array, buffer in zip(outputs.values(), buffers):
+                cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
+            ctx.queue.finish()
+    return {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}

@@ -1,0 +1,201 @@
+"""PNG files written band by band (PngWriter), and the previews of each AOV (depth and zdepth as
+disparity greys, normals as n * 0.5 + 0.5, ids as a colour per shape, shaded as clamped sRGB)."""
+from __future__ import annotations
+
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .files import Background, write_together
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+class PngWriter:
+    """Writes an 8-bit RGB PNG from bands of rows ((rows, width, 3) uint8), top to bottom: one
+    zlib stream over all rows, its output in IDAT chunks as it comes. write() returns at once: the
+    compression runs in the background (see Background); close() waits for it and ends the file;
+    stop() abandons it after a failure."""
+
+    def __init__(self, file, width: int, height: int):
+        self.file, self.width, self.height, self.rows = file, width, height, 0
+        self.zip = zlib.compressobj(6)
+        self.background = Background()
+        header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+        self.file.write(b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", header))
+
+    def write(self, rgb: np.ndarray) -> None:
+        self.rows += rgb.shape[0]
+        if self.rows > self.height:
+            raise ValueError(f"PngWriter: {self.rows} rows written, the image has {self.height}")
+        self.background.submit(self._compress, rgb)
+
+    def _compress(self, rgb: np.ndarray) -> None:
+        rows = rgb.shape[0]
+        lines = np.zeros((rows, 1 + 3 * self.width), np.uint8)  # filter type 0 (none) per row
+        lines[:, 1:] = np.asarray(rgb, np.uint8).reshape(rows, 3 * self.width)
+        self._emit(self.zip.compress(lines))
+
+    def _emit(self, data: bytes) -> None:
+        if data:
+            self.file.write(_png_chunk(b"IDAT", data))
+
+    def close(self) -> None:
+        self.background.finish()
+        self.stop()
+        if self.rows != self.height:
+            raise ValueError(f"PngWriter: {self.rows} of {self.height} rows written")
+        self._emit(self.zip.flush())
+        self.file.write(_png_chunk(b"IEND", b""))
+
+    def stop(self) -> None:
+        self.background.stop()
+
+
+def _png_bytes(rgb: np.ndarray) -> bytes:
+    """A whole image as PNG bytes."""
+    import io
+
+    buffer = io.BytesIO()
+    writer = PngWriter(buffer, rgb.shape[1], rgb.shape[0])
+    writer.write(rgb)
+    writer.close()
+    return buffer.getvalue()
+
+
+def write_png(path, rgb: np.ndarray) -> None:
+    write_together([(path, lambda tmp: Path(tmp).write_bytes(_png_bytes(np.ascontiguousarray(rgb, dtype=np.uint8))))])
+
+
+# -- previews ---------------------------------------------------------------------------------------
+class DepthPreview:
+    """Near bright, far dark, misses black: inverse distance (disparity) scaled between the
+    nearest and the farthest hit, to grey levels 255 (nearest) down to 48 (farthest), so that even
+    the farthest hit stays apart from the black of a miss. Disparity keeps contrast near the eye
+    when a ground plane runs to the horizon. Two passes: measure() sees every band (the scale is
+    the whole image's), then rgb() turns each band into grey rows."""
+
+    two_pass = True
+
+    def __init__(self):
+        self.low, self.high = np.inf, -np.inf
+
+    def measure(self, depth) -> None:
+        hit = np.isfinite(depth) & (depth > 0)
+        if hit.any():
+            inverse = 1.0 / depth[hit].astype(np.float64)
+            self.low, self.high = min(self.low, inverse.min()), max(self.high, inverse.max())
+
+    def rgb(self, depth) -> np.ndarray:
+        hit = np.isfinite(depth) & (depth > 0)
+        grey = np.zeros(depth.shape, np.uint8)
+        if hit.any():
+            inverse = 1.0 / depth[hit].astype(np.float64)
+            g = (inverse - self.low) / (self.high - self.low) if self.high > self.low else np.ones_like(inverse)
+            grey[hit] = np.round(48 + 207 * g).astype(np.uint8)
+        return np.repeat(grey[..., None], 3, axis=-1)
+
+
+class OnePassPreview:
+    """A preview whose rows depend on their band alone: rgb() turns each band as it comes."""
+
+    two_pass = False
+
+    def measure(self, band) -> None:
+        pass
+
+
+class NormalPreview(OnePassPreview):
+    """n * 0.5 + 0.5 as RGB; misses (zero normal) black."""
+
+    def rgb(self, normal) -> np.ndarray:
+        normal = np.asarray(normal)
+        level = normal.astype(np.float32) * np.float32(127.5) + np.float32(127.5)  # (n * 0.5 + 0.5) * 255
+        np.minimum(np.maximum(level, 0, out=level), 255, out=level)  # a unit normal is within; rounding may not be
+        rgb = np.rint(level, out=level).astype(np.uint8)
+        rgb[~np.any(normal != 0, axis=-1)] = 0
+        return rgb
+
+
+PREVIEWS = {"depth": DepthPreview, "normal": NormalPreview}
+
+
+def preview(aov: str, image: np.ndarray) -> np.ndarray:
+    """The (H, W, 3) uint8 preview of one AOV's whole image, as `pyclray render --png` writes it."""
+    maker = PREVIEWS[aov]()
+    maker.measure(image)
+    return np.ascontiguousarray(maker.rgb(image))
+
+
+def depth_preview(depth: np.ndarray) -> np.ndarray:
+    """The depth preview of a whole image (see DepthPreview)."""
+    return preview("depth", depth)
+
+
+def normal_preview(normal: np.ndarray) -> np.ndarray:
+    """The normal preview of a whole image (see NormalPreview)."""
+    return preview("normal", normal)
+
+
+def srgb_preview(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB clamped to [0, 1] and encoded with the sRGB transfer curve (IEC 61966-2-1)."""
+    c = np.clip(np.nan_to_num(np.asarray(linear, np.float64), nan=0.0), 0.0, 1.0)
+    encoded = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    return np.round(encoded * 255).astype(np.uint8)
+
+
+def id_colors(count: int) -> np.ndarray:
+    """(count, 3) uint8: distinct, bright colours, one per shape id: hues stepped by the golden
+    angle (neighbouring ids far apart on the colour wheel), saturation and value alternating in a
+    short cycle so that ids many hues apart still differ; never black (black is a miss)."""
+    k = np.arange(count)
+    hue = (k * 0.618033988749895) % 1.0
+    saturation = np.array([0.85, 0.55, 0.95])[k % 3]
+    value = np.array([0.95, 0.8, 0.65, 0.9])[(k // 3) % 4]
+    sector = np.floor(hue * 6).astype(int) % 6
+    f = hue * 6 - np.floor(hue * 6)
+    p, q, t = value * (1 - saturation), value * (1 - f * saturation), value * (1 - (1 - f) * saturation)
+    rgb = np.select(
+        [sector[:, None] == s for s in range(6)],
+        [np.stack(c, axis=-1) for c in ((value, t, p), (q, value, p), (p, value, t), (p, q, value), (t, p, value), (value, p, q))],
+    )
+    return np.round(rgb * 255).astype(np.uint8)
+
+
+def id_preview(ids: np.ndarray) -> np.ndarray:
+    """Each shape id in its own colour (id_colors), misses (-1) black."""
+    ids = np.asarray(ids)
+    rgb = np.zeros(ids.shape + (3,), np.uint8)
+    hit = ids >= 0
+    if hit.any():
+        rgb[hit] = id_colors(int(ids.max()) + 1)[ids[hit]]
+    return rgb
+
+
+class IdPreview(OnePassPreview):
+    """Each shape id in its own colour (id_colors), misses black: one pass (a colour per id)."""
+
+    def rgb(self, ids) -> np.ndarray:
+        return id_preview(ids)
+
+
+class ShadedPreview(OnePassPreview):
+    """The shaded image clamped to [0, 1] and sRGB-encoded (srgb_preview): one pass."""
+
+    def rgb(self, linear) -> np.ndarray:
+        return srgb_preview(linear)
+
+
+# AOV -> its preview, in the order of the files (zdepth is shown like depth; positions have none)
+PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview})
+
+
+def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:
+    """OUT.exr -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs given that have one)."""
+    out = Path(out)
+    stem = out.with_suffix("") if out.suffix.lower() == ".exr" else out
+    return {name: stem.with_name(f"{stem.name}.{name}.png") for name in PREVIEWS if name in aovs}

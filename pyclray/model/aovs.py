@@ -1,0 +1,61 @@
+"""The images a render or a cast can make (AOVs): the one table of what each one is.
+
+Everything that needs a fact about an AOV (its element type, its channels, its value on a miss, its
+bytes per pixel, its EXR channel names, whether cast makes it) reads it here; nothing else keeps a
+table of its own.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_REAL = {"fp32": np.float32, "fp64": np.float64}
+
+
+@dataclass(frozen=True)
+class Aov:
+    name: str
+    channels: int  # 1: an (H, W) image; 3: (H, W, 3)
+    real: bool  # the render's precision (float32 or float64); False: int32
+    miss: str  # what a pixel without a hit holds (for messages and the docs)
+    exr: tuple[str, ...]  # its EXR channel names, one per channel
+    cast: bool  # cast returns it too (the per-ray results)
+
+    def dtype(self, precision: str = "fp32") -> np.dtype:
+        return np.dtype(_REAL[precision] if self.real else np.int32)
+
+    def itemsize(self, precision: str = "fp32") -> int:
+        """Bytes per pixel."""
+        return self.channels * self.dtype(precision).itemsize
+
+    def shape(self, leading: tuple) -> tuple:
+        """The array's shape for these leading dimensions (pixels or rays)."""
+        return tuple(leading) + ((self.channels,) if self.channels > 1 else ())
+
+    def empty(self, leading: tuple, precision: str = "fp32") -> np.ndarray:
+        return np.empty(self.shape(leading), self.dtype(precision))
+
+
+# in the kernels' order (kernels/pyclray.cl takes each image's buffer in this order)
+TABLE = {
+    aov.name: aov
+    for aov in (
+        Aov("depth", 1, True, "+inf", ("Z",), True),
+        Aov("normal", 3, True, "(0, 0, 0)", ("N.X", "N.Y", "N.Z"), True),
+        Aov("id", 1, False, "-1", ("id",), True),
+        Aov("zdepth", 1, True, "+inf", ("zdepth",), False),
+        Aov("position", 3, True, "(0, 0, 0)", ("P.X", "P.Y", "P.Z"), False),
+        Aov("shaded", 3, True, "the background colour", ("R", "G", "B"), False),
+    )
+}
+
+# the images of every render and cast (and their default), and every image a render can make
+AOVS = tuple(name for name, aov in TABLE.items() if aov.cast)
+RENDER_AOVS = tuple(TABLE)
+
+
+def empty_images(aovs, precision: str = "fp32") -> dict:
+    """Zero-size (0, 0, ...) arrays of these AOVs' types and channels (what a writer needs to know
+    of a render before its first band)."""
+    return {name: TABLE[name].empty((0, 0), precision) for name in aovs}

@@ -1,0 +1,96 @@
+"""Reading scenes: TOML files (scene-format.md) into a Scene."""
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+from .animation import Animation
+from .camera import Camera, Image
+from .errors import RequestError, SceneError, no_unknown_keys, typed_table
+from .lights import Shading, lights_from_list
+from .scene import Scene
+from .shapes import REGISTRY
+
+
+def as_scene(value) -> Scene:
+    """A Scene, or the path of a scene file (loaded); anything else is a RequestError."""
+    if isinstance(value, Scene):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return load_scene(value)
+    raise RequestError(f"scene: expected a pyclray.Scene or the path of a scene file, got {type(value).__name__}")
+
+
+def _table(data: dict, key: str, *, required: bool) -> dict:
+    if key not in data:
+        if required:
+            raise SceneError(f"missing required table [{key}]")
+        return {}
+    if not isinstance(data[key], dict):
+        raise SceneError(f"expected a table [{key}], got {type(data[key]).__name__}", key=key)
+    return data[key]
+
+
+def scene_from_dict(data: dict, source: str | None = None) -> Scene:
+    """A Scene from the parsed contents of a scene file (see scene-format.md)."""
+    if not isinstance(data, dict):
+        raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
+    try:
+        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading", "animation"), required=())
+    except SceneError as error:
+        raise error.within(file=source, table="(top level)") from None
+    try:
+        table = _table(data, "camera", required=True)
+        no_unknown_keys(table, ("eye", "target", "up", "fov", "fov_axis"), required=("eye", "target", "fov"))
+        camera = Camera(**table)
+    except SceneError as error:
+        raise error.within(file=source, table="[camera]") from None
+    try:
+        table = _table(data, "image", required=False)
+        no_unknown_keys(table, ("width", "height"))
+        image = Image(**table)
+    except SceneError as error:
+        raise error.within(file=source, table="[image]") from None
+
+    entries = data.get("shapes", [])
+    if not isinstance(entries, list):
+        raise SceneError("expected an array of tables [[shapes]]", key="shapes", file=source)
+    shapes = []
+    for index, entry in enumerate(entries):
+        where = f"[[shapes]] #{index}"
+        try:
+            kind = typed_table(entry, REGISTRY, "shape")
+            where = f"[[shapes]] #{index} ({kind})"
+            shapes.append(REGISTRY[kind].from_table(entry, index))
+        except SceneError as error:
+            raise error.within(file=source, table=where) from None
+    lights = lights_from_list(data.get("lights", []), source)
+    try:
+        shading = Shading.from_table(_table(data, "shading", required=False))
+    except SceneError as error:
+        raise error.within(file=source, table="[shading]") from None
+    try:
+        animation = Animation.from_table(data["animation"]) if "animation" in data else None
+    except SceneError as error:
+        raise error.within(file=source, table="[animation]") from None
+    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation)
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene file; raises SceneError naming the file, table and key."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as error:
+        raise SceneError(f"cannot read the scene file: {(error.strerror or str(error)).lower()}", file=path) from None
+    try:
+        # a UTF-8 byte order mark (as some editors write) is not part of the text
+        data = tomllib.loads(raw.removeprefix(b"\xef\xbb\xbf").decode("utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"not valid TOML: {error}", file=path) from None
+    except UnicodeDecodeError as error:
+        raise SceneError(f"not valid UTF-8 text: {error}", file=path) from None
+    except RecursionError:
+        raise SceneError("not a scene: arrays or tables nested too deeply", file=path) from None
+    return scene_from_dict(data, source=str(path))
