@@ -64,6 +64,22 @@ class Camera:
         v = np.cross(w, u)
         return np.stack([u, v, w])
 
+    def intrinsics(self, width: int, height: int) -> np.ndarray:
+        """K (3x3 float64): the pinhole intrinsics of this camera's pixel-centre rays at this image
+        size, in OpenCV's convention (x right, y down, z forward; pixel (row j, column i) looks
+        through K^-1 [i + 0.5, j + 0.5, 1]): fx = width / (2 tan_x), cx = width / 2, and alike in y."""
+        tan_x, tan_y = self.tangents(width, height)
+        return np.array([[width / (2 * tan_x), 0.0, width / 2], [0.0, height / (2 * tan_y), height / 2], [0.0, 0.0, 1.0]])
+
+    def pose(self) -> np.ndarray:
+        """The camera-to-world pose (4x4 float64) in OpenCV's convention: its rotation's columns are
+        the camera's x (right = -u), y (down = -v) and z (forward = w) axes in world coordinates, its
+        translation the eye. A depth map back-projects as pose @ [depth * normalize(K^-1 [i+.5, j+.5, 1]), 1]."""
+        u, v, w = self.basis()
+        pose = np.eye(4)
+        pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -u, -v, w, self.eye
+        return pose
+
     def tangents(self, width: int, height: int) -> tuple[float, float]:
         """tan of the half opening angles along x and y (square pixels)."""
         t = math.tan(math.radians(self.fov) / 2)
