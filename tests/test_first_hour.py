@@ -1,0 +1,115 @@
+"""Issue 27, a user's first hour: every bad option of every command is one line and exit status 2,
+at once (before the scene is read, Dask imported or anything connects)."""
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import REPO
+
+TP02 = REPO / "scenes" / "tp02.toml"
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "pyclray", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, env=dict(os.environ))
+
+
+def the_one_line(result, command) -> str:
+    """The single stderr line of a bad-input exit: `pyclray <command>: error: ...`, no usage, no traceback."""
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith(f"pyclray{' ' + command if command else ''}: error: "), lines[0]
+    assert "usage:" not in result.stderr and "Traceback" not in result.stderr
+    return lines[0]
+
+
+# -- item 3: argparse's errors are one line too -------------------------------------------------
+@pytest.mark.parametrize("command,args,needle", [
+    ("render", ["render"], "required: SCENE, -o/--output"),
+    ("render", ["render", TP02], "required: -o/--output"),
+    ("render", ["render", TP02, "-o", "x.exr", "--bogus"], "unrecognized arguments: --bogus"),
+    ("render", ["render", TP02, "-o", "x.exr", "--precision", "fp16"], "--precision"),
+    ("render", ["render", TP02, "-o", "x.exr", "--size", "12"], "--size"),
+    ("animate", ["animate", TP02, "-o", "x.gif", "--workers", "0"], "--workers"),
+    ("animate", ["animate", TP02, "-o", "x.gif", "--workers", "2", "--scheduler", "tcp://h:1"], "not allowed"),
+    ("check", ["check", TP02, "--variant", "cuda"], "--variant"),
+    ("stability", ["stability", "--case", "no-such-case"], "--case"),
+    ("devices", ["devices", "--bogus"], "unrecognized arguments"),
+    ("", ["bogus"], "invalid choice: 'bogus'"),
+    ("", [], "required: COMMAND"),
+])
+def test_a_bad_option_is_one_line_naming_the_command(tmp_path, command, args, needle):
+    line = the_one_line(cli(*args, cwd=tmp_path), command)
+    assert needle in line
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- item 2: fail fast ----------------------------------------------------------------------------
+def test_a_malformed_scheduler_address_fails_before_dask_and_the_scene(tmp_path):
+    """--scheduler banana: one line at once; the scene (here a missing file) is never read and Dask
+    never imported (it took 20.7 s and a traceback)."""
+    code = ("import sys\nfrom pyclray.apps.cli import main\n"
+            "try:\n    main(sys.argv[1:])\nexcept SystemExit as exit:\n"
+            "    print(exit.code, 'distributed' in sys.modules)\n")
+    start = time.perf_counter()
+    result = subprocess.run([sys.executable, "-c", code, "animate", tmp_path / "missing.toml", "-o", tmp_path / "x.gif",
+                             "--scheduler", "banana"], capture_output=True, text=True)
+    assert time.perf_counter() - start < 10
+    assert result.stdout.split() == ["2", "False"]
+    line = result.stderr.strip()
+    assert line.startswith("pyclray animate: error: argument --scheduler: expected a Dask scheduler's address") and "'banana'" in line
+    assert "\n" not in line and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("address,good", [
+    ("tcp://10.0.0.5:8786", True), ("tls://scheduler.example.org:8786", True), ("ws://h:1", True),
+    ("tcp://[::1]:8786", True), ("127.0.0.1:8786", True), ("inproc://10.0.0.5/1234/1", True),
+    ("banana", False), ("tcp://host", False), ("tcp://host:0", False), ("tcp://host:70000", False),
+    ("http://host:8786", False), ("tcp://:8786", False), ("tcp://host:87x6", False), ("", False),
+])
+def test_scheduler_addresses(address, good):
+    from pyclray.apps.cli.options import scheduler_address
+
+    if good:
+        assert scheduler_address(address) == address
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match="PROTOCOL://HOST:PORT"):
+            scheduler_address(address)
+
+
+def test_a_scheduler_that_cannot_be_reached_is_one_line_without_waiting(tmp_path):
+    """A well-formed address Dask still refuses at once (TLS without its configuration): one line,
+    exit 2, and no 20 s wait for the failed Client's clean-up with a traceback at exit."""
+    start = time.perf_counter()
+    result = cli("animate", REPO / "scenes" / "tp02_orbit.toml", "-o", tmp_path / "x.gif", "--size", "8x8",
+                 "--scheduler", "tls://127.0.0.1:9")
+    assert time.perf_counter() - start < 10
+    line = the_one_line(result, "animate")
+    assert "--scheduler tls://127.0.0.1:9: cannot connect to a Dask scheduler there" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_animate_checks_its_options_before_reading_the_scene(tmp_path):
+    """--aov and --frames of the wrong form are named even when the scene file is missing."""
+    missing = tmp_path / "missing.toml"
+    line = the_one_line(cli("animate", missing, "-o", tmp_path / "x.gif", "--aov", "depth,normal"), "animate")
+    assert "--aov: a gif shows one image" in line
+    line = the_one_line(cli("animate", missing, "-o", tmp_path / "frames/", "--frames", "a:b"), "animate")
+    assert "--frames: expected A:B" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- item 4: the help names every shape type ------------------------------------------------------
+def test_the_help_names_every_shape_type():
+    from pyclray.model.shapes import REGISTRY
+
+    result = cli("--help")
+    text = " ".join(result.stdout.split())
+    assert result.returncode == 0
+    for kind in REGISTRY:
+        assert f"{kind}s" in text or f"{kind}es" in text, kind
