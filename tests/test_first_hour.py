@@ -113,3 +113,27 @@ def test_the_help_names_every_shape_type():
     assert result.returncode == 0
     for kind in REGISTRY:
         assert f"{kind}s" in text or f"{kind}es" in text, kind
+
+
+# -- item 6: read_exr on a bad file ---------------------------------------------------------------
+def test_read_exr_of_a_bad_file_is_one_output_error_and_prints_nothing(tmp_path, capfd):
+    """A missing file, a folder, a file of another kind and a damaged EXR: pyclray.OutputError (an
+    OSError) of one line naming the file; OpenEXR's own messages (its C library writes them to the
+    process's stdout and stderr) do not reach the terminal."""
+    import pyclray
+
+    good = tmp_path / "good.exr"
+    pyclray.write_exr(good, pyclray.render(pyclray.load_scene(TP02).with_size(32, 32)))
+    (tmp_path / "text.exr").write_text("not an image\n")
+    (tmp_path / "cut.exr").write_bytes(good.read_bytes()[:600])  # the header, and a chunk cut short
+    capfd.readouterr()
+    cases = {"missing.exr": "no such file or directory", ".": "is a directory", "text.exr": "not an OpenEXR file",
+             "cut.exr": "a damaged OpenEXR file"}
+    for name, reason in cases.items():
+        with pytest.raises(pyclray.OutputError) as error:
+            pyclray.read_exr(tmp_path / name)
+        message = str(error.value)
+        assert message.startswith(f"cannot read {tmp_path / name}: {reason}") and "\n" not in message, message
+        assert isinstance(error.value, OSError)
+    assert capfd.readouterr() == ("", "")
+    assert sorted(pyclray.read_exr(good)) == ["depth", "id", "normal"]  # and a good one still reads

@@ -17,15 +17,22 @@ reference the tests hold our files to.
 """
 from __future__ import annotations
 
+import io
 import os
 import struct
+import sys
+import tempfile
+import threading
 import zlib
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, redirect_stderr, redirect_stdout, suppress
+from pathlib import Path
 
 import numpy as np
 
 from ..model.aovs import TABLE
-from .files import Background
+from ..model.errors import OutputError
+from .files import Background, reason
 
 ID_MISS_UINT = 0xFFFFFFFF
 EXR_CHANNELS = {name: aov.exr for name, aov in TABLE.items()}
@@ -174,22 +181,70 @@ class ExrWriter:
         self.compressors.shutdown(wait=True, cancel_futures=True)
 
 
+EXR_MAGIC = b"\x76\x2f\x31\x01"  # the first four bytes of every OpenEXR file
+
+
 def read_exr(path) -> dict:
-    """The images of an EXR written by write_exr, as render returns them."""
+    """The images of an EXR written by write_exr or `pyclray render`, as render returns them: AOV
+    name -> array, for each AOV whose channels the file holds (ids and labels as int32).
+
+    A missing, unreadable or damaged file, or one that is not OpenEXR, raises OutputError of one
+    line ("cannot read PATH: ..."), and nothing is printed: OpenEXR's own messages, which its C
+    library writes to the process's stdout and stderr, are caught and put into the error."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as handle:
+            magic = handle.read(len(EXR_MAGIC))
+    except OSError as error:
+        raise OutputError(f"cannot read {path}: {reason(error)}") from None
+    if magic != EXR_MAGIC:
+        raise OutputError(f"cannot read {path}: not an OpenEXR file")
     import OpenEXR
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        channels = {name: channel.pixels for name, channel in exr.channels().items()}
+    try:
+        with _output_captured() as captured, OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = {name: channel.pixels for name, channel in exr.channels().items()}
+    except Exception as error:  # OpenEXR raises RuntimeError, ValueError, ... for a damaged file
+        detail = " ".join((captured.text.strip().splitlines() or [str(error)])[0].split())
+        raise OutputError(f"cannot read {path}: a damaged OpenEXR file ({detail})") from None
     out = {}
-    if "Z" in channels:
-        out["depth"] = channels["Z"]
-    if "N.X" in channels:
-        out["normal"] = np.stack([channels[c] for c in EXR_CHANNELS["normal"]], axis=-1)
-    if "id" in channels:
-        out["id"] = channels["id"].view(np.int32)
-    if "zdepth" in channels:
-        out["zdepth"] = channels["zdepth"]
-    for aov in ("position", "shaded"):
-        if all(name in channels for name in EXR_CHANNELS[aov]):
-            out[aov] = np.stack([channels[c] for c in EXR_CHANNELS[aov]], axis=-1)
+    for aov, names in EXR_CHANNELS.items():
+        if not all(name in channels for name in names):
+            continue
+        arrays = [channels[name] if TABLE[aov].real else channels[name].view(np.int32) for name in names]
+        out[aov] = arrays[0] if len(arrays) == 1 else np.stack(arrays, axis=-1)
     return out
+
+
+class _Captured:
+    text = ""
+
+
+@contextmanager
+def _output_captured():
+    """What C code writes to the process's stdout and stderr (file descriptors 1 and 2) and what is
+    printed to sys.stdout or sys.stderr during the block, kept in .text instead of printed. Python's own buffers are flushed first. Another thread
+    printing meanwhile is caught too: only OpenEXR's reads run in such a block (they take milliseconds)."""
+    captured = _Captured()
+    for stream in (sys.stdout, sys.stderr):
+        with suppress(Exception):
+            stream.flush()
+    python = io.StringIO()  # what the binding prints through Python's sys.stdout (its warnings)
+    with _capture_lock, tempfile.TemporaryFile() as sink, redirect_stdout(python), redirect_stderr(python):
+        saved = [os.dup(fd) for fd in (1, 2)]
+        try:
+            for fd in (1, 2):
+                os.dup2(sink.fileno(), fd)
+            try:
+                yield captured
+            finally:
+                for fd, original in zip((1, 2), saved):
+                    os.dup2(original, fd)
+                sink.seek(0)
+                captured.text = sink.read().decode("utf-8", "replace") + python.getvalue()
+        finally:
+            for original in saved:
+                os.close(original)
+
+
+_capture_lock = threading.Lock()
