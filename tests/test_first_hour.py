@@ -137,3 +137,64 @@ def test_read_exr_of_a_bad_file_is_one_output_error_and_prints_nothing(tmp_path,
         assert isinstance(error.value, OSError)
     assert capfd.readouterr() == ("", "")
     assert sorted(pyclray.read_exr(good)) == ["depth", "id", "normal"]  # and a good one still reads
+
+
+# -- item 8: names, --time, scene.at ---------------------------------------------------------------
+TWO_BALLS = """
+[camera]
+eye = [0.0, 2.0, 6.0]
+target = [0.0, 0.5, 0.0]
+fov = 45.0
+
+[[shapes]]
+type = "sphere"
+name = "ball"
+center = [0.0, 1.0, 0.0]
+radius = 1.0
+
+[[shapes]]
+type = "box"
+name = "ball"
+center = [2.0, 0.5, 0.0]
+size = [1.0, 1.0, 1.0]
+"""
+
+
+def test_two_shapes_of_one_name_are_a_scene_error_naming_file_table_and_key(tmp_path):
+    import pyclray
+
+    path = tmp_path / "twice.toml"
+    path.write_text(TWO_BALLS)
+    with pytest.raises(pyclray.SceneError) as caught:
+        pyclray.load_scene(path)
+    assert str(caught.value) == (f"{path}: table [[shapes]] #1 (box): key 'name': the name 'ball' is already used "
+                                 "by [[shapes]] #0")
+    line = the_one_line(cli("render", path, "-o", tmp_path / "x.exr"), "render")
+    assert line.endswith("the name 'ball' is already used by [[shapes]] #0")
+    path.write_text(TWO_BALLS.replace('name = "ball"\ncenter = [2.0', 'center = [2.0'))  # the default name: box1
+    assert [s.name for s in pyclray.load_scene(path).shapes] == ["ball", "box1"]
+
+
+def test_time_on_a_scene_without_animation_is_an_option_error_and_writes_nothing(tmp_path):
+    line = the_one_line(cli("render", TP02, "-o", tmp_path / "x.exr", "--time", "1.5", "--size", "8x8"), "render")
+    assert line == f"pyclray render: error: --time: {TP02} has no [animation] table; --time renders a time of an animated scene"
+    assert list(tmp_path.iterdir()) == []
+    result = cli("render", REPO / "scenes" / "tp02_orbit.toml", "-o", tmp_path / "x.exr", "--time", "1.5", "--size", "8x8")
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("t", [-1, -1e-9, float("nan"), float("inf"), "1.0", True, None])
+def test_scene_at_a_negative_or_non_time_is_a_request_error(t):
+    import pyclray
+
+    for path in (TP02, REPO / "scenes" / "tp02_orbit.toml"):  # static or animated alike
+        with pytest.raises(pyclray.RequestError, match=r"^t: expected a time in seconds >= 0 .* got "):
+            pyclray.load_scene(path).at(t)
+
+
+def test_scene_at_any_time_from_zero_on_holds_the_last_keys_past_the_end():
+    import pyclray
+
+    scene = pyclray.load_scene(REPO / "scenes" / "tp02_orbit.toml")
+    end = scene.animation.duration
+    assert scene.at(0) == scene.at(0.0) and scene.at(end + 100.0) == scene.at(end * 10)

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
+from numbers import Real
 
 import numpy as np
 
 from .animation import Animation, scene_at
 from .camera import MIN_PIXEL_TAN, Camera, Image
-from .errors import PyclrayWarning, SceneError
+from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
 from .shapes.base import Shape
@@ -56,7 +57,12 @@ class Scene:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
     def at(self, t: float) -> "Scene":
-        """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
+        """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
+        none. Frame k is at k / fps; past the last key (and the duration) every track holds its
+        last value. A negative or non-finite t is a RequestError."""
+        if isinstance(t, bool) or not isinstance(t, Real) or not 0 <= t < math.inf:
+            raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
+                               f"past the last key every track holds its last value), got {t!r}")
         return scene_at(self, t)
 
     def with_size(self, width: int, height: int) -> "Scene":

@@ -79,6 +79,8 @@ def load(path: str, size=None, t=None):
 
     scene = load_scene(path)
     scene = scene.with_size(*size) if size else scene
+    if t is not None and scene.animation is None:  # a time of nothing: a mistake, not ignored
+        raise BadInput(f"--time: {path} has no [animation] table; --time renders a time of an animated scene")
     return scene if t is None else scene.at(t)  # the static scene at that time of its animation
 
 
