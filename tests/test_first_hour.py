@@ -198,3 +198,43 @@ def test_scene_at_any_time_from_zero_on_holds_the_last_keys_past_the_end():
     scene = pyclray.load_scene(REPO / "scenes" / "tp02_orbit.toml")
     end = scene.animation.duration
     assert scene.at(0) == scene.at(0.0) and scene.at(end + 100.0) == scene.at(end * 10)
+
+
+# -- item 7: a render too large for memory ---------------------------------------------------------
+def test_a_render_too_large_for_memory_is_a_request_error_naming_the_bytes():
+    """60000x60000, every AOV: 172.8 GB of arrays. A RequestError saying so and how to render it in
+    parts, before anything is allocated (it was a MemoryError)."""
+    import pyclray
+
+    scene = pyclray.load_scene(TP02).with_size(60000, 60000)
+    every = ("depth", "normal", "id", "zdepth", "position", "shaded")
+    with pytest.raises(pyclray.RequestError) as caught:
+        pyclray.render(scene, aovs=every)
+    message = str(caught.value)
+    assert "need 172,800,000,000 bytes (173 GB)" in message and "60000x60000" in message
+    assert "window=(x0, y0, width, height)" in message and "pyclray render" in message and "\n" not in message
+    # a window of it is a render of that many pixels, and fits
+    assert pyclray.render(scene, aovs=every, window=(0, 30000, 64, 2))["id"].shape == (2, 64)
+
+
+def test_the_memory_check_uses_what_is_available(monkeypatch):
+    import pyclray
+    from pyclray.engine import memory
+    from pyclray.model.aovs import image_bytes
+
+    scene = pyclray.load_scene(TP02).with_size(64, 32)
+    need = image_bytes(("depth", "normal", "id"), 64 * 32)
+    assert need == 64 * 32 * (4 + 12 + 4)
+    monkeypatch.setattr(memory, "available_bytes", lambda: need - 1)
+    with pytest.raises(pyclray.RequestError, match=f"need {need:,} bytes"):
+        pyclray.render(scene)
+    assert pyclray.render(scene, aovs=("depth",))["depth"].shape == (32, 64)  # a third of it fits
+    monkeypatch.setattr(memory, "available_bytes", lambda: None)  # unknown: no check
+    assert pyclray.render(scene)["depth"].shape == (32, 64)
+
+
+def test_available_memory_is_read_on_linux():
+    from pyclray.engine.memory import available_bytes
+
+    if sys.platform.startswith("linux"):
+        assert available_bytes() > 0

@@ -295,6 +295,15 @@ def render_image(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
     the same images, bit for bit."""
     import numpy as np
 
+    from ..engine.memory import check_images_fit
+    from ..model.aovs import TABLE
+
+    # the whole image is put together here: it must fit in this machine's memory (a RequestError
+    # naming the bytes, before any task runs; render_bands streams it instead). A request of the
+    # wrong kind is left to the workers, which say what is wrong with it.
+    asked = (aovs.split(",") if isinstance(aovs, str) else list(aovs)) if aovs is not None else []
+    if asked and all(isinstance(a, str) and a.strip() in TABLE for a in asked) and precision in ("fp32", "fp64"):
+        check_images_fit(tuple(a.strip() for a in asked), precision, scene.image.width, scene.image.height)
     images, devices, top = {}, [], 0
     for band in render_bands(client, scene, aovs, precision, device, rows, progress):
         for name, array in band.items():

@@ -9,6 +9,7 @@ from ..model.loader import as_scene
 from ..model.scene import Scene
 from . import culling
 from .device import context_for
+from .memory import check_images_fit
 from .prepared import acceleration_for, check_renderable_once, render_inputs, shape_kinds
 from .programs import Variant, lanes_for
 from .request import Frame, check_request, run_kernel
@@ -50,6 +51,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     check_renderable_once(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
+    check_images_fit(aovs, precision, cols, rows)  # a clear error before any allocation
     camera, shape_args, lighting = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
     shadows = "shaded" in aovs and scene.shading.shadows

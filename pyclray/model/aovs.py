@@ -55,6 +55,11 @@ AOVS = tuple(name for name, aov in TABLE.items() if aov.cast)
 RENDER_AOVS = tuple(TABLE)
 
 
+def image_bytes(aovs, pixels: int, precision: str = "fp32") -> int:
+    """Bytes of the arrays a render of this many pixels returns for these AOVs."""
+    return pixels * sum(TABLE[name].itemsize(precision) for name in aovs)
+
+
 def empty_images(aovs, precision: str = "fp32") -> dict:
     """Zero-size (0, 0, ...) arrays of these AOVs' types and channels (what a writer needs to know
     of a render before its first band)."""
