@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.aovs import AOVS, RENDER_AOVS
+from ..model.aovs import AOVS, RENDER_AOVS, kernel_aovs
 from ..model.errors import PyclrayError, SceneError
 from ..model.loader import as_scene
 from ..model.scene import Scene
 from . import culling
 from .device import context_for
+from .labels import with_labels
 from .memory import check_images_fit
 from .prepared import acceleration_for, check_renderable_once, render_inputs, shape_kinds
 from .programs import Variant, lanes_for
@@ -36,8 +37,9 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
     SceneError (see scene.check_renderable).
-    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded: only those are
-    computed; shaded casts shadow rays where the scene's [shading] asks for them);
+    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded, label: only those
+    are computed; shaded casts shadow rays where the scene's [shading] asks for them; label, each
+    shape's label, is looked up from the id image);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
     window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
     rendered into images of that size, the same pixels as in the whole image; default: all of it;
@@ -47,11 +49,12 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     """
     scene = as_scene(scene)
     ctx = context_for(device)
-    aovs = check_request(aovs, precision, ctx, RENDER_AOVS)
+    asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     check_renderable_once(scene, precision)
     acceleration = acceleration_for(scene, acceleration)
     col0, row0, cols, rows = _window(scene, window)
-    check_images_fit(aovs, precision, cols, rows)  # a clear error before any allocation
+    check_images_fit(tuple(dict.fromkeys(aovs + asked)), precision, cols, rows)  # a clear error before any allocation
     camera, shape_args, lighting = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
     shadows = "shaded" in aovs and scene.shading.shadows
@@ -75,7 +78,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
     local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
     images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
-    return Frame(images, precision=precision, device=ctx.device.name.strip())
+    return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip())
 
 
 def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):

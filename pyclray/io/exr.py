@@ -8,6 +8,7 @@ EXR channels (one part, scanlines, ZIP compression, 32-bit):
   zdepth         FLOAT  depth along the camera's optical axis (+inf on a miss)
   P.X, P.Y, P.Z  FLOAT  world-space hit point (0 on a miss)
   R, G, B        FLOAT  the shaded image, linear RGB (the background colour on a miss)
+  label          UINT   the hit shape's label, int32 bit pattern as id (-1: a miss or no label)
 An fp64 render is stored as 32-bit floats: OpenEXR has no 64-bit float channel type (its pixel
 types are UINT, HALF and FLOAT).
 

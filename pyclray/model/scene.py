@@ -14,7 +14,7 @@ from .camera import MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
-from .shapes.base import Shape
+from .shapes.base import Shape, check_label
 
 # The kernels square lengths in the camera's frame (|centre - eye|^2, r^2, b^2) and add a few such
 # squares: every length must stay below the square root of the precision's largest float, with a
@@ -44,6 +44,11 @@ class Scene:
                     table=f"[[shapes]] #{index}",
                     file=self.source,
                 )
+            if shape.label is not None:  # (a scene file's labels are checked as they are read)
+                try:
+                    check_label(shape.label)
+                except SceneError as error:
+                    raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
         tan_x, tan_y = self.camera.tangents(self.image.width, self.image.height)
         if min(tan_x / self.image.width, tan_y / self.image.height) < MIN_PIXEL_TAN:
             raise SceneError(

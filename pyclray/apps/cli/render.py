@@ -118,7 +118,7 @@ def add_command(commands) -> None:
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded "
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,label "
         "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(
