@@ -22,8 +22,9 @@ from .engine.cast import cast, occluded
 from .engine.device import list_devices, select_device
 from .engine.render import render, render_animation
 from .engine.request import Frame
-from .io.bands import write_exr
+from .io.bands import write_exr, write_npz
 from .io.exr import read_exr
+from .io.npz import read_npz
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
@@ -39,7 +40,8 @@ __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "RequestError", "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
-    "read_exr", "render_animation", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "read_exr", "read_npz", "render_animation", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "write_npz",
 ]
 
 

@@ -238,3 +238,61 @@ def test_available_memory_is_read_on_linux():
 
     if sys.platform.startswith("linux"):
         assert available_bytes() > 0
+
+
+# -- items 1 and 10: the output's format follows its extension ---------------------------------------
+def test_o_png_writes_the_preview_of_the_first_aov_asked(tmp_path):
+    """-o out.png was an OpenEXR file named out.png: it is now a PNG, the preview of the first AOV
+    asked (depth by default), and only that AOV is rendered."""
+    import numpy as np
+
+    import pyclray
+    from pyclray.io import png
+    from test_output import read_png
+
+    result = cli("render", TP02, "-o", tmp_path / "out.png", "--size", "40x30")
+    assert result.returncode == 0, result.stderr
+    whole = pyclray.render(pyclray.load_scene(TP02).with_size(40, 30), aovs=("depth", "shaded"))
+    assert np.array_equal(read_png(tmp_path / "out.png"), png.depth_preview(whole["depth"]))
+    result = cli("render", TP02, "-o", tmp_path / "lit.PNG", "--size", "40x30", "--aov", "shaded,depth")
+    assert result.returncode == 0 and result.stdout.strip().endswith("[the shaded preview]"), result.stdout
+    assert np.array_equal(read_png(tmp_path / "lit.PNG"), png.srgb_preview(whole["shaded"]))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lit.PNG", "out.png"]
+
+
+def test_o_exr_still_writes_exr_and_previews(tmp_path):
+    import pyclray
+
+    result = cli("render", TP02, "-o", tmp_path / "o.exr", "--png", "--size", "16x16")
+    assert result.returncode == 0, result.stderr
+    assert sorted(pyclray.read_exr(tmp_path / "o.exr")) == ["depth", "id", "normal"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.depth.png", "o.exr", "o.id.png", "o.normal.png"]
+
+
+@pytest.mark.parametrize("output,extra,needle", [
+    ("out.tiff", [], "-o {out}: expected OUT.exr (OpenEXR channels), OUT.npz (numpy arrays, with the camera's K and "
+                     "pose) or OUT.png (the preview of one image); the format follows the extension"),
+    ("out", [], "expected OUT.exr"),
+    ("out.exr.bak", [], "expected OUT.exr"),
+    ("out.png", ["--png"], "--png: -o {out} is itself a preview"),
+    ("out.png", ["--aov", "position,depth"], "position has none"),
+])
+def test_another_extension_is_one_line_before_anything_is_read(tmp_path, output, extra, needle):
+    """Checked before the scene is read (a missing scene file is not what is reported)."""
+    out = tmp_path / output
+    line = the_one_line(cli("render", tmp_path / "missing.toml", "-o", out, *extra), "render")
+    assert needle.format(out=out) in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_scene_file_is_never_an_output(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_bytes(TP02.read_bytes())
+    os.link(scene, tmp_path / "linked.png")  # the same file under another name
+    (tmp_path / "o.depth.png").symlink_to(scene)
+    for output, extra in ((scene, []), (tmp_path / "." / "scene.toml", []), (tmp_path / "linked.png", []),
+                          (tmp_path / "o.exr", ["--png"])):
+        line = the_one_line(cli("render", scene, "-o", output, *extra), "render")
+        assert "is the scene file itself; give another output path" in line
+    assert scene.read_bytes() == TP02.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["linked.png", "o.depth.png", "scene.toml"]

@@ -209,7 +209,8 @@ PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPrevie
 
 
 def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:
-    """OUT.exr -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs given that have one)."""
+    """OUT.exr (or OUT.npz) -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs
+    given that have one)."""
     out = Path(out)
-    stem = out.with_suffix("") if out.suffix.lower() == ".exr" else out
+    stem = out.with_suffix("") if out.suffix.lower() in (".exr", ".npz") else out
     return {name: stem.with_name(f"{stem.name}.{name}.png") for name in PREVIEWS if name in aovs}
