@@ -112,7 +112,7 @@ def add_cluster_options(parser, what: str) -> None:
     group.add_argument("--workers", type=count, metavar="N",
                        help=f"render {what} on a local Dask cluster of N worker processes (pip install 'pyclray[cluster]')")
     group.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS",
-                       help=f"render {what} on a running Dask cluster, e.g. tcp://host:8786 (see README, Clusters)")
+                       help=f"render {what} on a running Dask cluster, e.g. tcp://host:8786 (see docs/clusters.md)")
 
 
 def cluster_module():
