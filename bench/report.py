@@ -284,9 +284,11 @@ def main(argv=None) -> None:
         raise SystemExit(f"python -m bench.report: no {args.results}: run `python -m pytest bench` first")
     args.output.parent.mkdir(parents=True, exist_ok=True)
     rows, machine, when = load(args.results)
+    plotted = True
     try:
         plot(rows, args.plot)
     except ModuleNotFoundError as error:  # matplotlib is in the bench extra
+        plotted = False
         print(f"no plot ({error}: pip install -e '.[bench]')")
     target_lines, _ = targets(rows)
     cpu = machine.get("cpu", {})
@@ -383,7 +385,7 @@ def main(argv=None) -> None:
         from .open3d_compare import write_report
 
         write_report(scale, args.output)
-    print(f"wrote {args.output} and {args.plot}")
+    print(f"wrote {args.output}" + (f" and {args.plot}" if plotted else ""))
     if args.readme:
         update_readme(args.readme, rows, target_summary(rows))
         print(f"updated the headline in {args.readme}")
