@@ -1,5 +1,8 @@
 """Issue 27, a user's first hour: every bad option of every command is one line and exit status 2,
-at once (before the scene is read, Dask imported or anything connects)."""
+at once (before the scene is read, Dask imported or anything connects); the help names every shape;
+read_exr's errors; a render too large for memory; unique shape names, --time and scene.at; the
+output's format by extension. Labels, .npz files, the benchmarks and the README have files of their
+own (test_labels.py, test_npz.py, test_bench_policy.py, test_docs.py)."""
 import argparse
 import os
 import subprocess
