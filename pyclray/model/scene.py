@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -36,7 +37,7 @@ class Scene:
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
         if not isinstance(self.shading, Shading):
             raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
-        for index, shape in enumerate(self.shapes):
+        for index, shape in enumerate(() if _validated(self.shapes) else self.shapes):
             if not isinstance(shape, Shape):
                 raise SceneError(
                     f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
@@ -54,6 +55,7 @@ class Scene:
             )
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
+        _remember_valid(self.shapes)
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
@@ -75,6 +77,24 @@ class Scene:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
         return tuple(t for t in REGISTRY if t in present)
+
+
+# Shapes tuples already checked, the most recent first: a view from another camera
+# (dataclasses.replace(scene, camera=...)) keeps the tuple and need not walk a million shapes again.
+_VALID_MAX = 32
+_valid: OrderedDict = OrderedDict()
+
+
+def _validated(shapes: tuple) -> bool:
+    entry = _valid.get(id(shapes))
+    return entry is not None and entry is shapes
+
+
+def _remember_valid(shapes: tuple) -> None:
+    _valid[id(shapes)] = shapes  # holds the tuple: its id() cannot be reused while remembered
+    _valid.move_to_end(id(shapes))
+    while len(_valid) > _VALID_MAX:
+        _valid.popitem(last=False)
 
 
 # The kernels keep a shape as 8 x its index in its type's array + its type (the BVH's refs, the
