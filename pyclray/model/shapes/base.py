@@ -253,14 +253,23 @@ def to_world(columns, origin) -> np.ndarray:
     return matrix
 
 
+def in_frame(x, rotation) -> np.ndarray:
+    """The coordinates of vectors x (N, 3) along a frame's axes (rotation's rows), each summed as
+    (r0 x0 + r1 x1) + r2 x2: the order kernels/rebase.cl's to_frame sums in, so that the host's and
+    the device's rebase round alike (numpy's matrix product may sum in another order)."""
+    x = np.asarray(x, np.float64).reshape(-1, 3)
+    rotation = np.asarray(rotation, np.float64)
+    return (x[:, 0:1] * rotation[:, 0] + x[:, 1:2] * rotation[:, 1]) + x[:, 2:3] * rotation[:, 2]
+
+
 def rebase_flat(out, world, origin, rotation) -> None:
     """The fields a flat shape (disk, rectangle) rebases alike: its centre and unit normal in the
     frame, the frame origin's signed distance to its plane (normal.w, from float64 with an exact
     dot), and its world normal, as is."""
     center, normal = world["center"][:, :3], world["normal"][:, :3]
     F = center - origin
-    out["center"][:, :3] = F @ rotation.T
-    out["normal"][:, :3] = normal @ rotation.T
+    out["center"][:, :3] = in_frame(F, rotation)
+    out["normal"][:, :3] = in_frame(normal, rotation)
     out["normal"][:, 3] = -dot2(normal, F)
     out["world_normal"][:, :3] = normal
 

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, padded_bounds, to_world, distance
+from .base import Shape, in_frame, padded_bounds, to_world, distance
 
 
 def rotation(axis, angle_degrees) -> np.ndarray:
@@ -121,11 +121,11 @@ class Box(Shape):
     def _rebase(cls, out, world, origin, rotation_rows):
         F = world["center"][:, :3] - origin
         half = world["half_size"][:, :3]
-        out["center"][:, :3] = F @ rotation_rows.T
+        out["center"][:, :3] = in_frame(F, rotation_rows)
         out["half_size"][:, :3] = half
         for axis in range(3):
             e = world[f"axis{axis}"][:, :3]
-            out[f"axis{axis}"][:, :3] = e @ rotation_rows.T
+            out[f"axis{axis}"][:, :3] = in_frame(e, rotation_rows)
             out[f"world_axis{axis}"][:, :3] = e
             # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
             ones = np.ones((len(e), 1))

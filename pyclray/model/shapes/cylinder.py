@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
+from .base import Shape, in_frame, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
 
 
 @dataclass(frozen=True)
@@ -100,11 +100,11 @@ class Cylinder(Shape):
         p1 = world["p1"][:, :3] - origin
         A = world["axis"][:, :3]
         radius = world["p0"][:, 3]
-        out["p0"][:, :3] = p0 @ rotation.T
+        out["p0"][:, :3] = in_frame(p0, rotation)
         out["p0"][:, 3] = radius * radius
-        out["p1"][:, :3] = p1 @ rotation.T
+        out["p1"][:, :3] = in_frame(p1, rotation)
         out["p1"][:, 3] = world["p1"][:, 3]
-        out["axis"][:, :3] = A @ rotation.T
+        out["axis"][:, :3] = in_frame(A, rotation)
         # what every ray from the frame origin shares, from error-free products and sums
         out["axis"][:, 3] = cross_norm2_minus(p0, A, radius)
         out["world_axis"][:, :3] = A

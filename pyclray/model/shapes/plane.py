@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, frame_columns, to_world
+from .base import Shape, in_frame, frame_columns, to_world
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
 # disk's error does not depend on its size; a rectangle's, two float32 triangles, does)
@@ -113,7 +113,7 @@ class Plane(Shape):
         n = n_h[:, :3]
         # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
         origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(n), 1))], axis=1)
-        out["normal"][:, :3] = n @ rotation.T
+        out["normal"][:, :3] = in_frame(n, rotation)
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
         out["exact"] = np.ascontiguousarray(n_h).view(np.uint64)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
-from .base import Shape, distance, flat_hits, padded_bounds, rebase_flat, to_world, unit_rows
+from .base import Shape, in_frame, distance, flat_hits, padded_bounds, rebase_flat, to_world, unit_rows
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -104,8 +104,8 @@ class Rectangle(Shape):
     @classmethod
     def _rebase(cls, out, world, origin, rotation):
         rebase_flat(out, world, origin, rotation)
-        out["u_dual"][:, :3] = world["u_dual"][:, :3] @ rotation.T
-        out["v_dual"][:, :3] = world["v_dual"][:, :3] @ rotation.T
+        out["u_dual"][:, :3] = in_frame(world["u_dual"][:, :3], rotation)
+        out["v_dual"][:, :3] = in_frame(world["v_dual"][:, :3], rotation)
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod

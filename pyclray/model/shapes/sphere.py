@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, distance
+from .base import Shape, in_frame, distance
 
 
 def eye_term(F, radius):
@@ -69,7 +69,7 @@ class Sphere(Shape):
     def _rebase(cls, out, world, origin, rotation):
         center, radius = world["center"][:, :3], world["center"][:, 3]
         F = center - origin
-        out["center"][:, :3] = F @ rotation.T
+        out["center"][:, :3] = in_frame(F, rotation)
         out["center"][:, 3] = radius * radius
         out["c"] = eye_term(F, radius)
 
