@@ -31,9 +31,10 @@ import pyopencl as cl
 from ..model.errors import PyclrayError, SceneError
 from ..model.scene import MAX_LENGTH, Scene, check_renderable, check_shape_count
 from ..model.shapes import REGISTRY
+from ..model.animation import derivation
 from ..model.shapes.base import entries
 from . import culling, shading
-from .bvh import outward32
+from .bvh import outward32, sah_cost, widened
 from .device import has_fp64
 from .programs import Variant, kernels_for
 from .request import REAL, camera_struct, input_buffer, render_lock
@@ -80,9 +81,8 @@ def aligned(array: np.ndarray) -> np.ndarray:
         return array
     raw = np.empty(array.nbytes + ALIGNMENT, np.uint8)
     start = -raw.ctypes.data % ALIGNMENT
-    out = raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
-    out[...] = array
-    return out
+    raw[start:start + array.nbytes] = np.ascontiguousarray(array).reshape(-1).view(np.uint8)  # padding too
+    return raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
 
 
 def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
@@ -143,8 +143,78 @@ class PreparedScene:
                 self.world_nodes = _buffer(ctx, self._world_nodes_host)
         with np.errstate(over="ignore", invalid="ignore"):
             self._materials_host = aligned(shading.pack_materials(shapes, precision))
+        self.base, self.dirty = shapes, set()  # see update
+        self._refit = None
         self.materials = _buffer(ctx, self._materials_host)
         self.reach = self._reach()
+
+    # -- an animation frame: a few shapes moved --------------------------------------------------
+    # Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this
+    # factor: a refit keeps the tree's topology, so shapes that wander far apart make its boxes
+    # overlap and rays visit more of them. Measured (bench/views.py, "animation"): 10 of 100,000
+    # spheres moving across the whole field raise the cost by well under 1%; a refit costs about a
+    # millisecond where a rebuild of that scene costs half a second.
+    REFIT_COST_MAX = 1.5
+
+    def update(self, shapes: tuple, changed) -> bool:
+        """Become the prepared scene of ``shapes``, a tuple equal to this scene's but for the shapes at
+        ``changed`` (an animation's frame, pyclray.model.animation.derivation): rewrite their world
+        entries, their materials and the BVH's boxes above them (a refit), on the host and the device.
+        O(K log N) host work for K changed shapes. False (and nothing changed) where the changes need a
+        new scene: another type or primitive count, or a refit that would degrade the tree."""
+        indices = sorted(set(changed) | self.dirty)  # shapes changed before and no longer: back to theirs
+        for i in indices:
+            if i >= len(shapes) or i >= len(self.shapes) or shapes[i].type != self.shapes[i].type \
+                    or shapes[i].primitive_count() != self.shapes[i].primitive_count():
+                return False
+        if self._refit is None:
+            self._refit = _RefitState(self)
+        state = self._refit
+        positions, rows_by_kind, bounds_rows = [], {}, []
+        for i in indices:
+            kind = self.kinds[shapes[i].type]
+            mine = state.positions(kind, i)
+            rows = kind.cls.pack_world([shapes[i]])
+            rows_by_kind.setdefault(kind.name, ([], []))
+            rows_by_kind[kind.name][0].append(mine)
+            rows_by_kind[kind.name][1].append(rows)
+            if kind.cls.bounded:
+                positions.append(state.leaf_positions(kind, mine))
+                bounds_rows.append(kind.cls.bounds_of(rows))
+        refitted = None
+        if positions:
+            refitted = state.refit(np.concatenate(positions), np.concatenate(bounds_rows))
+            if refitted is None:
+                return False
+        # the world entries, on the host and on the device
+        for name, (where, rows) in rows_by_kind.items():
+            kind = self.kinds[name]
+            where, rows = np.concatenate(where), np.concatenate(rows)
+            kind.world[where] = rows
+            if self.on_device:
+                self._scatter(kind.world_buffer, where, rows)
+        if refitted is not None and self.on_device:
+            nodes = refitted
+            self._scatter(self.world_nodes, nodes, self._world_nodes_host.reshape(-1, 2, 4)[nodes].reshape(-1, 4).copy(), width=2)
+        # materials (an animated colour or size): the rows that differ
+        materials = shading.pack_materials([shapes[i] for i in indices], self.precision)
+        if not (materials == self._materials_host[indices]).all():
+            self._materials_host[indices] = materials
+            cl.enqueue_copy(self.ctx.queue, self.materials, self._materials_host)
+        self.reach = self._reach()
+        self.shapes, self.dirty, self.view_key = shapes, set(changed), None
+        return True
+
+    def _scatter(self, buffer, index, rows, width=None) -> None:
+        """Write rows (each width double4s) at these indices of a device buffer (kernels' scatter_rows)."""
+        rows = np.ascontiguousarray(rows)
+        width = width or rows.dtype.itemsize // 32
+        if not len(index):
+            return
+        kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
+        index = np.ascontiguousarray(index, np.int32)
+        kernels["scatter_rows"](self.ctx.queue, (len(index),), None, buffer, input_buffer(self.ctx, index),
+                                input_buffer(self.ctx, rows.view(np.float64).reshape(-1)), np.int32(len(index)), np.int32(width))
 
     def _kind(self, t, world, ids, primitives) -> Kind:
         cls = REGISTRY[t]
@@ -232,9 +302,78 @@ class PreparedScene:
         return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, tan_x, tan_y, width, height)
 
 
+class _RefitState:
+    """What refitting a prepared scene's BVH needs, computed at its first update: each node's parent,
+    each leaf position's leaf, the entries' widened boxes in leaf order, the built tree's SAH cost,
+    and per type its entries sorted by shape id and their leaf positions."""
+
+    def __init__(self, prepared: PreparedScene):
+        tree, bvh = prepared.bvh.tree, prepared.bvh
+        self.prepared = prepared
+        self.parent = np.full(tree.nodes, -1, np.int64)
+        internal = np.nonzero(tree.count == 0)[0] if tree.nodes > 1 else np.zeros(0, np.int64)
+        self.parent[tree.first[internal]] = internal
+        self.parent[tree.first[internal] + 1] = internal
+        self.leaf_of = np.zeros(len(bvh.leaf_type), np.int64)
+        for leaf in np.nonzero(tree.count > 0)[0]:
+            self.leaf_of[tree.first[leaf]: tree.first[leaf] + tree.count[leaf]] = leaf
+        self.widened = widened(bvh.bounds) if len(bvh.bounds) else np.zeros((0, 2, 3))
+        self.built_cost = sah_cost(tree) if tree.nodes else 0.0
+        self.by_id, self.leaf_positions_of = {}, {}
+        for k, t in enumerate(bvh.types):
+            self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
+
+    def positions(self, kind: Kind, shape_index: int) -> np.ndarray:
+        """The positions of a shape's entries in its type's array."""
+        if kind.name not in self.by_id:
+            order = np.argsort(kind.ids, kind="stable")
+            self.by_id[kind.name] = (order, kind.ids[order])
+        order, ids = self.by_id[kind.name]
+        lo, hi = np.searchsorted(ids, shape_index, "left"), np.searchsorted(ids, shape_index, "right")
+        return order[lo:hi]
+
+    def leaf_positions(self, kind: Kind, positions: np.ndarray) -> np.ndarray:
+        return self.leaf_positions_of[kind.name][positions]
+
+    def refit(self, positions: np.ndarray, bounds: np.ndarray):
+        """New unwidened bounds of the entries at these leaf positions: the boxes of their leaves and
+        of every ancestor recomputed (each after its changed descendants). Returns the changed nodes,
+        or None (nothing changed) where the refitted tree's SAH cost exceeds REFIT_COST_MAX times the
+        built one's."""
+        tree, bvh = self.prepared.bvh.tree, self.prepared.bvh
+        old = (tree.lo.copy(), tree.hi.copy(), bvh.bounds[positions].copy(), self.widened[positions].copy())
+        bvh.bounds[positions] = bounds
+        self.widened[positions] = widened(bounds)
+        touched = [np.unique(self.leaf_of[positions])]
+        for leaf in touched[0]:
+            first, count = tree.first[leaf], tree.count[leaf]
+            tree.lo[leaf] = self.widened[first:first + count, 0].min(axis=0)
+            tree.hi[leaf] = self.widened[first:first + count, 1].max(axis=0)
+        nodes = np.unique(self.parent[touched[0]])
+        nodes = nodes[nodes >= 0]
+        while nodes.size:
+            touched.append(nodes)
+            left, right = tree.first[nodes], tree.first[nodes] + 1
+            tree.lo[nodes] = np.minimum(tree.lo[left], tree.lo[right])
+            tree.hi[nodes] = np.maximum(tree.hi[left], tree.hi[right])
+            nodes = np.unique(self.parent[nodes])
+            nodes = nodes[nodes >= 0]
+        if sah_cost(tree) > PreparedScene.REFIT_COST_MAX * self.built_cost:
+            tree.lo[...], tree.hi[...] = old[0], old[1]
+            bvh.bounds[positions], self.widened[positions] = old[2], old[3]
+            return None
+        changed = np.unique(np.concatenate(touched))
+        if self.prepared.on_device:
+            corners = self.prepared._world_nodes_host.reshape(-1, 2, 4)
+            corners[changed, 0, :3], corners[changed, 1, :3] = tree.lo[changed], tree.hi[changed]
+        return changed
+
+
 def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
     """The scene's shapes prepared on this device at this precision: kept per shapes tuple (a moved
-    camera keeps the scene's tuple), built at the first view."""
+    camera keeps the scene's tuple), built at the first view; a frame of an animation (a tuple that
+    pyclray.model.animation says was made from another by changing a few shapes) updates the prepared
+    scene of that other tuple in place (PreparedScene.update) instead."""
     shapes = scene.shapes
     key = (ctx.device.int_ptr, id(shapes), precision)
     with render_lock:
@@ -242,7 +381,23 @@ def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
         if entry is not None and entry.shapes is shapes:
             _prepared.move_to_end(key)
             return entry
+    derived = derivation(shapes)
+    if derived is not None:
+        base, changed = derived
+        with render_lock:
+            candidates = [(k, p) for k, p in _prepared.items()
+                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision]
+        for old_key, candidate in candidates:
+            with candidate.lock:
+                updated = candidate.shapes is not shapes and candidate.update(shapes, changed)
+            with render_lock:
+                _prepared.pop(old_key, None)
+                if updated:
+                    _prepared[key] = candidate
+                    return candidate
     prepared = PreparedScene(ctx, shapes, precision)
+    if derived is not None:
+        prepared.base, prepared.dirty = derived[0], set(derived[1])
     with render_lock:
         _prepared[key] = prepared
         while len(_prepared) > 1 and (len(_prepared) > PREPARED_MAX or

@@ -181,15 +181,9 @@ def read_exr(path) -> dict:
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         channels = {name: channel.pixels for name, channel in exr.channels().items()}
     out = {}
-    if "Z" in channels:
-        out["depth"] = channels["Z"]
-    if "N.X" in channels:
-        out["normal"] = np.stack([channels[c] for c in EXR_CHANNELS["normal"]], axis=-1)
-    if "id" in channels:
-        out["id"] = channels["id"].view(np.int32)
-    if "zdepth" in channels:
-        out["zdepth"] = channels["zdepth"]
-    for aov in ("position", "shaded"):
-        if all(name in channels for name in EXR_CHANNELS[aov]):
-            out[aov] = np.stack([channels[c] for c in EXR_CHANNELS[aov]], axis=-1)
+    for name, aov in TABLE.items():  # every AOV whose channels the file has, as render returns it
+        if all(channel in channels for channel in aov.exr):
+            planes = [channels[channel] for channel in aov.exr]
+            image = planes[0] if aov.channels == 1 else np.stack(planes, axis=-1)
+            out[name] = image if aov.real else image.view(np.int32)  # integers: their 32-bit pattern
     return out

@@ -191,7 +191,7 @@ class ShadedPreview(OnePassPreview):
 
 
 # AOV -> its preview, in the order of the files (zdepth is shown like depth; positions have none)
-PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview})
+PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview, "primitive": IdPreview})
 
 
 def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:

@@ -62,7 +62,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         try:
             kind = typed_table(entry, REGISTRY, "shape")
             where = f"[[shapes]] #{index} ({kind})"
-            shapes.append(REGISTRY[kind].from_table(entry, index))
+            shapes.append(REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None))
         except SceneError as error:
             raise error.within(file=source, table=where) from None
     lights = lights_from_list(data.get("lights", []), source)

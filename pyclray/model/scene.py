@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .animation import Animation, scene_at
+from .animation import Animation, derivation, scene_at
 from .camera import MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, SceneError
 from .lights import Shading, check_lights
@@ -86,8 +86,13 @@ _valid: OrderedDict = OrderedDict()
 
 
 def _validated(shapes: tuple) -> bool:
+    """Whether this tuple was checked, or was made by an animation from a checked one by changing
+    shapes through dataclasses.replace (which checks them): no item needs a look then."""
     entry = _valid.get(id(shapes))
-    return entry is not None and entry is shapes
+    if entry is not None and entry is shapes:
+        return True
+    derived = derivation(shapes)
+    return derived is not None and _validated(derived[0])
 
 
 def _remember_valid(shapes: tuple) -> None:

@@ -23,3 +23,13 @@ __kernel void rebase_nodes(__global const double4* world, __global BvhNode* out,
     out[k].lo.xyz = clamp(convert_float3_rtn(lo), -limit, limit);
     out[k].hi.xyz = clamp(convert_float3_rtp(hi), -limit, limit);
 }
+
+/* An animation frame's changed entries (pyclray.engine.prepared.PreparedScene.update): rows of width
+ * double4s each (a world struct, or a BVH node's two corners) written at their indices. */
+__kernel void scatter_rows(__global double4* out, __global const int* index, __global const double4* rows,
+                           const int n, const int width)
+{
+    const int k = get_global_id(0);
+    if (k >= n) return;
+    for (int c = 0; c < width; ++c) out[(size_t)index[k] * width + c] = rows[(size_t)k * width + c];
+}

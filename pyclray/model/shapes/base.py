@@ -59,12 +59,16 @@ class Shape:
     solid: ClassVar[bool] = False
 
     # -- scene file ----------------------------------------------------------------------------
+    # True for a type whose table may name files (read relative to the scene file's folder)
+    reads_files: ClassVar[bool] = False
+
     @classmethod
-    def from_table(cls, table: dict, index: int):
+    def from_table(cls, table: dict, index: int, folder=None):
         no_unknown_keys(table, ("type", "name") + cls.keys + MATERIAL_KEYS, required=cls.required)
         name = text("name", table.get("name", f"{cls.type}{index}"))
         material = Material.from_table(table)
-        shape = cls._from_table({k: v for k, v in table.items() if k not in MATERIAL_KEYS}, name)
+        own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS}
+        shape = cls._from_table(own, name, folder) if cls.reads_files else cls._from_table(own, name)
         return replace(shape, material=material) if material != Material() else shape
 
     @classmethod
@@ -163,6 +167,11 @@ class Shape:
         """(N, 2, 3) bounds of these shapes' primitives (see bounds_of)."""
         return cls.bounds_of(cls.pack_world(shapes))
 
+    def box(self) -> np.ndarray:
+        """(2, 3) [lo, hi]: the box holding the whole shape (every primitive of a batch)."""
+        bounds = self.world_bounds([self])
+        return np.stack([bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)])
+
     @classmethod
     def bounding_spheres(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
         """(centres, radii) of spheres holding these shapes' primitives (see spheres_of)."""
@@ -204,7 +213,7 @@ class Shape:
 
     def extent_from(self, point) -> float:
         """How far from ``point`` the shape reaches (for Mitsuba's clip range)."""
-        bounds = self.world_bounds([self])[0]
+        bounds = self.box()
         corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         return float(np.linalg.norm(corners - np.asarray(point, np.float64), axis=1).max())
 
