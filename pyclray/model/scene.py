@@ -53,9 +53,10 @@ class Scene:
                 key="fov",
                 file=self.source,
             )
+        if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
+            _remember_valid(self.shapes)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
-        _remember_valid(self.shapes)
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
