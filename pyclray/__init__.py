@@ -20,6 +20,7 @@ if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.a
 
 from .engine.cast import cast, occluded
 from .engine.device import list_devices, select_device
+from .engine.prepared import clear as clear_cache
 from .engine.render import render, render_animation, render_views
 from .engine.request import Frame
 from .io.bands import write_exr
@@ -36,7 +37,7 @@ from .version import __version__
 
 
 __all__ = [
-    "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
+    "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
     "read_exr", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
