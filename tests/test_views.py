@@ -55,12 +55,15 @@ def every_shape(offset=(0.0, 0.0, 0.0), size=(48, 40)) -> pyclray.Scene:
     return dataclasses.replace(scene, camera=camera, shapes=tuple(shapes), lights=lights)
 
 
+@pytest.mark.parametrize("rebase", ["device", "host"])
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 @pytest.mark.parametrize("offset", [1e5, 1e6, 1e8])
-def test_a_far_view_after_a_near_one_is_the_fresh_far_view_bit_for_bit(precision, offset):
+def test_a_far_view_after_a_near_one_is_the_fresh_far_view_bit_for_bit(monkeypatch, precision, offset, rebase):
     """The same shapes seen from the usual camera and then from one 1e5..1e8 away along the view
-    axis (the scene moved with it, so both see it): the far view equals a fresh scene's far view."""
+    axis (the scene moved with it, so both see it): the far view equals a fresh scene's far view,
+    with the per-view pass on the device and on the host (small scenes, devices without fp64)."""
     need(precision)
+    monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0 if rebase == "device" else 10**9)
     near = every_shape()
     far_scene = every_shape((offset, 0.3 * offset, -offset))
     expected = fresh(far_scene, aovs=ALL, precision=precision)
@@ -117,6 +120,7 @@ def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypat
     so the same images to the last bit."""
     need(precision)
     scene = every_shape((1e4, 0.0, 0.0))
+    monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0)  # a small scene: on the device all the same
     expected = fresh(scene, aovs=ALL, precision=precision)
     monkeypatch.setattr(prepared, "has_fp64", lambda device: False)
     same(fresh(scene, aovs=ALL, precision=precision), expected)

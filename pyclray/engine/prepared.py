@@ -95,12 +95,19 @@ def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
     return cl.Buffer(ctx.context, access | mf.COPY_HOST_PTR, hostbuf=array)
 
 
+# Scenes of fewer entries than this rebase on the host: measured per moved view (bench/views.py's
+# sphere fields, PoCL on 2 cores), the host takes 0.29 ms for 16 entries and 0.45 ms for 1,024, the
+# device 0.24 and 0.28 ms (a launch each); at 4,096 0.91 against 0.36, at 16,384 4.0 against 0.6.
+# Below the threshold the difference is a tenth of a millisecond, and such a scene's first render
+# then needs no second program (the rebase's), which would add its build to a cold start.
+DEVICE_REBASE_FROM = 1024
+
+
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
     def __init__(self, ctx, shapes: tuple, precision: str):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
-        self.on_device = has_fp64(ctx.device)  # rebase on the device (float64), else on the host
         self.lock = threading.Lock()  # one view at a time uses the frame buffers
         self.view_key = None
         by_type: dict = {}
@@ -110,17 +117,21 @@ class PreparedScene:
             by_type[shape.type][1].append(index)
         self.types = tuple(t for t in REGISTRY if t in by_type)
         worlds, bounds = {}, {}
+        self.on_device = False  # see below, once the entries are counted
         for t in self.types:
             cls = REGISTRY[t]
             mine, ids = by_type[t]
             world = cls.pack_world(mine)
             entry_ids, primitives = entries(mine, ids)
             worlds[t] = (world, entry_ids, primitives)
+            self.on_device = self.on_device or len(world) >= DEVICE_REBASE_FROM
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
                     bounds[t] = cls.bounds_of(world)
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
+        # rebase on the device (float64) where it has float64 and the scene is large enough to pay
+        self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
             world, ids, primitives = worlds[t]
