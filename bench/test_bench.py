@@ -237,8 +237,11 @@ def test_breakdown(benchmark, scenes_dir, part):
     ctx = device.context_for(None)
     width = height = ERROR_SIZE
     pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
-    camera, shape_args, _ = render_module.render_inputs(ctx, scene, "fp32", "tiles")
-    shape_args = [a for a in shape_args if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
+    prepared, inputs = render_module.render_inputs(ctx, scene, "fp32", "tiles")
+    with prepared.lock:  # the frame buffers in this view's frame (the render above left them so)
+        prepared.rebase(inputs.eye, inputs.rows)
+    camera = inputs.camera
+    shape_args = [a for a in inputs.shape_args(prepared, "tiles") if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
     lanes = programs.lanes_for(ctx.device, "fp32")
     kernel = programs.kernel_for(ctx, programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
     buffers = request_module._output_buffers(ctx, width * height, aovs, "fp32")

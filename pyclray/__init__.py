@@ -20,7 +20,8 @@ if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.a
 
 from .engine.cast import cast, occluded
 from .engine.device import list_devices, select_device
-from .engine.render import render, render_animation
+from .engine.prepared import clear as clear_cache
+from .engine.render import render, render_animation, render_views
 from .engine.request import Frame
 from .io.bands import write_exr, write_npz
 from .io.exr import read_exr
@@ -32,15 +33,15 @@ from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, Py
 from .model.lights import DirectionalLight, Material, PointLight, Shading
 from .model.loader import load_scene, scene_from_dict
 from .model.scene import Scene
-from .model.shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere
+from .model.shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere, Spheres
 from .version import __version__
 
 
 __all__ = [
-    "AOVS", "Animation", "Box", "BuildError", "Camera", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
+    "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "RequestError", "Scene", "SceneError", "Shading", "Sphere", "cast", "list_devices", "load_scene", "render",
-    "read_exr", "read_npz", "render_animation", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
     "write_npz",
 ]
 

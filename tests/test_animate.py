@@ -93,7 +93,8 @@ def test_frame_k_is_the_render_of_the_scene_at_k_over_fps(scene_file):
 
 def test_one_program_serves_every_frame():
     """Builds (compiled or read from the disk cache) happen for the first frame only; each later
-    frame of the orbiting camera fetches one kernel, the render's, from memory."""
+    frame of the orbiting camera fetches one kernel, the render's, from memory (a scene this small
+    is rebased into the moved camera's frame on the host: pyclray.engine.prepared)."""
     scene = pyclray.load_scene(REPO / "scenes/tp02_orbit.toml").with_size(32, 32)
     builds = lambda: programs.stats["compiled"] + programs.stats["from_disk"]
     counts, fetched = [], []

@@ -115,7 +115,7 @@ def test_the_help_names_every_shape_type():
     text = " ".join(result.stdout.split())
     assert result.returncode == 0
     for kind in REGISTRY:
-        assert f"{kind}s" in text or f"{kind}es" in text, kind
+        assert f"{kind}s" in text or f"{kind}es" in text or f"batches of {kind}" in text, kind
 
 
 # -- item 6: read_exr on a bad file ---------------------------------------------------------------

@@ -16,7 +16,7 @@ from pyclray.model.shapes import REGISTRY
 from conftest import REPO, SCENES
 
 # the ground unlabelled; the others' classes (two shapes share class 7); every shape type is here
-LABELS = {"ball": 7, "log": 2, "tube": 7, "mat": 0, "panel": 5, "crate": 2147483647}
+LABELS = {"ball": 7, "log": 2, "tube": 7, "mat": 0, "panel": 5, "crate": 2147483647, "pebbles": 9}
 
 
 def labelled(size=(96, 72)):
@@ -47,7 +47,7 @@ def test_the_label_image_is_the_label_of_the_id_image_everywhere(precision, acce
     assert np.array_equal(frame["label"], expected_labels(scene, frame["id"]))
     assert (frame["label"][frame["id"] == -1] == -1).all()  # the sky
     assert (frame["label"][frame["id"] == 0] == -1).all()  # the unlabelled ground
-    assert {7, 2, 0, 5, 2147483647} <= set(np.unique(frame["label"]).tolist())  # every class is seen
+    assert {7, 2, 0, 5, 2147483647, 9} <= set(np.unique(frame["label"]).tolist())  # every class is seen
     # the same pixels as the other images: the render without labels is the same
     plain = pyclray.render(scene, aovs=("depth", "id"), precision=precision, acceleration=acceleration)
     assert np.array_equal(plain["id"], frame["id"]) and np.array_equal(plain["depth"], frame["depth"])

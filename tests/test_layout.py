@@ -8,7 +8,8 @@ from pyclray.engine.programs import kernel_dir
 from pyclray.model.layout import CAMERA, Struct, c_header, layout
 from pyclray.model.shapes import REGISTRY
 
-STRUCTS = [CAMERA] + [cls.struct for cls in REGISTRY.values()]
+# the camera, each type's frame struct and its world struct (float64 fields: the per-view pass's input)
+STRUCTS = list(dict.fromkeys([CAMERA] + [cls.struct for cls in REGISTRY.values()] + [cls.world for cls in REGISTRY.values()]))
 
 
 def measure_on_device(struct: Struct, precision: str) -> list[int]:
@@ -16,7 +17,11 @@ def measure_on_device(struct: Struct, precision: str) -> list[int]:
     ctx = context_for()
     if precision == "fp64" and not has_fp64(ctx.device):
         pytest.skip("device lacks cl_khr_fp64")
+    if "World" in struct.name and not has_fp64(ctx.device):
+        pytest.skip("device lacks cl_khr_fp64 (world structs are float64: the host rebases instead)")
     prefix = "#define PYCLRAY_FP64 1\n" if precision == "fp64" else ""
+    if "World" in struct.name:
+        prefix = "#pragma OPENCL EXTENSION cl_khr_fp64 : enable\n" + prefix
     common = kernel_dir().joinpath("common.h").read_text()
     writes = [f"out[0] = sizeof({struct.name});"]
     writes += [f"out[{k + 1}] = __builtin_offsetof({struct.name}, {field});" for k, (field, _) in enumerate(struct.fields)]

@@ -116,7 +116,7 @@ def check_properties(scene, origins, directions, precision, inside=None, min_jud
         assert np.all(off <= slack[mine]), f"{shape}: a hit {off.max():.3g} off the surface"
         # within the bounds
         if shape.bounded:
-            lo, hi = type(shape).world_bounds([shape])[0]
+            lo, hi = shape.box()
             outside = np.maximum(lo - points[mine], points[mine] - hi).max(axis=1)
             assert np.all(outside <= slack[mine]), f"{shape}: a hit {outside.max():.3g} outside its bounds"
         # outward normals: against the ray from outside a solid, with it from inside
@@ -187,8 +187,9 @@ def test_the_model_catches_a_moved_shape(kind):
 
 @pytest.mark.parametrize("kind", TYPES)
 def test_bounds_hold_every_point_of_the_shape(kind):
-    """world_bounds is (N, 2, 3) and conservative: the oracle's hits of many rays lie inside it;
-    the plane has no bounds (``bounded`` False) and stays outside the BVH."""
+    """world_bounds is (N, 2, 3), one box per primitive (a batch's spheres each), and conservative:
+    the oracle's hits of many rays lie inside each shape's box; the plane has no bounds (``bounded``
+    False) and stays outside the BVH."""
     cls = REGISTRY[kind]
     rng = np.random.default_rng(5)
     shapes = [cls.random(rng) for _ in range(6)]
@@ -197,11 +198,13 @@ def test_bounds_hold_every_point_of_the_shape(kind):
             cls.world_bounds(shapes)
         return
     bounds = cls.world_bounds(shapes)
-    assert bounds.shape == (6, 2, 3) and bounds.dtype == np.float64
-    for shape, (lo, hi) in zip(shapes, bounds):
+    assert bounds.shape == (sum(s.primitive_count() for s in shapes), 2, 3) and bounds.dtype == np.float64
+    for shape in shapes:
+        lo, hi = shape.box()
         origins = rng.normal(size=(4000, 3)) * 8
-        (centre,), (radius,) = cls.bounding_spheres([shape])
-        directions = centre + rng.normal(size=(4000, 3)) * 0.5 * radius - origins
+        centres, radii = cls.bounding_spheres([shape])
+        aim = rng.integers(len(centres), size=4000)  # each ray toward one of its primitives
+        directions = centres[aim] + rng.normal(size=(4000, 3)) * 0.5 * radii[aim, None] - origins
         unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
         t = shape.oracle_distance(origins, unit)
         points = origins[np.isfinite(t)] + t[np.isfinite(t), None] * unit[np.isfinite(t)]

@@ -3,7 +3,7 @@ each type whose conservative screen bounds meet it. The kernel visits only those
 exactly as before, so the images do not change: a shape is left out of a tile only when no ray of
 the tile can hit it, with a wide margin over every float rounding of the kernel.
 
-Each shape is bounded by its type's bounding spheres (``Shape.bounding_spheres``); a type that is
+Each entry is bounded by its type's bounding spheres (``Shape.spheres_of``); a type that is
 not ``bounded`` (the plane) is visited in every tile.
 """
 from __future__ import annotations
@@ -53,14 +53,13 @@ def _pixel_range(lo, hi, tangent, size):
     return np.clip(first, 0, size - 1), np.clip(last, -1, size - 1), (last >= 0) & (first <= size - 1)
 
 
-def tile_lists(cls, shapes, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
-    """(start, index) int32 arrays: the shapes (positions in the packed array, all of the shape
-    class ``cls``) that tile t visits are index[start[t]:start[t+1]], in increasing order; tiles
-    are numbered row by row."""
+def tile_lists(bounded, spheres, n, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
+    """(start, index) int32 arrays: the n entries of one shape type (positions in its packed array;
+    bounded: held by the spheres (centres, radii), else visited everywhere) that tile t visits are
+    index[start[t]:start[t+1]], in increasing order; tiles are numbered row by row."""
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)
-    n = len(shapes)
-    if ENABLED and cls.bounded and n:
-        bounds = sphere_bounds(*cls.bounding_spheres(shapes), np.asarray(origin, np.float64), rotation)
+    if ENABLED and bounded and n:
+        bounds = sphere_bounds(*spheres, np.asarray(origin, np.float64), rotation)
         everywhere = np.isnan(bounds).any(axis=1)
         c0, c1, ok_x = _pixel_range(bounds[:, 0], bounds[:, 1], tan_x, width)
         r0, r1, ok_y = _pixel_range(bounds[:, 2], bounds[:, 3], tan_y, height)

@@ -75,7 +75,8 @@ class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
     kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
-    # work-item) or "occluded" (cast's any-hit query)
+    # work-item), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
+    # camera's frame: kernels/rebase.cl)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
@@ -107,6 +108,8 @@ class Variant:
             lines.append("#define PYCLRAY_CAST 1")
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
+        if self.kind == "rebase":
+            lines.append("#define PYCLRAY_REBASE 1")
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         return lines
@@ -121,22 +124,43 @@ class Variant:
         function kept out of the kernel, whose body PoCL copies three times (kernels/pyclray.cl).
         None of it changes a bit of the results (tests/test_speedups.py)."""
         shapes = [REGISTRY[t] for t in self.shape_types]
+        if self.kind == "rebase":
+            return self._rebase_source(shapes)
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines)]
         parts += [_read("common.h")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        structs = [CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else [])
+        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read("camera.h"), _read("bvh.h")] + [_read(f"{t}.cl") for t in self.shape_types]
+        parts += [_read("camera.h"), _read("bvh.h")] + [_read(name) for name in _kernel_files(shapes)]
         if shading:  # materials, lights and shadows: only in the programs that shade
             parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
+    def _rebase_source(self, shapes) -> str:
+        """The per-view pass: each type's world struct and frame struct, its <type>_rebase, and the
+        kernels of kernels/rebase_kernels.cl. float64 throughout (the device needs cl_khr_fp64)."""
+        parts = ["\n".join(["/* pyclray program variant */", "#pragma OPENCL EXTENSION cl_khr_fp64 : enable"] + self.defines())]
+        structs = _unique([NODE] + [s.struct for s in shapes] + [s.world for s in shapes])
+        parts += [_read("common.h"), c_header(structs, self.precision), _read("rebase.cl")]
+        parts += [_read(name) for name in _kernel_files(shapes)] + [_read("rebase_kernels.cl")]
+        return "\n".join(parts)
+
     def options(self) -> list[str]:
         return list(BUILD_OPTIONS)
+
+
+def _unique(items) -> list:
+    """Each item once, in order of first appearance (a batch type shares its single shape's struct)."""
+    return list(dict.fromkeys(items))
+
+
+def _kernel_files(shapes) -> list[str]:
+    """The kernel files of these shape types, each once, in order."""
+    return _unique(name for shape in shapes for name in shape.kernel_files)
 
 
 def cache_dir() -> Path | None:
@@ -217,3 +241,17 @@ def kernel_for(ctx: DeviceContext, variant: Variant) -> cl.Kernel:
             return kernel
         kernel = _programs[key] = cl.Kernel(_build(ctx, variant), variant.kind)
         return kernel
+
+
+def kernels_for(ctx: DeviceContext, variant: Variant) -> dict:
+    """Every kernel of this variant's program by name (the per-view pass has one per shape type):
+    built once, cached in memory and on disk."""
+    key = (ctx.device.int_ptr, variant, "all")
+    with _lock:
+        kernels = _programs.get(key)
+        if kernels is not None:
+            stats["from_memory"] += 1
+            return kernels
+        program = _build(ctx, variant)
+        kernels = _programs[key] = {kernel.function_name: kernel for kernel in program.all_kernels()}
+        return kernels

@@ -3,15 +3,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from dataclasses import replace
+
 from ..model.aovs import AOVS, RENDER_AOVS, kernel_aovs
-from ..model.errors import PyclrayError, SceneError
+from ..model.camera import Camera
+from ..model.errors import PyclrayError, RequestError, SceneError
 from ..model.loader import as_scene
 from ..model.scene import Scene
 from . import culling
 from .device import context_for
 from .labels import with_labels
 from .memory import check_images_fit
-from .prepared import acceleration_for, check_renderable_once, render_inputs, shape_kinds
+from .prepared import acceleration_for, check_renderable_once, prepared_scene, render_inputs
 from .programs import Variant, lanes_for
 from .request import Frame, check_request, run_kernel
 
@@ -32,12 +35,13 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
-def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto") -> Frame:
+def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto",
+           camera=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
     SceneError (see scene.check_renderable).
-    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded, label: only those
+    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded, primitive, label: only those
     are computed; shaded casts shadow rays where the scene's [shading] asks for them; label, each
     shape's label, is looked up from the id image);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
@@ -46,26 +50,36 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     acceleration: how the kernel skips the shapes a ray cannot hit, "tiles" (screen-space tile
     lists), "bvh" (the bounding volume hierarchy) or "auto" (tiles for a few shapes, else the BVH).
     The images do not depend on it, bit for bit.
+    camera: a pyclray.Camera to render the scene's shapes from instead of its own (the same as
+    rendering ``dataclasses.replace(scene, camera=camera)``).
+
+    The scene's shapes are prepared on the device once and kept (pyclray.engine.prepared): a view
+    from another camera uploads the camera only, whatever the number of shapes.
     """
     scene = as_scene(scene)
+    if camera is not None:
+        scene = with_camera(scene, camera)
     ctx = context_for(device)
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
-    check_renderable_once(scene, precision)
-    acceleration = acceleration_for(scene, acceleration)
+    prepared = prepared_scene(ctx, scene, precision)
+    check_renderable_once(scene, precision, prepared)
+    acceleration = acceleration_for(scene, acceleration, prepared)
     col0, row0, cols, rows = _window(scene, window)
     check_images_fit(tuple(dict.fromkeys(aovs + asked)), precision, cols, rows)  # a clear error before any allocation
-    camera, shape_args, lighting = render_inputs(ctx, scene, precision, acceleration)
+    _, inputs = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
     shadows = "shaded" in aovs and scene.shading.shadows
-    variant = Variant("render", shape_kinds(scene)[0], aovs, precision, lanes, shadows, bvh=acceleration == "bvh")
+    variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh")
     # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
+    shape_args = inputs.shape_args(prepared, acceleration)
     shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]
     tile = culling.TILE
     tiles_x = -(-scene.image.width // tile)
-    args = [camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
+    args = [inputs.camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
             np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
     # the arguments before each image's buffer, in the kernel's order (kernels/pyclray.cl)
+    lighting = inputs.lighting
     extra = {
         "position": [lighting["eye_high"], lighting["eye_low"]],
         "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")],
@@ -77,8 +91,31 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     group = (tile // lanes, tile)
     global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
     local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
-    images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
+    with prepared.lock:  # the frame buffers hold this view until its kernel has run
+        prepared.rebase(inputs.eye, inputs.rows)
+        images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
     return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip())
+
+
+def with_camera(scene: Scene, camera) -> Scene:
+    """The scene seen from another camera (its shapes tuple kept: the prepared scene serves it)."""
+    if not isinstance(camera, Camera):
+        raise RequestError(f"camera: expected a pyclray.Camera, got {type(camera).__name__}")
+    return replace(scene, camera=camera)
+
+
+def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", device=None, acceleration: str = "auto"):
+    """Yield the Frame of each camera (a pyclray.Camera, or a Scene whose camera and image size are
+    taken) in order: many views of one scene's shapes, prepared on the device once (a data set of
+    depth, normal and id maps from hundreds of poses). Each frame is exactly
+    ``render(scene, aovs, precision, device, camera=camera)``."""
+    scene = as_scene(scene)
+    for camera in cameras:
+        view = replace(scene, camera=camera.camera, image=camera.image) if isinstance(camera, Scene) else camera
+        if isinstance(view, Scene):
+            yield render(view, aovs, precision, device, acceleration=acceleration)
+        else:
+            yield render(scene, aovs, precision, device, acceleration=acceleration, camera=view)
 
 
 def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):

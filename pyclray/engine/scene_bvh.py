@@ -1,5 +1,5 @@
-"""The BVH of a scene's bounded shapes, with what the packers need of it (leaf order per shape
-type, ids, anchors)."""
+"""The BVH over a scene's bounded primitives (a shape is one primitive, a batch many), with what the
+packers need of it: each bounded type's entries in leaf order, the refs, the anchors of cast."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,17 +12,16 @@ from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
 @dataclass(frozen=True)
 class SceneBVH:
-    """The BVH over a scene's bounded shapes, with what the packers need: per leaf position, the
-    shape's type and its index in that type's array, the types' shapes (and ids) in leaf order,
-    and the shapes' unwidened bounds in leaf order (cast's anchors)."""
+    """The BVH over a scene's bounded primitives: per leaf position, the primitive's type and its
+    index in that type's array (which is in leaf order), each type's permutation into leaf order,
+    and the primitives' unwidened bounds in leaf order (cast's anchors)."""
 
     tree: BVH
     wide: WideBVH
     types: tuple[str, ...]  # the bounded types present, in the registry's order
     leaf_type: np.ndarray  # (N,) index into types
-    leaf_index: np.ndarray  # (N,) index in its type's array
-    shapes: dict  # type -> list of its shapes in leaf order
-    ids: dict  # type -> int32 array of their ids
+    leaf_index: np.ndarray  # (N,) index in its type's (leaf-ordered) array
+    order: dict  # type -> int64 array: its entries' positions (in the type's array as given) in leaf order
     bounds: np.ndarray  # (N, 2, 3) in leaf order
 
     def nodes(self, origin) -> np.ndarray:
@@ -33,6 +32,13 @@ class SceneBVH:
         """The binary nodes with their boxes relative to origin (see pack_nodes)."""
         return pack_nodes(self.tree, origin)
 
+    def world_corners(self) -> np.ndarray:
+        """(2 M, 4) float64: each binary node's low and high corner in world coordinates (the device's
+        per-view pass rounds them outward around the eye: kernels/rebase_kernels.cl)."""
+        out = np.zeros((2 * self.tree.nodes, 4))
+        out[0::2, :3], out[1::2, :3] = self.tree.lo, self.tree.hi
+        return out
+
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
         program's shape types)."""
@@ -41,8 +47,8 @@ class SceneBVH:
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
 
     def anchors(self) -> np.ndarray:
-        """(N, 4) float64 per leaf position: the centre A of the shape's box (its packing frame in
-        cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
+        """(N, 4) float64 per leaf position: the centre A of the primitive's box (its packing frame
+        in cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
         shape test's rounding (no hit the test reports lies nearer than (A - O).D - R)."""
         lo, hi = self.bounds[:, 0], self.bounds[:, 1]
         out = np.empty((max(len(lo), 1), 4))
@@ -51,32 +57,36 @@ class SceneBVH:
         return out
 
 
-def scene_bvh(shapes, registry) -> SceneBVH:
-    """The BVH of these shapes' bounded ones (registry: type name -> shape class)."""
-    types = tuple(t for t, cls in registry.items() if cls.bounded and any(s.type == t for s in shapes))
-    by_type = {t: ([], []) for t in types}
-    for index, shape in enumerate(shapes):
-        if shape.type in by_type:
-            by_type[shape.type][0].append(shape)
-            by_type[shape.type][1].append(index)
-    bounds = [registry[t].world_bounds(by_type[t][0]) for t in types]
+def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
+    """The BVH of the bounded primitives given as type -> (N_t, 2, 3) world bounds (in the order of
+    the types' arrays; the types in the registry's order)."""
+    types = tuple(t for t, b in bounds_by_type.items() if len(b))
+    bounds = [bounds_by_type[t] for t in types]
     bounds = np.concatenate(bounds) if bounds else np.zeros((0, 2, 3))
-    type_of = np.concatenate([np.full(len(by_type[t][0]), k) for k, t in enumerate(types)] or [np.zeros(0, int)])
-    within = np.concatenate([np.arange(len(by_type[t][0])) for t in types] or [np.zeros(0, int)])
+    type_of = np.concatenate([np.full(len(bounds_by_type[t]), k) for k, t in enumerate(types)] or [np.zeros(0, int)])
+    within = np.concatenate([np.arange(len(bounds_by_type[t])) for t in types] or [np.zeros(0, int)])
     tree = build(widened(bounds))
     leaf_type = type_of[tree.order]
     leaf_index = np.zeros(len(tree.order), np.int64)
-    ordered, ids = {}, {}
+    order = {}
     for k, t in enumerate(types):
         mine = leaf_type == k
         leaf_index[mine] = np.arange(int(mine.sum()))
-        positions = within[tree.order[mine]]
-        ordered[t] = [by_type[t][0][p] for p in positions]
-        ids[t] = np.array(by_type[t][1], np.int64)[positions].astype(np.int32)
+        order[t] = within[tree.order[mine]]
     if len(bounds):
         wide = collapse(tree)
     else:  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
         wide = WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
     if tree.depth() > BINARY_STACK or 7 * wide.depth + 1 > STACK:
         raise ValueError(f"the BVH is {wide.depth} wide levels deep, more than the kernel's stack holds")
-    return SceneBVH(tree, wide, types, leaf_type, leaf_index, ordered, ids, bounds[tree.order])
+    return SceneBVH(tree, wide, types, leaf_type, leaf_index, order, bounds[tree.order])
+
+
+def scene_bvh(shapes, registry) -> SceneBVH:
+    """The BVH of these shapes' bounded primitives (registry: type name -> shape class)."""
+    bounds = {}
+    for t, cls in registry.items():
+        mine = [s for s in shapes if s.type == t]
+        if cls.bounded and mine:
+            bounds[t] = cls.world_bounds(mine)
+    return primitives_bvh(bounds)

@@ -38,14 +38,15 @@ def shape_extent(shape) -> float:
     intersection works with the ray's origin only."""
     if getattr(shape, "bounded", True) is False:
         return 0.0
-    if hasattr(shape, "bounding_spheres"):
-        return float(shape.bounding_spheres([shape])[1][0])
+    if hasattr(shape, "bounding_spheres"):  # a batch: its largest primitive's
+        return float(shape.bounding_spheres([shape])[1].max(initial=0.0))
     return float(getattr(shape, "radius", 0.0))
 
 
-def pack_materials(scene, precision: str) -> np.ndarray:
-    out = np.zeros(max(len(scene.shapes), 1), dtype=layout(MATERIAL, precision).dtype)
-    for index, shape in enumerate(scene.shapes):
+def pack_materials(shapes, precision: str) -> np.ndarray:
+    """Each shape's material and extent, by id."""
+    out = np.zeros(max(len(shapes), 1), dtype=layout(MATERIAL, precision).dtype)
+    for index, shape in enumerate(shapes):
         material = shape.material
         out["color"][index] = (*material.color, material.specular)
         out["shininess"][index] = material.shininess

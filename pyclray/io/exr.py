@@ -209,11 +209,11 @@ def read_exr(path) -> dict:
         detail = " ".join((captured.text.strip().splitlines() or [str(error)])[0].split())
         raise OutputError(f"cannot read {path}: a damaged OpenEXR file ({detail})") from None
     out = {}
-    for aov, names in EXR_CHANNELS.items():
-        if not all(name in channels for name in names):
-            continue
-        arrays = [channels[name] if TABLE[aov].real else channels[name].view(np.int32) for name in names]
-        out[aov] = arrays[0] if len(arrays) == 1 else np.stack(arrays, axis=-1)
+    for name, aov in TABLE.items():  # every AOV whose channels the file has, as render returns it
+        if all(channel in channels for channel in aov.exr):
+            planes = [channels[channel] for channel in aov.exr]
+            image = planes[0] if aov.channels == 1 else np.stack(planes, axis=-1)
+            out[name] = image if aov.real else image.view(np.int32)  # integers: their 32-bit pattern
     return out
 
 
@@ -224,8 +224,9 @@ class _Captured:
 @contextmanager
 def _output_captured():
     """What C code writes to the process's stdout and stderr (file descriptors 1 and 2) and what is
-    printed to sys.stdout or sys.stderr during the block, kept in .text instead of printed. Python's own buffers are flushed first. Another thread
-    printing meanwhile is caught too: only OpenEXR's reads run in such a block (they take milliseconds)."""
+    printed to sys.stdout or sys.stderr during the block, kept in .text instead of printed.
+    Python's own buffers are flushed first. Another thread printing meanwhile is caught too: only
+    OpenEXR's reads run in such a block (they take milliseconds)."""
     captured = _Captured()
     for stream in (sys.stdout, sys.stderr):
         with suppress(Exception):

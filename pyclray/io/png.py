@@ -205,7 +205,8 @@ class LabelPreview(IdPreview):
 
 
 # AOV -> its preview, in the order of the files (zdepth is shown like depth; positions have none)
-PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview, "label": LabelPreview})
+PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview, "primitive": IdPreview,
+                 "label": LabelPreview})
 
 
 def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:

@@ -230,9 +230,26 @@ class Animation:
             scene_at(scene, t, frame=k)
 
 
+_PLACES_MAX = 4
+_places_of: dict = {}
+
+
 def _places(scene) -> dict[str, list[tuple[str, int | None]]]:
     """Target name -> where things of that name sit: ("camera", None), or (collection field, index)
-    for each named dataclass in any tuple field of the scene (shapes, lights, ...)."""
+    for each named dataclass in any tuple field of the scene (shapes, lights, ...). Kept for the last
+    few scenes (a frozen scene's places do not change): a frame of an animation of a million shapes
+    must not walk them."""
+    entry = _places_of.get(id(scene))
+    if entry is not None and entry[0] is scene:
+        return entry[1]
+    places = _find_places(scene)
+    _places_of[id(scene)] = (scene, places)  # holds the scene: its id() cannot be reused meanwhile
+    while len(_places_of) > _PLACES_MAX:
+        del _places_of[next(iter(_places_of))]
+    return places
+
+
+def _find_places(scene) -> dict[str, list[tuple[str, int | None]]]:
     places: dict[str, list] = {CAMERA: [(CAMERA, None)]}
     for f in dataclasses.fields(scene):
         items = getattr(scene, f.name)
@@ -258,6 +275,26 @@ def _describe(scene, place) -> str:
     return f"{described} ({place[0]} #{place[1]})"
 
 
+# What an animation's static scenes share with the animated one: new shapes tuple -> (the tuple,
+# the animated scene's tuple, the indices of the shapes whose values differ). The engine reads it to
+# update a prepared scene in place (only those shapes, and a refit of its BVH) rather than prepare a
+# frame's scene from nothing; an entry holds both tuples, so their id()s cannot be reused meanwhile.
+_DERIVED_MAX = 8
+_derived: dict = {}
+
+
+def derivation(shapes: tuple):
+    """(base shapes tuple, changed indices) if this tuple was made by scene_at from another, else None."""
+    entry = _derived.get(id(shapes))
+    return entry[1:] if entry is not None and entry[0] is shapes else None
+
+
+def _remember(shapes: tuple, base: tuple, changed: tuple) -> None:
+    _derived[id(shapes)] = (shapes, base, changed)
+    while len(_derived) > _DERIVED_MAX:
+        del _derived[next(iter(_derived))]
+
+
 def scene_at(scene, t: float, *, frame: int | None = None):
     """The static scene at time t: every animated key takes its track's value at t; the result has
     no animation. Raises SceneError naming the target, the key and the time if that scene is invalid."""
@@ -273,6 +310,7 @@ def scene_at(scene, t: float, *, frame: int | None = None):
     for track in animation.tracks:
         changes.setdefault(places[track.target][0], {})[track.key] = track.value_at(t, animation.interpolation)
     replaced: dict[str, object] = {}
+    items: dict[str, list] = {}  # each collection copied once, however many of its items change
     for place, values in changes.items():
         collection, index = place
         target = next(track.target for track in animation.tracks if places[track.target][0] == place)
@@ -280,11 +318,13 @@ def scene_at(scene, t: float, *, frame: int | None = None):
             if index is None:
                 replaced[collection] = dataclasses.replace(getattr(scene, collection), **values)
             else:
-                items = list(replaced.get(collection, getattr(scene, collection)))
-                items[index] = dataclasses.replace(items[index], **values)
-                replaced[collection] = tuple(items)
+                mine = items.setdefault(collection, list(getattr(scene, collection)))
+                mine[index] = dataclasses.replace(mine[index], **values)
         except SceneError as error:
             raise _frame_error(scene, error, target, values, when) from None
+    replaced.update({collection: tuple(mine) for collection, mine in items.items()})
+    if "shapes" in replaced:  # before the Scene checks it: only the changed shapes need a look
+        _remember(replaced["shapes"], scene.shapes, tuple(sorted(index for collection, index in changes if collection == "shapes")))
     try:
         return dataclasses.replace(scene, animation=None, **replaced)
     except SceneError as error:  # a scene-wide check (e.g. the fov against the image size)

@@ -50,6 +50,7 @@ TABLE = {
         Aov("zdepth", 1, True, "+inf", ("zdepth",), False),
         Aov("position", 3, True, "(0, 0, 0)", ("P.X", "P.Y", "P.Z"), False),
         Aov("shaded", 3, True, "the background colour", ("R", "G", "B"), False),
+        Aov("primitive", 1, False, "-1", ("primitive",), False),  # index within its shape (batch)
         # the hit shape's `label` (class masks beside the instance ids): labels[id], -1 for a miss
         # or a shape without one
         Aov("label", 1, False, "-1", ("label",), False, from_aov="id"),

@@ -62,7 +62,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         try:
             kind = typed_table(entry, REGISTRY, "shape")
             where = f"[[shapes]] #{index} ({kind})"
-            shape = REGISTRY[kind].from_table(entry, index)
+            shape = REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None)
             # names are unique, as the lights' (a name is what an animation key targets; the
             # defaults "<type><index>" are unique)
             if shape.name in seen:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, scene_at
+from .animation import Animation, derivation, scene_at
 from .camera import MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
@@ -37,7 +38,7 @@ class Scene:
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
         if not isinstance(self.shading, Shading):
             raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
-        for index, shape in enumerate(self.shapes):
+        for index, shape in enumerate(() if _validated(self.shapes) else self.shapes):
             if not isinstance(shape, Shape):
                 raise SceneError(
                     f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
@@ -58,6 +59,8 @@ class Scene:
                 key="fov",
                 file=self.source,
             )
+        if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
+            _remember_valid(self.shapes)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
@@ -86,6 +89,29 @@ class Scene:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
         return tuple(t for t in REGISTRY if t in present)
+
+
+# Shapes tuples already checked, the most recent first: a view from another camera
+# (dataclasses.replace(scene, camera=...)) keeps the tuple and need not walk a million shapes again.
+_VALID_MAX = 32
+_valid: OrderedDict = OrderedDict()
+
+
+def _validated(shapes: tuple) -> bool:
+    """Whether this tuple was checked, or was made by an animation from a checked one by changing
+    shapes through dataclasses.replace (which checks them): no item needs a look then."""
+    entry = _valid.get(id(shapes))
+    if entry is not None and entry is shapes:
+        return True
+    derived = derivation(shapes)
+    return derived is not None and _validated(derived[0])
+
+
+def _remember_valid(shapes: tuple) -> None:
+    _valid[id(shapes)] = shapes  # holds the tuple: its id() cannot be reused while remembered
+    _valid.move_to_end(id(shapes))
+    while len(_valid) > _VALID_MAX:
+        _valid.popitem(last=False)
 
 
 # The kernels keep a shape as 8 x its index in its type's array + its type (the BVH's refs, the

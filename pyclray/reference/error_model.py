@@ -128,7 +128,7 @@ def cast_frames(scene: Scene, origins, directions, ids):
     mean = origins.reshape(-1, 3).mean(axis=0) if origins.size else np.zeros(3)
     for i, shape in enumerate(scene.shapes):
         if shape.bounded:
-            lo, hi = type(shape).world_bounds([shape])[0]
+            lo, hi = shape.box()
             centre[i], radius[i], bounded[i] = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo), True
         else:
             centre[i] = shape.anchor(mean)

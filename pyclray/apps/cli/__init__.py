@@ -22,8 +22,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = Parser(
         prog="pyclray",
-        description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id and shaded images of "
-        "scenes of planes, spheres, cylinders, disks, rectangles and boxes described in TOML files.",
+        description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id, label and shaded images "
+        "of scenes of planes, spheres, cylinders, disks, rectangles, boxes and batches of spheres described in "
+        "TOML files.",
         epilog=EXIT_STATUS_HELP,
     )
     parser.add_argument("--version", action="version", version=f"pyclray {_version()}")

@@ -174,7 +174,7 @@ def add_command(commands) -> None:
                         help="the file to write; its extension decides the format (.exr, .npz or .png)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,label "
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,primitive,label "
         "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(

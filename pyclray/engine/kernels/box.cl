@@ -11,6 +11,31 @@
  * taken (an edge case where either answer is right). A ray starting inside has entry <= 0 < exit
  * and sees the far side. */
 
+#ifdef PYCLRAY_REBASE
+
+/* The box in the camera's frame: its centre and axes along the frame's axes, and its slabs'
+ * offsets (C - origin) . e_k -+ h_k from error-free sums (an eye next to a face keeps its distance). */
+inline void box_rebase(__global const BoxWorld* world, __global Box* out, const Frame* frame)
+{
+    const double3 F = world->center.xyz - frame->origin;
+    const double3 h = world->half_size.xyz;
+    const double3 e0 = world->axis0.xyz, e1 = world->axis1.xyz, e2 = world->axis2.xyz;
+    out->center = (real4)(to_frame(frame, F), 0);
+    out->half_size = (real4)(convert_real3(h), 0);
+    out->axis0 = (real4)(to_frame(frame, e0), (real)dot2_4((double4)(F, -h.x), (double4)(e0, 1.0)));
+    out->axis1 = (real4)(to_frame(frame, e1), (real)dot2_4((double4)(F, -h.y), (double4)(e1, 1.0)));
+    out->axis2 = (real4)(to_frame(frame, e2), (real)dot2_4((double4)(F, -h.z), (double4)(e2, 1.0)));
+    out->high = (real4)((real)dot2_4((double4)(F, h.x), (double4)(e0, 1.0)),
+                        (real)dot2_4((double4)(F, h.y), (double4)(e1, 1.0)),
+                        (real)dot2_4((double4)(F, h.z), (double4)(e2, 1.0)), 0);
+    out->world_axis0 = (real4)(convert_real3(e0), 0);
+    out->world_axis1 = (real4)(convert_real3(e1), 0);
+    out->world_axis2 = (real4)(convert_real3(e2), 0);
+}
+
+#else
+
+
 typedef struct {
     realv entry, exit;  /* along the ray, from the packed offsets (exact for camera rays) */
     intv entry_axis, exit_axis, overlap;
@@ -101,3 +126,5 @@ inline vec3v box_normal(__global const Box* box, const RayPacket* ray, __global 
     const realv sign = (along > 0) == entering ? SPLAT(-1) : SPLAT(1);
     return v3_scale(e, sign);
 }
+
+#endif

@@ -14,6 +14,26 @@
  * within r of the cap's centre.
  * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
 
+#ifdef PYCLRAY_REBASE
+
+/* The cylinder in the camera's frame: both ends and the axis along the frame's axes, and what every
+ * ray from the frame's origin shares, from error-free products and sums: c = |(p0 - o) x A|^2 - r^2,
+ * d0 = (p0 - o) . A and d1 = (p1 - o) . A. */
+inline void cylinder_rebase(__global const CylinderWorld* world, __global Cylinder* out, const Frame* frame)
+{
+    const double3 p0 = world->p0.xyz - frame->origin, p1 = world->p1.xyz - frame->origin, A = world->axis.xyz;
+    const double r = world->p0.w;
+    out->p0 = (real4)(to_frame(frame, p0), (real)(r * r));
+    out->p1 = (real4)(to_frame(frame, p1), (real)world->p1.w);
+    out->axis = (real4)(to_frame(frame, A), (real)cross_norm2_minus(p0, A, r));
+    out->world_axis = (real4)(convert_real3(A), (real)dot2_3(p0, A));
+    out->d1 = (real)dot2_3(p1, A);
+    out->caps = world->caps;
+}
+
+#else
+
+
 typedef struct {
     vec3v DxA;
     realv disc, triple;
@@ -118,3 +138,5 @@ inline vec3v cylinder_normal(__global const Cylinder* cylinder, const RayPacket*
     const vec3v cap = v3_scale(axis, hit.kind == SPLAT_INT(3) ? SPLAT(-1) : SPLAT(1));
     return v3_select(outward, cap, hit.kind >= SPLAT_INT(3));
 }
+
+#endif

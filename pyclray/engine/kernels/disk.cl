@@ -4,6 +4,22 @@
  * difference small); it equals n x (D x F) / (n . D), whose cross product keeps the digits of the
  * small sideways offsets of the camera frame, so the border is as sharp far away as near. */
 
+#ifdef PYCLRAY_REBASE
+
+/* The disk in the camera's frame (rebase_flat: its centre, normal and the origin's distance to its
+ * plane), and r^2. */
+inline void disk_rebase(__global const DiskWorld* world, __global Disk* out, const Frame* frame)
+{
+    const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
+    const double r = world->center.w;
+    out->center = (real4)(to_frame(frame, F), (real)(r * r));
+    out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
+    out->world_normal = (real4)(convert_real3(n), 0);
+}
+
+#else
+
+
 inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 {
     const vec3v n = v3_splat(disk->normal);
@@ -21,3 +37,5 @@ inline vec3v disk_normal(__global const Disk* disk, const RayPacket* ray, __glob
 {
     return v3_splat(disk->world_normal);
 }
+
+#endif

@@ -2,6 +2,21 @@
  * frame's origin, both computed on the host in float64; exact: n and h in the world, float64 bits
  * (cast only, where the plane is tested from each ray's own origin). */
 
+#ifdef PYCLRAY_REBASE
+
+/* The plane in the camera's frame: its normal along the frame's axes and the frame origin's signed
+ * distance n . origin + h, compensated (a far origin cancels); its world normal and exact bits. */
+inline void plane_rebase(__global const PlaneWorld* world, __global Plane* out, const Frame* frame)
+{
+    const double4 n_h = world->normal;
+    out->normal = (real4)(to_frame(frame, n_h.xyz), (real)dot2_4(n_h, (double4)(frame->origin, 1.0)));
+    out->world_normal = (real4)(convert_real3(n_h.xyz), 0);
+    out->exact = as_ulong4(n_h);
+}
+
+#else
+
+
 inline realv plane_hit(__global const Plane* plane, const RayPacket* ray)
 {
     const vec3v n = v3_splat(plane->normal);
@@ -26,3 +41,5 @@ inline vec3v plane_normal(__global const Plane* plane, const RayPacket* ray, __g
 {
     return v3_splat(plane->world_normal);
 }
+
+#endif

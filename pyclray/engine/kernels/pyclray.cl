@@ -11,6 +11,7 @@
  *   PYCLRAY_AOV_ZDEPTH/_POSITION        render: depth along the optical axis, world hit points
  *   PYCLRAY_AOV_SHADED                  render: the shading model (kernels/shading.h, put before this file)
  *   PYCLRAY_SHADOWS                     render, with SHADED: shadow rays (without it none are cast)
+ *   PYCLRAY_AOV_PRIMITIVE               render: the winner's index within its shape (a batch's primitive)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
  *
@@ -19,11 +20,14 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
+#endif
+#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE)
+#define PYCLRAY_WINNER_LOOP 1  /* the packet's distinct winners are visited once each */
 #endif
 /* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
 #ifndef PYCLRAY_AOV_SHADED
@@ -78,7 +82,7 @@
 #define PYCLRAY_LINEAR(X) PYCLRAY_SHAPES(X)
 #define PYCLRAY_BVH_ARGS(P)
 #endif
-#define PYCLRAY_KIND(Type, type) KIND_##Type,
+#define PYCLRAY_KIND(Type, type) KIND_##type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
 /* -- the nearest hit of each lane ----------------------------------------------------------------
@@ -108,7 +112,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
         const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
         const realv s = type##_hit(&type##s[k], &ray);                                \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
     }
 #define PYCLRAY_FIND_NEAREST                                                          \
     PYCLRAY_BEST                                                                      \
@@ -116,9 +120,9 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
 /* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
-    if (kind == KIND_##Type) {                                                        \
+    if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &ray);                                \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##Type, k)                            \
+        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
@@ -140,16 +144,34 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 
 #ifdef PYCLRAY_WINNER_NORMAL
-/* the normal of one winning shape (and with shading, its material) for the whole packet, kept in
- * the lanes it won */
+#define PYCLRAY_NORMAL_OF(type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
+#define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+#else
+#define PYCLRAY_NORMAL_OF(type)
+#define PYCLRAY_NORMAL_BEGIN
+#endif
+/* the winner's index within its shape (a batch's primitive; 0 for a single shape), -1 on a miss */
+#ifdef PYCLRAY_AOV_PRIMITIVE
+#define PYCLRAY_PRIMITIVE_OF(type) primitive = mine ? SPLAT_INT(type##s[k].primitive) : primitive;
+#define PYCLRAY_PRIMITIVE_BEGIN intv primitive = SPLAT_INT(-1);
+#else
+#define PYCLRAY_PRIMITIVE_OF(type)
+#define PYCLRAY_PRIMITIVE_BEGIN
+#endif
+
+#ifdef PYCLRAY_WINNER_LOOP
+/* what one winning shape gives the lanes it won: its normal (and with shading, its material), its
+ * primitive index */
 #define PYCLRAY_NORMAL(Type, type)                                                    \
-    if (kind == KIND_##Type) {                                                        \
-        normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);   \
+    if (kind == KIND_##type) {                                                        \
+        PYCLRAY_NORMAL_OF(type)                                                       \
         PYCLRAY_MATERIAL_OF(type##s[k].id, mine)                                      \
+        PYCLRAY_PRIMITIVE_OF(type)                                                    \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
 #define PYCLRAY_WINNERS                                                               \
-    vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
+    PYCLRAY_NORMAL_BEGIN                                                              \
+    PYCLRAY_PRIMITIVE_BEGIN                                                           \
     PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
         /* each distinct winner once, the largest key first: one reduction finds the    \
@@ -212,8 +234,18 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_POSITION(index, first, end)
 #endif
 
+/* render only: the winner's primitive index within its shape */
+#ifdef PYCLRAY_AOV_PRIMITIVE
+#define PYCLRAY_PRIMITIVE_ARG(P) P(__global int*, primitive_out)
+#define PYCLRAY_WRITE_PRIMITIVE(index, first, end) write_ints(TO_INT32V(primitive), index, first, end, primitive_out);
+#else
+#define PYCLRAY_PRIMITIVE_ARG(P)
+#define PYCLRAY_WRITE_PRIMITIVE(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_DEPTH_ARG(P) PYCLRAY_NORMAL_ARG(P) PYCLRAY_ID_ARG(P)
-#define PYCLRAY_RENDER_OUTPUT_ARGS(P) PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P)
+#define PYCLRAY_RENDER_OUTPUT_ARGS(P) \
+    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P)
 /* the shapes' arguments as parameters and as the arguments of a call */
 #define PYCLRAY_SHAPE_PARAMETERS(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_DECLARE, Type, type)
 #define PYCLRAY_SHAPE_PASSED(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_PASS, Type, type)
@@ -222,7 +254,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     PYCLRAY_WRITE_DEPTH(index, first, end) PYCLRAY_WRITE_NORMAL(index, first, end) PYCLRAY_WRITE_ID(index, first, end)
 #define PYCLRAY_RENDER_WRITE(index, first, end) \
     PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
-    PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end)
+    PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end) \
+    PYCLRAY_WRITE_PRIMITIVE(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int
@@ -385,10 +418,10 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
  * relative to the sphere's size, as a camera next to it would; its distance is s0 + s (s: the
  * shape's own, from the new origin). Unbounded shapes (planes) take the world origin in float64. */
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
-    if (kind == KIND_##Type) {                                                      \
+    if (kind == KIND_##type) {                                                      \
         const real s = type##_hit(&type##s[k], &moved);                             \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
-        PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##Type, k, q)                      \
+        PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
     }
 #define PYCLRAY_CAST_VISIT(q)                                                       \
     {                                                                               \
@@ -405,7 +438,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
     for (int q = 0; q < n_##type##s; ++q) {                                         \
         const real s = type##_hit(&type##s[q], &ray);                               \
         const double t = s < MISS ? (double)s * length : INFINITY;                  \
-        PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##Type, q, -1)                     \
+        PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
 
 inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v.z); }
@@ -488,7 +521,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
 #define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
 #define PYCLRAY_CAST_NORMAL(Type, type) \
-    if (best_kind == KIND_##Type) normal = type##_normal(&type##s[best_k], &ray, camera);
+    if (best_kind == KIND_##type) normal = type##_normal(&type##s[best_k], &ray, camera);
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
 #define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \

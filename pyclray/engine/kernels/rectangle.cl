@@ -4,6 +4,23 @@
  * point from the centre is n x (D x F) / (n . D) rather than s D - F, which cancels far away (see
  * kernels/disk.cl). */
 
+#ifdef PYCLRAY_REBASE
+
+/* The rectangle in the camera's frame: its centre, normal and the origin's distance to its plane,
+ * and the dual vectors of its sides along the frame's axes. */
+inline void rectangle_rebase(__global const RectangleWorld* world, __global Rectangle* out, const Frame* frame)
+{
+    const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
+    out->center = (real4)(to_frame(frame, F), 0);
+    out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
+    out->u_dual = (real4)(to_frame(frame, world->u_dual.xyz), 0);
+    out->v_dual = (real4)(to_frame(frame, world->v_dual.xyz), 0);
+    out->world_normal = (real4)(convert_real3(n), 0);
+}
+
+#else
+
+
 inline realv rectangle_hit(__global const Rectangle* rectangle, const RayPacket* ray)
 {
     const vec3v n = v3_splat(rectangle->normal);
@@ -21,3 +38,5 @@ inline vec3v rectangle_normal(__global const Rectangle* rectangle, const RayPack
 {
     return v3_splat(rectangle->world_normal);
 }
+
+#endif

@@ -118,7 +118,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 }
 
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
-    if (kind == KIND_##Type) {                                                        \
+    if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &shadow);                             \
         open = open && !(s < limit);                                                  \
     }

@@ -6,6 +6,21 @@
  * eye's squared distance to the surface, exact even for a huge sphere just below the camera).
  */
 
+#ifdef PYCLRAY_REBASE
+
+/* The sphere in the camera's frame, from its world centre and radius: F = C - origin (float64),
+ * its coordinates along the frame's axes, r^2, and c = |F|^2 - r^2 from error-free sums. */
+inline void sphere_rebase(__global const SphereWorld* world, __global Sphere* out, const Frame* frame)
+{
+    const double3 F = world->center.xyz - frame->origin;
+    const double r = world->center.w;
+    out->center = (real4)(to_frame(frame, F), (real)(r * r));
+    out->c = (real)dot2_4((double4)(F, r), (double4)(F, -r));
+}
+
+#else
+
+
 /* F (the centre from the ray's origin), c = |F|^2 - r^2, b = F.D and the discriminant b^2 - a c. */
 typedef struct {
     vec3v F;
@@ -64,3 +79,5 @@ inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, 
     const vec3v n = v3_sub(v3_scale(D, side * v_sqrt(t.disc)), v3_cross(D, v3_cross(t.F, D)));
     return world_from_frame(camera, v3_normalize(n));
 }
+
+#endif

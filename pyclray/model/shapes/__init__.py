@@ -10,8 +10,9 @@ from .disk import Disk
 from .plane import Plane
 from .rectangle import Rectangle
 from .sphere import Sphere
+from .spheres import Spheres
 
 # type name in scene files -> shape class, in the order the kernel visits them
-REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box)}
+REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box, Spheres)}
 
-__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Plane", "Rectangle", "Sphere"]
+__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Plane", "Rectangle", "Sphere", "Spheres"]

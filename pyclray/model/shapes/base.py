@@ -4,9 +4,11 @@ A shape module owns everything about its shape, so that nothing outside pyclray/
 type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 
 - scene file: ``type``, ``keys``, ``required``, ``_from_table`` and the dataclass's validation;
-- device: ``c_type``, ``struct`` and ``_pack`` (host work in float64, in the kernel's frame), and
-  kernels/<type>.cl with ``<type>_hit`` and ``<type>_normal``;
-- bounds: ``bounded`` and ``world_bounds`` (culling, the BVH), ``bounding_spheres``;
+- device: ``world`` and ``_pack_world`` (the world-space float64 entries, packed once), ``c_type``,
+  ``struct`` and ``_rebase`` (the entries in a camera's frame, in float64 on the host), and
+  engine/kernels/<type>.cl with ``<type>_rebase`` (the same on the device), ``<type>_hit`` and
+  ``<type>_normal``;
+- bounds: ``bounded`` and ``bounds_of`` (culling, the BVH), ``spheres_of``;
 - the float64 oracle: ``oracle_distance``, ``oracle_normal``, ``surface_distance``,
   ``edge_distance`` (where a ray may go either way);
 - the error model (pyclray.reference.error_model): ``anchor`` (the point its coordinates are measured from)
@@ -41,8 +43,8 @@ class Shape:
     (its packed layout, declared once) and ``keys`` (the keys of its scene table besides type and
     name), and implements the methods below that raise NotImplementedError.
 
-    ``_pack(out, shapes, origin, rotation)`` must accept ``origin`` of shape (3,) (one frame for
-    every shape: render) or (N, 3) (one frame per shape, each at its own anchor: cast).
+    ``_rebase(out, world, origin, rotation)`` must accept ``origin`` of shape (3,) (one frame for
+    every entry: render) or (N, 3) (one frame per entry, each at its own anchor: cast).
     """
 
     type: ClassVar[str]
@@ -60,13 +62,17 @@ class Shape:
     solid: ClassVar[bool] = False
 
     # -- scene file ----------------------------------------------------------------------------
+    # True for a type whose table may name files (read relative to the scene file's folder)
+    reads_files: ClassVar[bool] = False
+
     @classmethod
-    def from_table(cls, table: dict, index: int):
+    def from_table(cls, table: dict, index: int, folder=None):
         no_unknown_keys(table, ("type", "name", "label") + cls.keys + MATERIAL_KEYS, required=cls.required)
         name = text("name", table.get("name", f"{cls.type}{index}"))
         material = Material.from_table(table)
         label = check_label(table.get("label"))
-        shape = cls._from_table({k: v for k, v in table.items() if k not in MATERIAL_KEYS and k != "label"}, name)
+        own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS and k != "label"}
+        shape = cls._from_table(own, name, folder) if cls.reads_files else cls._from_table(own, name)
         common = {k: v for k, v in (("material", material), ("label", label)) if v != getattr(shape, k)}
         return replace(shape, **common) if common else shape
 
@@ -84,20 +90,61 @@ class Shape:
         return f"{self.type} '{self.name}'"
 
     # -- device --------------------------------------------------------------------------------
+    # The scene lives on the device in world coordinates (``world``: float64 fields, packed once per
+    # scene by ``pack_world``); for each view the engine rebases it into the frame of the camera
+    # (``struct``: what the kernel's shape test reads) with ``<type>_rebase`` of the shape's kernel
+    # file, or on the host with ``rebase`` (devices without float64, and cast's per-shape frames).
+    # Both compute what every ray from the frame's origin shares in float64 (error-free sums where
+    # a difference cancels), from the world fields.
+    world: ClassVar[Struct]
+    # the kernel files this type needs, in order (a batch type reuses its single shape's code)
+    kernel_files: ClassVar[tuple[str, ...]] = ()
+
+    def primitive_count(self) -> int:
+        """How many entries of the packed arrays this shape is (a batch: one per primitive)."""
+        return 1
+
     @classmethod
-    def pack(cls, shapes, ids, origin, rotation, precision: str) -> np.ndarray:
-        """The packed array of these shapes in a frame: origin (world, float64) and rotation
-        (rows: the frame's axes in world coordinates). What every ray from the frame's origin
-        shares is computed here once, in float64, from the world coordinates."""
-        out = np.zeros(len(shapes), dtype=layout(cls.struct, precision).dtype)
-        out["id"] = ids
-        if len(shapes):
-            cls._pack(out, shapes, np.asarray(origin, np.float64), np.asarray(rotation, np.float64))
+    def pack_world(cls, shapes) -> np.ndarray:
+        """The world array of these shapes (float64 geometry, the world struct's dtype): one entry
+        per primitive (see ``entries`` for their ids and primitive indices)."""
+        counts = primitive_counts(shapes)
+        out = np.zeros(int(counts.sum()), dtype=layout(cls.world, "fp64").dtype)
+        if len(out):
+            cls._pack_world(out, shapes)
         return out
 
     @classmethod
-    def _pack(cls, out, shapes, origin, rotation) -> None:
+    def _pack_world(cls, out, shapes) -> None:
         raise NotImplementedError
+
+    @classmethod
+    def rebase(cls, world, origin, rotation, precision: str, ids=None, primitives=None) -> np.ndarray:
+        """The packed array (``struct``) of these world entries in a frame: origin (world, float64;
+        (3,) for every entry, or (N, 3) one per entry) and rotation (rows: the frame's axes in world
+        coordinates), computed on the host in float64; ids and primitive indices as given (default 0)."""
+        out = np.zeros(len(world), dtype=layout(cls.struct, precision).dtype)
+        out["id"] = 0 if ids is None else ids
+        out["primitive"] = 0 if primitives is None else primitives
+        if len(world):
+            cls._rebase(out, world, np.asarray(origin, np.float64), np.asarray(rotation, np.float64))
+        return out
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation) -> None:
+        raise NotImplementedError
+
+    @classmethod
+    def pack(cls, shapes, ids, origin, rotation, precision: str) -> np.ndarray:
+        """The packed array of these shapes in a frame (pack_world, then rebase)."""
+        entry_ids, primitives = entries(shapes, ids)
+        return cls.rebase(cls.pack_world(shapes), origin, rotation, precision, entry_ids, primitives)
+
+    @classmethod
+    def world_within(cls, world, eye, limit: float) -> bool:
+        """For a type without bounds (the BVH's box bounds the others): whether every length its
+        kernel squares from this eye stays within limit (see lengths)."""
+        return True
 
     def lengths(self, eye) -> dict[str, float]:
         """Scene key -> the size of what the kernel computes from it in the camera's frame (e.g. a
@@ -105,22 +152,35 @@ class Shape:
         (scene.check_renderable) refuses a scene whose lengths exceed the precision's range."""
         return {}
 
-
-
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, shapes) -> np.ndarray:
-        """(N, 2, 3) float64: [lo, hi] of each shape, conservative (every point of the shape lies
-        inside, whatever the rounding). Only for ``bounded`` types."""
+    def bounds_of(cls, world) -> np.ndarray:
+        """(N, 2, 3) float64: [lo, hi] of each world entry, conservative (every point of the
+        primitive lies inside, whatever the rounding). Only for ``bounded`` types."""
         raise NotImplementedError(f"a {cls.type} has no bounds")
 
     @classmethod
-    def bounding_spheres(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
-        """(centres (N, 3), radii (N,)) of spheres holding each shape: by default the spheres
-        around the world bounds."""
-        bounds = cls.world_bounds(shapes).reshape(-1, 2, 3)
+    def spheres_of(cls, world) -> tuple[np.ndarray, np.ndarray]:
+        """(centres (N, 3), radii (N,)) of spheres holding each world entry: by default the spheres
+        around its bounds."""
+        bounds = cls.bounds_of(world).reshape(-1, 2, 3)
         centre = 0.5 * (bounds[:, 0] + bounds[:, 1])
         return centre, 0.5 * np.linalg.norm(bounds[:, 1] - bounds[:, 0], axis=1) * (1 + 1e-12)
+
+    @classmethod
+    def world_bounds(cls, shapes) -> np.ndarray:
+        """(N, 2, 3) bounds of these shapes' primitives (see bounds_of)."""
+        return cls.bounds_of(cls.pack_world(shapes))
+
+    def box(self) -> np.ndarray:
+        """(2, 3) [lo, hi]: the box holding the whole shape (every primitive of a batch)."""
+        bounds = self.world_bounds([self])
+        return np.stack([bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)])
+
+    @classmethod
+    def bounding_spheres(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
+        """(centres, radii) of spheres holding these shapes' primitives (see spheres_of)."""
+        return cls.spheres_of(cls.pack_world(shapes))
 
     # -- the float64 oracle --------------------------------------------------------------------
     def oracle_distance(self, origins, directions) -> np.ndarray:
@@ -158,7 +218,7 @@ class Shape:
 
     def extent_from(self, point) -> float:
         """How far from ``point`` the shape reaches (for Mitsuba's clip range)."""
-        bounds = self.world_bounds([self])[0]
+        bounds = self.box()
         corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         return float(np.linalg.norm(corners - np.asarray(point, np.float64), axis=1).max())
 
@@ -188,6 +248,21 @@ def labels_of(shapes) -> np.ndarray:
     return np.array([-1 if shape.label is None else shape.label for shape in shapes], np.int32).reshape(-1)
 
 
+def primitive_counts(shapes) -> np.ndarray:
+    """How many world entries each shape is (a batch: its primitives)."""
+    return np.fromiter((shape.primitive_count() for shape in shapes), np.int64, len(shapes))
+
+
+def entries(shapes, ids) -> tuple[np.ndarray, np.ndarray]:
+    """(id, primitive) int32 per world entry of these shapes (of these ids): each entry carries its
+    shape's id and its index within its shape."""
+    counts = primitive_counts(shapes)
+    starts = np.cumsum(counts) - counts
+    total = int(counts.sum())
+    return (np.repeat(np.asarray(ids, np.int32).reshape(-1), counts),
+            (np.arange(total) - np.repeat(starts, counts)).astype(np.int32))
+
+
 def frame_columns(normal) -> np.ndarray:
     """(t1, t2, n): a right-handed orthonormal frame around the unit vector n, float64."""
     n = np.asarray(normal, np.float64)
@@ -206,13 +281,23 @@ def to_world(columns, origin) -> np.ndarray:
     return matrix
 
 
-def pack_flat(out, center, normal, origin, rotation) -> None:
-    """The fields a flat shape (disk, rectangle) packs alike: its centre and unit normal in the frame,
-    the frame origin's signed distance to its plane (normal.w, from float64 with an exact dot), and
-    its world normal, packed as is."""
+def in_frame(x, rotation) -> np.ndarray:
+    """The coordinates of vectors x (N, 3) along a frame's axes (rotation's rows), each summed as
+    (r0 x0 + r1 x1) + r2 x2: the order kernels/rebase.cl's to_frame sums in, so that the host's and
+    the device's rebase round alike (numpy's matrix product may sum in another order)."""
+    x = np.asarray(x, np.float64).reshape(-1, 3)
+    rotation = np.asarray(rotation, np.float64)
+    return (x[:, 0:1] * rotation[:, 0] + x[:, 1:2] * rotation[:, 1]) + x[:, 2:3] * rotation[:, 2]
+
+
+def rebase_flat(out, world, origin, rotation) -> None:
+    """The fields a flat shape (disk, rectangle) rebases alike: its centre and unit normal in the
+    frame, the frame origin's signed distance to its plane (normal.w, from float64 with an exact
+    dot), and its world normal, as is."""
+    center, normal = world["center"][:, :3], world["normal"][:, :3]
     F = center - origin
-    out["center"][:, :3] = F @ rotation.T
-    out["normal"][:, :3] = normal @ rotation.T
+    out["center"][:, :3] = in_frame(F, rotation)
+    out["normal"][:, :3] = in_frame(normal, rotation)
     out["normal"][:, 3] = -dot2(normal, F)
     out["world_normal"][:, :3] = normal
 

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, padded_bounds, to_world, distance
+from .base import Shape, in_frame, padded_bounds, to_world, distance
 
 
 def rotation(axis, angle_degrees) -> np.ndarray:
@@ -50,11 +50,24 @@ class Box(Shape):
             ("world_axis1", "real4"),
             ("world_axis2", "real4"),
             ("id", "int"),
+            ("primitive", "int"),  # 0
         ),
         "Box: a ray o + s D is inside slab k where lo_k <= s (D . axis_k) <= hi_k, lo_k and hi_k = "
         "(center - o) . axis_k -+ size_k / 2, exact for the frame origin; center and half for the "
         "slab test from the ray's point nearest the centre.",
     )
+    world = Struct(
+        "BoxWorld",
+        (
+            ("center", "double4"),
+            ("half_size", "double4"),  # half the edge lengths
+            ("axis0", "double4"),  # the box's unit axes in world space
+            ("axis1", "double4"),
+            ("axis2", "double4"),
+        ),
+        "A box in world coordinates: centre, half sizes and its three unit axes.",
+    )
+    kernel_files = ("box.cl",)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -97,27 +110,35 @@ class Box(Shape):
         return np.array(self.size) / 2
 
     @classmethod
-    def _pack(cls, out, boxes, origin, rotation_rows):
-        origins = np.broadcast_to(origin, (len(boxes), 3))  # one frame for all, or one per box (cast)
-        for k, box in enumerate(boxes):
-            R = box.axes()
-            F = np.array(box.center) - origins[k]
-            out["center"][k, :3] = rotation_rows @ F
-            out["half_size"][k, :3] = box.half()
-            for axis in range(3):
-                e = R[:, axis]
-                out[f"axis{axis}"][k, :3] = rotation_rows @ e
-                out[f"world_axis{axis}"][k, :3] = e
-                # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
-                low, high = dot2(np.array([[*F, -box.half()[axis]], [*F, box.half()[axis]]]), np.append(e, 1.0))
-                out[f"axis{axis}"][k, 3] = low
-                out["high"][k, axis] = high
+    def _pack_world(cls, out, boxes):
+        out["center"][:, :3] = [b.center for b in boxes]
+        out["half_size"][:, :3] = [b.half() for b in boxes]
+        axes = np.array([b.axes() for b in boxes]).reshape(-1, 3, 3)
+        for axis in range(3):
+            out[f"axis{axis}"][:, :3] = axes[:, :, axis]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation_rows):
+        F = world["center"][:, :3] - origin
+        half = world["half_size"][:, :3]
+        out["center"][:, :3] = in_frame(F, rotation_rows)
+        out["half_size"][:, :3] = half
+        for axis in range(3):
+            e = world[f"axis{axis}"][:, :3]
+            out[f"axis{axis}"][:, :3] = in_frame(e, rotation_rows)
+            out[f"world_axis{axis}"][:, :3] = e
+            # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
+            ones = np.ones((len(e), 1))
+            h = half[:, axis:axis + 1]
+            out[f"axis{axis}"][:, 3] = dot2(np.concatenate([F, -h], axis=1), np.concatenate([e, ones], axis=1))
+            out["high"][:, axis] = dot2(np.concatenate([F, h], axis=1), np.concatenate([e, ones], axis=1))
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, boxes):
-        center = np.array([b.center for b in boxes], np.float64).reshape(-1, 3)
-        reach = np.array([np.abs(b.axes()) @ b.half() for b in boxes]).reshape(-1, 3)
+    def bounds_of(cls, world):
+        center = world["center"][:, :3]
+        axes = np.stack([world[f"axis{k}"][:, :3] for k in range(3)], axis=2)  # columns: the axes
+        reach = np.einsum("nij,nj->ni", np.abs(axes), world["half_size"][:, :3])
         return padded_bounds(center - reach, center + reach)
 
     # -- the float64 oracle --------------------------------------------------------------------

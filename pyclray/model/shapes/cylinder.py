@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
+from .base import Shape, in_frame, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
 
 
 @dataclass(frozen=True)
@@ -34,10 +34,22 @@ class Cylinder(Shape):
             ("d1", "real"),  # (p1 - frame origin) . axis
             ("caps", "int"),  # 1: closed by its two caps (a solid), 0: an open tube
             ("id", "int"),
+            ("primitive", "int"),  # 0
         ),
         "Cylinder: for rays from the frame origin, c = |(p0 - o) x axis|^2 - r^2 (the eye's squared "
         "distance from the axis minus r^2) and d0, d1 = (p0 - o).axis, (p1 - o).axis, exact.",
     )
+    world = Struct(
+        "CylinderWorld",
+        (
+            ("p0", "double4"),  # w: radius
+            ("p1", "double4"),  # w: length |p1 - p0|
+            ("axis", "double4"),  # unit axis (p1 - p0) / length
+            ("caps", "int"),
+        ),
+        "A cylinder in world coordinates: p0.w = radius, p1.w = length, unit axis.",
+    )
+    kernel_files = ("cylinder.cl",)
 
     def __post_init__(self):
         object.__setattr__(self, "p0", vector3("p0", self.p0))
@@ -73,32 +85,39 @@ class Cylinder(Shape):
         return d / length, length
 
     @classmethod
-    def _pack(cls, out, cylinders, origin, rotation):
-        p0 = np.array([c.p0 for c in cylinders]) - origin
-        p1 = np.array([c.p1 for c in cylinders]) - origin
+    def _pack_world(cls, out, cylinders):
         axes = [c.axis() for c in cylinders]
-        A = np.array([a for a, _ in axes])
-        radius = np.array([c.radius for c in cylinders])
-        out["p0"][:, :3] = p0 @ rotation.T
-        out["p0"][:, 3] = radius * radius
-        out["p1"][:, :3] = p1 @ rotation.T
+        out["p0"][:, :3] = [c.p0 for c in cylinders]
+        out["p0"][:, 3] = [c.radius for c in cylinders]
+        out["p1"][:, :3] = [c.p1 for c in cylinders]
         out["p1"][:, 3] = [length for _, length in axes]
-        out["axis"][:, :3] = A @ rotation.T
+        out["axis"][:, :3] = [a for a, _ in axes]
+        out["caps"] = [int(c.caps) for c in cylinders]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation):
+        p0 = world["p0"][:, :3] - origin
+        p1 = world["p1"][:, :3] - origin
+        A = world["axis"][:, :3]
+        radius = world["p0"][:, 3]
+        out["p0"][:, :3] = in_frame(p0, rotation)
+        out["p0"][:, 3] = radius * radius
+        out["p1"][:, :3] = in_frame(p1, rotation)
+        out["p1"][:, 3] = world["p1"][:, 3]
+        out["axis"][:, :3] = in_frame(A, rotation)
         # what every ray from the frame origin shares, from error-free products and sums
         out["axis"][:, 3] = cross_norm2_minus(p0, A, radius)
         out["world_axis"][:, :3] = A
         out["world_axis"][:, 3] = dot2(p0, A)
         out["d1"] = dot2(p1, A)
-        out["caps"] = [int(c.caps) for c in cylinders]
+        out["caps"] = world["caps"]
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, cylinders):
-        p0 = np.array([c.p0 for c in cylinders], np.float64).reshape(-1, 3)
-        p1 = np.array([c.p1 for c in cylinders], np.float64).reshape(-1, 3)
-        A = np.array([c.axis()[0] for c in cylinders]).reshape(-1, 3)
+    def bounds_of(cls, world):
+        p0, p1, A = world["p0"][:, :3], world["p1"][:, :3], world["axis"][:, :3]
         # each end's circle of radius r around the axis reaches r sqrt(1 - A_k^2) along axis k
-        reach = np.array([c.radius for c in cylinders])[:, None] * np.sqrt(np.clip(1 - A * A, 0, 1))
+        reach = world["p0"][:, 3][:, None] * np.sqrt(np.clip(1 - A * A, 0, 1))
         return padded_bounds(np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach)
 
     # -- the float64 oracle --------------------------------------------------------------------

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
-from .base import Shape, distance, dot_rows, flat_hits, frame_columns, pack_flat, padded_bounds, to_world, unit_rows
+from .base import Shape, distance, dot_rows, flat_hits, frame_columns, padded_bounds, rebase_flat, to_world, unit_rows
 
 
 @dataclass(frozen=True)
@@ -28,9 +28,19 @@ class Disk(Shape):
             ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
+            ("primitive", "int"),  # 0
         ),
         "Disk: center.xyz, center.w = r^2; normal.xyz = n, normal.w = h = n.(origin - center).",
     )
+    world = Struct(
+        "DiskWorld",
+        (
+            ("center", "double4"),  # w: radius
+            ("normal", "double4"),  # unit normal
+        ),
+        "A disk in world coordinates: center.xyz, center.w = radius, normal.xyz unit.",
+    )
+    kernel_files = ("disk.cl",)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -56,18 +66,22 @@ class Disk(Shape):
         return unit_rows(self.normal)
 
     @classmethod
-    def _pack(cls, out, disks, origin, rotation):
-        center = np.array([d.center for d in disks])
-        pack_flat(out, center, np.array([d.unit_normal() for d in disks]), origin, rotation)
-        out["center"][:, 3] = np.array([d.radius for d in disks]) ** 2
+    def _pack_world(cls, out, disks):
+        out["center"][:, :3] = [d.center for d in disks]
+        out["center"][:, 3] = [d.radius for d in disks]
+        out["normal"][:, :3] = [d.unit_normal() for d in disks]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation):
+        rebase_flat(out, world, origin, rotation)
+        out["center"][:, 3] = world["center"][:, 3] ** 2
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, disks):
-        center = np.array([d.center for d in disks], np.float64).reshape(-1, 3)
-        n = np.array([d.unit_normal() for d in disks]).reshape(-1, 3)
+    def bounds_of(cls, world):
+        center, radius, n = world["center"][:, :3], world["center"][:, 3], world["normal"][:, :3]
         # a circle of radius r around n reaches r sqrt(1 - n_k^2) along axis k
-        reach = np.array([d.radius for d in disks])[:, None] * np.sqrt(np.clip(1 - n * n, 0, 1))
+        reach = radius[:, None] * np.sqrt(np.clip(1 - n * n, 0, 1))
         return padded_bounds(center - reach, center + reach)
 
     # -- the float64 oracle --------------------------------------------------------------------

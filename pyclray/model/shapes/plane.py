@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, frame_columns, to_world
+from .base import Shape, in_frame, frame_columns, to_world
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
 # disk's error does not depend on its size; a rectangle's, two float32 triangles, does)
@@ -33,10 +33,19 @@ class Plane(Shape):
             ("normal", "real4"),  # unit normal in the frame; w: signed distance of the frame origin
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
+            ("primitive", "int"),  # 0
             ("exact", "ulong4"),  # unit normal and offset in world space, the bits of float64 numbers
         ),
         "Plane n.p + h = 0: normal.xyz = n in the frame, normal.w = h at the frame's origin.",
     )
+    world = Struct(
+        "PlaneWorld",
+        (
+            ("normal", "double4"),  # unit normal; w: the offset h (n.p + h = 0)
+        ),
+        "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
+    )
+    kernel_files = ("plane.cl",)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)
@@ -83,22 +92,31 @@ class Plane(Shape):
         length = norm3(self.normal)
         return np.array(self.normal) / length, self.offset / length
 
+    @classmethod
+    def world_within(cls, world, eye, limit: float) -> bool:
+        with np.errstate(over="ignore", invalid="ignore"):  # the eye's distance to each plane
+            return bool(np.all(np.abs(world["normal"][:, :3] @ np.asarray(eye, np.float64) + world["normal"][:, 3]) <= limit))
+
     def lengths(self, eye) -> dict[str, float]:
         n, h = self.unit()
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is an inf, which the range check refuses
             return {"offset": abs(float(np.dot(n, eye) + h))}  # the eye's distance to the plane
 
     @classmethod
-    def _pack(cls, out, planes, origin, rotation):
-        n = np.array([p.unit()[0] for p in planes])
-        h = np.array([p.unit()[1] for p in planes])
+    def _pack_world(cls, out, planes):
+        out["normal"][:, :3] = [p.unit()[0] for p in planes]
+        out["normal"][:, 3] = [p.unit()[1] for p in planes]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation):
+        n_h = world["normal"]
+        n = n_h[:, :3]
         # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
-        n_h = np.concatenate([n, h[:, None]], axis=1)
-        origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(planes), 1))], axis=1)
-        out["normal"][:, :3] = n @ rotation.T
+        origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(n), 1))], axis=1)
+        out["normal"][:, :3] = in_frame(n, rotation)
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
-        out["exact"] = n_h.view(np.uint64)
+        out["exact"] = np.ascontiguousarray(n_h).view(np.uint64)
 
     # -- float64 oracle ----------------------------------------------------------------------
     def oracle_distance(self, origins, directions):

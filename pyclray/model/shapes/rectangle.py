@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
-from .base import Shape, distance, flat_hits, pack_flat, padded_bounds, to_world, unit_rows
+from .base import Shape, in_frame, distance, flat_hits, padded_bounds, rebase_flat, to_world, unit_rows
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -33,9 +33,23 @@ class Rectangle(Shape):
             ("v_dual", "real4"),  # (P - centre) . v_dual = b
             ("world_normal", "real4"),  # normalize(u x v) in world space
             ("id", "int"),
+            ("primitive", "int"),  # 0
         ),
         "Rectangle: hit where |a| <= 1 and |b| <= 1, a and b from the dual vectors of u and v.",
     )
+    world = Struct(
+        "RectangleWorld",
+        (
+            ("center", "double4"),
+            ("normal", "double4"),  # normalize(u x v)
+            ("u_dual", "double4"),
+            ("v_dual", "double4"),
+            ("u", "double4"),  # the half sides (for the bounds)
+            ("v", "double4"),
+        ),
+        "A rectangle in world coordinates: centre, unit normal, the dual vectors of u and v, u and v.",
+    )
+    kernel_files = ("rectangle.cl",)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -78,18 +92,26 @@ class Rectangle(Shape):
         return vn / (u @ vn), nu / (v @ nu)
 
     @classmethod
-    def _pack(cls, out, rectangles, origin, rotation):
-        center = np.array([r.center for r in rectangles])
-        pack_flat(out, center, np.array([r.unit_normal() for r in rectangles]), origin, rotation)
+    def _pack_world(cls, out, rectangles):
+        out["center"][:, :3] = [r.center for r in rectangles]
+        out["normal"][:, :3] = [r.unit_normal() for r in rectangles]
         duals = [r.dual() for r in rectangles]
-        out["u_dual"][:, :3] = np.array([d[0] for d in duals]) @ rotation.T
-        out["v_dual"][:, :3] = np.array([d[1] for d in duals]) @ rotation.T
+        out["u_dual"][:, :3] = [d[0] for d in duals]
+        out["v_dual"][:, :3] = [d[1] for d in duals]
+        out["u"][:, :3] = [r.u for r in rectangles]
+        out["v"][:, :3] = [r.v for r in rectangles]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation):
+        rebase_flat(out, world, origin, rotation)
+        out["u_dual"][:, :3] = in_frame(world["u_dual"][:, :3], rotation)
+        out["v_dual"][:, :3] = in_frame(world["v_dual"][:, :3], rotation)
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, rectangles):
-        center = np.array([r.center for r in rectangles], np.float64).reshape(-1, 3)
-        reach = np.array([np.abs(r.u) + np.abs(r.v) for r in rectangles]).reshape(-1, 3)
+    def bounds_of(cls, world):
+        center = world["center"][:, :3]
+        reach = np.abs(world["u"][:, :3]) + np.abs(world["v"][:, :3])
         return padded_bounds(center - reach, center + reach)
 
     # -- the float64 oracle --------------------------------------------------------------------

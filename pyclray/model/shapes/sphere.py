@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, distance
+from .base import Shape, in_frame, distance
 
 
 def eye_term(F, radius):
@@ -36,9 +36,18 @@ class Sphere(Shape):
             ("center", "real4"),  # centre in the frame; w: radius squared
             ("c", "real"),  # |centre - frame origin|^2 - radius^2, from float64 error-free sums
             ("id", "int"),
+            ("primitive", "int"),  # its index in its batch (pyclray.Spheres), 0 for a Sphere
         ),
         "Sphere: center.xyz in the frame, center.w = r^2, c = |center|^2 - r^2.",
     )
+    world = Struct(
+        "SphereWorld",
+        (
+            ("center", "double4"),  # world centre; w: radius
+        ),
+        "A sphere in world coordinates: center.xyz, center.w = radius.",
+    )
+    kernel_files = ("sphere.cl",)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -52,11 +61,15 @@ class Sphere(Shape):
         return {"center": distance(self.center, eye), "radius": self.radius}
 
     @classmethod
-    def _pack(cls, out, spheres, origin, rotation):
-        center = np.array([s.center for s in spheres])
-        radius = np.array([s.radius for s in spheres])
+    def _pack_world(cls, out, spheres):
+        out["center"][:, :3] = [s.center for s in spheres]
+        out["center"][:, 3] = [s.radius for s in spheres]
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation):
+        center, radius = world["center"][:, :3], world["center"][:, 3]
         F = center - origin
-        out["center"][:, :3] = F @ rotation.T
+        out["center"][:, :3] = in_frame(F, rotation)
         out["center"][:, 3] = radius * radius
         out["c"] = eye_term(F, radius)
 
@@ -92,15 +105,14 @@ class Sphere(Shape):
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod
-    def world_bounds(cls, spheres):
-        centre, radius = cls.bounding_spheres(spheres)
+    def bounds_of(cls, world):
+        centre, radius = cls.spheres_of(world)
         return np.stack([centre - radius[:, None], centre + radius[:, None]], axis=1)
 
     @classmethod
-    def bounding_spheres(cls, spheres):
-        centre = np.array([s.center for s in spheres], np.float64).reshape(-1, 3)
-        radius = np.array([s.radius for s in spheres], np.float64)
-        return centre, radius * (1 + 1e-12)  # rounding of lo = c - r: one float64 ulp, widened
+    def spheres_of(cls, world):
+        # rounding of lo = c - r: one float64 ulp, widened
+        return world["center"][:, :3].reshape(-1, 3), world["center"][:, 3] * (1 + 1e-12)
 
     # -- the error model -----------------------------------------------------------------------
     def anchor(self, point):

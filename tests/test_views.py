@@ -1,0 +1,127 @@
+"""Build once, render many (pyclray.engine.prepared): the scene's shapes are prepared on the device
+once per shapes tuple, and a view from another camera rebases them into its frame on the device.
+What a view computes must not depend on the views before it: every test here compares bit for bit
+with a render from a freshly prepared scene (the cache cleared), which is itself held to the float64
+oracle by the rest of the suite (tests/test_render.py, test_shapes.py, the holdout-style cases)."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine import prepared
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.model.aovs import RENDER_AOVS
+
+ALL = RENDER_AOVS
+
+
+def same(a, b):
+    assert set(a) == set(b)
+    for name in a:
+        assert np.array_equal(a[name], b[name], equal_nan=True), name
+
+
+def fresh(scene, **options):
+    """The render of a scene prepared from nothing."""
+    prepared.clear()
+    return pyclray.render(scene, **options)
+
+
+def need(precision):
+    if precision == "fp64" and not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+def every_shape(offset=(0.0, 0.0, 0.0), size=(48, 40)) -> pyclray.Scene:
+    """scenes/shapes.toml (every shape type, lit) moved by offset, camera and lights with it."""
+    scene = pyclray.load_scene("scenes/shapes-lit.toml").with_size(*size)
+    move = lambda p: tuple(np.add(p, offset))
+    shapes = []
+    for shape in scene.shapes:
+        changes = {}
+        for field in ("center", "p0", "p1"):
+            if hasattr(shape, field):
+                changes[field] = move(getattr(shape, field))
+        if isinstance(shape, pyclray.Plane):
+            n, h = shape.unit()
+            shapes.append(dataclasses.replace(shape, normal=tuple(n), offset=float(h - n @ np.asarray(offset))))
+        else:
+            shapes.append(dataclasses.replace(shape, **changes))
+    lights = tuple(dataclasses.replace(l, position=move(l.position)) if hasattr(l, "position") else l for l in scene.lights)
+    camera = dataclasses.replace(scene.camera, eye=move(scene.camera.eye), target=move(scene.camera.target))
+    return dataclasses.replace(scene, camera=camera, shapes=tuple(shapes), lights=lights)
+
+
+@pytest.mark.parametrize("rebase", ["device", "host"])
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("offset", [1e5, 1e6, 1e8])
+def test_a_far_view_after_a_near_one_is_the_fresh_far_view_bit_for_bit(monkeypatch, precision, offset, rebase):
+    """The same shapes seen from the usual camera and then from one 1e5..1e8 away along the view
+    axis (the scene moved with it, so both see it): the far view equals a fresh scene's far view,
+    with the per-view pass on the device and on the host (small scenes, devices without fp64)."""
+    need(precision)
+    monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0 if rebase == "device" else 10**9)
+    near = every_shape()
+    far_scene = every_shape((offset, 0.3 * offset, -offset))
+    expected = fresh(far_scene, aovs=ALL, precision=precision)
+    prepared.clear()
+    pyclray.render(far_scene, aovs=ALL, precision=precision, camera=near.camera)  # a first view elsewhere
+    pyclray.render(dataclasses.replace(far_scene, camera=near.camera), aovs=ALL, precision=precision)
+    same(pyclray.render(far_scene, aovs=ALL, precision=precision), expected)
+
+
+@pytest.mark.parametrize("acceleration", ["tiles", "bvh"])
+def test_camera_argument_replace_and_render_views_agree(acceleration):
+    scene = pyclray.load_scene("scenes/tp02-lit.toml").with_size(40, 30)
+    cameras = [pyclray.Camera((4.0 * np.cos(a), 2.0, 4.0 * np.sin(a)), (0.0, 0.5, 0.0), fov=50.0) for a in np.linspace(0, 3, 5)]
+    views = list(pyclray.render_views(scene, cameras, aovs=ALL, acceleration=acceleration))
+    assert len(views) == len(cameras)
+    for camera, view in zip(cameras, views):
+        same(view, pyclray.render(scene, aovs=ALL, camera=camera, acceleration=acceleration))
+        same(view, fresh(dataclasses.replace(scene, camera=camera), aovs=ALL, acceleration=acceleration))
+    # the views came from one prepared scene: the shapes were packed and uploaded once
+    prepared.clear()
+    list(pyclray.render_views(scene, cameras, aovs=("depth",)))
+    assert len(prepared._prepared) == 1
+
+
+def test_render_views_takes_scenes_of_other_sizes_and_rejects_other_things():
+    scene = pyclray.load_scene("scenes/tp02.toml").with_size(32, 24)
+    other = scene.with_size(16, 8)
+    (a, b) = pyclray.render_views(scene, [scene.camera, other])
+    assert a["depth"].shape == (24, 32) and b["depth"].shape == (8, 16)
+    with pytest.raises(pyclray.RequestError, match="camera: expected a pyclray.Camera"):
+        pyclray.render(scene, camera="front")
+
+
+def test_a_moved_camera_uploads_no_shapes(monkeypatch):
+    """After the first view, other cameras neither pack nor upload the shapes: the prepared scene is
+    the same object and no shape is packed on the host (Shape.pack_world is never called again)."""
+    scene = pyclray.load_scene("scenes/grid64.toml").with_size(32, 32)
+    prepared.clear()
+    pyclray.render(scene)
+    first = prepared.prepared_scene(context_for(None), scene, "fp32")
+    calls = []
+    for cls in pyclray.model.shapes.REGISTRY.values():
+        monkeypatch.setattr(cls, "pack_world", classmethod(lambda c, shapes: calls.append(c) or None))
+    for a in np.linspace(0.1, 1.0, 4):
+        pyclray.render(scene, camera=dataclasses.replace(scene.camera, eye=tuple(np.add(scene.camera.eye, a))))
+    assert not calls
+    assert prepared.prepared_scene(context_for(None), scene, "fp32") is first
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypatch, precision):
+    """A device without float64 rebases on the host (Shape.rebase, numpy float64) what others rebase
+    on the device (kernels/rebase.cl): the same formulas in the same order (pyclray.model.shapes.base.in_frame),
+    so the same images to the last bit."""
+    need(precision)
+    scene = every_shape((1e4, 0.0, 0.0))
+    monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0)  # a small scene: on the device all the same
+    expected = fresh(scene, aovs=ALL, precision=precision)
+    monkeypatch.setattr(prepared, "has_fp64", lambda device: False)
+    same(fresh(scene, aovs=ALL, precision=precision), expected)
+    prepared.clear()
