@@ -60,12 +60,20 @@ def check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple
     return tuple(a for a in known if a in aovs)  # canonical order: one program per set
 
 
-def camera_struct(rows, tan_x, tan_y, width, height, precision):
+def camera_struct(rows, plane, width, height, precision):
+    """The kernel's Camera (model/layout.py): the frame's rows u, v, w and the image plane (a
+    model.camera.ImagePlane at this size). Twice the principal point goes as an integer and the
+    rest, so that the kernel's numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum
+    (and exactly width - 1 - 2 i, as ever, for a centred camera)."""
     camera = np.zeros(1, dtype=layout(CAMERA, precision).dtype)
     for name, row in zip("uvw", rows):
         camera[name][0, :3] = row
-    camera["tan_x"], camera["tan_y"] = tan_x, tan_y
+    camera["tan_x"], camera["tan_y"] = plane.tan_x, plane.tan_y
     camera["width"], camera["height"] = width, height
+    for axis, c in (("x", plane.cx), ("y", plane.cy)):
+        whole = round(2 * c)
+        camera[f"centre_{axis}"] = whole
+        camera[f"centre_{axis}_low"] = 2 * c - whole  # exact in float64: |2 c| < 2^30
     return camera
 
 

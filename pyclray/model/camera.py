@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,6 +16,19 @@ MIN_UP_SINE = 1e-6
 # neighbouring pixels are no longer distinct in float32, so such a fov is an error.
 MIN_PIXEL_TAN = 1e-30
 MAX_IMAGE_SIDE = 1 << 16
+
+
+class ImagePlane(NamedTuple):
+    """Where the pixel centres' rays go, on the image plane at distance 1 in the camera's frame
+    (x left, y up, z forward): pixel (row j, column i) at
+    sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height.
+    tan_x = width / (2 fx) and tan_y = height / (2 fy) (the tangents of a centred camera's half
+    opening angles); cx, cy: the principal point in pixels (K's: width / 2, height / 2 when centred)."""
+
+    tan_x: float
+    tan_y: float
+    cx: float
+    cy: float
 
 
 @dataclass(frozen=True)
@@ -79,6 +93,11 @@ class Camera:
         pose = np.eye(4)
         pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -u, -v, w, self.eye
         return pose
+
+    def image_plane(self, width: int, height: int) -> ImagePlane:
+        """Where this camera's pixel-centre rays go at this image size (see ImagePlane): the one
+        description of them that the kernel's camera struct, the oracle and the culling share."""
+        return ImagePlane(*self.tangents(width, height), width / 2, height / 2)
 
     def tangents(self, width: int, height: int) -> tuple[float, float]:
         """tan of the half opening angles along x and y (square pixels)."""
