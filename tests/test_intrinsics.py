@@ -1,7 +1,8 @@
 """Cameras as vision users write them (scene-format.md, "Camera from intrinsics"): K and a
 camera-to-world pose in OpenCV's convention, in TOML and in Python; their renders against the
 float64 oracle (off-centre principal points, fx != fy, a principal point outside the image); a
-look-at camera turned into K and a pose renders the same images; animation."""
+look-at camera turned into K and a pose renders the same images; back-projection of the depth
+map; the EXR header; animation."""
 import dataclasses
 import os
 import subprocess
@@ -14,7 +15,7 @@ import pyclray
 from pyclray import SceneError
 from pyclray.engine import culling
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.reference import oracle
+from pyclray.reference import error_model, oracle
 
 from conftest import SCENES
 from test_render import assert_matches_oracle
@@ -276,6 +277,77 @@ def test_a_look_at_camera_as_k_and_pose_renders_the_same_images(name):
         assert_matches_oracle(as_intrinsics, pyclray.render(as_intrinsics, precision="fp64"), precision="fp64")
 
 
+# -- back-projection --------------------------------------------------------------------------------
+# -- back-projection --------------------------------------------------------------------------------
+@pytest.mark.parametrize("intrinsics", [K(40.0, 70.0, 45.25, 9.5), K(55.0, 55.0, 11.3, 40.7)], ids=["fx-fy", "off-centre"])
+def test_the_depth_map_back_projects_onto_the_shapes(intrinsics):
+    """pose @ (depth * normalize(K^-1 [i + .5, j + .5, 1])) with the frame's own K and pose, in
+    plain numpy, is the oracle's hit point to the depth's own error: the rays are the oracle's to
+    float64 rounding, and the depth meets the error model."""
+    scene = scene_of(intrinsics)
+    frame = pyclray.render(scene, aovs=("depth", "id", "position"))
+    assert np.array_equal(frame.intrinsics, intrinsics) and np.array_equal(frame.pose, POSE)
+    j, i = np.mgrid[0:48, 0:64]
+    pixels = np.stack([i + 0.5, j + 0.5, np.ones((48, 64))], axis=-1)
+    rays = pixels @ np.linalg.inv(frame.intrinsics).T
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    origins, directions = oracle.camera_rays(scene)
+    R, eye = frame.pose[:3, :3], frame.pose[:3, 3]
+    assert np.abs(rays @ R.T - directions).max() < 1e-14
+    ref = error_model.reference(scene)
+    result = error_model.compare(frame, ref, engine="fp32")
+    assert result["depth_ulps_max"] <= error_model.FP32_DEPTH_ULPS and result["id_mismatch"] == 0
+    hit = (frame["id"] >= 0) & (frame["id"] == ref["id"])
+    depth = frame["depth"].astype(np.float64)
+    points = (np.where(hit, depth, 0)[..., None] * rays) @ R.T + eye
+    truth = origins + np.where(hit, ref["depth"], 0)[..., None] * directions
+    off = np.linalg.norm(points - truth, axis=-1)[hit]
+    assert np.all(off <= np.abs(depth[hit] - ref["depth"][hit]) + 1e-12 * ref["depth"][hit])
+    assert np.abs(points - frame["position"])[hit].max() < 1e-4  # and the position image says as much
+
+
+def test_a_window_frame_holds_the_principal_point_of_its_own_pixels():
+    scene = scene_of(K(40.0, 70.0, 45.25, 9.5))
+    whole = pyclray.render(scene)
+    part = pyclray.render(scene, window=(8, 16, 40, 20))
+    assert np.array_equal(part.intrinsics, K(40.0, 70.0, 37.25, -6.5)) and np.array_equal(part.pose, whole.pose)
+    assert np.array_equal(part["depth"], whole["depth"][16:36, 8:48])
+
+
+# -- the EXR header ------------------------------------------------------------------------------
+# -- the EXR header ------------------------------------------------------------------------------
+def test_the_exr_header_holds_k_and_the_pose(tmp_path):
+    import OpenEXR
+
+    scene = scene_of(K(40.0, 70.0, 45.25, 9.5))
+    frame = pyclray.render(scene)
+    pyclray.write_exr(tmp_path / "f.exr", frame)
+    images, header = pyclray.read_exr(tmp_path / "f.exr", header=True)
+    assert set(images) == {"depth", "normal", "id"} and np.array_equal(images["depth"], frame["depth"])
+    assert header["intrinsics"].dtype == np.float64 and np.array_equal(header["intrinsics"], frame.intrinsics)
+    assert np.array_equal(header["pose"], frame.pose)
+    assert isinstance(pyclray.read_exr(tmp_path / "f.exr"), dict)  # without header=True: the images, as before
+    # OpenEXR's own reader sees the attributes with their types (m33d, m44d, m44f)
+    with OpenEXR.File(str(tmp_path / "f.exr")) as exr:
+        attributes = dict(exr.header())
+    assert attributes["intrinsics"].shape == (3, 3) and attributes["pose"].dtype == np.float64
+    # worldToCamera: OpenEXR's convention, row vectors and camera x right, y up, z forward
+    M = attributes["worldToCamera"].astype(np.float64)
+    assert attributes["worldToCamera"].dtype == np.float32
+    pose = frame.pose
+    for camera_point in ([0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]):  # OpenCV's: ahead, right, below
+        world = pose[:3, :3] @ camera_point + pose[:3, 3]
+        renderman = np.append(world, 1.0) @ M
+        assert np.allclose(renderman[:3], np.multiply(camera_point, [1, -1, 1]), atol=1e-5) and renderman[3] == 1
+
+
+def test_a_dict_of_images_is_written_without_a_camera(tmp_path):
+    frame = pyclray.render(scene_of(K(40.0, 70.0, 45.25, 9.5)))
+    pyclray.write_exr(tmp_path / "d.exr", dict(frame))
+    _, header = pyclray.read_exr(tmp_path / "d.exr", header=True)
+    assert "intrinsics" not in header and "pose" not in header and "worldToCamera" not in header
+
+
 # -- animation -----------------------------------------------------------------------------------
 ANIMATED = """
 [animation]
@@ -315,3 +387,18 @@ def test_keys_an_intrinsics_camera_cannot_animate_are_a_clear_error(tmp_path, ke
         pyclray.load_scene(write(tmp_path, text))
     message = str(error.value)
     assert f"key {key!r}: cannot be animated" in message and "(expected one of: eye)" in message, message
+
+
+def test_each_animated_frames_exr_holds_its_own_camera(tmp_path):
+    """`pyclray animate` to a folder: frame k's header holds the camera at its time (the eye keyed)."""
+    text = camera_table(K(50.0, 50.0, 30.0, 20.0)) + SCENE_REST + ANIMATED.format(
+        key="eye", first="[2.5, 1.8, 4.2]", last="[0.5, 1.8, 5.2]")
+    path = write(tmp_path, text)
+    result = subprocess.run([sys.executable, "-m", "pyclray", "animate", str(path), "-o", str(tmp_path / "frames"),
+                             "--aov", "depth"], capture_output=True, text=True, env=dict(os.environ))
+    assert result.returncode == 0, result.stderr
+    scene = pyclray.load_scene(path)
+    for k in range(4):
+        _, header = pyclray.read_exr(tmp_path / "frames" / f"frame_{k:05d}.exr", header=True)
+        camera = scene.at(k / 2.0).camera
+        assert np.array_equal(header["pose"], camera.pose()) and np.array_equal(header["intrinsics"], K(50.0, 50.0, 30.0, 20.0))

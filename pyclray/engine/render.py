@@ -14,7 +14,7 @@ from . import culling
 from .device import context_for
 from .prepared import acceleration_for, check_renderable_once, prepared_scene, render_inputs
 from .programs import Variant, lanes_for
-from .request import Frame, check_request, run_kernel
+from .request import Frame, check_request, frame_camera, run_kernel
 
 
 def _window(scene: Scene, window) -> tuple[int, int, int, int]:
@@ -89,7 +89,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     with prepared.lock:  # the frame buffers hold this view until its kernel has run
         prepared.rebase(inputs.eye, inputs.rows)
         images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
-    return Frame(images, precision=precision, device=ctx.device.name.strip())
+    return Frame(images, precision=precision, device=ctx.device.name.strip(),
+                 **frame_camera(scene.camera, scene.image.width, scene.image.height, col0, row0))
 
 
 def with_camera(scene: Scene, camera) -> Scene:

@@ -28,12 +28,20 @@ class Frame(dict):
     precision "fp64"); normal: unit world normal, (0, 0, 0) on a miss; id: int32, -1 on a miss.
     Renders may add zdepth (depth along the optical axis, +inf on a miss), position (world hit
     point, (0, 0, 0) on a miss) and shaded (linear RGB, the background on a miss).
+
+    A render's frame also holds its camera as the vision tools take it: ``intrinsics`` (K, 3x3, in
+    pixels of these images: a window's principal point is shifted by its corner) and ``pose`` (4x4
+    camera-to-world), OpenCV's convention (x right, y down, z forward), so that
+    pose @ [depth * normalize(K^-1 [i + 0.5, j + 0.5, 1]), 1] is pixel (j, i)'s hit point; None
+    for a cast's.
     """
 
-    def __init__(self, arrays, *, precision: str, device: str):
+    def __init__(self, arrays, *, precision: str, device: str, intrinsics=None, pose=None):
         super().__init__(arrays)
         self.precision = precision
         self.device = device
+        self.intrinsics = intrinsics
+        self.pose = pose
 
     def __repr__(self) -> str:
         shapes = ", ".join(f"{k}: {v.dtype}{list(v.shape)}" for k, v in self.items())
@@ -75,6 +83,15 @@ def camera_struct(rows, plane, width, height, precision):
         camera[f"centre_{axis}"] = whole
         camera[f"centre_{axis}_low"] = 2 * c - whole  # exact in float64: |2 c| < 2^30
     return camera
+
+
+def frame_camera(camera, width: int, height: int, col0: int = 0, row0: int = 0) -> dict:
+    """The intrinsics and pose of a Frame (see Frame) of the window of a width x height image from
+    column col0 and row row0 on."""
+    K = camera.intrinsics(width, height)
+    K[0, 2] -= col0
+    K[1, 2] -= row0
+    return {"intrinsics": K, "pose": camera.pose()}
 
 
 def input_buffer(ctx, array):

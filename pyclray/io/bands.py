@@ -28,20 +28,20 @@ def band_rows(width: int, budget_pixels: int = 1 << 22) -> int:
 
 
 def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, previews: bool = False,
-                 comment: str | None = None) -> list[Path]:
+                 comment: str | None = None, camera=None) -> list[Path]:
     """Stream the images of a render into OUT.exr and, with previews, OUT.<aov>.png for each AOV
     that has one, all replaced together (see replace_together). bands: name -> (rows, width, ...)
     arrays, top to bottom, covering the image once. Memory: a few bands (the one being made, and
     at most two waiting per writer while the background compresses); a preview that needs the
     whole image's scale (depth) keeps its AOV in an unnamed temporary file beside the output and
-    makes its rows in a second pass.
+    makes its rows in a second pass. camera: (K, pose) of the image for the EXR's header, or None.
     Returns the paths written."""
     aovs = tuple(aovs)
     pngs = preview_paths(out, aovs) if previews else {}
     targets = [Path(out), *pngs.values()]
     channels = {name: kind for name, (_, kind) in exr_channel_arrays(empty_images(aovs)).items()}
     with replace_together(targets) as temporaries, ExitStack() as files:
-        exr = ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment)
+        exr = ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment, camera)
         files.callback(exr.stop)  # after a failure: no background job writes on (closes run last first)
         writers = {name: PngWriter(files.enter_context(open(tmp, "wb")), width, height) for name, tmp in zip(pngs, temporaries[1:])}
         for writer in writers.values():
@@ -75,7 +75,15 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
     return targets
 
 
+def camera_of(frame):
+    """(K, pose) of a render's Frame (its intrinsics and pose), or None (a plain dict of images)."""
+    K, pose = getattr(frame, "intrinsics", None), getattr(frame, "pose", None)
+    return None if K is None or pose is None else (K, pose)
+
+
 def write_exr(path, frame, comment: str | None = None) -> None:
-    """One EXR file of a frame's images (replaced as a whole, see replace_together)."""
+    """One EXR file of a frame's images (replaced as a whole, see replace_together); a render's
+    Frame also puts its camera (intrinsics and pose) in the header."""
     height, width = next(iter(frame.values())).shape[:2]
-    write_images(path, frame_bands(frame), width=width, height=height, aovs=tuple(frame), comment=comment)
+    write_images(path, frame_bands(frame), width=width, height=height, aovs=tuple(frame), comment=comment,
+                 camera=camera_of(frame))

@@ -16,6 +16,11 @@ def _band_renderer(scene, aovs, precision, device):
     return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
 
 
+def _camera(scene):
+    """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py)."""
+    return scene.camera.intrinsics(scene.image.width, scene.image.height), scene.camera.pose()
+
+
 def run(args) -> int:
     from ...io import exr, files, png
     from ...io.bands import band_rows, write_images
@@ -49,7 +54,7 @@ def run(args) -> int:
     start = time.perf_counter()
     with progress(height, desc="pyclray render", unit="row") as bar:
         written = write_images(out, bands(), width=width, height=height, aovs=args.aov, previews=args.png,
-                                      comment=f"pyclray render of {args.scene}")
+                                      comment=f"pyclray render of {args.scene}", camera=_camera(scene))
     total = time.perf_counter() - start
     channels = ", ".join(exr.exr_channel_arrays(empty_images(args.aov)))
     print(
@@ -86,7 +91,8 @@ def _render_on_cluster(args, scene, out) -> int:
 
             with progress(-(-height // rows), desc="pyclray render", unit="band") as bar:
                 written = write_images(out, received(), width=width, height=height, aovs=args.aov,
-                                              previews=args.png, comment=f"pyclray render of {args.scene}")
+                                              previews=args.png, comment=f"pyclray render of {args.scene}",
+                                              camera=_camera(scene))
     except cluster.ClusterError as error:
         raise BadInput(str(error)) from None
     total = time.perf_counter() - start
