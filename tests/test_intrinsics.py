@@ -2,7 +2,7 @@
 camera-to-world pose in OpenCV's convention, in TOML and in Python; their renders against the
 float64 oracle (off-centre principal points, fx != fy, a principal point outside the image); a
 look-at camera turned into K and a pose renders the same images; back-projection of the depth
-map; the EXR header; animation."""
+map; the EXR header; the Mitsuba mapping; the command line; animation."""
 import dataclasses
 import os
 import subprocess
@@ -15,9 +15,9 @@ import pyclray
 from pyclray import SceneError
 from pyclray.engine import culling
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.reference import error_model, oracle
+from pyclray.reference import check, error_model, mitsuba, oracle
 
-from conftest import SCENES
+from conftest import REPO, SCENES
 from test_render import assert_matches_oracle
 
 # A pose looking down at TP02's spheres from the front right (columns: x right, y down, z forward
@@ -80,6 +80,12 @@ def test_a_toml_camera_from_intrinsics_loads_as_from_intrinsics_builds_it(tmp_pa
     assert camera.eye == (2.5, 1.8, 4.2)
     u, v, w = camera.basis()  # the frame the kernels use: u left, v up, w forward
     assert np.array_equal(w, np.array(POSE)[:3, 2]) and np.array_equal(u, -np.array(POSE)[:3, 0])
+
+
+def test_the_shipped_intrinsics_scene_is_a_camera_from_intrinsics():
+    scene = pyclray.load_scene(SCENES / "intrinsics.toml")
+    assert scene.camera.K is not None and scene.camera.size == (640, 480)
+    assert scene.camera.intrinsics(640, 480)[0, 2] == 330.0
 
 
 BAD = [
@@ -278,7 +284,6 @@ def test_a_look_at_camera_as_k_and_pose_renders_the_same_images(name):
 
 
 # -- back-projection --------------------------------------------------------------------------------
-# -- back-projection --------------------------------------------------------------------------------
 @pytest.mark.parametrize("intrinsics", [K(40.0, 70.0, 45.25, 9.5), K(55.0, 55.0, 11.3, 40.7)], ids=["fx-fy", "off-centre"])
 def test_the_depth_map_back_projects_onto_the_shapes(intrinsics):
     """pose @ (depth * normalize(K^-1 [i + .5, j + .5, 1])) with the frame's own K and pose, in
@@ -315,7 +320,6 @@ def test_a_window_frame_holds_the_principal_point_of_its_own_pixels():
 
 
 # -- the EXR header ------------------------------------------------------------------------------
-# -- the EXR header ------------------------------------------------------------------------------
 def test_the_exr_header_holds_k_and_the_pose(tmp_path):
     import OpenEXR
 
@@ -346,6 +350,78 @@ def test_a_dict_of_images_is_written_without_a_camera(tmp_path):
     pyclray.write_exr(tmp_path / "d.exr", dict(frame))
     _, header = pyclray.read_exr(tmp_path / "d.exr", header=True)
     assert "intrinsics" not in header and "pose" not in header and "worldToCamera" not in header
+
+
+def test_the_render_command_writes_k_at_its_size(tmp_path):
+    out = tmp_path / "i.exr"
+    result = subprocess.run([sys.executable, "-m", "pyclray", "render", str(SCENES / "intrinsics.toml"), "-o", str(out),
+                             "--size", "160x120", "--aov", "depth,zdepth"], capture_output=True, text=True,
+                            env=dict(os.environ))
+    assert result.returncode == 0, result.stderr
+    images, header = pyclray.read_exr(out, header=True)
+    scene = pyclray.load_scene(SCENES / "intrinsics.toml").with_size(160, 120)
+    assert np.array_equal(header["intrinsics"], K(131.25, 131.25, 82.5, 61.5))  # 640x480's K / 4
+    assert np.array_equal(header["pose"], scene.camera.pose())
+    expected = pyclray.render(scene, aovs=("depth", "zdepth"))
+    assert np.array_equal(images["depth"], expected["depth"]) and np.array_equal(images["zdepth"], expected["zdepth"])
+    # z-depth back-projects with K alone: zdepth K^-1 [i + .5, j + .5, 1] is the hit in the camera's frame
+    j, i = np.mgrid[0:120, 0:160]
+    hit = np.isfinite(images["zdepth"])
+    camera_points = images["zdepth"][hit][:, None] * (np.stack([i + .5, j + .5, np.ones((120, 160))], -1)[hit]
+                                                      @ np.linalg.inv(header["intrinsics"]).T)
+    assert np.allclose(np.linalg.norm(camera_points, axis=-1), images["depth"][hit], rtol=1e-5)
+
+
+# -- the Mitsuba mapping -------------------------------------------------------------------------
+def test_mitsubas_sensor_follows_the_principal_point_and_focal_length():
+    """The sensor's own ray through each pixel centre is pyclray's pixel ray to float32 rounding
+    (Mitsuba's principal_point_offset is added to the film position: offset = 0.5 - c / size)."""
+    scene = scene_of(K(55.0, 55.0, 11.3, 40.7))
+    sensor = mitsuba.sensor_of(scene)
+    assert sensor["fov_axis"] == "x" and sensor["fov"] == pytest.approx(np.degrees(2 * np.arctan(64 / 110)))
+    assert sensor["principal_point_offset_x"] == pytest.approx(0.5 - 11.3 / 64)
+    assert sensor["principal_point_offset_y"] == pytest.approx(0.5 - 40.7 / 48)
+    mitsuba.import_mitsuba("scalar_rgb")
+    mi_scene, _ = mitsuba.load(scene, "scalar_rgb")
+    rows, columns = np.mgrid[0:48:5, 0:64:7]
+    _, directions = mitsuba.primary_rays(mi_scene, scene, rows.ravel(), columns.ravel())
+    ours = oracle.camera_rays(scene)[1][rows.ravel(), columns.ravel()]
+    angle = error_model.angle_between(directions, ours)
+    assert angle.max() <= error_model.camera_angle_tolerance(scene)
+
+
+@pytest.mark.parametrize("intrinsics", [K(55.0, 55.0, 11.3, 40.7), K(45.0, 45.0, -7.5, 36.0)], ids=["off-centre", "outside"])
+def test_an_intrinsics_scene_agrees_with_mitsuba(intrinsics):
+    scene = scene_of(intrinsics, 96, 72)
+    images = check.cross_check(scene, "scalar_rgb")
+    assert images.passed, images.failures
+    assert images.counts["both hit the same shape"] > 96 * 72 // 3
+    rays = check.ray_level(scene, "scalar_rgb", 256, seed=1)
+    assert rays.passed, rays.failures
+
+
+def test_the_check_refuses_unequal_focal_lengths_in_one_line(tmp_path):
+    scene = scene_of(K(40.0, 70.0, 32.0, 24.0))
+    with pytest.raises(SceneError, match="square pixels only") as error:
+        mitsuba.sensor_of(scene)
+    assert "table [camera]: key 'intrinsics'" in str(error.value)
+    path = write(tmp_path, camera_table(K(40.0, 70.0, 32.0, 24.0)) + SCENE_REST)
+    result = subprocess.run([sys.executable, "-m", "pyclray", "check", str(path)], capture_output=True, text=True,
+                            env=dict(os.environ))
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1 and "fx = 40, fy = 70" in result.stderr, result.stderr
+    # --size that changes the aspect ratio stretches the view: its pixels are no longer square
+    result = subprocess.run([sys.executable, "-m", "pyclray", "check", str(SCENES / "intrinsics.toml"), "--size", "64x64"],
+                            capture_output=True, text=True, env=dict(os.environ))
+    assert result.returncode == 2 and "square pixels only" in result.stderr
+
+
+def test_the_check_command_passes_on_the_intrinsics_scene():
+    result = subprocess.run([sys.executable, "-m", "pyclray", "check", str(SCENES / "intrinsics.toml"),
+                             "--size", "128x96", "--rays", "128"], capture_output=True, text=True, env=dict(os.environ),
+                            cwd=REPO)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "passed: within the tolerance" in result.stdout
 
 
 # -- animation -----------------------------------------------------------------------------------
