@@ -261,6 +261,22 @@ def test_culling_stays_conservative_for_any_principal_point_and_focal_lengths(mo
             assert np.array_equal(tiles[name], everything[name]) and np.array_equal(tiles[name], bvh[name]), name
 
 
+def test_views_from_many_poses_are_those_of_their_own_scenes():
+    """render_views and render(camera=...) with cameras from intrinsics (a data set of depth maps
+    from many poses): each frame is the render of the scene with that camera, bit for bit, and
+    holds that camera's K and pose; a camera without a size takes the scene's image's."""
+    base = scene_of(K(50.0, 50.0, 30.0, 20.0))
+    cameras = [pyclray.Camera.from_intrinsics(K(50.0 + 5 * k, 50.0 + 5 * k, 30.0 + k, 20.0 - k),
+                                              np.array(POSE) + [[0, 0, 0, 0.2 * k], [0, 0, 0, 0], [0, 0, 0, -0.1 * k],
+                                                                [0, 0, 0, 0]]) for k in range(3)]
+    frames = list(pyclray.render_views(base, cameras, aovs=("depth", "id")))
+    for camera, frame in zip(cameras, frames):
+        alone = pyclray.render(dataclasses.replace(base, camera=camera), aovs=("depth", "id"))
+        assert np.array_equal(frame["depth"], alone["depth"]) and np.array_equal(frame["id"], alone["id"])
+        assert np.array_equal(frame.intrinsics, camera.K) and np.array_equal(frame.pose, camera.pose())
+    assert np.array_equal(pyclray.render(base, aovs=("depth",), camera=cameras[1])["depth"], frames[1]["depth"])
+
+
 # -- a look-at camera as K and a pose -------------------------------------------------------------
 @pytest.mark.parametrize("name", ["tp02", "portrait", "room", "far", "shapes-lit", "sun"])
 def test_a_look_at_camera_as_k_and_pose_renders_the_same_images(name):
