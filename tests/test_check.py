@@ -56,9 +56,17 @@ def assert_passed(result):
     assert result.normal_ratio.max <= 1
 
 
+def small(scene):
+    """The scene at SMALL; a camera from intrinsics keeps its aspect ratio (a new one would stretch
+    its K to fx != fy, which Mitsuba's square pixels cannot show)."""
+    if scene.camera.K is None:
+        return scene.with_size(*SMALL)
+    return scene.with_size(SMALL[0], round(SMALL[0] * scene.image.height / scene.image.width))
+
+
 @pytest.mark.parametrize("path", scene_files(), ids=lambda p: p.name)
 def test_every_scene_agrees_with_mitsuba_scalar(path):
-    scene = pyclray.load_scene(path).with_size(*SMALL)
+    scene = small(pyclray.load_scene(path))
     result = check.cross_check(scene, "scalar_rgb")
     assert_passed(result)
     assert result.ids["unexplained"] == 0

@@ -25,7 +25,8 @@ def test_streamed_npz_holds_the_arrays_as_numpy_savez_would(tmp_path, height, wi
     frame = random_frame(height, width, seed=width, real=np.float64)
     extra = {"K": np.eye(3), "pose": np.arange(16.0).reshape(4, 4)}
     path = tmp_path / "x.npz"
-    assert write_images(path, frame_bands(frame, rows), width=width, height=height, aovs=tuple(frame), arrays=extra) == [path]
+    assert write_images(path, frame_bands(frame, rows), width=width, height=height, aovs=tuple(frame),
+                        camera=(extra["K"], extra["pose"])) == [path]
     with np.load(path, allow_pickle=False) as archive:
         assert archive.files == [*frame, "K", "pose"]
         for name, array in {**frame, **extra}.items():
@@ -35,17 +36,20 @@ def test_streamed_npz_holds_the_arrays_as_numpy_savez_would(tmp_path, height, wi
     assert no_temporaries(tmp_path) and sorted(p.name for p in tmp_path.iterdir()) == ["x.npz"]
 
 
-def test_write_npz_and_read_npz_with_the_camera(tmp_path):
+def test_write_npz_and_read_npz_with_the_frames_camera(tmp_path):
     scene = pyclray.load_scene(TP02).with_size(48, 32)
     frame = pyclray.render(scene, aovs=EVERY, precision="fp64")
-    pyclray.write_npz(tmp_path / "f.npz", frame, camera=scene.camera)
+    pyclray.write_npz(tmp_path / "f.npz", frame)  # a render's Frame: its camera as K and pose
     back = pyclray.read_npz(tmp_path / "f.npz")
     assert list(back) == [*frame, "K", "pose"]
     for name in frame:
         assert back[name].dtype == frame[name].dtype and np.array_equal(back[name], frame[name]), name
     assert back["depth"].dtype == np.float64  # unlike an EXR, the .npz keeps fp64
     assert np.array_equal(back["K"], scene.camera.intrinsics(48, 32)) and np.array_equal(back["pose"], scene.camera.pose())
-    pyclray.write_npz(tmp_path / "g.npz", frame)  # no camera: the images only
+    window = pyclray.render(scene, aovs=("depth",), window=(8, 4, 16, 12))  # a window's K: its own pixels
+    pyclray.write_npz(tmp_path / "w.npz", window)
+    assert np.array_equal(pyclray.read_npz(tmp_path / "w.npz")["K"], window.intrinsics)
+    pyclray.write_npz(tmp_path / "g.npz", dict(frame))  # a plain dict of images: the images only
     assert list(pyclray.read_npz(tmp_path / "g.npz")) == list(frame)
 
 

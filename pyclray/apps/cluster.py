@@ -32,7 +32,7 @@ from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_wo
 from distributed.scheduler import KilledWorker
 
 from ..engine.render import render
-from ..engine.request import Frame
+from ..engine.request import Frame, frame_camera
 from ..model.aovs import AOVS
 from ..model.camera import Camera
 from ..model.errors import PyclrayError
@@ -313,4 +313,5 @@ def render_image(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
         top += next(iter(band.values())).shape[0]
         if band.device not in devices:
             devices.append(band.device)
-    return Frame(images, precision=band.precision, device=" + ".join(devices))
+    return Frame(images, precision=band.precision, device=" + ".join(devices),
+                 **frame_camera(scene.camera, scene.image.width, scene.image.height))

@@ -6,6 +6,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..model.aovs import AOVS
+from ..model.camera import ImagePlane
 from ..model.errors import DeviceError, PyclrayError, RequestError
 from ..model.layout import PRECISIONS
 from ..model.loader import as_scene
@@ -149,7 +150,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
         cl.enqueue_copy(ctx.queue, out, buffer)
         return _unsorted(out.astype(bool), order).reshape(shape)
     identity = np.eye(3)
-    camera = camera_struct(identity, 0.0, 0.0, 0, 0, precision)
+    camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", shape_types, aovs, precision)
     results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], (count,), count, aovs, precision, (count,))
     results = {k: _unsorted(v, order).reshape(shape + v.shape[1:]) for k, v in results.items()}

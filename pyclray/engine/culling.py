@@ -45,24 +45,28 @@ def sphere_bounds(center, radius, origin, rotation):
     return out
 
 
-def _pixel_range(lo, hi, tangent, size):
-    """First and last pixel index whose centre coordinate tangent (size - 2 i - 1) / size lies in
-    [lo, hi] (the coordinate decreases with i), widened by one pixel and clamped."""
-    first = np.floor((size * (1 - hi / tangent) - 1) / 2) - 1
-    last = np.ceil((size * (1 - lo / tangent) - 1) / 2) + 1
+def _pixel_range(lo, hi, tangent, centre, size):
+    """First and last pixel index whose centre coordinate tangent (2 centre - 2 i - 1) / size
+    (model.camera.ImagePlane; centre: the principal point in pixels) lies in [lo, hi] (the
+    coordinate decreases with i), widened by one pixel and clamped."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        first = np.floor((2 * centre - 1 - size * (hi / tangent)) / 2) - 1
+        last = np.ceil((2 * centre - 1 - size * (lo / tangent)) / 2) + 1
     return np.clip(first, 0, size - 1), np.clip(last, -1, size - 1), (last >= 0) & (first <= size - 1)
 
 
-def tile_lists(bounded, spheres, n, origin, rotation, tan_x, tan_y, width, height, tile=TILE):
+def tile_lists(bounded, spheres, n, origin, rotation, plane, width, height, tile=TILE):
     """(start, index) int32 arrays: the n entries of one shape type (positions in its packed array;
     bounded: held by the spheres (centres, radii), else visited everywhere) that tile t visits are
-    index[start[t]:start[t+1]], in increasing order; tiles are numbered row by row."""
+    index[start[t]:start[t+1]], in increasing order; tiles are numbered row by row. plane: the
+    camera's model.camera.ImagePlane at this image size (each axis's tangent and principal point on
+    its own: off-centre and unequal focal lengths alike)."""
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)
     if ENABLED and bounded and n:
         bounds = sphere_bounds(*spheres, np.asarray(origin, np.float64), rotation)
         everywhere = np.isnan(bounds).any(axis=1)
-        c0, c1, ok_x = _pixel_range(bounds[:, 0], bounds[:, 1], tan_x, width)
-        r0, r1, ok_y = _pixel_range(bounds[:, 2], bounds[:, 3], tan_y, height)
+        c0, c1, ok_x = _pixel_range(bounds[:, 0], bounds[:, 1], plane.tan_x, plane.cx, width)
+        r0, r1, ok_y = _pixel_range(bounds[:, 2], bounds[:, 3], plane.tan_y, plane.cy, height)
         ok = ok_x & ok_y & (c0 <= c1) & (r0 <= r1)
         tx0, tx1 = np.where(ok, c0 // tile, 0), np.where(ok, c1 // tile, -1)
         ty0, ty1 = np.where(ok, r0 // tile, 0), np.where(ok, r1 // tile, -1)

@@ -307,10 +307,10 @@ class PreparedScene:
                 cl.enqueue_copy(queue, self.nodes, self._nodes_host)
         self.view_key = key
 
-    def tile_lists(self, kind: Kind, eye, rows, tan_x, tan_y, width, height):
+    def tile_lists(self, kind: Kind, eye, rows, plane, width, height):
         """(start, index) of the kind's entries for each screen tile of this view (culling.tile_lists)."""
         spheres = kind.cls.spheres_of(kind.world) if kind.cls.bounded else None
-        return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, tan_x, tan_y, width, height)
+        return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
 
 
 class _RefitState:
@@ -490,11 +490,11 @@ def _cheaper_acceleration(scene: Scene, prepared: PreparedScene | None) -> str:
         return "bvh"
     width, height = scene.image.width, scene.image.height
     rows = scene.camera.basis()
-    tan_x, tan_y = scene.camera.tangents(width, height)
+    plane = scene.camera.image_plane(width, height)
     pairs, tiles = 0, 1
     for kind in prepared.kinds.values():
         if kind.cls.bounded:
-            start, _ = prepared.tile_lists(kind, scene.camera.eye, rows, tan_x, tan_y, width, height)
+            start, _ = prepared.tile_lists(kind, scene.camera.eye, rows, plane, width, height)
             pairs += int(start[-1])
             tiles = len(start) - 1
     return "tiles" if pairs <= TILE_LIST_MAX * tiles else "bvh"
@@ -539,12 +539,12 @@ class ViewInputs:
         width, height = scene.image.width, scene.image.height
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
-        tan_x, tan_y = scene.camera.tangents(width, height)
-        self.camera = input_buffer(ctx, camera_struct(self.rows, tan_x, tan_y, width, height, precision))
+        plane = scene.camera.image_plane(width, height)
+        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
-                start, index = prepared.tile_lists(kind, self.eye, self.rows, tan_x, tan_y, width, height)
+                start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
         lights = shading.pack_lights(scene, precision)
         real = REAL[precision]

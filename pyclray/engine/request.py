@@ -29,12 +29,20 @@ class Frame(dict):
     Renders may add zdepth (depth along the optical axis, +inf on a miss), position (world hit
     point, (0, 0, 0) on a miss), shaded (linear RGB, the background on a miss) and label (int32, the
     hit shape's label, -1 on a miss or for a shape without one).
+
+    A render's frame also holds its camera as the vision tools take it: ``intrinsics`` (K, 3x3, in
+    pixels of these images: a window's principal point is shifted by its corner) and ``pose`` (4x4
+    camera-to-world), OpenCV's convention (x right, y down, z forward), so that
+    pose @ [depth * normalize(K^-1 [i + 0.5, j + 0.5, 1]), 1] is pixel (j, i)'s hit point; None
+    for a cast's.
     """
 
-    def __init__(self, arrays, *, precision: str, device: str):
+    def __init__(self, arrays, *, precision: str, device: str, intrinsics=None, pose=None):
         super().__init__(arrays)
         self.precision = precision
         self.device = device
+        self.intrinsics = intrinsics
+        self.pose = pose
 
     def __repr__(self) -> str:
         shapes = ", ".join(f"{k}: {v.dtype}{list(v.shape)}" for k, v in self.items())
@@ -61,13 +69,30 @@ def check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple
     return tuple(a for a in known if a in aovs)  # canonical order: one program per set
 
 
-def camera_struct(rows, tan_x, tan_y, width, height, precision):
+def camera_struct(rows, plane, width, height, precision):
+    """The kernel's Camera (model/layout.py): the frame's rows u, v, w and the image plane (a
+    model.camera.ImagePlane at this size). Twice the principal point goes as an integer and the
+    rest, so that the kernel's numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum
+    (and exactly width - 1 - 2 i, as ever, for a centred camera)."""
     camera = np.zeros(1, dtype=layout(CAMERA, precision).dtype)
     for name, row in zip("uvw", rows):
         camera[name][0, :3] = row
-    camera["tan_x"], camera["tan_y"] = tan_x, tan_y
+    camera["tan_x"], camera["tan_y"] = plane.tan_x, plane.tan_y
     camera["width"], camera["height"] = width, height
+    for axis, c in (("x", plane.cx), ("y", plane.cy)):
+        whole = round(2 * c)
+        camera[f"centre_{axis}"] = whole
+        camera[f"centre_{axis}_low"] = 2 * c - whole  # exact in float64: |2 c| < 2^30
     return camera
+
+
+def frame_camera(camera, width: int, height: int, col0: int = 0, row0: int = 0) -> dict:
+    """The intrinsics and pose of a Frame (see Frame) of the window of a width x height image from
+    column col0 and row row0 on."""
+    K = camera.intrinsics(width, height)
+    K[0, 2] -= col0
+    K[1, 2] -= row0
+    return {"intrinsics": K, "pose": camera.pose()}
 
 
 def input_buffer(ctx, array):

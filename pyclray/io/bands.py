@@ -13,7 +13,7 @@ from ..model.aovs import empty_images
 from ..model.errors import RequestError
 from .exr import _ZIP_LINES, ExrWriter, exr_channel_arrays
 from .files import replace_together
-from .npz import NpzWriter, camera_arrays
+from .npz import CAMERA_ARRAYS, NpzWriter
 from .png import PREVIEWS, PngWriter, preview_paths
 
 
@@ -64,17 +64,17 @@ class _ExrBands:
 
 
 def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, previews: bool = False,
-                 comment: str | None = None, arrays: dict | None = None, format: str | None = None) -> list[Path]:
+                 comment: str | None = None, camera=None, format: str | None = None) -> list[Path]:
     """Stream the images of a render into `out`, whose extension says what it is (output_format;
     or `format`, "exr", "npz" or "png", whatever the name):
-    OUT.exr (every AOV's channels), OUT.npz (every AOV as an array, and `arrays` such as the
-    camera's K and pose) or OUT.png (the preview of the first AOV; it must have one); with
+    OUT.exr (every AOV's channels; camera in its header), OUT.npz (every AOV as an array, and the
+    camera as arrays K and pose) or OUT.png (the preview of the first AOV; it must have one); with
     previews (.exr or .npz), also OUT.<aov>.png for each AOV that has one. All are replaced together
     (see replace_together). bands: name -> (rows, width, ...) arrays, top to bottom, covering the
     image once. Memory: a few bands (the one being made, and at most two waiting per writer while
     the background compresses); a preview that needs the whole image's scale (depth) keeps its AOV
     in an unnamed temporary file beside the output and makes its rows in a second pass, and an
-    .npz keeps each AOV's rows so until its member is written.
+    .npz keeps each AOV's rows so until its member is written. camera: (K, pose) of the image, or None.
     Returns the paths written."""
     aovs = tuple(aovs)
     out = Path(out)
@@ -96,8 +96,10 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
         main = None
         if kind == "exr":
             channels = {name: kind for name, (_, kind) in exr_channel_arrays(empty_images(aovs)).items()}
-            main = _ExrBands(ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment))
+            main = _ExrBands(ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment,
+                                       camera))
         elif kind == "npz":
+            arrays = None if camera is None else dict(zip(CAMERA_ARRAYS, camera))
             main = NpzWriter(files.enter_context(open(temporaries[0], "wb")), width, height, arrays, out.parent)
         if main is not None:
             files.callback(main.stop)  # after a failure: no background job writes on (closes run last first)
@@ -136,24 +138,31 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
     return targets
 
 
+def camera_of(frame):
+    """(K, pose) of a render's Frame (its intrinsics and pose), or None (a plain dict of images)."""
+    K, pose = getattr(frame, "intrinsics", None), getattr(frame, "pose", None)
+    return None if K is None or pose is None else (K, pose)
+
+
 def write_exr(path, frame, comment: str | None = None) -> None:
     """One OpenEXR file of a frame's images (every AOV's channels, see pyclray.io.exr), replaced as
-    a whole (see replace_together); pyclray.read_exr reads it back. An fp64 frame is stored as
-    32-bit floats (OpenEXR has no 64-bit float channels): use write_npz to keep float64."""
+    a whole (see replace_together); a render's Frame also puts its camera (intrinsics and pose) in
+    the header. pyclray.read_exr reads it back. An fp64 frame is stored as 32-bit floats (OpenEXR
+    has no 64-bit float channels): use write_npz to keep float64."""
     _write_frame(path, frame, "exr", comment=comment)
 
 
-def write_npz(path, frame, camera=None) -> None:
+def write_npz(path, frame) -> None:
     """One .npz file of a frame's images (every AOV as an array under its name, in its own dtype)
-    and, given the Camera the frame was rendered with, its intrinsics `K` at the frame's size and
-    its `pose` (see Camera.intrinsics, Camera.pose; for a whole image, not a window of one).
-    Replaced as a whole; pyclray.read_npz or numpy.load reads it back."""
-    height, width = next(iter(frame.values())).shape[:2] if frame else (0, 0)
-    _write_frame(path, frame, "npz", arrays=None if camera is None else camera_arrays(camera, width, height))
+    and, for a render's Frame, its camera as arrays `K` (its intrinsics, in the frame's own pixels:
+    a window's too) and `pose` (camera-to-world), OpenCV's convention. Replaced as a whole;
+    pyclray.read_npz or numpy.load reads it back."""
+    _write_frame(path, frame, "npz")
 
 
 def _write_frame(path, frame, kind: str, **options) -> None:
     if not frame:
         raise RequestError("frame: expected at least one image, got none")
     height, width = next(iter(frame.values())).shape[:2]
-    write_images(path, frame_bands(frame), width=width, height=height, aovs=tuple(frame), format=kind, **options)
+    write_images(path, frame_bands(frame), width=width, height=height, aovs=tuple(frame), format=kind,
+                 camera=camera_of(frame), **options)

@@ -12,6 +12,14 @@ EXR channels (one part, scanlines, ZIP compression, 32-bit):
 An fp64 render is stored as 32-bit floats: OpenEXR has no 64-bit float channel type (its pixel
 types are UINT, HALF and FLOAT).
 
+The camera, in the header (camera_attributes), where the writer was given it:
+  intrinsics     m33d  K of this image, OpenCV's (pixels; [u, v, 1] ~ K [x, y, z], row-major as written)
+  pose           m44d  camera-to-world, OpenCV's axes (x right, y down, z forward), for column
+                       vectors: p_world = pose @ [p_camera, 1] (row-major as written)
+  worldToCamera  m44f  OpenEXR's standard attribute, in its own convention: Imath's row vectors
+                       ([p_camera, 1] = [p_world, 1] @ M) and RenderMan's camera space (x right,
+                       y up, z forward, left-handed)
+
 The encoder takes the image in bands of whole rows (ExrWriter), so a command never needs the whole
 image in memory. It is ours: the OpenEXR package writes only whole arrays; its reader is the
 reference the tests hold our files to.
@@ -76,6 +84,22 @@ def _attribute(name: str, kind: str, value: bytes) -> bytes:
     return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
 
 
+def camera_attributes(intrinsics, pose) -> list[bytes]:
+    """The header attributes of a render's camera (see the module's docstring): K and the pose in
+    OpenCV's convention, and OpenEXR's standard worldToCamera."""
+    K = np.asarray(intrinsics, np.float64)
+    pose = np.asarray(pose, np.float64)
+    axes = pose[:3, :3] * [1.0, -1.0, 1.0]  # columns: RenderMan's x right, y up, z forward
+    world_to_camera = np.eye(4)  # Imath's row-vector form: the transpose of the column-vector matrix
+    world_to_camera[:3, :3] = axes
+    world_to_camera[3, :3] = -(pose[:3, 3] @ axes)
+    return [
+        _attribute("intrinsics", "m33d", K.astype("<f8").tobytes()),
+        _attribute("pose", "m44d", pose.astype("<f8").tobytes()),
+        _attribute("worldToCamera", "m44f", world_to_camera.astype("<f4").tobytes()),
+    ]
+
+
 def _zip_chunk(raw: np.ndarray) -> bytes:
     """OpenEXR's ZIP compression of one chunk: bytes split into even and odd positions, each
     byte replaced by its difference to the previous one (+128, mod 256), then zlib; stored raw
@@ -97,9 +121,10 @@ class ExrWriter:
     any width are rounded to float32; integers are stored by their 32-bit pattern), any number of
     rows at a time, and returns at once: the chunks are compressed (on up to 4 threads) and
     written in the background; close() waits for them and finishes the file (an error if rows are
-    missing); stop() abandons the file after a failure."""
+    missing); stop() abandons the file after a failure. camera: (K, pose) of the image, for the
+    header (camera_attributes), or None."""
 
-    def __init__(self, file, width: int, height: int, channels: dict, comment: str | None = None):
+    def __init__(self, file, width: int, height: int, channels: dict, comment: str | None = None, camera=None):
         self.file, self.width, self.height = file, width, height
         self.names = sorted(channels)  # OpenEXR keeps channels sorted by name, in the file too
         self.kinds = [channels[name] for name in self.names]
@@ -120,6 +145,8 @@ class ExrWriter:
         ]
         if comment:
             header.append(_attribute("comment", "string", comment.encode()))
+        if camera is not None:  # (K, pose) of this image
+            header += camera_attributes(*camera)
         version = 2 | (0x400 if max(map(len, self.names + ["comment"])) > 31 else 0)  # long names
         self.file.write(struct.pack("<ii", 20000630, version) + b"".join(header) + b"\0")
         self.chunks = -(-height // _ZIP_LINES)
@@ -183,11 +210,15 @@ class ExrWriter:
 
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"  # the first four bytes of every OpenEXR file
+CAMERA_ATTRIBUTES = {"intrinsics": (3, 3), "pose": (4, 4), "worldToCamera": (4, 4)}
 
 
-def read_exr(path) -> dict:
+def read_exr(path, header: bool = False):
     """The images of an EXR written by write_exr or `pyclray render`, as render returns them: AOV
     name -> array, for each AOV whose channels the file holds (ids and labels as int32).
+    header=True: (images, header), the header a dict of the file's attributes as OpenEXR reads
+    them, with the camera's (see camera_attributes) as float64 numpy arrays: header["intrinsics"]
+    (K) and header["pose"] where the file has them.
 
     A missing, unreadable or damaged file, or one that is not OpenEXR, raises OutputError of one
     line ("cannot read PATH: ..."), and nothing is printed: OpenEXR's own messages, which its C
@@ -205,9 +236,20 @@ def read_exr(path) -> dict:
     try:
         with _output_captured() as captured, OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: channel.pixels for name, channel in exr.channels().items()}
+            attributes = dict(exr.header()) if header else None
     except Exception as error:  # OpenEXR raises RuntimeError, ValueError, ... for a damaged file
         detail = " ".join((captured.text.strip().splitlines() or [str(error)])[0].split())
         raise OutputError(f"cannot read {path}: a damaged OpenEXR file ({detail})") from None
+    images = _images(channels)
+    if not header:
+        return images
+    for name, shape in CAMERA_ATTRIBUTES.items():
+        if name in attributes:
+            attributes[name] = np.asarray(attributes[name], np.float64).reshape(shape)
+    return images, attributes
+
+
+def _images(channels: dict) -> dict:
     out = {}
     for name, aov in TABLE.items():  # every AOV whose channels the file has, as render returns it
         if all(channel in channels for channel in aov.exr):

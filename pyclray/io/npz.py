@@ -20,12 +20,7 @@ import numpy as np
 from ..model.errors import OutputError
 from .files import reason
 
-CAMERA_ARRAYS = ("K", "pose")  # the arrays beside the AOVs, when the camera is known
-
-
-def camera_arrays(camera, width: int, height: int) -> dict:
-    """{"K": 3x3 intrinsics at this image size, "pose": 4x4 camera-to-world}, float64."""
-    return {"K": camera.intrinsics(width, height), "pose": camera.pose()}
+CAMERA_ARRAYS = ("K", "pose")  # the arrays beside the AOVs, when the camera is known: (K, pose)
 
 
 class NpzWriter:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bands import frame_bands, write_images
+from .bands import frame_bands, camera_of, write_images
 from .png import PREVIEWS, preview
 
 
@@ -55,7 +55,7 @@ class FrameFiles:
     def write(self, exr: Path, frame):
         height, width = next(iter(frame.values())).shape[:2]
         write_images(exr, frame_bands(frame), width=width, height=height, aovs=tuple(frame),
-                            previews=True, comment=self.comment)
+                            previews=True, comment=self.comment, camera=camera_of(frame))
 
     def __call__(self, frame) -> list[tuple[str, bytes]]:
         with tempfile.TemporaryDirectory(prefix="pyclray-frame-") as scratch:

@@ -215,7 +215,8 @@ class Animation:
             animatable = {f.name: _kind(getattr(thing, f.name)) if getattr(thing, f.name) is not None
                           else _kind(track.values[0]) or "a number or numbers" for f in dataclasses.fields(thing)
                           if f.metadata.get("animatable", True)}
-            animatable = {k: kind for k, kind in animatable.items() if kind}
+            fixed = getattr(thing, "fixed_keys", ())  # e.g. the other kind of camera's keys
+            animatable = {k: kind for k, kind in animatable.items() if kind and k not in fixed}
             if track.key not in animatable:
                 raise SceneError(
                     f"cannot be animated: {_describe(scene, found[0])} has no number or vector key of that name "

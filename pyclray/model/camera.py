@@ -1,12 +1,14 @@
-"""The camera (a perspective view from an eye toward a target) and the image's size."""
+"""The camera (a perspective view: from an eye toward a target, or a pose and pinhole intrinsics)
+and the image's size."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from .errors import SceneError, integer, norm3, number, vector3
+from .errors import SceneError, _shown, integer, norm3, number, vector3
 
 # Below this sine of the angle between up and the view direction the image's roll is decided by
 # rounding noise: a degenerate camera, reported as an error rather than rendered.
@@ -15,32 +17,198 @@ MIN_UP_SINE = 1e-6
 # neighbouring pixels are no longer distinct in float32, so such a fov is an error.
 MIN_PIXEL_TAN = 1e-30
 MAX_IMAGE_SIDE = 1 << 16
+# A pose's rotation R must be orthonormal within this (every entry of R^T R - I), with det R > 0:
+# poses written with 7 significant digits pass. Within float64 rounding (RIGID_EXACT) R is used as
+# given; otherwise the camera holds its nearest rotation (the polar factor of R), so that its frame
+# is orthonormal as the kernels assume.
+RIGID_TOLERANCE = 1e-6
+RIGID_EXACT = 1e-12
+# The image plane's reach (the largest |x / z| or |y / z| of a pixel centre's ray), as far as a
+# look-at camera's fov < 180 reaches in float64 (tan(90 - 1.4e-14 degrees) = 4e15): beyond it the
+# kernels' squares of the ray's coordinates are not safely finite in float32.
+MAX_PLANE_REACH = 1e16
+# The principal point at most this many pixels from the image's corner (twice it is an int32 in the
+# kernel's camera struct, less the pixel's index).
+MAX_PRINCIPAL_POINT = 2.0**28
+
+LOOK_AT_KEYS = ("target", "up", "fov", "fov_axis")
+INTRINSICS_KEYS = ("K", "rotation", "size")
+
+
+class ImagePlane(NamedTuple):
+    """Where the pixel centres' rays go, on the image plane at distance 1 in the camera's frame
+    (x left, y up, z forward): pixel (row j, column i) at
+    sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height.
+    tan_x = width / (2 fx) and tan_y = height / (2 fy) (the tangents of a centred camera's half
+    opening angles); cx, cy: the principal point in pixels (K's: width / 2, height / 2 when centred)."""
+
+    tan_x: float
+    tan_y: float
+    cx: float
+    cy: float
+
+
+def _matrix(key: str, value, rows: int, columns: int) -> np.ndarray:
+    """A rows x columns matrix of finite numbers (nested sequences or an array), as float64."""
+    shape = f"{rows}x{columns}"
+    try:
+        array = np.array(value, dtype=object)
+    except (ValueError, TypeError):  # a ragged nesting
+        array = None
+    if array is None or array.shape != (rows, columns):
+        raise SceneError(f"expected a {shape} matrix ({rows} rows of {columns} numbers), got {_shown(value)}", key=key)
+    out = np.empty((rows, columns))
+    for index, entry in np.ndenumerate(array):
+        if isinstance(entry, (bool, np.bool_)) or not isinstance(entry, (int, float, np.integer, np.floating)):
+            raise SceneError(f"expected a {shape} matrix of numbers, got {_shown(entry)} in row {index[0]}", key=key)
+        try:
+            out[index] = float(entry)
+        except OverflowError:  # an integer beyond float64
+            out[index] = math.inf
+    if not np.all(np.isfinite(out)):
+        raise SceneError(f"expected a {shape} matrix of finite numbers, got {_shown(value)}", key=key)
+    return out
+
+
+def _nested(array: np.ndarray) -> tuple:
+    return tuple(tuple(float(x) for x in row) for row in array)
+
+
+def _intrinsics(key: str, value) -> np.ndarray:
+    """K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]: fx, fy > 0, no skew, principal point anywhere
+    within MAX_PRINCIPAL_POINT."""
+    K = _matrix(key, value, 3, 3)
+    form = "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]"
+    if K[0, 1] != 0:
+        raise SceneError(f"expected no skew (K[0][1] = 0, as OpenCV's and Mitsuba's cameras), got {K[0, 1]!r}", key=key)
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        raise SceneError(f"expected a pinhole matrix {form}, got {_shown(_nested(K))}", key=key)
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise SceneError(f"expected focal lengths fx = K[0][0] > 0 and fy = K[1][1] > 0 (pixels), got "
+                         f"fx = {K[0, 0]!r}, fy = {K[1, 1]!r}", key=key)
+    if max(abs(K[0, 2]), abs(K[1, 2])) > MAX_PRINCIPAL_POINT:
+        raise SceneError(f"expected the principal point (cx, cy) within {MAX_PRINCIPAL_POINT:.0f} pixels of the "
+                         f"image's corner, got ({K[0, 2]!r}, {K[1, 2]!r})", key=key)
+    return K
+
+
+def _rotation(key: str, R: np.ndarray) -> np.ndarray:
+    """A rotation within RIGID_TOLERANCE (orthonormal, det +1): as given when orthonormal to float64
+    rounding, else its nearest rotation (the polar factor U V^T of R = U S V^T)."""
+    deviation = float(np.abs(R.T @ R - np.eye(3)).max())
+    determinant = float(np.linalg.det(R))
+    if not (deviation <= RIGID_TOLERANCE and determinant > 0):
+        what = "a reflection (det < 0)" if determinant < 0 and deviation <= RIGID_TOLERANCE else (
+            f"R^T R - I up to {deviation:.3g}")
+        raise SceneError(f"expected a rigid camera-to-world pose: its rotation orthonormal within "
+                         f"{RIGID_TOLERANCE:g} with det +1 (no scale, shear or mirror), got {what}", key=key)
+    if deviation <= RIGID_EXACT:
+        return R
+    U, _, Vt = np.linalg.svd(R)
+    return U @ Vt
 
 
 @dataclass(frozen=True)
 class Camera:
-    """A perspective camera looking from ``eye`` at ``target``; ``fov`` in degrees along ``fov_axis``."""
+    """A perspective camera at ``eye``, given one of two ways (never a mix):
+
+    - looking at ``target``, ``up`` (default +y), ``fov`` in degrees (default 45) along ``fov_axis``
+      ("x", the default, or "y"): ``Camera(eye, target, up, fov)``;
+    - from pinhole intrinsics and a pose, OpenCV's convention (x right, y down, z forward):
+      ``Camera.from_intrinsics(K, pose)``, which holds ``K`` (3x3, pixels), ``rotation`` (the pose's
+      3x3 camera-to-world rotation) and ``size`` ((width, height): the image K is in pixels of;
+      None: the scene's image, filled in by the Scene).
+
+    ``intrinsics(width, height)`` and ``pose()`` give K and the pose of either kind; ``basis()`` the
+    frame the kernels use, ``image_plane(width, height)`` where its pixel-centre rays go."""
 
     eye: tuple[float, float, float]
-    target: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    fov: float = 45.0
-    fov_axis: str = "x"
+    target: tuple[float, float, float] | None = None
+    up: tuple[float, float, float] | None = None
+    fov: float | None = None
+    fov_axis: str | None = None
+    K: tuple | None = None
+    rotation: tuple | None = None
+    size: tuple[int, int] | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "eye", vector3("eye", self.eye))
+        if self.K is not None or self.rotation is not None:
+            self._check_intrinsics()
+        else:
+            self._check_look_at()
+        self.basis()  # a degenerate basis is an error now, not a NaN image later
+
+    def _check_look_at(self):
+        mixed = next((key for key in INTRINSICS_KEYS if getattr(self, key) is not None), None)
+        if mixed is not None:
+            raise SceneError(f"a look-at camera (eye, target, up, fov) has no {mixed}: only a camera from intrinsics "
+                             "and a pose does (Camera.from_intrinsics)", key=mixed)
+        if self.target is None:
+            raise SceneError("missing: a camera needs a target (or intrinsics and a pose: Camera.from_intrinsics)",
+                             key="target")
         object.__setattr__(self, "target", vector3("target", self.target))
-        object.__setattr__(self, "up", vector3("up", self.up))
-        fov = number("fov", self.fov)
+        object.__setattr__(self, "up", vector3("up", (0.0, 1.0, 0.0) if self.up is None else self.up))
+        fov = number("fov", 45.0 if self.fov is None else self.fov)
         if not 0 < fov < 180:
             raise SceneError(f"expected 0 < fov < 180 (degrees), got {fov!r}", key="fov")
         object.__setattr__(self, "fov", fov)
-        if self.fov_axis not in ("x", "y"):
-            raise SceneError(f'expected "x" or "y", got {self.fov_axis!r}', key="fov_axis")
-        self.basis()  # a degenerate basis is an error now, not a NaN image later
+        fov_axis = "x" if self.fov_axis is None else self.fov_axis
+        if fov_axis not in ("x", "y"):
+            raise SceneError(f'expected "x" or "y", got {fov_axis!r}', key="fov_axis")
+        object.__setattr__(self, "fov_axis", fov_axis)
+
+    def _check_intrinsics(self):
+        mixed = next((key for key in LOOK_AT_KEYS if getattr(self, key) is not None), None)
+        if mixed is not None:
+            raise SceneError(f"a camera from intrinsics and a pose has no {mixed} (give either eye, target, up, fov, "
+                             "fov_axis or intrinsics and a pose, not a mix)", key=mixed)
+        for key in ("K", "rotation"):
+            if getattr(self, key) is None:
+                raise SceneError("missing: a camera from intrinsics needs both K and rotation", key=key)
+        object.__setattr__(self, "K", _nested(_intrinsics("K", self.K)))
+        object.__setattr__(self, "rotation", _nested(_rotation("rotation", _matrix("rotation", self.rotation, 3, 3))))
+        if self.size is not None:
+            if isinstance(self.size, (str, bytes)) or not hasattr(self.size, "__len__") or len(self.size) != 2:
+                raise SceneError(f"expected (width, height), got {_shown(self.size)}", key="size")
+            size = tuple(integer("size", side, minimum=1, maximum=MAX_IMAGE_SIDE) for side in self.size)
+            object.__setattr__(self, "size", size)
+
+    @classmethod
+    def from_intrinsics(cls, K, pose, width: int | None = None, height: int | None = None) -> "Camera":
+        """The camera of pinhole intrinsics K (3x3, pixels: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
+        fx, fy > 0, no skew, principal point anywhere) and a rigid camera-to-world pose (4x4, last
+        row 0 0 0 1), in OpenCV's convention (x right, y down, z forward): pixel (row j, column i)
+        casts normalize(R K^-1 [i + 0.5, j + 0.5, 1]) from the pose's translation.
+        width, height: the image K is in pixels of (both or neither); left out, the scene's image.
+        Rendered at another size, K scales with the image (fx, cx by the ratio of widths; fy, cy
+        of heights). Errors name the key: intrinsics, pose, width or height."""
+        K = _intrinsics("intrinsics", K)
+        pose = _matrix("pose", pose, 4, 4)
+        if not np.array_equal(pose[3], [0.0, 0.0, 0.0, 1.0]):
+            raise SceneError(f"expected a rigid camera-to-world pose, its last row 0 0 0 1, got "
+                             f"{_shown(list(pose[3]))}", key="pose")
+        rotation = _rotation("pose", pose[:3, :3])
+        if (width is None) != (height is None):
+            raise SceneError("expected both width and height (the image K is in pixels of), or neither",
+                             key="height" if height is None else "width")
+        size = None
+        if width is not None:
+            size = (integer("width", width, minimum=1, maximum=MAX_IMAGE_SIDE),
+                    integer("height", height, minimum=1, maximum=MAX_IMAGE_SIDE))
+        return cls(tuple(pose[:3, 3]), K=_nested(K), rotation=_nested(rotation), size=size)
+
+    @property
+    def fixed_keys(self) -> tuple[str, ...]:
+        """The fields an animation cannot key (pyclray.model.animation): the other kind's, and the
+        size. A camera from intrinsics animates its eye (the pose's translation) only."""
+        return INTRINSICS_KEYS if self.K is None else LOOK_AT_KEYS + INTRINSICS_KEYS
 
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64."""
+        if self.K is not None:
+            R = np.array(self.rotation)
+            return np.stack([-R[:, 0], -R[:, 1], R[:, 2]])  # OpenCV's x right, y down, z forward
         with np.errstate(over="ignore"):
             forward = np.subtract(self.target, self.eye)
         length = norm3(forward)
@@ -67,9 +235,17 @@ class Camera:
     def intrinsics(self, width: int, height: int) -> np.ndarray:
         """K (3x3 float64): the pinhole intrinsics of this camera's pixel-centre rays at this image
         size, in OpenCV's convention (x right, y down, z forward; pixel (row j, column i) looks
-        through K^-1 [i + 0.5, j + 0.5, 1]): fx = width / (2 tan_x), cx = width / 2, and alike in y."""
-        tan_x, tan_y = self.tangents(width, height)
-        return np.array([[width / (2 * tan_x), 0.0, width / 2], [0.0, height / (2 * tan_y), height / 2], [0.0, 0.0, 1.0]])
+        through K^-1 [i + 0.5, j + 0.5, 1]). A look-at camera: fx = width / (2 tan_x), cx = width / 2,
+        and alike in y. A camera from intrinsics: its K as given at its size, scaled with the image
+        at another (fx and cx by width / its width, fy and cy by height / its height)."""
+        if self.K is None:
+            tan_x, tan_y = self.tangents(width, height)
+            return np.array([[width / (2 * tan_x), 0.0, width / 2], [0.0, height / (2 * tan_y), height / 2], [0.0, 0.0, 1.0]])
+        K = np.array(self.K)
+        if self.size is not None and (width, height) != self.size:
+            K[0] *= width / self.size[0]  # fx, 0, cx (a multiple of the image's edges: pixel centres at i + 0.5)
+            K[1] *= height / self.size[1]
+        return K
 
     def pose(self) -> np.ndarray:
         """The camera-to-world pose (4x4 float64) in OpenCV's convention: its rotation's columns are
@@ -80,8 +256,20 @@ class Camera:
         pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -u, -v, w, self.eye
         return pose
 
+    def image_plane(self, width: int, height: int) -> ImagePlane:
+        """Where this camera's pixel-centre rays go at this image size (see ImagePlane): the one
+        description of them that the kernel's camera struct, the oracle and the culling share."""
+        if self.K is None:  # exactly the tangents, and the centre: a look-at camera's rays as ever
+            return ImagePlane(*self.tangents(width, height), width / 2, height / 2)
+        K = self.intrinsics(width, height)
+        return ImagePlane(float(width / (2 * K[0, 0])), float(height / (2 * K[1, 1])), float(K[0, 2]), float(K[1, 2]))
+
     def tangents(self, width: int, height: int) -> tuple[float, float]:
-        """tan of the half opening angles along x and y (square pixels)."""
+        """tan of the half opening angles along x and y (square pixels for a look-at camera; for a
+        camera from intrinsics, those of a centred camera of its focal lengths: width / (2 fx), ...)."""
+        if self.K is not None:
+            plane = self.image_plane(width, height)
+            return plane.tan_x, plane.tan_y
         t = math.tan(math.radians(self.fov) / 2)
         if self.fov_axis == "x":
             return t, t * height / width

@@ -32,6 +32,27 @@ def _table(data: dict, key: str, *, required: bool) -> dict:
     return data[key]
 
 
+LOOK_AT_KEYS = ("eye", "target", "up", "fov", "fov_axis")
+INTRINSICS_KEYS = ("intrinsics", "pose")
+
+
+def camera_from_table(table: dict) -> Camera:
+    """The [camera] table: eye, target, up, fov, fov_axis, or intrinsics and pose (scene-format.md,
+    "Camera from intrinsics"), never a mix."""
+    if not any(key in table for key in INTRINSICS_KEYS):
+        no_unknown_keys(table, LOOK_AT_KEYS, required=("eye", "target", "fov"))
+        return Camera(**table)
+    no_unknown_keys(table, LOOK_AT_KEYS + INTRINSICS_KEYS)
+    for key in LOOK_AT_KEYS:
+        if key in table:
+            raise SceneError("a camera is given either by eye, target, up, fov, fov_axis or by intrinsics and pose, "
+                             "not a mix (the pose holds the eye)", key=key)
+    for key in INTRINSICS_KEYS:
+        if key not in table:
+            raise SceneError(f"missing required key: a camera from intrinsics needs both intrinsics and pose", key=key)
+    return Camera.from_intrinsics(table["intrinsics"], table["pose"])
+
+
 def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     """A Scene from the parsed contents of a scene file (see scene-format.md)."""
     if not isinstance(data, dict):
@@ -41,9 +62,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
     try:
-        table = _table(data, "camera", required=True)
-        no_unknown_keys(table, ("eye", "target", "up", "fov", "fov_axis"), required=("eye", "target", "fov"))
-        camera = Camera(**table)
+        camera = camera_from_table(_table(data, "camera", required=True))
     except SceneError as error:
         raise error.within(file=source, table="[camera]") from None
     try:

@@ -11,7 +11,7 @@ from numbers import Real
 import numpy as np
 
 from .animation import Animation, derivation, scene_at
-from .camera import MIN_PIXEL_TAN, Camera, Image
+from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
@@ -50,15 +50,11 @@ class Scene:
                     check_label(shape.label)
                 except SceneError as error:
                     raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
-        tan_x, tan_y = self.camera.tangents(self.image.width, self.image.height)
-        if min(tan_x / self.image.width, tan_y / self.image.height) < MIN_PIXEL_TAN:
-            raise SceneError(
-                f"fov {self.camera.fov!r} is too small: neighbouring pixels' rays are not distinct "
-                "in float32",
-                table="[camera]",
-                key="fov",
-                file=self.source,
-            )
+        if not isinstance(self.camera, Camera):
+            raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
+        if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
+            object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
+        check_image_plane(self.camera, self.image, self.source)
         if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
             _remember_valid(self.shapes)
         if self.animation is not None:
@@ -74,13 +70,16 @@ class Scene:
         return scene_at(self, t)
 
     def with_size(self, width: int, height: int) -> "Scene":
+        """The scene at another image size. A camera from intrinsics keeps its K and size, so its K
+        scales with the image (Camera.intrinsics): the same view at another resolution."""
         return replace(self, image=Image(width, height))
 
     def extent(self) -> float:
         """A length that bounds the scene as seen from the eye (at least 1): the distance to the
         target and the farthest reach of any shape (Mitsuba's clip range and plane stand-in)."""
         eye = np.array(self.camera.eye)
-        size = max(1.0, float(np.linalg.norm(np.subtract(self.camera.target, eye))))
+        target = self.camera.target
+        size = max(1.0, float(np.linalg.norm(np.subtract(target, eye)))) if target is not None else 1.0
         for shape in self.shapes:
             size = max(size, shape.extent_from(eye))
         return size
@@ -112,6 +111,29 @@ def _remember_valid(shapes: tuple) -> None:
     _valid.move_to_end(id(shapes))
     while len(_valid) > _VALID_MAX:
         _valid.popitem(last=False)
+
+
+def check_image_plane(camera: Camera, image: Image, source=None) -> None:
+    """Refuse a camera whose pixel-centre rays at this image size are not distinct in float32 (a
+    too small fov, too long focal lengths) or reach too near 90 degrees off the optical axis (too
+    short focal lengths for where the principal point sits): a SceneError naming the key."""
+    width, height = image.width, image.height
+    plane = camera.image_plane(width, height)
+    key = "fov" if camera.K is None else "intrinsics"
+    if min(plane.tan_x / width, plane.tan_y / height) < MIN_PIXEL_TAN:
+        what = f"fov {camera.fov!r} is too small" if camera.K is None else "the focal lengths are too long"
+        raise SceneError(f"{what}: neighbouring pixels' rays are not distinct in float32",
+                         table="[camera]", key=key, file=source)
+    if camera.K is not None:
+        if max(abs(plane.cx), abs(plane.cy)) > MAX_PRINCIPAL_POINT:
+            raise SceneError(f"the principal point ({plane.cx:g}, {plane.cy:g}) lies more than {MAX_PRINCIPAL_POINT:.0f} "
+                             f"pixels from the {width}x{height} image", table="[camera]", key=key, file=source)
+        reach_x = plane.tan_x * max(abs(2 * plane.cx - 1), abs(2 * plane.cx - 2 * width + 1)) / width
+        reach_y = plane.tan_y * max(abs(2 * plane.cy - 1), abs(2 * plane.cy - 2 * height + 1)) / height
+        if not max(reach_x, reach_y) <= MAX_PLANE_REACH:
+            raise SceneError(f"the focal lengths are too short: the {width}x{height} image reaches to within "
+                             f"{1 / max(reach_x, reach_y):.2g} radians of 90 degrees off the optical axis",
+                             table="[camera]", key=key, file=source)
 
 
 # The kernels keep a shape as 8 x its index in its type's array + its type (the BVH's refs, the

@@ -42,7 +42,8 @@ def tolerance_text() -> list[str]:
         "tolerances (eps = 2^-24; t = distance, cos = |cos incidence| from the float64 oracle, r = radius of curvature,",
         "  L = max(|eye|, |anchor|, |eye - anchor|): the size of the float32 world coordinates Mitsuba works in,",
         "  anchor = the point the shape is intersected from (a centre, an end, the plane's disk centre);",
-        "  S = max(|eye|, |target|) / |target - eye|):",
+        "  S = max(|eye|, |target|) / |target - eye| (a camera from intrinsics: max(tan_x, tan_y) (1 + 2 |offset|),",
+        "  offset = the principal point's from the image's centre, in image sizes):",
         f"  same rays: |depth difference| <= {K:g} eps (t + L) / cos, normal angle <= {K:g} eps (1 + (t + L) / (r cos))",
         f"  cameras:   direction angle <= alpha = {camera_k:g} eps (1 + S), origin off our ray <= {ORIGIN_K:g} eps max(|eye|, 1)",
         f"  images:    |depth difference| <= D = eps ({K:g} (t + L) + {camera_k:g} (1 + S) t + {ORIGIN_K:g} max(|eye|, 1)) / cos,"

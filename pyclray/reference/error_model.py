@@ -160,10 +160,24 @@ def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, 
                       k=K_ORACLE, oracle_scale=world, travelled=travelled)
 
 
+def camera_size(scene: Scene) -> float:
+    """S, the size of the roundings of Mitsuba's float32 camera rays: a look-at camera's
+    max(|eye|, |target|) / |target - eye| (look_at's subtraction); a camera from intrinsics (its
+    to_world a matrix) max(tan_x, tan_y) (1 + 2 |offset|), offset the larger principal point
+    offset (mitsuba.sensor_of), which Mitsuba adds to the film position in float32."""
+    camera = scene.camera
+    if camera.K is None:
+        eye, target = np.array(camera.eye), np.array(camera.target)
+        return max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye)
+    width, height = scene.image.width, scene.image.height
+    plane = camera.image_plane(width, height)
+    offset = max(abs(0.5 - plane.cx / width), abs(0.5 - plane.cy / height))
+    return max(plane.tan_x, plane.tan_y) * (1 + 2 * offset)
+
+
 def camera_angle_tolerance(scene: Scene) -> float:
-    """alpha: how far (radians) Mitsuba's float32 look_at camera rays may be from pyclray's."""
-    eye, target = np.array(scene.camera.eye), np.array(scene.camera.target)
-    return CAMERA_K * EPSILON["fp32"] * (1 + max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye))
+    """alpha: how far (radians) Mitsuba's float32 camera rays may be from pyclray's."""
+    return CAMERA_K * EPSILON["fp32"] * (1 + camera_size(scene))
 
 
 def mitsuba_tolerances(scene: Scene, t, ids, cos, *, cameras: bool, origin_scale=None):

@@ -14,11 +14,19 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
   edge, near the horizon, Mitsuba sees nothing where pyclray sees the plane:
   ``beyond_counterparts`` marks those pixels so that comparisons can leave them out.
 - normals: ``geo_normal`` is the geometric normal, outward and not flipped, as pyclray's.
+- cameras: a look-at camera is Mitsuba's ``look_at`` with its fov and fov_axis. A camera from
+  intrinsics (sensor_of) has ``to_world`` the matrix of its frame (columns u left, v up, w forward:
+  Mitsuba's camera space, OpenCV's x and y negated) and, since Mitsuba's pixels are square, only
+  fx = fy: fov = 2 atan(width / (2 fx)) along x, and the principal point through
+  ``principal_point_offset_x/_y``, which Mitsuba adds to the film position in [0, 1]^2 before
+  projecting (perspective.cpp's sample_ray): the optical axis meets the film at 0.5 - offset, so
+  offset_x = 0.5 - cx / width and offset_y = 0.5 - cy / height (K's cx, cy in pixels).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..model.errors import SceneError
 from ..model.scene import Scene
 from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
@@ -69,21 +77,53 @@ def _mitsuba_values(mi, value):
     return value
 
 
+# Mitsuba's pixels are square: a camera from intrinsics maps to its sensor where fx and fy agree
+# to this (relative; K scaled to another image size may round them apart)
+SQUARE_PIXELS = 1e-9
+
+
+def sensor_of(scene: Scene) -> dict:
+    """The perspective sensor's camera properties (fov, fov_axis, principal point offsets, and
+    to_world as a 4x4 numpy matrix or the look_at arguments) of the scene's camera at its image
+    size; a SceneError where Mitsuba has no such camera (fx != fy). Needs no Mitsuba."""
+    camera, width, height = scene.camera, scene.image.width, scene.image.height
+    if camera.K is None:
+        return {"fov": camera.fov, "fov_axis": camera.fov_axis,
+                "look_at": {"origin": list(camera.eye), "target": list(camera.target), "up": list(camera.up)}}
+    K = camera.intrinsics(width, height)
+    fx, fy = float(K[0, 0]), float(K[1, 1])
+    if abs(fx - fy) > SQUARE_PIXELS * max(fx, fy):
+        raise SceneError(f"Mitsuba's perspective sensor has square pixels only (fx = fy); this camera has fx = {fx:g}, "
+                         f"fy = {fy:g} at {width}x{height}, so it cannot be checked against Mitsuba",
+                         file=scene.source, table="[camera]", key="intrinsics")
+    to_world = np.eye(4)
+    to_world[:3, :3] = camera.basis().T  # columns u, v, w: Mitsuba's camera space
+    to_world[:3, 3] = camera.eye
+    return {"fov": float(np.degrees(2 * np.arctan(width / (2 * fx)))), "fov_axis": "x",
+            "principal_point_offset_x": 0.5 - float(K[0, 2]) / width,
+            "principal_point_offset_y": 0.5 - float(K[1, 2]) / height,
+            "to_world": to_world}
+
+
 def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
     """The Mitsuba scene description: pixel-centre perspective sensor, aov integrator, shapes."""
     mi = import_mitsuba(variant)
-    camera, image = scene.camera, scene.image
+    image = scene.image
     near, far = clip_range(scene)
+    camera = sensor_of(scene)
+    look_at = camera.pop("look_at", None)
+    if look_at is not None:
+        camera["to_world"] = mi.ScalarTransform4f().look_at(**look_at)
+    else:
+        camera["to_world"] = mi.ScalarTransform4f(camera["to_world"].tolist())
     out = {
         "type": "scene",
         "integrator": {"type": "aov", "aovs": aovs},
         "sensor": {
             "type": "perspective",
-            "fov": camera.fov,
-            "fov_axis": camera.fov_axis,
+            **camera,
             "near_clip": near,
             "far_clip": far,
-            "to_world": mi.ScalarTransform4f().look_at(origin=list(camera.eye), target=list(camera.target), up=list(camera.up)),
             # one ray through each pixel centre
             "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
             "film": {

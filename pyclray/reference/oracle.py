@@ -12,20 +12,24 @@ from ..model.scene import Scene
 
 
 def image_plane(scene: Scene):
-    """(sx, sy): the pixel centres' coordinates on the image plane at distance 1, per column and
-    per row, float64: sx = tan_x (width - 2 i - 1) / width, sy = tan_y (height - 2 j - 1) / height."""
+    """(sx, sy): the pixel centres' coordinates on the image plane at distance 1 (x left, y up), per
+    column and per row, float64: sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height
+    (model.camera.ImagePlane; a look-at camera: cx = width / 2, so sx = tan_x (width - 2 i - 1) / width).
+    For a camera from intrinsics that is (cx - i - 0.5) / fx: the x of K^-1 [i + 0.5, j + 0.5, 1],
+    negated (OpenCV's x points right, the frame's u left)."""
     width, height = scene.image.width, scene.image.height
-    tan_x, tan_y = scene.camera.tangents(width, height)
-    sx = tan_x * (width - 2.0 * np.arange(width) - 1.0) / width
-    sy = tan_y * (height - 2.0 * np.arange(height) - 1.0) / height
+    plane = scene.camera.image_plane(width, height)
+    sx = plane.tan_x * ((2 * plane.cx - 1.0) - 2.0 * np.arange(width)) / width
+    sy = plane.tan_y * ((2 * plane.cy - 1.0) - 2.0 * np.arange(height)) / height
     return sx, sy
 
 
 def camera_rays(scene: Scene):
     """(origins, directions) of the pixel-centre rays, each (height, width, 3) float64, unit directions.
 
-    Pixel (row j, column i) looks through sx = tan_x (1 - 2 (i + 0.5) / width),
-    sy = tan_y (1 - 2 (j + 0.5) / height): d = normalize(w + sx u + sy v).
+    Pixel (row j, column i) looks through sx = tan_x (2 cx - 2 i - 1) / width,
+    sy = tan_y (2 cy - 2 j - 1) / height (image_plane): d = normalize(w + sx u + sy v); for a camera
+    from intrinsics that is normalize(R K^-1 [i + 0.5, j + 0.5, 1]).
     """
     u, v, w = scene.camera.basis()
     sx, sy = image_plane(scene)

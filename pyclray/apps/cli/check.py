@@ -42,6 +42,9 @@ def run(args) -> int:
         if not folder.parent.is_dir():
             raise BadInput(f"--save {folder}: the folder {folder.parent} does not exist")
     scene = load(args.scene, args.size)
+    from ...reference.mitsuba import sensor_of
+
+    sensor_of(scene)  # a camera Mitsuba has no sensor for (fx != fy) is bad input, said before any work
     try:
         from ...reference.mitsuba import import_mitsuba
 

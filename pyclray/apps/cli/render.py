@@ -54,7 +54,13 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
     return kind, aovs, targets
 
 
-def _written(kind: str, aovs, arrays) -> str:
+def _camera(scene):
+    """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py) and the
+    .npz's K and pose arrays."""
+    return scene.camera.intrinsics(scene.image.width, scene.image.height), scene.camera.pose()
+
+
+def _written(kind: str, aovs) -> str:
     """What the files hold, for the last line: the EXR's channels, the .npz's arrays, the AOV a .png shows."""
     from ...io import exr
     from ...model.aovs import empty_images
@@ -62,14 +68,13 @@ def _written(kind: str, aovs, arrays) -> str:
     if kind == "exr":
         return ", ".join(exr.exr_channel_arrays(empty_images(aovs)))
     if kind == "npz":
-        return ", ".join((*aovs, *(arrays or ())))
+        return ", ".join((*aovs, "K", "pose"))
     return f"the {aovs[0]} preview"
 
 
 def run(args) -> int:
     from ...io import files
     from ...io.bands import band_rows, write_images
-    from ...io.npz import camera_arrays
     from ...io.progress import progress, seconds
 
     # the options first: a wrong -o costs no scene read, no device and no render
@@ -82,9 +87,8 @@ def run(args) -> int:
         cluster_module()  # installed? (says what to install before the scene is read)
     scene = load(args.scene, args.size, args.time)
     width, height = scene.image.width, scene.image.height
-    arrays = camera_arrays(scene.camera, width, height) if kind == "npz" else None
     if on_cluster:
-        return _render_on_cluster(args, scene, out, aovs, arrays, kind)
+        return _render_on_cluster(args, scene, out, aovs, kind)
     render_band = _band_renderer(scene, aovs, args.precision, args.device)
     rows = band_rows(width)
     spent = {"render": 0.0}
@@ -104,17 +108,17 @@ def run(args) -> int:
     start = time.perf_counter()
     with progress(height, desc="pyclray render", unit="row") as bar:
         written = write_images(out, bands(), width=width, height=height, aovs=aovs, previews=args.png,
-                               comment=f"pyclray render of {args.scene}", arrays=arrays)
+                               comment=f"pyclray render of {args.scene}", camera=_camera(scene))
     total = time.perf_counter() - start
     print(
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
-        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs, arrays)}]"
+        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs)}]"
     )
     return 0
 
 
-def _render_on_cluster(args, scene, out, aovs, arrays, kind) -> int:
+def _render_on_cluster(args, scene, out, aovs, kind) -> int:
     """`pyclray render --workers N | --scheduler ADDRESS`: the image's bands of whole rows are the
     tasks (pyclray/apps/cluster.py); they come back in order and are streamed into the files as a local
     render streams its bands, so the files are the same bytes."""
@@ -138,7 +142,7 @@ def _render_on_cluster(args, scene, out, aovs, arrays, kind) -> int:
 
             with progress(-(-height // rows), desc="pyclray render", unit="band") as bar:
                 written = write_images(out, received(), width=width, height=height, aovs=aovs, previews=args.png,
-                                       comment=f"pyclray render of {args.scene}", arrays=arrays)
+                                       comment=f"pyclray render of {args.scene}", camera=_camera(scene))
     except cluster.ClusterError as error:
         raise BadInput(str(error)) from None
     total = time.perf_counter() - start
@@ -147,7 +151,7 @@ def _render_on_cluster(args, scene, out, aovs, arrays, kind) -> int:
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
         f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} "
-        f"[{_written(kind, aovs, arrays)}]"
+        f"[{_written(kind, aovs)}]"
     )
     return 0
 

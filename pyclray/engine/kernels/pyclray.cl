@@ -347,10 +347,13 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 {
     const int width = camera->width, height = camera->height;
     const intv i = SPLAT_INT(i0) + LANE_INDEX;
-    /* pixel centres on the image plane at distance 1: the integer numerators are exact, so each
-     * coordinate carries two roundings and keeps its relative precision even for a tiny fov */
-    const realv sx = SPLAT(camera->tan_x) * (TO_REALV(SPLAT_INT(width - 1) - 2 * i) / SPLAT((real)width));
-    const realv sy = SPLAT(camera->tan_y * ((real)(height - 2 * j - 1) / (real)height));
+    /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
+     * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
+     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
+     * keeps its relative precision even for a tiny fov or next to the principal point */
+    const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
+                                            / SPLAT((real)width));
+    const realv sy = SPLAT(camera->tan_y * (((real)(camera->centre_y - 1 - 2 * j) + camera->centre_y_low) / (real)height));
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
