@@ -115,7 +115,7 @@ def _start_cluster(workers: int, folder: Path):
     processes = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                    "--scheduler-file", str(file)], **quiet)]
     threads = str(max(1, len(os.sched_getaffinity(0)) // workers))
-    # the nannies leave MALLOC_TRIM_THRESHOLD_ out, as in a local cluster (README, Clusters)
+    # the nannies leave MALLOC_TRIM_THRESHOLD_ out, as in a local cluster (docs/clusters.md)
     config = folder / "dask-config"
     config.mkdir(exist_ok=True)
     (config / "pyclray.yaml").write_text("distributed: {nanny: {pre-spawn-environ: {MALLOC_TRIM_THRESHOLD_: null}}}\n")

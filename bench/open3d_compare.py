@@ -1,8 +1,10 @@
 """pyclray against Open3D's RaycastingScene (Embree over triangle meshes) in one process, and the
 BVH's scaling, build times and memory (issue 11).
 
-    python -m bench.open3d_compare [--quick]      # writes bench/open3d_results.json and the
-                                                   # "Scale" section of bench/REPORT.md
+    python -m bench.open3d_compare [--quick]      # writes bench/out/open3d_results.json and the
+                                                   # "Scale" section of bench/out/REPORT.md (untracked)
+    python -m bench.open3d_compare --update       # the tracked bench/open3d_results.json and
+                                                   # bench/REPORT.md instead
 
 Open3D is in the `bench` extra; its wheel needs the Debian library libusb-1.0-0
 (`apt-get update && apt-get install -y libusb-1.0-0`). Spheres are tessellated as Open3D's users
@@ -38,9 +40,8 @@ from pyclray.engine.scene_bvh import scene_bvh as build_scene_bvh
 
 from . import scale
 
-HERE = Path(__file__).resolve().parent
-RESULTS = HERE / "open3d_results.json"
-REPORT = HERE / "REPORT.md"
+from . import HERE, OUT  # OUT: untracked (.gitignore); --update writes the tracked files in HERE instead
+RESULTS_NAME, REPORT_NAME = "open3d_results.json", "REPORT.md"
 BEGIN, END = "<!-- scale:begin -->", "<!-- scale:end -->"
 render_module = sys.modules["pyclray.engine.prepared"]
 
@@ -214,14 +215,15 @@ def report(results: dict) -> str:
     return "\n".join(lines)
 
 
-def write_report(results: dict) -> None:
-    text = REPORT.read_text(encoding="utf-8") if REPORT.exists() else ""
+def write_report(results: dict, path: Path) -> None:
+    """Put the "Scale" section into the report at path (replacing an earlier one)."""
+    text = path.read_text(encoding="utf-8") if path.exists() else ""
     section = report(results)
     if BEGIN in text:
         text = re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: section, text, flags=re.S)
     else:
         text = text.rstrip("\n") + "\n\n" + section + "\n"
-    REPORT.write_text(text, encoding="utf-8")
+    path.write_text(text, encoding="utf-8")
 
 
 NOTES = """What the BVH does when things move: a render of a scene whose camera moved (a new Scene with the
@@ -237,7 +239,11 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer rounds and no 1,000,000-sphere scene")
     parser.add_argument("--no-open3d", action="store_true", help="skip the comparison with Open3D")
+    parser.add_argument("--update", action="store_true",
+                        help="write the tracked bench/open3d_results.json and bench/REPORT.md (default: bench/out/)")
     args = parser.parse_args(argv)
+    folder = HERE if args.update else OUT
+    folder.mkdir(parents=True, exist_ok=True)
     rounds, block = (3, 2) if args.quick else (9, 3)
     results = {
         "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
@@ -251,8 +257,8 @@ def main(argv=None) -> None:
     print("tiles or BVH...", file=sys.stderr)
     results["acceleration"] = acceleration_choice(rounds, block)
     results["notes"] = NOTES
-    RESULTS.write_text(json.dumps(results, indent=1), encoding="utf-8")
-    write_report(results)
+    (folder / RESULTS_NAME).write_text(json.dumps(results, indent=1), encoding="utf-8")
+    write_report(results, folder / REPORT_NAME)
     print(report(results))
 
 

@@ -1,6 +1,9 @@
-"""Read the pytest-benchmark JSON and write bench/REPORT.md and bench/error_vs_time.png.
+"""Read the pytest-benchmark JSON and write the report (REPORT.md) and its plot (error_vs_time.png).
 
-    pytest bench/ --benchmark-only --benchmark-json=bench/results.json && python -m bench.report
+    python -m pytest bench                  # runs the benchmarks and writes bench/out/REPORT.md itself
+    python -m bench.report                  # bench/out/results.json -> bench/out/REPORT.md (untracked)
+    python -m bench.report --update         # bench/results.json -> the tracked bench/REPORT.md, plot and
+                                            # the headline of docs/benchmarks.md
 """
 from __future__ import annotations
 
@@ -8,7 +11,8 @@ import argparse
 import json
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+from . import HERE, OUT  # OUT: untracked (.gitignore), a run's results and report
+HEADLINE = HERE.parent / "docs" / "benchmarks.md"  # the page whose headline table --update rewrites
 KIND_ORDER = ["pyclray", "pyclray-new-scene", "pyclray-cold", "mitsuba-llvm", "mitsuba-scalar", "oracle", "floor", "floor+copies", "floor-in-place", "breakdown", "targets-blocks"]
 SCENE_ORDER = ["tp02", "grid64", "grid1024", "shapes", "floor"]
 TARGETS = {"tp02_speedup": 8.0, "depth_share": 0.60, "grid64_speedup": 2.0}
@@ -98,7 +102,7 @@ def llvm_of(rows, row):
 
 def table(rows) -> list[str]:
     out = [
-        "| kind | scene | size | AOVs | precision | median ms | IQR ms (q1–q3) | min–max ms | rounds | vs llvm | Mrays/s | depth ulps×\|cos\| max / p99 | normal err×\|cos\| max / p99 | id mismatches |",
+        r"| kind | scene | size | AOVs | precision | median ms | IQR ms (q1–q3) | min–max ms | rounds | vs llvm | Mrays/s | depth ulps×\|cos\| max / p99 | normal err×\|cos\| max / p99 | id mismatches |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -258,15 +262,34 @@ def plot(rows, path: Path) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("results", nargs="?", default=HERE / "results.json", type=Path)
-    parser.add_argument("-o", "--output", default=HERE / "REPORT.md", type=Path)
-    parser.add_argument("--plot", default=HERE / "error_vs_time.png", type=Path)
-    parser.add_argument("--readme", type=Path, nargs="?", const=HERE.parent / "README.md", default=None,
-                        help="also replace the headline table between the bench-headline markers of README.md")
+    parser = argparse.ArgumentParser(prog="python -m bench.report", description=__doc__.splitlines()[0])
+    parser.add_argument("results", nargs="?", default=None, type=Path,
+                        help=f"the pytest-benchmark JSON (default {OUT / 'results.json'}; with --update {HERE / 'results.json'})")
+    parser.add_argument("-o", "--output", default=None, type=Path, help=f"the report (default {OUT / 'REPORT.md'})")
+    parser.add_argument("--plot", default=None, type=Path, help=f"the plot (default {OUT / 'error_vs_time.png'})")
+    parser.add_argument("--readme", type=Path, nargs="?", const=HEADLINE, default=None,
+                        help=f"also replace the headline table between the bench-headline markers of this file "
+                        f"(default {HEADLINE})")
+    parser.add_argument("--update", action="store_true",
+                        help="the tracked files: bench/results.json -> bench/REPORT.md, bench/error_vs_time.png and the "
+                        "headline of docs/benchmarks.md (a checkout stays clean without it)")
     args = parser.parse_args(argv)
+    folder = HERE if args.update else OUT
+    args.results = args.results or folder / "results.json"
+    args.output = args.output or folder / "REPORT.md"
+    args.plot = args.plot or folder / "error_vs_time.png"
+    if args.update and args.readme is None:
+        args.readme = HEADLINE
+    if not args.results.is_file():
+        raise SystemExit(f"python -m bench.report: no {args.results}: run `python -m pytest bench` first")
+    args.output.parent.mkdir(parents=True, exist_ok=True)
     rows, machine, when = load(args.results)
-    plot(rows, args.plot)
+    plotted = True
+    try:
+        plot(rows, args.plot)
+    except ModuleNotFoundError as error:  # matplotlib is in the bench extra
+        plotted = False
+        print(f"no plot ({error}: pip install -e '.[bench]')")
     target_lines, _ = targets(rows)
     cpu = machine.get("cpu", {})
     lines = [
@@ -276,7 +299,8 @@ def main(argv=None) -> None:
         f"{cpu.get('brand_raw', machine.get('processor', '?'))}, {cpu.get('count', '?')} logical CPUs, "
         f"Python {machine.get('python_version', '?')}. PoCL (CPU) is pyclray's device.",
         "",
-        "Run: `pytest bench/ --benchmark-only --benchmark-json=bench/results.json && python -m bench.report`.",
+        "Run: `python -m pytest bench --bench-full --bench-update` (the whole matrix; `python -m pytest bench` alone "
+        "runs the quick subset and writes its report under bench/out/, untracked).",
         "",
         "## Speed targets (ratios to Mitsuba 3 llvm_ad_rgb measured in the same run)",
         "",
@@ -356,10 +380,23 @@ def main(argv=None) -> None:
         "",
     ]
     args.output.write_text("\n".join(lines))
-    print(f"wrote {args.output} and {args.plot}")
+    scale = scale_section(args.results.parent)
+    if scale:  # the "Scale" section of bench.open3d_compare, kept from its own results
+        from .open3d_compare import write_report
+
+        write_report(scale, args.output)
+    print(f"wrote {args.output}" + (f" and {args.plot}" if plotted else ""))
     if args.readme:
         update_readme(args.readme, rows, target_summary(rows))
         print(f"updated the headline in {args.readme}")
+
+
+def scale_section(folder: Path) -> dict | None:
+    """The results of bench.open3d_compare beside these results (else the tracked ones), if any."""
+    for path in (folder / "open3d_results.json", HERE / "open3d_results.json"):
+        if path.is_file():
+            return json.loads(path.read_text())
+    return None
 
 
 START, END = "<!-- bench-headline: written by python -m bench.report --readme -->", "<!-- /bench-headline -->"

@@ -30,7 +30,8 @@ SIZES = (512, 2048)
 AOV_SETS = {"all": ("depth", "normal", "id"), "depth": ("depth",)}
 PRECISIONS = ("fp32", "fp64")
 ERROR_SIZE = 512
-BUDGET = 2.0  # seconds of timed rounds per case, roughly
+# seconds of timed rounds per case, roughly: the quick run (bench/conftest.py) spends less per case
+BUDGET = 0.5 if os.environ.get("PYCLRAY_BENCH_MODE") == "quick" else 2.0
 _references: dict = {}
 
 
@@ -38,7 +39,8 @@ def load(scenes_dir, name: str, size: int):
     return pyclray.load_scene(scenes_dir / f"{name}.toml").with_size(size, size)
 
 
-def rounds_for(seconds: float, budget: float = BUDGET, most: int = 100, least: int = 3) -> int:
+def rounds_for(seconds: float, budget: float | None = None, most: int = 100, least: int = 3) -> int:
+    budget = BUDGET if budget is None else budget
     return int(max(least, min(most, budget / max(seconds, 1e-6))))
 
 

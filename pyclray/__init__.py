@@ -23,8 +23,9 @@ from .engine.device import list_devices, select_device
 from .engine.prepared import clear as clear_cache
 from .engine.render import render, render_animation, render_views
 from .engine.request import Frame
-from .io.bands import write_exr
+from .io.bands import write_exr, write_npz
 from .io.exr import read_exr
+from .io.npz import read_npz
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
@@ -40,7 +41,8 @@ __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
-    "read_exr", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "write_npz",
 ]
 
 

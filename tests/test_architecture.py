@@ -1,4 +1,4 @@
-"""The package's folders are its layers (README, "Layout"): apps > reference > io > engine > model,
+"""The package's folders are its layers (docs/development.md, "Layout"): apps > reference > io > engine > model,
 each importing only those below it, and the product (model, engine, io) never importing the
 reference stack. The contracts live in setup.cfg ([importlinter]); import-linter checks them here,
 on every import (deferred imports inside functions too), so an import that runs back up fails CI.

@@ -184,6 +184,14 @@ def test_bad_cluster_input_exits_2_with_one_line_and_writes_nothing(client, tmp_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.toml"]
 
 
+def test_an_image_too_large_to_put_together_here_is_a_request_error_before_any_task(client):
+    """render_image puts the whole image together in the client: too large for its memory is the
+    RequestError that pyclray.render raises (issue 27), before any task (render_bands streams)."""
+    huge = pyclray.load_scene(REPO / "scenes/tp02.toml").with_size(60000, 60000)
+    with pytest.raises(pyclray.RequestError, match="need 172,800,000,000 bytes"):
+        cluster.render_image(client, huge, aovs=("depth", "normal", "id", "zdepth", "position", "shaded"))
+
+
 def test_without_distributed_the_options_say_what_to_install(tmp_path, scene_file):
     code = ("import sys; sys.modules['distributed'] = None; from pyclray.apps.cli import main; "
             f"sys.exit(main(['animate', {str(scene_file)!r}, '-o', {str(tmp_path / 'x.gif')!r}, '--workers', '2']))")

@@ -73,11 +73,7 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     threads (unless $POCL_CPU_MAX_CU_COUNT is set): N workers of all the cores each would only contend.
     The results do not depend on the number of threads."""
     if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as error:
-            raise ClusterError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({error})") from None
-        with client:
+        with _client_of(scheduler) as client:
             try:
                 client.wait_for_workers(1, timeout=WORKERS_TIMEOUT_S)
             except TimeoutError:
@@ -104,6 +100,27 @@ def connect(workers: int | None = None, scheduler: str | None = None):
         )
     # the client fetches results from the workers themselves, not through the scheduler
     with cluster, Client(cluster, set_as_default=False, direct_to_workers=True) as client:
+        yield client
+
+
+@contextmanager
+def _client_of(scheduler: str):
+    """A Client of the scheduler at this address, or a ClusterError of one line at once.
+
+    A Client whose constructor fails (a malformed address, TLS without its configuration, an
+    unreachable host) still runs its event loop, and its __del__ then waits twice the timeout (20 s)
+    to close a connection that never was and prints a traceback: it is made here with __new__ so
+    that a failed one can be marked closed and its loop stopped."""
+    client = Client.__new__(Client)
+    try:
+        client.__init__(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+    except Exception as error:  # Dask raises OSError, TimeoutError, ValueError, TypeError, ...
+        client.status = "closed"
+        with suppress(Exception):
+            client._loop_runner.stop()
+        reason = " ".join(str(error).split()) or type(error).__name__
+        raise ClusterError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({reason})") from None
+    with client:
         yield client
 
 
@@ -278,6 +295,15 @@ def render_image(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
     the same images, bit for bit."""
     import numpy as np
 
+    from ..engine.memory import check_images_fit
+    from ..model.aovs import TABLE
+
+    # the whole image is put together here: it must fit in this machine's memory (a RequestError
+    # naming the bytes, before any task runs; render_bands streams it instead). A request of the
+    # wrong kind is left to the workers, which say what is wrong with it.
+    asked = (aovs.split(",") if isinstance(aovs, str) else list(aovs)) if aovs is not None else []
+    if asked and all(isinstance(a, str) and a.strip() in TABLE for a in asked) and precision in ("fp32", "fp64"):
+        check_images_fit(tuple(a.strip() for a in asked), precision, scene.image.width, scene.image.height)
     images, devices, top = {}, [], 0
     for band in render_bands(client, scene, aovs, precision, device, rows, progress):
         for name, array in band.items():

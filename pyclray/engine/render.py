@@ -5,13 +5,15 @@ import numpy as np
 
 from dataclasses import replace
 
-from ..model.aovs import AOVS, RENDER_AOVS
+from ..model.aovs import AOVS, RENDER_AOVS, kernel_aovs
 from ..model.camera import Camera
 from ..model.errors import PyclrayError, RequestError, SceneError
 from ..model.loader import as_scene
 from ..model.scene import Scene
 from . import culling
 from .device import context_for
+from .labels import with_labels
+from .memory import check_images_fit
 from .prepared import acceleration_for, check_renderable_once, prepared_scene, render_inputs
 from .programs import Variant, lanes_for
 from .request import Frame, check_request, frame_camera, run_kernel
@@ -39,8 +41,9 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
     SceneError (see scene.check_renderable).
-    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded: only those are
-    computed; shaded casts shadow rays where the scene's [shading] asks for them);
+    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded, primitive, label: only those
+    are computed; shaded casts shadow rays where the scene's [shading] asks for them; label, each
+    shape's label, is looked up from the id image);
     precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
     window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
     rendered into images of that size, the same pixels as in the whole image; default: all of it;
@@ -57,11 +60,13 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     if camera is not None:
         scene = with_camera(scene, camera)
     ctx = context_for(device)
-    aovs = check_request(aovs, precision, ctx, RENDER_AOVS)
+    asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     prepared = prepared_scene(ctx, scene, precision)
     check_renderable_once(scene, precision, prepared)
     acceleration = acceleration_for(scene, acceleration, prepared)
     col0, row0, cols, rows = _window(scene, window)
+    check_images_fit(tuple(dict.fromkeys(aovs + asked)), precision, cols, rows)  # a clear error before any allocation
     _, inputs = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
     shadows = "shaded" in aovs and scene.shading.shadows
@@ -89,7 +94,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     with prepared.lock:  # the frame buffers hold this view until its kernel has run
         prepared.rebase(inputs.eye, inputs.rows)
         images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
-    return Frame(images, precision=precision, device=ctx.device.name.strip(),
+    return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip(),
                  **frame_camera(scene.camera, scene.image.width, scene.image.height, col0, row0))
 
 

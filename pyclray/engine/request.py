@@ -27,7 +27,8 @@ class Frame(dict):
     depth: distance from the ray origin along the unit ray, +inf on a miss (float32; float64 with
     precision "fp64"); normal: unit world normal, (0, 0, 0) on a miss; id: int32, -1 on a miss.
     Renders may add zdepth (depth along the optical axis, +inf on a miss), position (world hit
-    point, (0, 0, 0) on a miss) and shaded (linear RGB, the background on a miss).
+    point, (0, 0, 0) on a miss), shaded (linear RGB, the background on a miss) and label (int32, the
+    hit shape's label, -1 on a miss or for a shape without one).
 
     A render's frame also holds its camera as the vision tools take it: ``intrinsics`` (K, 3x3, in
     pixels of these images: a window's principal point is shifted by its corner) and ``pose`` (4x4

@@ -8,6 +8,7 @@ EXR channels (one part, scanlines, ZIP compression, 32-bit):
   zdepth         FLOAT  depth along the camera's optical axis (+inf on a miss)
   P.X, P.Y, P.Z  FLOAT  world-space hit point (0 on a miss)
   R, G, B        FLOAT  the shaded image, linear RGB (the background colour on a miss)
+  label          UINT   the hit shape's label, int32 bit pattern as id (-1: a miss or no label)
 An fp64 render is stored as 32-bit floats: OpenEXR has no 64-bit float channel type (its pixel
 types are UINT, HALF and FLOAT).
 
@@ -25,15 +26,22 @@ reference the tests hold our files to.
 """
 from __future__ import annotations
 
+import io
 import os
 import struct
+import sys
+import tempfile
+import threading
 import zlib
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, redirect_stderr, redirect_stdout, suppress
+from pathlib import Path
 
 import numpy as np
 
 from ..model.aovs import TABLE
-from .files import Background
+from ..model.errors import OutputError
+from .files import Background, reason
 
 ID_MISS_UINT = 0xFFFFFFFF
 EXR_CHANNELS = {name: aov.exr for name, aov in TABLE.items()}
@@ -201,19 +209,37 @@ class ExrWriter:
         self.compressors.shutdown(wait=True, cancel_futures=True)
 
 
+EXR_MAGIC = b"\x76\x2f\x31\x01"  # the first four bytes of every OpenEXR file
 CAMERA_ATTRIBUTES = {"intrinsics": (3, 3), "pose": (4, 4), "worldToCamera": (4, 4)}
 
 
 def read_exr(path, header: bool = False):
-    """The images of an EXR written by write_exr, as render returns them. header=True: (images,
-    header), the header a dict of the file's attributes as OpenEXR reads them, with the camera's
-    (see camera_attributes) as float64 numpy arrays: header["intrinsics"] (K) and header["pose"]
-    where the file has them."""
+    """The images of an EXR written by write_exr or `pyclray render`, as render returns them: AOV
+    name -> array, for each AOV whose channels the file holds (ids and labels as int32).
+    header=True: (images, header), the header a dict of the file's attributes as OpenEXR reads
+    them, with the camera's (see camera_attributes) as float64 numpy arrays: header["intrinsics"]
+    (K) and header["pose"] where the file has them.
+
+    A missing, unreadable or damaged file, or one that is not OpenEXR, raises OutputError of one
+    line ("cannot read PATH: ..."), and nothing is printed: OpenEXR's own messages, which its C
+    library writes to the process's stdout and stderr, are caught and put into the error."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as handle:
+            magic = handle.read(len(EXR_MAGIC))
+    except OSError as error:
+        raise OutputError(f"cannot read {path}: {reason(error)}") from None
+    if magic != EXR_MAGIC:
+        raise OutputError(f"cannot read {path}: not an OpenEXR file")
     import OpenEXR
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        channels = {name: channel.pixels for name, channel in exr.channels().items()}
-        attributes = dict(exr.header()) if header else None
+    try:
+        with _output_captured() as captured, OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = {name: channel.pixels for name, channel in exr.channels().items()}
+            attributes = dict(exr.header()) if header else None
+    except Exception as error:  # OpenEXR raises RuntimeError, ValueError, ... for a damaged file
+        detail = " ".join((captured.text.strip().splitlines() or [str(error)])[0].split())
+        raise OutputError(f"cannot read {path}: a damaged OpenEXR file ({detail})") from None
     images = _images(channels)
     if not header:
         return images
@@ -231,3 +257,38 @@ def _images(channels: dict) -> dict:
             image = planes[0] if aov.channels == 1 else np.stack(planes, axis=-1)
             out[name] = image if aov.real else image.view(np.int32)  # integers: their 32-bit pattern
     return out
+
+
+class _Captured:
+    text = ""
+
+
+@contextmanager
+def _output_captured():
+    """What C code writes to the process's stdout and stderr (file descriptors 1 and 2) and what is
+    printed to sys.stdout or sys.stderr during the block, kept in .text instead of printed.
+    Python's own buffers are flushed first. Another thread printing meanwhile is caught too: only
+    OpenEXR's reads run in such a block (they take milliseconds)."""
+    captured = _Captured()
+    for stream in (sys.stdout, sys.stderr):
+        with suppress(Exception):
+            stream.flush()
+    python = io.StringIO()  # what the binding prints through Python's sys.stdout (its warnings)
+    with _capture_lock, tempfile.TemporaryFile() as sink, redirect_stdout(python), redirect_stderr(python):
+        saved = [os.dup(fd) for fd in (1, 2)]
+        try:
+            for fd in (1, 2):
+                os.dup2(sink.fileno(), fd)
+            try:
+                yield captured
+            finally:
+                for fd, original in zip((1, 2), saved):
+                    os.dup2(original, fd)
+                sink.seek(0)
+                captured.text = sink.read().decode("utf-8", "replace") + python.getvalue()
+        finally:
+            for original in saved:
+                os.close(original)
+
+
+_capture_lock = threading.Lock()

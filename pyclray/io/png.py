@@ -1,5 +1,6 @@
 """PNG files written band by band (PngWriter), and the previews of each AOV (depth and zdepth as
-disparity greys, normals as n * 0.5 + 0.5, ids as a colour per shape, shaded as clamped sRGB)."""
+disparity greys, normals as n * 0.5 + 0.5, ids as a colour per shape, labels as a colour per label,
+shaded as clamped sRGB)."""
 from __future__ import annotations
 
 import struct
@@ -149,10 +150,16 @@ def srgb_preview(linear: np.ndarray) -> np.ndarray:
 
 
 def id_colors(count: int) -> np.ndarray:
-    """(count, 3) uint8: distinct, bright colours, one per shape id: hues stepped by the golden
-    angle (neighbouring ids far apart on the colour wheel), saturation and value alternating in a
-    short cycle so that ids many hues apart still differ; never black (black is a miss)."""
-    k = np.arange(count)
+    """(count, 3) uint8: distinct, bright colours, one per shape id (see colors_of)."""
+    return colors_of(np.arange(count))
+
+
+def colors_of(k) -> np.ndarray:
+    """(..., 3) uint8: the colour of each id (or label) k >= 0: hues stepped by the golden angle
+    (neighbouring ids far apart on the colour wheel), saturation and value alternating in a short
+    cycle so that ids many hues apart still differ; never black (black is a miss). A function of k
+    alone: any band, any image gives k the same colour, whatever the largest k."""
+    k = np.asarray(k, np.int64)
     hue = (k * 0.618033988749895) % 1.0
     saturation = np.array([0.85, 0.55, 0.95])[k % 3]
     value = np.array([0.95, 0.8, 0.65, 0.9])[(k // 3) % 4]
@@ -160,24 +167,26 @@ def id_colors(count: int) -> np.ndarray:
     f = hue * 6 - np.floor(hue * 6)
     p, q, t = value * (1 - saturation), value * (1 - f * saturation), value * (1 - (1 - f) * saturation)
     rgb = np.select(
-        [sector[:, None] == s for s in range(6)],
+        [sector[..., None] == s for s in range(6)],
         [np.stack(c, axis=-1) for c in ((value, t, p), (q, value, p), (p, value, t), (p, q, value), (t, p, value), (value, p, q))],
     )
     return np.round(rgb * 255).astype(np.uint8)
 
 
 def id_preview(ids: np.ndarray) -> np.ndarray:
-    """Each shape id in its own colour (id_colors), misses (-1) black."""
+    """Each shape id (or label) in its own colour (colors_of), misses (-1) black. Colours are made
+    for the distinct values present only, so a label of 2^31 - 1 costs what a label of 1 does."""
     ids = np.asarray(ids)
     rgb = np.zeros(ids.shape + (3,), np.uint8)
     hit = ids >= 0
     if hit.any():
-        rgb[hit] = id_colors(int(ids.max()) + 1)[ids[hit]]
+        present, index = np.unique(ids[hit], return_inverse=True)
+        rgb[hit] = colors_of(present)[index.reshape(-1)]
     return rgb
 
 
 class IdPreview(OnePassPreview):
-    """Each shape id in its own colour (id_colors), misses black: one pass (a colour per id)."""
+    """Each shape id in its own colour (colors_of), misses black: one pass (a colour per id)."""
 
     def rgb(self, ids) -> np.ndarray:
         return id_preview(ids)
@@ -190,12 +199,19 @@ class ShadedPreview(OnePassPreview):
         return srgb_preview(linear)
 
 
+class LabelPreview(IdPreview):
+    """Each label in its own colour (the colours of ids: label k as id k), misses and shapes
+    without a label (-1) black."""
+
+
 # AOV -> its preview, in the order of the files (zdepth is shown like depth; positions have none)
-PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview, "primitive": IdPreview})
+PREVIEWS.update({"id": IdPreview, "zdepth": DepthPreview, "shaded": ShadedPreview, "primitive": IdPreview,
+                 "label": LabelPreview})
 
 
 def preview_paths(out, aovs=tuple(PREVIEWS)) -> dict:
-    """OUT.exr -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs given that have one)."""
+    """OUT.exr (or OUT.npz) -> {"depth": OUT.depth.png, "normal": OUT.normal.png} (for the AOVs
+    given that have one)."""
     out = Path(out)
-    stem = out.with_suffix("") if out.suffix.lower() == ".exr" else out
+    stem = out.with_suffix("") if out.suffix.lower() in (".exr", ".npz") else out
     return {name: stem.with_name(f"{stem.name}.{name}.png") for name in PREVIEWS if name in aovs}

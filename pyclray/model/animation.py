@@ -6,7 +6,8 @@ scene's collections of named dataclasses (shapes today, lights when they exist).
 knows a shape type: a keyed value goes through the target's own dataclass
 (``dataclasses.replace``), so it is validated exactly as a value written in the scene file is.
 A key can be animated when it is a field of the target's dataclass holding a number or a vector;
-type, name, fov_axis and caps (strings, booleans) cannot.
+type, name, fov_axis and caps (strings, booleans) cannot, nor a field whose metadata says
+"animatable": False (a shape's label).
 """
 from __future__ import annotations
 
@@ -212,7 +213,8 @@ class Animation:
             thing = _get(scene, found[0])
             # a number or vector field; an optional one left out (None) takes the kind keyed first
             animatable = {f.name: _kind(getattr(thing, f.name)) if getattr(thing, f.name) is not None
-                          else _kind(track.values[0]) or "a number or numbers" for f in dataclasses.fields(thing)}
+                          else _kind(track.values[0]) or "a number or numbers" for f in dataclasses.fields(thing)
+                          if f.metadata.get("animatable", True)}
             fixed = getattr(thing, "fixed_keys", ())  # e.g. the other kind of camera's keys
             animatable = {k: kind for k, kind in animatable.items() if kind and k not in fixed}
             if track.key not in animatable:

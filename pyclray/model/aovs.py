@@ -21,6 +21,8 @@ class Aov:
     miss: str  # what a pixel without a hit holds (for messages and the docs)
     exr: tuple[str, ...]  # its EXR channel names, one per channel
     cast: bool  # cast returns it too (the per-ray results)
+    # the kernel computes it; else the host derives it after the kernel from the AOV named here
+    from_aov: str | None = None
 
     def dtype(self, precision: str = "fp32") -> np.dtype:
         return np.dtype(_REAL[precision] if self.real else np.int32)
@@ -37,7 +39,8 @@ class Aov:
         return np.empty(self.shape(leading), self.dtype(precision))
 
 
-# in the kernels' order (kernels/pyclray.cl takes each image's buffer in this order)
+# the kernel's images in the kernels' order (kernels/pyclray.cl takes each image's buffer in this
+# order), then those the host derives from them
 TABLE = {
     aov.name: aov
     for aov in (
@@ -48,12 +51,27 @@ TABLE = {
         Aov("position", 3, True, "(0, 0, 0)", ("P.X", "P.Y", "P.Z"), False),
         Aov("shaded", 3, True, "the background colour", ("R", "G", "B"), False),
         Aov("primitive", 1, False, "-1", ("primitive",), False),  # index within its shape (batch)
+        # the hit shape's `label` (class masks beside the instance ids): labels[id], -1 for a miss
+        # or a shape without one
+        Aov("label", 1, False, "-1", ("label",), False, from_aov="id"),
     )
 }
 
 # the images of every render and cast (and their default), and every image a render can make
 AOVS = tuple(name for name, aov in TABLE.items() if aov.cast)
 RENDER_AOVS = tuple(TABLE)
+
+
+def kernel_aovs(aovs) -> tuple[str, ...]:
+    """The images the kernel makes for a request (in the table's order): those asked that it
+    computes, and those the others are derived from (label needs id)."""
+    needed = {TABLE[name].from_aov or name for name in aovs}
+    return tuple(name for name in TABLE if name in needed)
+
+
+def image_bytes(aovs, pixels: int, precision: str = "fp32") -> int:
+    """Bytes of the arrays a render of this many pixels returns for these AOVs."""
+    return pixels * sum(TABLE[name].itemsize(precision) for name in aovs)
 
 
 def empty_images(aovs, precision: str = "fp32") -> dict:

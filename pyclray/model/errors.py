@@ -50,7 +50,9 @@ class BuildError(PyclrayError, RuntimeError):
 class OutputError(PyclrayError, OSError):
     """An output file that cannot be written (a missing or read-only folder, a full disk, a path
     that is a folder): names the path and the reason. Nothing was replaced: the command's old
-    files are intact and no temporary is left behind. Exit status 2 on the command line."""
+    files are intact and no temporary is left behind. Exit status 2 on the command line.
+    Also an output file that cannot be read back (read_exr, read_npz: a missing, unreadable or
+    damaged file, or one of another format): "cannot read PATH: reason"."""
 
 
 class RequestError(PyclrayError, ValueError):

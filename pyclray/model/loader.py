@@ -75,13 +75,19 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     entries = data.get("shapes", [])
     if not isinstance(entries, list):
         raise SceneError("expected an array of tables [[shapes]]", key="shapes", file=source)
-    shapes = []
+    shapes, seen = [], {}
     for index, entry in enumerate(entries):
         where = f"[[shapes]] #{index}"
         try:
             kind = typed_table(entry, REGISTRY, "shape")
             where = f"[[shapes]] #{index} ({kind})"
-            shapes.append(REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None))
+            shape = REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None)
+            # names are unique, as the lights' (a name is what an animation key targets; the
+            # defaults "<type><index>" are unique)
+            if shape.name in seen:
+                raise SceneError(f"the name {shape.name!r} is already used by [[shapes]] #{seen[shape.name]}", key="name")
+            seen[shape.name] = index
+            shapes.append(shape)
         except SceneError as error:
             raise error.within(file=source, table=where) from None
     lights = lights_from_list(data.get("lights", []), source)

@@ -6,15 +6,16 @@ import math
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
+from numbers import Real
 
 import numpy as np
 
 from .animation import Animation, derivation, scene_at
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
-from .errors import PyclrayWarning, SceneError
+from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
-from .shapes.base import Shape
+from .shapes.base import Shape, check_label
 
 # The kernels square lengths in the camera's frame (|centre - eye|^2, r^2, b^2) and add a few such
 # squares: every length must stay below the square root of the precision's largest float, with a
@@ -44,6 +45,11 @@ class Scene:
                     table=f"[[shapes]] #{index}",
                     file=self.source,
                 )
+            if shape.label is not None:  # (a scene file's labels are checked as they are read)
+                try:
+                    check_label(shape.label)
+                except SceneError as error:
+                    raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
         if not isinstance(self.camera, Camera):
             raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
         if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
@@ -55,7 +61,12 @@ class Scene:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
     def at(self, t: float) -> "Scene":
-        """The static scene at time t (seconds) of its animation; the scene itself if it has none."""
+        """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
+        none. Frame k is at k / fps; past the last key (and the duration) every track holds its
+        last value. A negative or non-finite t is a RequestError."""
+        if isinstance(t, bool) or not isinstance(t, Real) or not 0 <= t < math.inf:
+            raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
+                               f"past the last key every track holds its last value), got {t!r}")
         return scene_at(self, t)
 
     def with_size(self, width: int, height: int) -> "Scene":

@@ -271,7 +271,7 @@ def reference(scene: Scene) -> dict:
 def render_reach(scene: Scene, t, ids, directions, precision: str) -> np.ndarray:
     """The sideways position error of pyclray's render rays at their hits (scene units), which
     decides silhouettes and edges. The render works in the camera's frame, where every coordinate
-    keeps its own relative precision (README, "Numerical design"): a ray's sideways error is eps
+    keeps its own relative precision (docs/exactness.md, "Numerical design"): a ray's sideways error is eps
     times the sideways size of the coordinates involved (the hit's and the anchor's distances from
     the optical axis), not eps t; plus the oracle's own eps64 (t + W)."""
     eye = np.asarray(scene.camera.eye, np.float64)

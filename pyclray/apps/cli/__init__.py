@@ -10,7 +10,7 @@ import argparse
 import signal
 import sys
 
-from .options import BadInput
+from .options import BadInput, Parser
 from .texts import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STATUS_HELP
 
 # one module per command, each with add_command(subparsers); each imports its heavy parts lazily
@@ -20,10 +20,11 @@ COMMANDS = ("render", "devices", "check", "stability", "animate")
 def build_parser() -> argparse.ArgumentParser:
     from importlib import import_module
 
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="pyclray",
-        description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id and shaded images of "
-        "scenes of planes, spheres, cylinders, disks, rectangles and boxes described in TOML files.",
+        description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id, label and shaded images "
+        "of scenes of planes, spheres, cylinders, disks, rectangles, boxes and batches of spheres described in "
+        "TOML files.",
         epilog=EXIT_STATUS_HELP,
     )
     parser.add_argument("--version", action="version", version=f"pyclray {_version()}")
@@ -31,6 +32,11 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMANDS:
         import_module(f"{__package__}.{name}").add_command(commands)
     return parser
+
+
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return commands.choices[command]
 
 
 def _version() -> str:
@@ -62,8 +68,10 @@ def main(argv=None) -> int:
         from ...model.errors import DeviceError, OutputError, PyclrayError, PyclrayWarning, SceneError
 
         parser = build_parser()
-        args = parser.parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
         command = args.command
+        if unknown:  # named by the command's parser: `pyclray render: error: ...`, not `pyclray: ...`
+            _subparser(parser, command).error(f"unrecognized arguments: {' '.join(unknown)}")
         with warnings.catch_warnings():
             warnings.simplefilter("default", PyclrayWarning)
             warnings.showwarning = _show_warning(command)

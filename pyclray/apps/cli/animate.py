@@ -23,18 +23,21 @@ from .options import BadInput, add_cluster_options, aov_list, cluster_module, im
 DEFAULT_AOV = "shaded"
 
 
-def frame_range(text: str, count: int) -> range:
-    """--frames A:B (A..B-1, either end may be left out, as a Python slice) or K (frame K alone)."""
+def frame_range(text: str, count: int | None) -> range:
+    """--frames A:B (A..B-1, either end may be left out, as a Python slice) or K (frame K alone);
+    with count None only its form is checked."""
     try:
         if ":" in text:
             first, _, last = text.partition(":")
             start = int(first) if first.strip() else 0
-            stop = int(last) if last.strip() else count
+            stop = int(last) if last.strip() else (count or 0)
         else:
             start = int(text)
             stop = start + 1
     except ValueError:
         raise BadInput(f"--frames: expected A:B (frames A to B-1) or K, got {text!r}") from None
+    if count is None:  # the form alone (the animation's length is not known yet)
+        return range(0)
     if not 0 <= start < stop <= count:
         raise BadInput(f"--frames: expected 0 <= A < B <= {count} (the animation has {count} frames), got {text!r}")
     return range(start, stop)
@@ -88,13 +91,10 @@ def add_command(subparsers) -> None:
 
 
 def run(args) -> int:
+    # every option that can be checked alone is checked first, before the scene is read and before
+    # any slow import (Dask, pyopencl): a typo costs nothing
     out = Path(args.output)
     kind = _output_kind(out, args.output)
-    scene = load(args.scene, args.size)
-    animation = scene.animation
-    if animation is None:
-        raise BadInput(f"{args.scene}: the scene has no [animation] table to animate")
-    frames = frame_range(args.frames, animation.frame_count()) if args.frames else range(animation.frame_count())
     if kind == "folder":
         aovs = args.aov or AOVS
     else:
@@ -102,6 +102,8 @@ def run(args) -> int:
         if len(aovs) != 1 or not video.has_preview(aovs[0]):
             with_preview = [a for a in RENDER_AOVS if video.has_preview(a)]
             raise BadInput(f"--aov: a {kind} shows one image with a preview ({', '.join(with_preview)}), got {','.join(aovs)}")
+    if args.frames:
+        frame_range(args.frames, None)  # its form; its range once the animation's length is known
     try:
         if kind == "mp4":
             import imageio_ffmpeg  # noqa: F401
@@ -109,6 +111,13 @@ def run(args) -> int:
             import PIL  # noqa: F401
     except ModuleNotFoundError as error:
         raise BadInput(f"writing .{kind} needs {error.name}: pip install 'pyclray[video]'") from None
+    if args.workers is not None or args.scheduler is not None:
+        cluster_module()  # installed? (before the scene: it says what to install)
+    scene = load(args.scene, args.size)
+    animation = scene.animation
+    if animation is None:
+        raise BadInput(f"{args.scene}: the scene has no [animation] table to animate")
+    frames = frame_range(args.frames, animation.frame_count()) if args.frames else range(animation.frame_count())
 
     def sink(tmp):
         if kind == "folder":

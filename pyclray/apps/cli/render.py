@@ -1,5 +1,6 @@
-"""`pyclray render`: a scene's images to one OpenEXR file and PNG previews, streamed in bands of
-rows (bounded memory), here or on a Dask cluster."""
+"""`pyclray render`: a scene's images to one OpenEXR file, an .npz of numpy arrays or a PNG preview
+(by -o's extension) and PNG previews, streamed in bands of rows (bounded memory), here or on a Dask
+cluster."""
 from __future__ import annotations
 
 import time
@@ -16,26 +17,79 @@ def _band_renderer(scene, aovs, precision, device):
     return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
 
 
+def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
+    """The output's format (from -o's extension), the AOVs it holds and every file the command will
+    write, checked before the scene is read: another extension, --png beside a .png, a .png of an
+    AOV without a preview, or a file that is the scene itself is a one-line error."""
+    from ...io import png
+    from ...io.bands import output_format
+    from ...model.errors import RequestError
+
+    out, scene = Path(args.output), Path(args.scene)
+
+    def is_scene(target: Path) -> bool:
+        return target.resolve() == scene.resolve() or (target.exists() and scene.exists() and target.samefile(scene))
+
+    if is_scene(out):
+        raise BadInput(f"-o {args.output}: is the scene file itself; give another output path")
+    try:
+        kind = output_format(out)
+    except RequestError:
+        raise BadInput(f"-o {args.output}: expected OUT.exr (OpenEXR channels), OUT.npz (numpy arrays, with the "
+                       "camera's K and pose) or OUT.png (the preview of one image); the format follows the extension") from None
+    aovs = args.aov
+    if kind == "png":
+        if args.png:
+            raise BadInput(f"--png: -o {args.output} is itself a preview; --png writes previews beside an .exr or .npz")
+        if aovs[0] not in png.PREVIEWS:
+            raise BadInput(f"-o {args.output}: a .png is the preview of the first image of --aov, and {aovs[0]} has "
+                           f"none (those with one: {', '.join(png.PREVIEWS)})")
+        aovs = aovs[:1]  # the one image a .png shows: the others are not rendered
+        targets = [out]
+    else:
+        targets = [out, *(png.preview_paths(out, aovs).values() if args.png else ())]
+    for target in targets[1:]:  # a preview's name too (a scene file named OUT.depth.png)
+        if is_scene(target):
+            raise BadInput(f"-o {args.output}: its preview {target} is the scene file itself; give another output path")
+    return kind, aovs, targets
+
+
 def _camera(scene):
-    """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py)."""
+    """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py) and the
+    .npz's K and pose arrays."""
     return scene.camera.intrinsics(scene.image.width, scene.image.height), scene.camera.pose()
 
 
-def run(args) -> int:
-    from ...io import exr, files, png
-    from ...io.bands import band_rows, write_images
-    from ...io.progress import progress, seconds
+def _written(kind: str, aovs) -> str:
+    """What the files hold, for the last line: the EXR's channels, the .npz's arrays, the AOV a .png shows."""
+    from ...io import exr
     from ...model.aovs import empty_images
 
-    out = Path(args.output)
-    scene = load(args.scene, args.size, args.time)
-    targets = [out, *(png.preview_paths(out, args.aov).values() if args.png else ())]
-    for target in targets:  # before the render: a path that cannot be written costs no time
+    if kind == "exr":
+        return ", ".join(exr.exr_channel_arrays(empty_images(aovs)))
+    if kind == "npz":
+        return ", ".join((*aovs, "K", "pose"))
+    return f"the {aovs[0]} preview"
+
+
+def run(args) -> int:
+    from ...io import files
+    from ...io.bands import band_rows, write_images
+    from ...io.progress import progress, seconds
+
+    # the options first: a wrong -o costs no scene read, no device and no render
+    kind, aovs, targets = _outputs(args)
+    for target in targets:  # a path that cannot be written costs no time either
         files.check_target(target)
-    if args.workers is not None or args.scheduler is not None:
-        return _render_on_cluster(args, scene, out)
+    out = targets[0]
+    on_cluster = args.workers is not None or args.scheduler is not None
+    if on_cluster:
+        cluster_module()  # installed? (says what to install before the scene is read)
+    scene = load(args.scene, args.size, args.time)
     width, height = scene.image.width, scene.image.height
-    render_band = _band_renderer(scene, args.aov, args.precision, args.device)
+    if on_cluster:
+        return _render_on_cluster(args, scene, out, aovs, kind)
+    render_band = _band_renderer(scene, aovs, args.precision, args.device)
     rows = band_rows(width)
     spent = {"render": 0.0}
     devices = []
@@ -53,26 +107,23 @@ def run(args) -> int:
 
     start = time.perf_counter()
     with progress(height, desc="pyclray render", unit="row") as bar:
-        written = write_images(out, bands(), width=width, height=height, aovs=args.aov, previews=args.png,
-                                      comment=f"pyclray render of {args.scene}", camera=_camera(scene))
+        written = write_images(out, bands(), width=width, height=height, aovs=aovs, previews=args.png,
+                               comment=f"pyclray render of {args.scene}", camera=_camera(scene))
     total = time.perf_counter() - start
-    channels = ", ".join(exr.exr_channel_arrays(empty_images(args.aov)))
     print(
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
-        f"wrote {', '.join(map(str, written))} [{channels}]"
+        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs)}]"
     )
     return 0
 
 
-def _render_on_cluster(args, scene, out) -> int:
+def _render_on_cluster(args, scene, out, aovs, kind) -> int:
     """`pyclray render --workers N | --scheduler ADDRESS`: the image's bands of whole rows are the
     tasks (pyclray/apps/cluster.py); they come back in order and are streamed into the files as a local
     render streams its bands, so the files are the same bytes."""
-    from ...io import exr
     from ...io.bands import write_images
     from ...io.progress import progress, seconds
-    from ...model.aovs import empty_images
 
     cluster = cluster_module()
     width, height = scene.image.width, scene.image.height
@@ -85,23 +136,22 @@ def _render_on_cluster(args, scene, out) -> int:
             devices = []
 
             def received():
-                for band in cluster.render_bands(client, scene, args.aov, args.precision, args.device, rows, bar):
+                for band in cluster.render_bands(client, scene, aovs, args.precision, args.device, rows, bar):
                     devices.append(band.device)
                     yield band
 
             with progress(-(-height // rows), desc="pyclray render", unit="band") as bar:
-                written = write_images(out, received(), width=width, height=height, aovs=args.aov,
-                                              previews=args.png, comment=f"pyclray render of {args.scene}",
-                                              camera=_camera(scene))
+                written = write_images(out, received(), width=width, height=height, aovs=aovs, previews=args.png,
+                                       comment=f"pyclray render of {args.scene}", camera=_camera(scene))
     except cluster.ClusterError as error:
         raise BadInput(str(error)) from None
     total = time.perf_counter() - start
-    channels = ", ".join(exr.exr_channel_arrays(empty_images(args.aov)))
     count = -(-height // rows)
     print(
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
-        f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} [{channels}]"
+        f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} "
+        f"[{_written(kind, aovs)}]"
     )
     return 0
 
@@ -109,29 +159,33 @@ def _render_on_cluster(args, scene, out) -> int:
 def add_command(commands) -> None:
     render = commands.add_parser(
         "render",
-        help="render a scene to a multi-channel OpenEXR file (and PNG previews)",
-        description="Render SCENE with one ray per pixel centre and write one OpenEXR file with "
-        "the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z (unit world normal, "
-        "0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), and as asked "
-        "zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point) and R G B (shaded, linear RGB). "
+        help="render a scene to an OpenEXR file, an .npz of numpy arrays or a PNG preview",
+        description="Render SCENE with one ray per pixel centre. -o decides the format from its extension: "
+        "OUT.exr (one OpenEXR file with the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z "
+        "(unit world normal, 0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), "
+        "and as asked zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point), R G B (shaded, "
+        "linear RGB) and label (UINT, the shape's label)); OUT.npz (every image as a numpy array under its "
+        "name, in its own type, with the camera's intrinsics K (3x3) and pose (4x4 camera-to-world, OpenCV's "
+        "convention)); OUT.png (the preview of the first image of --aov). "
         "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
         "float32): OpenEXR has no 64-bit "
-        "float channel type. Large images are rendered and written in bands of rows, so memory stays "
-        "bounded; a progress bar shows on a terminal.",
+        "float channel type (an .npz keeps float64). Large images are rendered and written in bands of rows, so "
+        "memory stays bounded; a progress bar shows on a terminal.",
         epilog=EXIT_STATUS_HELP,
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
-    render.add_argument("-o", "--output", required=True, metavar="OUT.exr", help="the OpenEXR file to write")
+    render.add_argument("-o", "--output", required=True, metavar="OUT.exr|OUT.npz|OUT.png",
+                        help="the file to write; its extension decides the format (.exr, .npz or .png)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded "
+        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,primitive,label "
         "(default: depth,normal,id); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",
-        help="also write a PNG preview of each image: OUT.depth.png and OUT.zdepth.png (near bright, far "
-        "dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a colour per shape, misses black), "
-        "OUT.shaded.png (clamped, sRGB)",
+        help="also write a PNG preview of each image beside OUT.exr or OUT.npz: OUT.depth.png and "
+        "OUT.zdepth.png (near bright, far dark, misses black), OUT.normal.png (n*0.5+0.5), OUT.id.png (a "
+        "colour per shape, misses black), OUT.label.png (a colour per label), OUT.shaded.png (clamped, sRGB)",
     )
     render.add_argument(
         "--precision", choices=("fp32", "fp64"), default="fp32",

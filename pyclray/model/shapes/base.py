@@ -25,7 +25,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import no_unknown_keys, text
+from ..errors import integer, no_unknown_keys, text
 from ..exact import dot2
 from ..layout import Struct, layout
 from ..lights import MATERIAL_KEYS, Material
@@ -53,6 +53,9 @@ class Shape:
     keys: ClassVar[tuple[str, ...]]
     required: ClassVar[tuple[str, ...]] = ()
     material: Material = field(default=Material(), compare=True)
+    # an optional class label (an integer >= 0) beside the shape's id, for the `label` AOV: class
+    # masks beside instance masks. Not animated (a class does not change between frames).
+    label: int | None = field(default=None, metadata={"animatable": False})
     # False for shapes without finite bounds (the plane): visited by every ray, outside the BVH
     bounded: ClassVar[bool] = True
     # a solid has an inside: a ray starting there sees its far side (only t > 0 counts)
@@ -64,12 +67,14 @@ class Shape:
 
     @classmethod
     def from_table(cls, table: dict, index: int, folder=None):
-        no_unknown_keys(table, ("type", "name") + cls.keys + MATERIAL_KEYS, required=cls.required)
+        no_unknown_keys(table, ("type", "name", "label") + cls.keys + MATERIAL_KEYS, required=cls.required)
         name = text("name", table.get("name", f"{cls.type}{index}"))
         material = Material.from_table(table)
-        own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS}
+        label = check_label(table.get("label"))
+        own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS and k != "label"}
         shape = cls._from_table(own, name, folder) if cls.reads_files else cls._from_table(own, name)
-        return replace(shape, material=material) if material != Material() else shape
+        common = {k: v for k, v in (("material", material), ("label", label)) if v != getattr(shape, k)}
+        return replace(shape, **common) if common else shape
 
     @classmethod
     def _from_table(cls, table: dict, name: str):
@@ -227,6 +232,20 @@ class Shape:
         """Whether Mitsuba's counterpart holds these points of the shape (False where a stand-in
         ends, such as the plane's disk)."""
         return np.ones(np.shape(points)[:-1], bool)
+
+
+LABEL_MAX = 2**31 - 1  # labels are int32 in the label image
+
+
+def check_label(value) -> int | None:
+    """A shape's label: None (no label) or a whole number 0 <= label <= 2^31 - 1 (a SceneError at
+    the key 'label' otherwise)."""
+    return None if value is None else integer("label", value, minimum=0, maximum=LABEL_MAX)
+
+
+def labels_of(shapes) -> np.ndarray:
+    """(N,) int32: each shape's label, -1 for a shape without one."""
+    return np.array([-1 if shape.label is None else shape.label for shape in shapes], np.int32).reshape(-1)
 
 
 def primitive_counts(shapes) -> np.ndarray:
