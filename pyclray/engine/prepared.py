@@ -289,23 +289,34 @@ class PreparedScene:
         if self.on_device:
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
-            for kind in self.kinds.values():
-                if kind.count:
-                    kernels[f"rebase_{kind.name}"](queue, (kind.count,), None, kind.world_buffer, kind.frame,
-                                                   np.int32(kind.count), *frame)
-            if self.bvh.types:
-                kernels["rebase_nodes"](queue, (self.bvh.tree.nodes,), None, self.world_nodes, self.nodes,
+        for kind in self.kinds.values():
+            if not kind.count:
+                continue
+            if self.on_device and kind.count >= self.GROUP:
+                kernels[f"rebase_{kind.name}"](queue, *self._groups(kind.count), kind.world_buffer, kind.frame,
+                                               np.int32(kind.count), *frame)
+            else:  # on the host: a few entries (a ground plane) cost less than a launch
+                packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
+                cl.enqueue_copy(queue, kind.frame, packed)
+        if self.bvh.types:
+            if self.on_device:
+                kernels["rebase_nodes"](queue, *self._groups(self.bvh.tree.nodes), self.world_nodes, self.nodes,
                                         np.int32(self.bvh.tree.nodes), frame[0])
-        else:
-            for kind in self.kinds.values():
-                if kind.count:
-                    packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
-                    cl.enqueue_copy(queue, kind.frame, packed)
-            if self.bvh.types:
-                lo, hi = outward32(self.bvh.tree.lo - eye, self.bvh.tree.hi - eye)
-                self._nodes_host["lo"][:, :3], self._nodes_host["hi"][:, :3] = lo, hi
-                cl.enqueue_copy(queue, self.nodes, self._nodes_host)
+            else:
+                nodes = self._nodes_host.copy()  # not the buffer's own memory (a CPU device's) as the source
+                nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(self.bvh.tree.lo - eye, self.bvh.tree.hi - eye)
+                cl.enqueue_copy(queue, self.nodes, nodes)
         self.view_key = key
+
+    GROUP = 256
+
+    def _groups(self, count: int):
+        """(global size, local size) of a pass over count entries: work-groups of GROUP work-items
+        (or the device's most), the count rounded up (the kernels skip the rest). Left to itself, PoCL
+        divides a count like 70,669 into tiny work-groups: the nodes' pass then took 2.0 ms for
+        100,000 spheres, 1.6 ms in groups of 256."""
+        group = min(self.GROUP, self.ctx.device.max_work_group_size)
+        return (-(-count // group) * group,), (group,)
 
     def tile_lists(self, kind: Kind, eye, rows, plane, width, height):
         """(start, index) of the kind's entries for each screen tile of this view (culling.tile_lists)."""

@@ -26,11 +26,16 @@ inline real3 to_frame(const Frame* frame, const double3 x)
                                    (frame->w.x * x.x + frame->w.y * x.y) + frame->w.z * x.z));
 }
 
-/* a b = p + e exactly */
+/* a b = p + e exactly: Dekker's product, with his splitter 2^27 + 1 (pyclray.model.exact.two_prod;
+ * fma(a, b, -p) gives the same e, but is a call into PoCL's library, which LLVM does not inline) */
 inline double2 two_prod(const double a, const double b)
 {
     const double p = a * b;
-    return (double2)(p, fma(a, b, -p));
+    double t = 134217729.0 * a;
+    const double a_hi = t - (t - a), a_lo = a - a_hi;
+    t = 134217729.0 * b;
+    const double b_hi = t - (t - b), b_lo = b - b_hi;
+    return (double2)(p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo);
 }
 
 /* a + b = s + e exactly */
