@@ -125,3 +125,45 @@ def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypat
     monkeypatch.setattr(prepared, "has_fp64", lambda device: False)
     same(fresh(scene, aovs=ALL, precision=precision), expected)
     prepared.clear()
+
+
+def moving_spheres(count: int, moving: int = 6, size=(64, 48)) -> pyclray.Scene:
+    """A field of named spheres over a ground plane, `moving` of them keyed to travel across it."""
+    from pyclray.model.animation import Animation
+
+    rng = np.random.default_rng(count)
+    centres = rng.uniform((-8, 0, -8), (8, 3, 8), (count, 3))
+    shapes = (pyclray.Plane((0, 1, 0), 0.0),) + tuple(
+        pyclray.Sphere(tuple(c), 0.3, name=f"s{i}") for i, c in enumerate(centres.tolist()))
+    keys = []
+    for i in np.linspace(0, count - 1, moving).astype(int):
+        start = centres[i].tolist()
+        keys += [{"target": f"s{i}", "time": 0.0, "center": start},
+                 {"target": f"s{i}", "time": 1.0, "center": [-start[0], start[1] + 1.0, -start[2]]},
+                 {"target": f"s{i}", "time": 0.5, "radius": 0.6}, {"target": f"s{i}", "time": 0.0, "radius": 0.3}]
+    return pyclray.Scene(pyclray.Camera((0, 9, 20), (0, 1, 0), fov=55.0), pyclray.Image(*size), shapes,
+                         animation=Animation.from_table({"fps": 8.0, "duration": 1.0, "keys": keys}))
+
+
+@pytest.mark.parametrize("count", [300, 3000])  # rebased on the host, on the device
+@pytest.mark.parametrize("refit_max", [1.5, 0.0])  # refit in place; every frame rebuilt
+def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monkeypatch, count, refit_max):
+    """Each frame of an animation that moves (and grows) a few of many spheres is the update of
+    one prepared scene in place (their entries, a refit of the BVH above them, their changed
+    materials' extents), or a rebuild where the refit would degrade the tree; either way the
+    images equal those of the frame's scene prepared from nothing, bit for bit."""
+    monkeypatch.setattr(prepared.PreparedScene, "REFIT_COST_MAX", refit_max)
+    scene = moving_spheres(count)
+    prepared.clear()
+    frames = [frame for _, frame in pyclray.render_animation(scene, aovs=ALL)]
+    kept = [p for p in prepared._prepared.values() if p.base is scene.shapes]
+    assert len(kept) == 1  # one prepared scene, updated (or rebuilt) frame after frame
+    if refit_max and count >= prepared.DEVICE_REBASE_FROM:
+        from pyclray.engine.bvh import sah_cost
+
+        state = kept[0]._refit
+        assert np.isclose(state.cost(), sah_cost(kept[0].bvh.tree), rtol=1e-9)  # the kept cost is the tree's
+    for k, frame in enumerate(frames):
+        t = scene.animation.frame_time(k)
+        still = pyclray.Scene(scene.camera, scene.image, scene.at(t).shapes)  # no derivation: a new scene
+        same(frame, fresh(still, aovs=ALL))

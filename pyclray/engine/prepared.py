@@ -109,7 +109,7 @@ class PreparedScene:
     def __init__(self, ctx, shapes: tuple, precision: str):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
         self.lock = threading.Lock()  # one view at a time uses the frame buffers
-        self.view_key = None
+        self.view_key = self.view = None  # the camera the frame buffers hold: (eye, rows) bytes, arrays
         by_type: dict = {}
         for index, shape in enumerate(shapes):
             by_type.setdefault(shape.type, ([], []))
@@ -205,27 +205,45 @@ class PreparedScene:
             if self.on_device:
                 self._scatter(kind.world_buffer, where, rows)
         if refitted is not None and self.on_device:
-            nodes = refitted
-            self._scatter(self.world_nodes, nodes, self._world_nodes_host.reshape(-1, 2, 4)[nodes].reshape(-1, 4).copy(), width=2)
+            corners = self._world_nodes_host.reshape(-1, 2, 4)[refitted]  # a node's two corners: 64 bytes
+            self._scatter(self.world_nodes, refitted, corners.reshape(len(refitted), 8).view([("corners", "f8", 8)]).reshape(-1))
+        if self.on_device and self.view is not None:
+            # the frame buffers hold the last view: bring the changed entries and nodes to it in place
+            # (the same floats as a whole pass: the host's rebase is the device's, bit for bit)
+            eye, rows = self.view
+            for name, (where, _) in rows_by_kind.items():
+                kind = self.kinds[name]
+                where = np.concatenate(where)
+                self._scatter(kind.frame, where, kind.cls.rebase(kind.world[where], eye, rows, self.precision,
+                                                                 kind.ids[where], kind.primitives[where]))
+            if refitted is not None:
+                tree = self.bvh.tree
+                nodes = self._nodes_host[refitted].copy()
+                nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - eye, tree.hi[refitted] - eye)
+                self._scatter(self.nodes, refitted, nodes)
         # materials (an animated colour or size): the rows that differ
         materials = shading.pack_materials([shapes[i] for i in indices], self.precision)
         if not (materials == self._materials_host[indices]).all():
             self._materials_host[indices] = materials
             cl.enqueue_copy(self.ctx.queue, self.materials, self._materials_host)
         self.reach = self._reach()
-        self.shapes, self.dirty, self.view_key = shapes, set(changed), None
+        self.shapes, self.dirty = shapes, set(changed)
+        if not (self.on_device and self.view is not None):
+            self.view_key = None  # a whole pass at the next view
         return True
 
-    def _scatter(self, buffer, index, rows, width=None) -> None:
-        """Write rows (each width double4s) at these indices of a device buffer (kernels' scatter_rows)."""
+    def _scatter(self, buffer, index, rows) -> None:
+        """Write rows (structs of a multiple of 16 bytes) at these indices of a device buffer of such
+        rows (kernels' scatter_rows)."""
         rows = np.ascontiguousarray(rows)
-        width = width or rows.dtype.itemsize // 32
         if not len(index):
             return
+        width = rows.dtype.itemsize // 16
         kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
         index = np.ascontiguousarray(index, np.int32)
+        words = rows.view(np.uint8).reshape(-1).view(np.uint32)
         kernels["scatter_rows"](self.ctx.queue, (len(index),), None, buffer, input_buffer(self.ctx, index),
-                                input_buffer(self.ctx, rows.view(np.float64).reshape(-1)), np.int32(len(index)), np.int32(width))
+                                input_buffer(self.ctx, words), np.int32(len(index)), np.int32(width))
 
     def _kind(self, t, world, ids, primitives) -> Kind:
         cls = REGISTRY[t]
@@ -306,7 +324,7 @@ class PreparedScene:
                 nodes = self._nodes_host.copy()  # not the buffer's own memory (a CPU device's) as the source
                 nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(self.bvh.tree.lo - eye, self.bvh.tree.hi - eye)
                 cl.enqueue_copy(queue, self.nodes, nodes)
-        self.view_key = key
+        self.view_key, self.view = key, (eye, rows)
 
     GROUP = 256
 
@@ -341,9 +359,23 @@ class _RefitState:
             self.leaf_of[tree.first[leaf]: tree.first[leaf] + tree.count[leaf]] = leaf
         self.widened = widened(bvh.bounds) if len(bvh.bounds) else np.zeros((0, 2, 3))
         self.built_cost = sah_cost(tree) if tree.nodes else 0.0
+        # the SAH cost's sum (sah_cost before the division by the root's area), kept up to date as
+        # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
+        self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)
+        self.cost_sum = float((self._areas(np.arange(tree.nodes)) * self.weight).sum())
         self.by_id, self.leaf_positions_of = {}, {}
         for k, t in enumerate(bvh.types):
             self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
+
+    def _areas(self, nodes) -> np.ndarray:
+        tree = self.prepared.bvh.tree
+        extent = np.maximum(tree.hi[nodes] - tree.lo[nodes], 0.0)
+        return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+
+    def cost(self) -> float:
+        """The tree's SAH cost as sah_cost computes it (relative to the root's area)."""
+        root = self._areas(np.zeros(1, np.int64))[0]
+        return self.cost_sum / (root if root > 0 else 1.0)
 
     def positions(self, kind: Kind, shape_index: int) -> np.ndarray:
         """The positions of a shape's entries in its type's array."""
@@ -363,28 +395,34 @@ class _RefitState:
         or None (nothing changed) where the refitted tree's SAH cost exceeds REFIT_COST_MAX times the
         built one's."""
         tree, bvh = self.prepared.bvh.tree, self.prepared.bvh
-        old = (tree.lo.copy(), tree.hi.copy(), bvh.bounds[positions].copy(), self.widened[positions].copy())
+        ancestors = [np.unique(self.leaf_of[positions])]
+        while True:  # every node whose box may change: the leaves, then their ancestors
+            up = np.unique(self.parent[ancestors[-1]])
+            up = up[up >= 0]
+            if not up.size:
+                break
+            ancestors.append(up)
+        every = np.unique(np.concatenate(ancestors))
+        old = (tree.lo[every].copy(), tree.hi[every].copy(), bvh.bounds[positions].copy(), self.widened[positions].copy())
+        before = float((self._areas(every) * self.weight[every]).sum())
         bvh.bounds[positions] = bounds
         self.widened[positions] = widened(bounds)
-        touched = [np.unique(self.leaf_of[positions])]
-        for leaf in touched[0]:
+        for leaf in ancestors[0]:  # a leaf's box: its entries'
             first, count = tree.first[leaf], tree.count[leaf]
             tree.lo[leaf] = self.widened[first:first + count, 0].min(axis=0)
             tree.hi[leaf] = self.widened[first:first + count, 1].max(axis=0)
-        nodes = np.unique(self.parent[touched[0]])
-        nodes = nodes[nodes >= 0]
-        while nodes.size:
-            touched.append(nodes)
+        for nodes in ancestors[1:]:  # a level's parents after the level (a node again after a deeper change)
             left, right = tree.first[nodes], tree.first[nodes] + 1
             tree.lo[nodes] = np.minimum(tree.lo[left], tree.lo[right])
             tree.hi[nodes] = np.maximum(tree.hi[left], tree.hi[right])
-            nodes = np.unique(self.parent[nodes])
-            nodes = nodes[nodes >= 0]
-        if sah_cost(tree) > PreparedScene.REFIT_COST_MAX * self.built_cost:
-            tree.lo[...], tree.hi[...] = old[0], old[1]
+        after = float((self._areas(every) * self.weight[every]).sum())
+        self.cost_sum += after - before
+        if self.cost() > PreparedScene.REFIT_COST_MAX * self.built_cost:
+            tree.lo[every], tree.hi[every] = old[0], old[1]
             bvh.bounds[positions], self.widened[positions] = old[2], old[3]
+            self.cost_sum -= after - before
             return None
-        changed = np.unique(np.concatenate(touched))
+        changed = every
         if self.prepared.on_device:
             corners = self.prepared._world_nodes_host.reshape(-1, 2, 4)
             corners[changed, 0, :3], corners[changed, 1, :3] = tree.lo[changed], tree.hi[changed]

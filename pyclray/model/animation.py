@@ -319,7 +319,9 @@ def scene_at(scene, t: float, *, frame: int | None = None):
             if index is None:
                 replaced[collection] = dataclasses.replace(getattr(scene, collection), **values)
             else:
-                mine = items.setdefault(collection, list(getattr(scene, collection)))
+                if collection not in items:  # (not setdefault: its default would be built every time)
+                    items[collection] = list(getattr(scene, collection))
+                mine = items[collection]
                 mine[index] = dataclasses.replace(mine[index], **values)
         except SceneError as error:
             raise _frame_error(scene, error, target, values, when) from None

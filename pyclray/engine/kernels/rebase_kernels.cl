@@ -41,8 +41,8 @@ __kernel void rebase_nodes(__global const double4* world, __global BvhNode* out,
 }
 
 /* An animation frame's changed entries (pyclray.engine.prepared.PreparedScene.update): rows of width
- * double4s each (a world struct, or a BVH node's two corners) written at their indices. */
-__kernel void scatter_rows(__global double4* out, __global const int* index, __global const double4* rows,
+ * 16-byte words each (a world or frame struct, or a BVH node) written at their indices. */
+__kernel void scatter_rows(__global uint4* out, __global const int* index, __global const uint4* rows,
                            const int n, const int width)
 {
     const int k = get_global_id(0);
