@@ -127,8 +127,9 @@ def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypat
     prepared.clear()
 
 
-def moving_spheres(count: int, moving: int = 6, size=(64, 48)) -> pyclray.Scene:
-    """A field of named spheres over a ground plane, `moving` of them keyed to travel across it."""
+def moving_spheres(count: int, moving: int = 6, size=(64, 48), orbit: bool = False) -> pyclray.Scene:
+    """A field of named spheres over a ground plane, `moving` of them keyed to travel across it (and
+    with orbit, the camera keyed around it too)."""
     from pyclray.model.animation import Animation
 
     rng = np.random.default_rng(count)
@@ -141,19 +142,22 @@ def moving_spheres(count: int, moving: int = 6, size=(64, 48)) -> pyclray.Scene:
         keys += [{"target": f"s{i}", "time": 0.0, "center": start},
                  {"target": f"s{i}", "time": 1.0, "center": [-start[0], start[1] + 1.0, -start[2]]},
                  {"target": f"s{i}", "time": 0.5, "radius": 0.6}, {"target": f"s{i}", "time": 0.0, "radius": 0.3}]
+    if orbit:
+        keys += [{"target": "camera", "time": 0.0, "eye": [0.0, 9.0, 20.0]}, {"target": "camera", "time": 1.0, "eye": [20.0, 6.0, 0.0]}]
     return pyclray.Scene(pyclray.Camera((0, 9, 20), (0, 1, 0), fov=55.0), pyclray.Image(*size), shapes,
                          animation=Animation.from_table({"fps": 8.0, "duration": 1.0, "keys": keys}))
 
 
+@pytest.mark.parametrize("orbit", [False, True])  # frames brought to the same view in place; whole passes
 @pytest.mark.parametrize("count", [300, 3000])  # rebased on the host, on the device
 @pytest.mark.parametrize("refit_max", [1.5, 0.0])  # refit in place; every frame rebuilt
-def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monkeypatch, count, refit_max):
+def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monkeypatch, count, refit_max, orbit):
     """Each frame of an animation that moves (and grows) a few of many spheres is the update of
     one prepared scene in place (their entries, a refit of the BVH above them, their changed
     materials' extents), or a rebuild where the refit would degrade the tree; either way the
     images equal those of the frame's scene prepared from nothing, bit for bit."""
     monkeypatch.setattr(prepared.PreparedScene, "REFIT_COST_MAX", refit_max)
-    scene = moving_spheres(count)
+    scene = moving_spheres(count, orbit=orbit)
     prepared.clear()
     frames = [frame for _, frame in pyclray.render_animation(scene, aovs=ALL)]
     kept = [p for p in prepared._prepared.values() if p.base is scene.shapes]
@@ -165,5 +169,6 @@ def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monke
         assert np.isclose(state.cost(), sah_cost(kept[0].bvh.tree), rtol=1e-9)  # the kept cost is the tree's
     for k, frame in enumerate(frames):
         t = scene.animation.frame_time(k)
-        still = pyclray.Scene(scene.camera, scene.image, scene.at(t).shapes)  # no derivation: a new scene
+        at = scene.at(t)
+        still = pyclray.Scene(at.camera, scene.image, at.shapes)  # no derivation: a new scene
         same(frame, fresh(still, aovs=ALL))

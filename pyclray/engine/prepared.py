@@ -155,6 +155,7 @@ class PreparedScene:
         with np.errstate(over="ignore", invalid="ignore"):
             self._materials_host = aligned(shading.pack_materials(shapes, precision))
         self.base, self.dirty = shapes, set()  # see update
+        self.stale: dict = {}  # type name (or "nodes") -> world entries changed on the host only
         self._refit = None
         self.materials = _buffer(ctx, self._materials_host)
         self.reach = self._reach()
@@ -197,16 +198,16 @@ class PreparedScene:
             refitted = state.refit(np.concatenate(positions), np.concatenate(bounds_rows))
             if refitted is None:
                 return False
-        # the world entries, on the host and on the device
+        # the world entries on the host; the device's are brought up to date before the next whole
+        # pass needs them (flush_world): while the camera stays, a frame writes only the frame buffers
         for name, (where, rows) in rows_by_kind.items():
             kind = self.kinds[name]
             where, rows = np.concatenate(where), np.concatenate(rows)
             kind.world[where] = rows
             if self.on_device:
-                self._scatter(kind.world_buffer, where, rows)
+                self.stale.setdefault(name, set()).update(where.tolist())
         if refitted is not None and self.on_device:
-            corners = self._world_nodes_host.reshape(-1, 2, 4)[refitted]  # a node's two corners: 64 bytes
-            self._scatter(self.world_nodes, refitted, corners.reshape(len(refitted), 8).view([("corners", "f8", 8)]).reshape(-1))
+            self.stale.setdefault("nodes", set()).update(refitted.tolist())
         if self.on_device and self.view is not None:
             # the frame buffers hold the last view: bring the changed entries and nodes to it in place
             # (the same floats as a whole pass: the host's rebase is the device's, bit for bit)
@@ -231,6 +232,18 @@ class PreparedScene:
         if not (self.on_device and self.view is not None):
             self.view_key = None  # a whole pass at the next view
         return True
+
+    def flush_world(self) -> None:
+        """Write the world entries and BVH corners that animation frames changed to the device."""
+        for name, where in self.stale.items():
+            where = np.array(sorted(where), np.int64)
+            if name == "nodes":
+                corners = self._world_nodes_host.reshape(-1, 2, 4)[where]  # a node's two corners: 64 bytes
+                self._scatter(self.world_nodes, where, corners.reshape(len(where), 8).view([("corners", "f8", 8)]).reshape(-1))
+            else:
+                kind = self.kinds[name]
+                self._scatter(kind.world_buffer, where, kind.world[where])
+        self.stale = {}
 
     def _scatter(self, buffer, index, rows) -> None:
         """Write rows (structs of a multiple of 16 bytes) at these indices of a device buffer of such
@@ -305,6 +318,7 @@ class PreparedScene:
             return
         queue = self.ctx.queue
         if self.on_device:
+            self.flush_world()
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
@@ -363,7 +377,7 @@ class _RefitState:
         # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
         self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)
         self.cost_sum = float((self._areas(np.arange(tree.nodes)) * self.weight).sum())
-        self.by_id, self.leaf_positions_of = {}, {}
+        self.by_id, self.leaf_positions_of, self.found = {}, {}, {}
         for k, t in enumerate(bvh.types):
             self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
 
@@ -379,12 +393,15 @@ class _RefitState:
 
     def positions(self, kind: Kind, shape_index: int) -> np.ndarray:
         """The positions of a shape's entries in its type's array."""
-        if kind.name not in self.by_id:
-            order = np.argsort(kind.ids, kind="stable")
-            self.by_id[kind.name] = (order, kind.ids[order])
-        order, ids = self.by_id[kind.name]
-        lo, hi = np.searchsorted(ids, shape_index, "left"), np.searchsorted(ids, shape_index, "right")
-        return order[lo:hi]
+        found = self.found.get((kind.name, shape_index))
+        if found is None:
+            if kind.name not in self.by_id:
+                order = np.argsort(kind.ids, kind="stable")
+                self.by_id[kind.name] = (order, kind.ids[order])
+            order, ids = self.by_id[kind.name]
+            lo, hi = np.searchsorted(ids, shape_index, "left"), np.searchsorted(ids, shape_index, "right")
+            found = self.found[(kind.name, shape_index)] = order[lo:hi]  # an animation asks each frame
+        return found
 
     def leaf_positions(self, kind: Kind, positions: np.ndarray) -> np.ndarray:
         return self.leaf_positions_of[kind.name][positions]
