@@ -192,7 +192,8 @@ def add_command(commands) -> None:
         help="kernel precision (default fp32); fp64 depth and normals are stored in the EXR as 32-bit floats",
     )
     render.add_argument("--size", type=image_size, metavar="WxH",
-                        help="override the scene's image size (each side at most 65536)")
+                        help="override the scene's image size (each side at most 65536); a camera from "
+                        "intrinsics scales its K with the image")
     render.add_argument("--time", type=time_value, metavar="T", help="render the scene at time T (seconds) of its [animation]")
     render.add_argument(
         "--device", metavar="DEV",
