@@ -18,14 +18,10 @@ def _quiet_interrupt(number, frame):
 if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.argv else False:
     _signal.signal(_signal.SIGINT, _quiet_interrupt)
 
-from .engine.cast import cast, occluded
 from .engine.device import list_devices, select_device
 from .engine.prepared import clear as clear_cache
 from .engine.render import render, render_animation, render_views
 from .engine.request import Frame
-from .io.bands import write_exr, write_npz
-from .io.exr import read_exr
-from .io.npz import read_npz
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
@@ -46,11 +42,30 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    """``pyclray.cluster`` (``from pyclray import cluster``): the Dask scale-out, imported when first
-    asked for (it needs the cluster extra, and importing distributed takes a while)."""
-    if name == "cluster":
-        from importlib import import_module
+# Imported when first asked for: the files' readers and writers and the casts are not on the render
+# path (a first render of a new process pays for every module it imports), and pyclray.cluster needs
+# the cluster extra (importing distributed takes a while). name -> (module, attribute)
+_LAZY = {
+    "cast": (".engine.cast", "cast"), "occluded": (".engine.cast", "occluded"),
+    "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
+    "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
+    "cluster": (".apps.cluster", None),
+}
 
-        return import_module(".apps.cluster", __name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+def __getattr__(name: str):
+    """The names of _LAZY, imported at their first use (then kept as the package's attributes)."""
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    module, attribute = _LAZY[name]
+    value = import_module(module, __name__)
+    value = value if attribute is None else getattr(value, attribute)
+    if attribute is not None:
+        globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
