@@ -228,6 +228,7 @@ def test_the_memory_check_uses_what_is_available(monkeypatch):
     scene = pyclray.load_scene(TP02).with_size(64, 32)
     need = image_bytes(("depth", "normal", "id"), 64 * 32)
     assert need == 64 * 32 * (4 + 12 + 4)
+    monkeypatch.setattr(memory, "ALWAYS_FITS", 0)  # (images below 64 MiB are not checked)
     monkeypatch.setattr(memory, "available_bytes", lambda: need - 1)
     with pytest.raises(pyclray.RequestError, match=f"need {need:,} bytes"):
         pyclray.render(scene)

@@ -205,7 +205,16 @@ class Camera:
         return INTRINSICS_KEYS if self.K is None else LOOK_AT_KEYS + INTRINSICS_KEYS
 
     def basis(self) -> np.ndarray:
-        """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64."""
+        """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64 (read-only:
+        computed once per camera, which is frozen; a warm render asks for it several times)."""
+        cached = self.__dict__.get("_basis")
+        if cached is None:
+            cached = self._basis_of()
+            cached.setflags(write=False)
+            object.__setattr__(self, "_basis", cached)
+        return cached
+
+    def _basis_of(self) -> np.ndarray:
         if self.K is not None:
             R = np.array(self.rotation)
             return np.stack([-R[:, 0], -R[:, 1], R[:, 2]])  # OpenCV's x right, y down, z forward
