@@ -199,12 +199,10 @@ def build(bounds: np.ndarray, leaf_size: int | None = None) -> BVH:
     child_internal = (child_last - child_first + 1) > leaf_size
     child_node = np.stack([gamma, gamma + 1])  # internal node index when internal
     # breadth-first numbering: the root, then the two children of each node in turn
-    new_first, new_count, new_range = [], [], []
     level_nodes = np.array([0])  # Karras indices of this level's internal nodes
     level_ranges = np.array([[0, n - 1]])
     level_internal = np.array([True])
     next_index = 1
-    order_lo, order_hi = [], []
     levels = []
     while level_nodes.size:
         m = len(level_nodes)

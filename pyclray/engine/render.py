@@ -16,7 +16,7 @@ from .labels import with_labels
 from .memory import check_images_fit
 from .prepared import acceleration_for, check_renderable_once, prepared_scene, render_inputs
 from .programs import Variant, lanes_for
-from .request import Frame, check_request, frame_camera, run_kernel
+from .request import Frame, check_request, run_kernel
 
 
 def _window(scene: Scene, window) -> tuple[int, int, int, int]:
@@ -95,7 +95,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
         prepared.rebase(inputs.eye, inputs.rows)
         images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
     return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip(),
-                 **frame_camera(scene.camera, scene.image.width, scene.image.height, col0, row0))
+                 view=(scene.camera, scene.image.width, scene.image.height, col0, row0))
 
 
 def with_camera(scene: Scene, camera) -> Scene:
