@@ -49,7 +49,7 @@ def camera_from_table(table: dict) -> Camera:
                              "not a mix (the pose holds the eye)", key=key)
     for key in INTRINSICS_KEYS:
         if key not in table:
-            raise SceneError(f"missing required key: a camera from intrinsics needs both intrinsics and pose", key=key)
+            raise SceneError("missing required key: a camera from intrinsics needs both intrinsics and pose", key=key)
     return Camera.from_intrinsics(table["intrinsics"], table["pose"])
 
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import SceneError, _shown
 from .base import Shape
-from .sphere import Sphere, eye_term
+from .sphere import Sphere
 
 
 def _array(key: str, value, shape_tail: tuple, what: str) -> np.ndarray:
