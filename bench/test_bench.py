@@ -228,7 +228,7 @@ BREAKDOWN = {
 def test_breakdown(benchmark, scenes_dir, part):
     import importlib
 
-    render_module = importlib.import_module("pyclray.engine.prepared")
+    render_module = importlib.import_module("pyclray.engine.views")
     request_module = importlib.import_module("pyclray.engine.request")
     scene = load(scenes_dir, "tp02", ERROR_SIZE)
     if part == "kernel only, all AOVs, plane only":

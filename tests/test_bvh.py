@@ -177,7 +177,7 @@ def test_a_moved_camera_reuses_the_tree():
     import sys
     from dataclasses import replace
 
-    render_module = sys.modules["pyclray.engine.prepared"]
+    render_module = sys.modules["pyclray.engine.views"]
 
     scene = crowded_scene(7, size=16)
     first = render_module.scene_bvh(scene)
@@ -210,11 +210,11 @@ def test_packets_of_every_width_traverse_to_the_same_bits(monkeypatch, lanes):
 
 
 def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
-    """Tiles where a tile's list is short (render.TILE_LIST_MAX shapes on average), the BVH where
+    """Tiles where a tile's list is short (views.TILE_LIST_MAX shapes on average), the BVH where
     it is long: tp02's three spheres, and 3,000 spheres filling a small image."""
     import sys
 
-    render_module = sys.modules["pyclray.engine.prepared"]
+    render_module = sys.modules["pyclray.engine.views"]
     tp02 = pyclray.load_scene(SCENES / "tp02.toml").with_size(64, 64)
     assert render_module.acceleration_for(tp02) == "tiles"
     assert render_module.acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"

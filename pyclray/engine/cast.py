@@ -2,6 +2,8 @@
 (occluded), each ray traced on its own from its float64 origin and direction."""
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 import pyopencl as cl
 
@@ -12,9 +14,10 @@ from ..model.layout import PRECISIONS
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
-from .prepared import cast_inputs, shape_kinds
+from .prepared import CACHES, PREPARED_MAX, prepared_scene
+from .views import shape_kinds
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, check_request, input_buffer, run_kernel
+from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -97,6 +100,55 @@ def _coherent_order(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         q = np.clip((points - lo) * (1023.0 / extent), 0, 1023).astype(np.uint32)
     code = (_spread10(q[:, 0]) << np.uint32(2)) | (_spread10(q[:, 1]) << np.uint32(1)) | _spread10(q[:, 2])
     return np.argsort(code)
+
+
+# -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
+_cast_prepared: OrderedDict = OrderedDict()
+CACHES.append(_cast_prepared)  # pyclray.clear_cache() empties it
+
+
+def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, np.ndarray]:
+    """(arguments, anchor): the BVH around the scene's anchor (its root box's centre), its refs and
+    the entries' anchors, and per shape type its packed buffer (each bounded entry relative to its
+    own anchor, in leaf order) and count. They depend on the shapes only, never on the rays."""
+    key = (ctx.device.int_ptr, id(scene.shapes), precision)
+    with render_lock:
+        entry = _cast_prepared.get(key)
+        if entry is not None and entry[0] is scene.shapes and entry[1] == shape_types:
+            _cast_prepared.move_to_end(key)
+            return entry[2], entry[3]
+    prepared = prepared_scene(ctx, scene, precision)
+    tree = prepared.bvh
+    anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
+    # w: 1 where the scene reaches beyond 2^100 from its anchor, too far for the float box tests
+    # (kernels/pyclray.cl: its rays then test every bounded shape)
+    large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
+    anchor = np.append(anchor, 1.0 if large else 0.0)
+    args = []
+    if tree.types:
+        anchors = tree.anchors()
+        args += [
+            input_buffer(ctx, tree.nodes(anchor[:3])),
+            input_buffer(ctx, tree.refs(shape_types)),
+            input_buffer(ctx, np.ascontiguousarray(anchors)),
+        ]
+    identity = np.eye(3)
+    for name in shape_types:
+        kind = prepared.kinds[name]
+        if kind.cls.bounded:
+            origin = anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name), :3]
+        else:
+            origin = np.zeros(3)
+        with np.errstate(over="ignore", invalid="ignore"):
+            packed = kind.cls.rebase(kind.world, origin, identity, precision, kind.ids, kind.primitives)
+        if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
+            raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
+        args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)), np.int32(kind.count)]
+    with render_lock:
+        _cast_prepared[key] = (scene.shapes, shape_types, args, anchor)
+        while len(_cast_prepared) > PREPARED_MAX:
+            _cast_prepared.popitem(last=False)
+    return args, anchor
 
 
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):

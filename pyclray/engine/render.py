@@ -14,7 +14,8 @@ from . import culling
 from .device import context_for
 from .labels import with_labels
 from .memory import check_images_fit
-from .prepared import acceleration_for, check_renderable_once, prepared_scene, render_inputs
+from .prepared import prepared_scene
+from .views import acceleration_for, check_renderable_once, render_inputs
 from .programs import Variant, lanes_for
 from .request import Frame, check_request, run_kernel
 

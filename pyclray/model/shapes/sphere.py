@@ -1,7 +1,6 @@
 """The sphere: the points p with |p - center| = radius."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

@@ -1,0 +1,190 @@
+"""What a view of a prepared scene needs besides the shapes, kept per scene object: the camera, the
+lights in its frame, the tile lists, the acceleration choice and the range check."""
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from ..model.errors import PyclrayError, SceneError
+from ..model.scene import Scene, check_renderable, check_shape_count
+from ..model.shapes import REGISTRY
+from . import shading
+from .prepared import CACHES, PreparedScene, prepared_scene
+from .request import REAL, camera_struct, input_buffer, render_lock
+from .scene_bvh import SceneBVH
+
+
+class PerObject:
+    """Values computed from an object (a scene or its shapes tuple), the `most` most recently used:
+    keyed by the object's id and holding the object itself, so that neither an equal object nor a
+    new one at a recycled id takes another's value. The value is computed outside the lock."""
+
+    def __init__(self, most: int):
+        self.most = most
+        self.entries: OrderedDict = OrderedDict()
+        CACHES.append(self.entries)  # pyclray.clear_cache() empties it
+
+    def get(self, obj, compute):
+        key = id(obj)
+        with render_lock:
+            entry = self.entries.get(key)
+            if entry is not None and entry[0] is obj:
+                self.entries.move_to_end(key)
+                return entry[1]
+        value = compute()
+        with render_lock:
+            self.entries[key] = (obj, value)
+            while len(self.entries) > self.most:
+                self.entries.popitem(last=False)
+        return value
+
+
+_kinds = PerObject(16)
+
+
+def shape_kinds(scene: Scene) -> tuple[tuple[str, ...], int]:
+    """(the shape types present, the number of bounded shapes), once per shapes tuple: a warm
+    render of a scene of a million shapes must not walk them."""
+    return _kinds.get(scene.shapes, lambda: (
+        scene.shape_types(), sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded)))
+
+
+def scene_bvh(scene: Scene, ctx=None) -> SceneBVH:
+    """The BVH over the scene's bounded primitives, built once per shapes tuple (with its prepared
+    scene, on the default device at fp32 unless a context is given)."""
+    from .device import context_for
+
+    return prepared_scene(ctx or context_for(None), scene, "fp32").bvh
+
+
+# Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
+# BVH, whichever costs a packet less. Through tile lists a packet tests every shape of its tile's
+# list; through the BVH it pays its traversal. Measured (bench/REPORT.md, "Tiles or BVH"), the two
+# cost the same at about 16 shapes per tile on average (a field of 3,000 spheres at 512x512):
+# below, tiles win (2x at 1,000 spheres: no traversal at all), above, the BVH (3x at 30,000).
+# Beyond TILES_MAX_SHAPES bounded entries the lists are not even computed: no visible scene of that
+# many shapes has short lists, and computing them costs more than building the tree.
+TILE_LIST_MAX = 16.0
+TILES_MAX_SHAPES = 20_000
+_choices = PerObject(16)
+
+
+def acceleration_for(scene: Scene, acceleration: str = "auto", prepared: PreparedScene | None = None) -> str:
+    """"tiles" or "bvh" for a render of this scene (see TILE_LIST_MAX)."""
+    if acceleration not in ("auto", "bvh", "tiles"):
+        raise PyclrayError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
+    if acceleration != "auto":
+        return acceleration
+    return _choices.get(scene, lambda: _cheaper_acceleration(scene, prepared))
+
+
+def _cheaper_acceleration(scene: Scene, prepared: PreparedScene | None) -> str:
+    """Tile lists while they average at most TILE_LIST_MAX shapes a tile, else the BVH."""
+    if prepared is None:
+        from .device import context_for
+
+        prepared = prepared_scene(context_for(None), scene, "fp32")
+    if prepared.bounded > TILES_MAX_SHAPES:
+        return "bvh"
+    width, height = scene.image.width, scene.image.height
+    rows = scene.camera.basis()
+    plane = scene.camera.image_plane(width, height)
+    pairs, tiles = 0, 1
+    for kind in prepared.kinds.values():
+        if kind.cls.bounded:
+            start, _ = prepared.tile_lists(kind, scene.camera.eye, rows, plane, width, height)
+            pairs += int(start[-1])
+            tiles = len(start) - 1
+    return "tiles" if pairs <= TILE_LIST_MAX * tiles else "bvh"
+
+
+_checked = PerObject(16)
+
+
+def check_entry_count(prepared: PreparedScene) -> None:
+    """Refuse more entries of one type than the kernels can index (8 x index + type in 32 bits)."""
+    from ..model import scene as scene_model
+
+    for kind in prepared.kinds.values():
+        if kind.count > scene_model.MAX_SHAPES:
+            raise SceneError(f"{kind.count} {kind.name} primitives; pyclray renders at most {scene_model.MAX_SHAPES} of a "
+                             "type (the kernels index one by 8 x its position + its type in 32 bits)")
+
+
+def check_renderable_once(scene: Scene, precision: str, prepared: PreparedScene) -> None:
+    """scene.check_renderable once per scene object and precision, in O(1) where the prepared
+    scene's conservative bound holds (a new view of a million shapes must not walk them), shape by
+    shape only where it does not, to name the shape; a scene without shapes is warned about at
+    every render."""
+    if not scene.shapes:
+        check_renderable(scene, precision)
+        return
+    check_shape_count(scene)
+    check_entry_count(prepared)
+    done = _checked.get(scene, set)
+    if precision not in done:
+        if not prepared.within_range(scene.camera.eye, precision):
+            check_renderable(scene, precision)
+        done.add(precision)
+
+
+class ViewInputs:
+    """What a view of a prepared scene needs besides the shapes: the camera, the lights in its
+    frame, the eye for the position image, and (tiles) the tile lists."""
+
+    def __init__(self, ctx, scene: Scene, prepared: PreparedScene, acceleration: str):
+        precision = prepared.precision
+        width, height = scene.image.width, scene.image.height
+        self.rows = scene.camera.basis()
+        self.eye = np.asarray(scene.camera.eye, np.float64)
+        plane = scene.camera.image_plane(width, height)
+        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision))
+        self.tiles = {}
+        if acceleration == "tiles":
+            for kind in prepared.kinds.values():
+                start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
+                self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
+        lights = shading.pack_lights(scene, precision)
+        real = REAL[precision]
+        eye_high = self.eye.astype(real)
+        self.lighting = {
+            "materials": prepared.materials,
+            "lights": input_buffer(ctx, lights),
+            "n_lights": np.int32(len(lights)),
+            "ambient": np.array((*scene.shading.ambient, 0), real),
+            "background": np.array((*scene.shading.background, 0), real),
+            # the eye as a sum of two reals, for the position image (kernels/pyclray.cl)
+            "eye_high": np.array((*eye_high, 0), real),
+            "eye_low": np.array((*(self.eye - eye_high.astype(np.float64)), 0), real),
+        }
+
+    def shape_args(self, prepared: PreparedScene, acceleration: str) -> list:
+        """The kernel's shape arguments: the BVH (nodes, refs) and per type its frame buffer and
+        count, or per type its frame buffer and tile lists (a tuple: the argument of shadow rays
+        only, each type's count)."""
+        args = []
+        if acceleration == "bvh":
+            if prepared.bvh.types:
+                args += [prepared.nodes, prepared.refs]
+            for kind in prepared.kinds.values():
+                args += [kind.frame, np.int32(kind.count)]
+        else:
+            for kind in prepared.kinds.values():
+                start, index = self.tiles[kind.name]
+                args += [kind.frame, start, index, (np.int32(kind.count),)]
+        return args
+
+
+_views = PerObject(16)
+
+
+def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
+    """(prepared scene, view inputs) of a render of this scene."""
+    prepared = prepared_scene(ctx, scene, precision)
+    per_scene = _views.get(scene, dict)
+    key = (ctx.device.int_ptr, precision, acceleration)
+    inputs = per_scene.get(key)
+    if inputs is None:
+        inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)
+    return prepared, inputs
