@@ -68,6 +68,7 @@ class Kind:
     primitives: np.ndarray
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
     frame: cl.Buffer  # the entries in the frame of the last view (the render kernel's shape array)
+    frame_host: np.ndarray  # the frame buffer's memory on a CPU device (its bytes, elsewhere)
 
     @property
     def count(self) -> int:
@@ -174,15 +175,13 @@ class PreparedScene:
         return refit.update(self, shapes, changed)
 
     def _kind(self, t, world, ids, primitives) -> Kind:
+        # a type is present only with a shape of it, and every shape is at least one entry
         cls = REGISTRY[t]
-        frame = aligned(np.zeros(max(len(world), 1), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
-        frame["id"][: len(world)] = ids
-        frame["primitive"][: len(world)] = primitives
-        world = aligned(world if len(world) else np.zeros(1, world.dtype))[: len(world)]
-        world_buffer = _buffer(self.ctx, world.base if not len(world) else world) if self.on_device else None
-        kind = Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, frame, writable=True))
-        kind.frame_host = frame  # the frame buffer's memory on a CPU device
-        return kind
+        frame = aligned(np.zeros(len(world), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
+        frame["id"], frame["primitive"] = ids, primitives
+        world = aligned(world)
+        world_buffer = _buffer(self.ctx, world) if self.on_device else None
+        return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, frame, writable=True), frame)
 
     def nbytes(self) -> int:
         """The bytes this scene holds (host arrays shared with a CPU device counted once)."""
