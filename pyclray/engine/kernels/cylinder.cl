@@ -14,12 +14,12 @@
  * within r of the cap's centre.
  * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The cylinder in the camera's frame: both ends and the axis along the frame's axes, and what every
  * ray from the frame's origin shares, from error-free products and sums: c = |(p0 - o) x A|^2 - r^2,
  * d0 = (p0 - o) . A and d1 = (p1 - o) . A. */
-inline void cylinder_rebase(__global const CylinderWorld* world, __global Cylinder* out, const Frame* frame)
+inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_OUT Cylinder* out, const Frame* frame)
 {
     const double3 p0 = world->p0.xyz - frame->origin, p1 = world->p1.xyz - frame->origin, A = world->axis.xyz;
     const double r = world->p0.w;
@@ -31,7 +31,9 @@ inline void cylinder_rebase(__global const CylinderWorld* world, __global Cylind
     out->caps = world->caps;
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
 
 
 typedef struct {
@@ -51,7 +53,7 @@ inline void cylinder_candidate(CylinderHit* hit, const realv s, const realv key,
     hit->kind = nearer ? SPLAT_INT(kind) : hit->kind;
 }
 
-inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const RayPacket* ray)
+inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray)
 {
     CylinderHit hit;
     const vec3v A = v3_splat(cylinder->axis);
@@ -117,7 +119,7 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
     return hit;
 }
 
-inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ray)
+inline realv cylinder_hit(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray)
 {
     return cylinder_intersect(cylinder, ray).best;
 }
@@ -127,7 +129,7 @@ inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ra
  * subtracting large nearly equal vectors, as for the sphere: a R = -+sqrt(disc) D_perp - triple (D x A)
  * (near root: -, far root: +), D_perp = A x (D x A); the open tube's inner side has the same
  * outward normal. */
-inline vec3v cylinder_normal(__global const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
+inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
 {
     const CylinderHit hit = cylinder_intersect(cylinder, ray);
     const realv side = hit.kind == SPLAT_INT(1) ? SPLAT(-1) : SPLAT(1);

@@ -233,12 +233,21 @@ typedef struct {
 #endif
 } RayPacket;
 
+/* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
+ * private copy framed on the ray's origin (kernels/cast.h) */
+#ifdef PYCLRAY_CAST
+#define SHAPE_SPACE
+#else
+#define SHAPE_SPACE __global
+#endif
+
 /* FROM_EYE(ray): whether the packet starts at the frame's origin, the eye, where the terms the host
- * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). Cast's rays never
- * do; a render's camera rays always, and its shadow rays (only compiled with shadows) never: a
- * constant wherever the shape functions are inlined into the kernel. */
+ * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). A render's camera
+ * rays always do, and its shadow rays (only compiled with shadows) never; cast frames every shape on
+ * its ray's origin first (kernels/cast.h), so its rays always do: a constant wherever the shape
+ * functions are inlined into the kernel. */
 #if defined(PYCLRAY_CAST)
-#define FROM_EYE(ray) 0
+#define FROM_EYE(ray) 1  /* each shape is framed on the ray's own origin (kernels/cast.h) */
 #elif defined(PYCLRAY_SHADOWS)
 #define FROM_EYE(ray) ((ray)->from_eye)
 #else

@@ -6,11 +6,11 @@
  * eye's squared distance to the surface, exact even for a huge sphere just below the camera).
  */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The sphere in the camera's frame, from its world centre and radius: F = C - origin (float64),
  * its coordinates along the frame's axes, r^2, and c = |F|^2 - r^2 from error-free sums. */
-inline void sphere_rebase(__global const SphereWorld* world, __global Sphere* out, const Frame* frame)
+inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT Sphere* out, const Frame* frame)
 {
     const double3 F = world->center.xyz - frame->origin;
     const double r = world->center.w;
@@ -18,7 +18,9 @@ inline void sphere_rebase(__global const SphereWorld* world, __global Sphere* ou
     out->c = (real)dot2_4((double4)(F, r), (double4)(F, -r));
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
 
 
 /* F (the centre from the ray's origin), c = |F|^2 - r^2, b = F.D and the discriminant b^2 - a c. */
@@ -27,7 +29,7 @@ typedef struct {
     realv c, b, disc;
 } SphereTerms;
 
-inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* ray)
+inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
     SphereTerms t;
     const realv r2 = SPLAT(sphere->center.w);
@@ -53,7 +55,7 @@ inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* 
 }
 
 /* Nearest root s > 0 per lane, or MISS. */
-inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
+inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
     /* stable roots: q = b + sign(b) sqrt(disc) never cancels; the roots are c/q and q/a
@@ -71,7 +73,7 @@ inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
  * nearly equal vectors, so a far sphere's normal keeps its digits. The sign needs no root: from
  * outside (c > 0) a ray hits the near side, b - sqrt(disc); from inside or on the surface
  * (c <= 0) only the far root is positive, b + sqrt(disc). */
-inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+inline vec3v sphere_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
     const vec3v D = ray->dir;
