@@ -37,6 +37,9 @@ inline void box_rebase(__global const BoxWorld* world, PYCLRAY_FRAME_OUT Box* ou
 
 #ifndef PYCLRAY_REBASE
 
+/* a shadow ray leaving its outer side toward the light never meets it again (convex) */
+#define PYCLRAY_FLAT_box 0
+
 
 typedef struct {
     realv entry, exit;  /* along the ray, from the packed offsets (exact for camera rays) */

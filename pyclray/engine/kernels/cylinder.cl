@@ -35,6 +35,10 @@ inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_O
 
 #ifndef PYCLRAY_REBASE
 
+/* leaving the outer side of the tube or a cap toward the light never meets it again (convex);
+ * its inner side may (the opposite wall) */
+#define PYCLRAY_FLAT_cylinder 0
+
 
 typedef struct {
     vec3v DxA;
@@ -67,10 +71,15 @@ inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, cons
         c = SPLAT(cylinder->axis.w);
         d0 = SPLAT(cylinder->world_axis.w);
         d1 = SPLAT(cylinder->d1);
-    } else {  /* cast and shadow rays */
+    } else {  /* shadow rays, from a point p of the scene */
         F = v3_sub(v3_splat(cylinder->p0), ray->origin);
         FxA = v3_cross(F, A);
-        c = v3_dot(FxA, FxA) - r2;
+        /* c = |F x A|^2 - r^2 directly, or moved from the eye's exact c, c_eye - (p x A).(p0 x A + F x A):
+         * the form whose terms are smaller, as for the sphere (kernels/sphere.cl) */
+        const vec3v pxA = v3_cross(ray->origin, A), sum = v3_add(v3_cross(v3_splat(cylinder->p0), A), FxA);
+        const realv moved = SPLAT(cylinder->axis.w) - v3_dot(pxA, sum);
+        const realv moved_size = v_abs(SPLAT(cylinder->axis.w)) + v3_dot(v3_abs(pxA), v3_abs(sum));
+        c = moved_size < v3_dot(FxA, FxA) + r2 ? moved : v3_dot(FxA, FxA) - r2;
         d0 = v3_dot(F, A);
         d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
     }

@@ -21,6 +21,9 @@ inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk*
 
 #ifndef PYCLRAY_REBASE
 
+/* a shadow ray leaving it on either side never meets it again (flat) */
+#define PYCLRAY_FLAT_disk 1
+
 
 inline realv disk_hit(SHAPE_SPACE const Disk* disk, const RayPacket* ray)
 {

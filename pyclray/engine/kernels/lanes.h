@@ -169,6 +169,7 @@ inline vec3v v3(const realv x, const realv y, const realv z)
 }
 /* one point or direction (xyz of a packed real4) in every lane */
 inline vec3v v3_splat(const real4 p) { return v3(SPLAT(p.x), SPLAT(p.y), SPLAT(p.z)); }
+inline vec3v v3_abs(const vec3v v) { return v3(v_abs(v.x), v_abs(v.y), v_abs(v.z)); }
 inline vec3v v3_add(const vec3v a, const vec3v b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
 inline vec3v v3_sub(const vec3v a, const vec3v b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 inline vec3v v3_scale(const vec3v a, const realv s) { return v3(a.x * s, a.y * s, a.z * s); }

@@ -18,6 +18,9 @@ inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_FRAME_OUT Pla
 
 #ifndef PYCLRAY_REBASE
 
+/* a shadow ray leaving it on either side never meets it again (flat) */
+#define PYCLRAY_FLAT_plane 1
+
 
 inline realv plane_hit(SHAPE_SPACE const Plane* plane, const RayPacket* ray)
 {

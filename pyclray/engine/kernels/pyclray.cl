@@ -33,7 +33,7 @@
 #ifndef PYCLRAY_AOV_SHADED
 #define PYCLRAY_SHADED_ARGS(P)
 #define PYCLRAY_MATERIALS_BEGIN
-#define PYCLRAY_MATERIAL_OF(id, mine)
+#define PYCLRAY_MATERIAL_OF(id, mine, flat)
 #define PYCLRAY_WRITE_SHADED(index, first, end)
 #endif
 
@@ -171,7 +171,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_NORMAL(Type, type)                                                    \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_NORMAL_OF(type)                                                       \
-        PYCLRAY_MATERIAL_OF(type##s[k].id, mine)                                      \
+        PYCLRAY_MATERIAL_OF(type##s[k].id, mine, PYCLRAY_FLAT_##type)                 \
         PYCLRAY_PRIMITIVE_OF(type)                                                    \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */

@@ -22,6 +22,9 @@ inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME
 
 #ifndef PYCLRAY_REBASE
 
+/* a shadow ray leaving it on either side never meets it again (flat) */
+#define PYCLRAY_FLAT_rectangle 1
+
 
 inline realv rectangle_hit(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray)
 {

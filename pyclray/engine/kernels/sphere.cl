@@ -22,6 +22,9 @@ inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT S
 
 #ifndef PYCLRAY_REBASE
 
+/* a shadow ray leaving a sphere's outer side toward the light never meets it again (convex) */
+#define PYCLRAY_FLAT_sphere 0
+
 
 /* F (the centre from the ray's origin), c = |F|^2 - r^2, b = F.D and the discriminant b^2 - a c. */
 typedef struct {
@@ -36,9 +39,18 @@ inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacke
     if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: c from the host, exact */
         t.F = v3_splat(sphere->center);
         t.c = SPLAT(sphere->c);
-    } else {
+    } else {  /* a shadow ray from a point p of the scene */
         t.F = v3_sub(v3_splat(sphere->center), ray->origin);
-        t.c = v3_dot(t.F, t.F) - r2;
+        /* c = |F|^2 - r^2 taken directly rounds terms of size |F|^2 + r^2: eps r^2 for a huge
+         * sphere, a position error of eps r (a unit at r = 1e6); moved from the eye's exact c,
+         * c_eye - p.(C + F), it rounds terms of size |c_eye| + |p| |C + F|, a position error of
+         * about eps |p| |C| / r (a huge sphere's). Each lane takes the form whose terms are smaller:
+         * either way about eps (|p| + min(r, |p| |C| / r)) <= 2 eps |p| where |p| >= r. */
+        const vec3v sum = v3_add(v3_splat(sphere->center), t.F);
+        const realv moved = SPLAT(sphere->c) - v3_dot(ray->origin, sum);
+        const realv direct = v3_dot(t.F, t.F) - r2;
+        const realv moved_size = v_abs(SPLAT(sphere->c)) + v3_dot(v3_abs(ray->origin), v3_abs(sum));
+        t.c = moved_size < v3_dot(t.F, t.F) + r2 ? moved : direct;
     }
     const vec3v D = ray->dir;
     const realv a = ray->a;

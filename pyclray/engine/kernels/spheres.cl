@@ -12,6 +12,8 @@ inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT 
 
 #ifndef PYCLRAY_REBASE
 
+#define PYCLRAY_FLAT_spheres 0  /* each primitive a sphere: convex */
+
 inline realv spheres_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray) { return sphere_hit(sphere, ray); }
 
 inline vec3v spheres_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
