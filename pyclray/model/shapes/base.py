@@ -168,6 +168,13 @@ class Shape:
         return centre, 0.5 * np.linalg.norm(bounds[:, 1] - bounds[:, 0], axis=1) * (1 + 1e-12)
 
     @classmethod
+    def cast_anchors(cls, world, ids):
+        """(N, 4) float64 per world entry (ids: their shapes' ids): the point cast packs the entry
+        relative to (xyz) and a radius about it holding the entry (w), or None for the default, the
+        centre of each entry's own box (pyclray.engine.scene_bvh.SceneBVH.anchors)."""
+        return None
+
+    @classmethod
     def world_bounds(cls, shapes) -> np.ndarray:
         """(N, 2, 3) bounds of these shapes' primitives (see bounds_of)."""
         return cls.bounds_of(cls.pack_world(shapes))
