@@ -20,13 +20,14 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE) \
+    || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
 #endif
-#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE) || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_WINNER_LOOP 1  /* the packet's distinct winners are visited once each */
 #endif
 /* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
@@ -159,6 +160,22 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_PRIMITIVE_BEGIN
 #endif
 
+/* the winner's barycentric (u, v) (triangles; 0, 0 for the other types and on a miss) */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_OF(Type, type)                                            \
+    if (kind == KIND_##type) {                                                        \
+        realv u, v;                                                                   \
+        type##_barycentric(&type##s[k], &ray, &u, &v);                                \
+        bary_u = mine ? u : bary_u;                                                   \
+        bary_v = mine ? v : bary_v;                                                   \
+    }
+#define PYCLRAY_BARYCENTRIC_BEGIN realv bary_u = SPLAT(0), bary_v = SPLAT(0);
+#define PYCLRAY_BARYCENTRICS PYCLRAY_BARYCENTRIC_TYPES(PYCLRAY_BARYCENTRIC_OF)
+#else
+#define PYCLRAY_BARYCENTRIC_BEGIN
+#define PYCLRAY_BARYCENTRICS
+#endif
+
 #ifdef PYCLRAY_WINNER_LOOP
 /* what one winning shape gives the lanes it won: its normal (and with shading, its material), its
  * primitive index */
@@ -172,6 +189,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WINNERS                                                               \
     PYCLRAY_NORMAL_BEGIN                                                              \
     PYCLRAY_PRIMITIVE_BEGIN                                                           \
+    PYCLRAY_BARYCENTRIC_BEGIN                                                         \
     PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
         /* each distinct winner once, the largest key first: one reduction finds the    \
@@ -183,6 +201,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             const int kind = winner & 7, k = winner >> 3;                             \
             const intv mine = key == SPLAT_INT(winner);                               \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            PYCLRAY_BARYCENTRICS                                                      \
             pending = mine ? SPLAT_INT(0) : pending;                                  \
         }                                                                             \
     }
@@ -243,9 +262,34 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_PRIMITIVE(index, first, end)
 #endif
 
+/* render only: the winner's barycentric (u, v), interleaved per pixel */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_ARG(P) P(__global real*, barycentric_out)
+#define PYCLRAY_STORE_UV_LANE(l, c) \
+    if (bary_first <= l && l < bary_end) {                                            \
+        barycentric_out[2 * (bary_index + l)] = bary_u.c;                             \
+        barycentric_out[2 * (bary_index + l) + 1] = bary_v.c;                         \
+    }
+#if LANES == 1
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end) \
+    { barycentric_out[2 * (index)] = bary_u; barycentric_out[2 * (index) + 1] = bary_v; }
+#else
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)                                 \
+    {                                                                                 \
+        const size_t bary_index = (index);                                            \
+        const int bary_first = (first), bary_end = (end);                             \
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_UV_LANE)                                      \
+    }
+#endif
+#else
+#define PYCLRAY_BARYCENTRIC_ARG(P)
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_DEPTH_ARG(P) PYCLRAY_NORMAL_ARG(P) PYCLRAY_ID_ARG(P)
 #define PYCLRAY_RENDER_OUTPUT_ARGS(P) \
-    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P)
+    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P) \
+    PYCLRAY_BARYCENTRIC_ARG(P)
 /* the shapes' arguments as parameters and as the arguments of a call */
 #define PYCLRAY_SHAPE_PARAMETERS(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_DECLARE, Type, type)
 #define PYCLRAY_SHAPE_PASSED(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_PASS, Type, type)
@@ -255,7 +299,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_RENDER_WRITE(index, first, end) \
     PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
     PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end) \
-    PYCLRAY_WRITE_PRIMITIVE(index, first, end)
+    PYCLRAY_WRITE_PRIMITIVE(index, first, end) PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int

@@ -97,6 +97,9 @@ class Shape:
     # Both compute what every ray from the frame's origin shares in float64 (error-free sums where
     # a difference cancels), from the world fields.
     world: ClassVar[Struct]
+    # True for a type whose kernel file has <type>_barycentric(shape, ray, &u, &v) (triangles): the
+    # barycentric image's (u, v); the other types give (0, 0)
+    barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
 

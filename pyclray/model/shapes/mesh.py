@@ -122,6 +122,7 @@ class Mesh(Shape):
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
     kernel_files = ("mesh.cl",)
+    barycentric = True
 
     def __post_init__(self):
         vertices = _vertices(self.vertices)
