@@ -89,8 +89,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 /* -- the nearest hit of each lane ----------------------------------------------------------------
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
- * A lane's winner is also kept as one key, 8 k + kind (k its index in its type's array; kinds are
- * 1 to 7, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
+ * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
+ * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
@@ -99,7 +99,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         if (ANY(nearer)) {                                                            \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_key = nearer ? SPLAT_INT((k) * 8 + (kind)) : best_key;               \
+            best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
         }                                                                             \
     }
 #define PYCLRAY_BEST                                                                  \
@@ -119,7 +119,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
+/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &ray);                                \
@@ -127,7 +127,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 
@@ -198,7 +198,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         intv pending = key;                                                           \
         for (int winner = (int)lanes_max_int(pending); winner > 0;                    \
              winner = (int)lanes_max_int(pending)) {                                  \
-            const int kind = winner & 7, k = winner >> 3;                             \
+            const int kind = winner & 15, k = winner >> 4;                             \
             const intv mine = key == SPLAT_INT(winner);                               \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
             PYCLRAY_BARYCENTRICS                                                      \
@@ -472,7 +472,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
     }
 #define PYCLRAY_CAST_VISIT(q)                                                       \
     {                                                                               \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                      \
         double s0;                                                                  \
         bool near;                                                                  \
         const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \

@@ -238,6 +238,10 @@ class Shape:
         shape's id). A ``to_world`` value is a 4x4 float64 numpy matrix (the bridge converts it)."""
         raise NotImplementedError
 
+    # True where the Mitsuba counterpart is one shape numbering its primitives as this type does
+    # (a mesh's triangles: Mitsuba's prim_index is pyclray's primitive), so checks compare them
+    mitsuba_primitives: ClassVar[bool] = False
+
     def mitsuba_covers(self, scene, points) -> np.ndarray:
         """Whether Mitsuba's counterpart holds these points of the shape (False where a stand-in
         ends, such as the plane's disk)."""

@@ -123,6 +123,7 @@ class Mesh(Shape):
     )
     kernel_files = ("mesh.cl",)
     barycentric = True
+    mitsuba_primitives = True
 
     def __post_init__(self):
         vertices = _vertices(self.vertices)

@@ -164,15 +164,19 @@ def _read_ply(path: Path):
     if "vertex" not in elements:
         raise _Bad("expected a 'vertex' element")
     data = elements["vertex"]["data"]
+    data = {k: data[k] for k in (data.dtype.names if isinstance(data, np.ndarray) else data)}
     vertices = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("x", "y", "z")], axis=1)
     normals = None
     if all(k in data for k in ("nx", "ny", "nz")):
         normals = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("nx", "ny", "nz")], axis=1)
     faces = elements.get("face", {}).get("data", {})
-    lists = faces.get("vertex_indices", faces.get("vertex_index")) if isinstance(faces, dict) else None
-    if lists is None:
+    names = faces.dtype.names or () if isinstance(faces, np.ndarray) else tuple(faces)
+    key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
+    if key is None:
         raise _Bad("expected a 'face' element with 'vertex_indices'")
-    lists = np.asarray(lists)
+    lists = np.asarray(faces[key])
+    if lists.dtype.names:  # a binary file whose lists all have one length: (count, indices) records
+        return vertices, fan(np.asarray(lists[lists.dtype.names[1]], np.int64).reshape(len(lists), -1)), normals
     if lists.dtype != object and lists.ndim == 2:
         return vertices, fan(lists.astype(np.int64)), normals
     return vertices, fan([np.asarray(p, np.int64).reshape(-1) for p in lists]), normals
