@@ -157,6 +157,8 @@ class Mesh(Shape):
                                  key="matrix")
             object.__setattr__(self, "matrix", _matrix(self.matrix))
         object.__setattr__(self, "smooth", flag("smooth", self.smooth))
+        if self.smooth:  # refused rather than ignored: the shaded image would silently be flat
+            raise SceneError("smooth = true (interpolated vertex normals) is not implemented yet; use false", key="smooth")
         if self.normals is not None:
             object.__setattr__(self, "normals", _vertices(self.normals, "normals"))
             if len(self.normals) != len(vertices):
@@ -355,6 +357,18 @@ class Mesh(Shape):
 
     def extent_from(self, point) -> float:
         return float(np.linalg.norm(self.world_vertices() - np.asarray(point, np.float64), axis=1).max())
+
+    def curvature_radius(self) -> float:
+        """The smallest altitude of its (non-degenerate) triangles: a vertex moved by e (Mitsuba's
+        float32 positions) turns a triangle's normal by up to about e / altitude, as a position error
+        turns a curved surface's normal by e / radius."""
+        if "altitude" not in self._cache:
+            a, b, c = self.corners()
+            twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+            longest = np.maximum.reduce([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))])
+            valid = self.face_normals().any(axis=1)
+            self._cache["altitude"] = float((twice_area[valid] / longest[valid]).min()) if valid.any() else np.inf
+        return self._cache["altitude"]
 
     # -- Mitsuba 3 -------------------------------------------------------------------------------
     def mitsuba_shapes(self, scene):
