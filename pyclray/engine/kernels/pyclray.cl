@@ -435,8 +435,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-    /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
-    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir));
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
     /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */

@@ -88,9 +88,10 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
         open = open && !(s < limit);                                                  \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-/* The shadow packet for box tests, in the BVH's frame (world axes around the eye): its unit
- * directions, its per-lane origins, and a margin over their rounding and over a shape test's error
- * from an origin of that size (2^-20 |o|_1, as cast's box rays). */
+/* The shadow packet for box tests, in the BVH's frame (world axes around the scene's anchor): its
+ * unit directions, its per-lane origins, and a margin over their rounding and over a shape test's
+ * error from an origin of that size (2^-20 |o|_1, as cast's box rays), and over the rounding of
+ * the eye from the anchor (the camera's box origin). */
 typedef struct {
     BoxPacket box;
     vec3v origin;
@@ -132,9 +133,12 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
     if (ANY(open)) {                                                                  \
         ShadowBoxes boxes;                                                            \
-        boxes.box = box_packet(world_from_frame(camera, shadow.dir));                 \
-        boxes.origin = world_from_frame(camera, shadow.origin);                       \
-        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)); \
+        boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
+        const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
+        boxes.origin = v3_add(from_eye, v3_splat((real4)(convert_real3(camera->box_origin.xyz), 0))); \
+        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)) \
+                       + SPLAT(0x1p-20) * ((v_abs(from_eye.x) + v_abs(from_eye.y)) + v_abs(from_eye.z)) \
+                       + SPLAT(camera->box_origin.w);                                 \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
         PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
     }
