@@ -9,7 +9,7 @@ applied to p (scene-format.md, "Triangle meshes").
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -164,6 +164,18 @@ class Mesh(Shape):
             if len(self.normals) != len(vertices):
                 raise SceneError(f"expected {len(vertices)} normals, one per vertex, got {len(self.normals)}", key="normals")
         object.__setattr__(self, "_cache", {})
+
+    def __eq__(self, other) -> bool:
+        """The same arrays (by identity: a mesh is one object however many triangles it holds) and
+        equal other fields (an animation frame that keys a placement to its own value is equal)."""
+        if type(other) is not Mesh:
+            return NotImplemented
+        same = all(getattr(self, k) is getattr(other, k) for k in ("vertices", "faces", "normals"))
+        return same and all(getattr(self, f.name) == getattr(other, f.name) for f in fields(self)
+                            if f.name not in ("vertices", "faces", "normals"))
+
+    def __hash__(self) -> int:
+        return hash((id(self.vertices), id(self.faces), self.scale, self.axis, self.angle, self.translate, self.name))
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.faces)} triangles, {len(self.vertices)} vertices, name={self.name!r})"
