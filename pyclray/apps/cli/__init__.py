@@ -23,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="pyclray",
         description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id, label and shaded images "
-        "of scenes of planes, spheres, cylinders, disks, rectangles, boxes and batches of spheres described in "
+        "of scenes of planes, spheres, cylinders, disks, rectangles, boxes, batches of spheres and triangle meshes described in "
         "TOML files.",
         epilog=EXIT_STATUS_HELP,
     )
