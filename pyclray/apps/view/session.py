@@ -12,7 +12,10 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import sys
 import time
+
+from websockets.exceptions import ConnectionClosed
 
 from ...model.errors import PyclrayError
 from .controls import Orbit, camera_toml
@@ -61,12 +64,16 @@ class Session:
             message = json.loads(text) if isinstance(text, str) else None
         except (ValueError, RecursionError):
             return
-        handler = self.HANDLERS.get(message.get("type")) if isinstance(message, dict) else None
+        kind = message.get("type") if isinstance(message, dict) else None
+        handler = self.HANDLERS.get(kind) if isinstance(kind, str) else None
         if handler is None:
             return
         try:
             handler(self, message)
         except (Ignored, PyclrayError, ArithmeticError, ValueError):
+            return
+        except Exception as error:  # a bug of ours, not of the page's: said, and the view goes on
+            print(f"pyclray view: warning: message {kind!r} ignored: {type(error).__name__}: {error}", file=sys.stderr)
             return
         seq = message.get("seq")  # the page's count of its inputs: echoed with the frames (latency)
         if isinstance(seq, int) and not isinstance(seq, bool):
@@ -163,8 +170,14 @@ class Session:
         while True:
             await self.wake.wait()
             self.wake.clear()
-            while self.in_flight < MAX_IN_FLIGHT and await self.step():
-                pass
+            try:
+                while self.in_flight < MAX_IN_FLIGHT and await self.step():
+                    pass
+            except ConnectionClosed:
+                raise
+            except Exception as error:  # a bug of ours: said on the terminal, and the next input tries again
+                self.shown, self.settled = self.version, True
+                print(f"pyclray view: warning: a frame failed: {type(error).__name__}: {error}", file=sys.stderr)
 
     def _wake_at(self, when: float) -> None:
         if self.timer is not None:

@@ -37,6 +37,7 @@ function paint(header, bitmap) {
   painted += 1;
   view.dataset.frame = String(painted);
   stats.paints.push({ time: performance.now(), seq: header.seq, width: header.width, lossless: header.lossless });
+  stats.camera = header.camera;
   send({ type: "painted", frame: header.frame });
   last = header;
   const vector = (v) => "[" + v.map((x) => x.toFixed(3)).join(", ") + "]";
