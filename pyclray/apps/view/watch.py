@@ -59,17 +59,22 @@ def _same(a, b) -> bool:
 
 
 def load(path, size, previous=None):
-    """The scene file read again (at the --size given), and the files to watch. When its shapes equal
-    the previous scene's, the new scene keeps the previous shapes tuple, so the scene prepared on
-    the device serves it unchanged: an edit of the camera, a light or the shading of a scene of a
-    million spheres costs no new BVH."""
+    """The scene file read again (at the --size given), and the files to watch. Its shapes that
+    equal the previous scene's are the previous objects, so the scene prepared on the device is
+    reused: as it is when no shape changed (an edit of the camera, a light, the shading), else
+    updated in place for the changed shapes (pyclray.model.animation.derived_from, as an animation's
+    frame): an edit of one shape beside a million spheres costs no new BVH."""
+    from ...model.animation import derivation, derived_from
     from ...model.loader import load_scene
 
     files = named_files(path)
     scene = load_scene(path)
     if size is not None:
         scene = scene.with_size(*size)
-    if previous is not None and len(previous.shapes) == len(scene.shapes) and previous.shapes is not scene.shapes \
-            and all(_same(a, b) for a, b in zip(previous.shapes, scene.shapes)):
-        scene = dataclasses.replace(scene, shapes=previous.shapes)
-    return scene, files
+    if previous is None or len(previous.shapes) != len(scene.shapes) or scene.animation is not None:
+        return scene, files
+    shapes = tuple(old if _same(old, new) else new for old, new in zip(previous.shapes, scene.shapes))
+    if all(a is b for a, b in zip(shapes, previous.shapes)):
+        return dataclasses.replace(scene, shapes=previous.shapes), files
+    base = (derivation(previous.shapes) or (previous.shapes,))[0]  # the tuple first prepared
+    return dataclasses.replace(scene, shapes=derived_from(shapes, base)), files
