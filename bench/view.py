@@ -3,6 +3,7 @@ Playwright, the server in a process of its own, as a user runs it.
 
     python -m bench.view                       # tp02 and 100,000 spheres, 256x256 and 512x512
     python -m bench.view --scenes tp02 --sizes 256
+    python -m bench.view --screenshot docs/view.png   # the README's picture of the page
 
 For each scene and size:
 
@@ -173,14 +174,50 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def screenshot(browser, path: Path) -> None:
+    """The page of scenes/shapes-lit.toml, orbited a little (the README's picture)."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "tests"))
+    from viewing import Viewer
+
+    viewer = Viewer("scenes/shapes-lit.toml", "--size", "512x384", cwd=REPO)
+    page = browser.new_context(bypass_csp=True, viewport={"width": 720, "height": 470}).new_page()
+    try:
+        page.goto(viewer.url)
+        settled = "n => window.pyclrayView.paints.length > n && window.pyclrayView.paints.at(-1).lossless"
+        page.wait_for_function(settled, arg=0, timeout=60_000)
+        box = page.locator("#view").bounding_box()
+        x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        n = page.evaluate("window.pyclrayView.paints.length")
+        page.mouse.move(x, y)
+        page.mouse.down()
+        for k in range(1, 11):
+            page.mouse.move(x - 1.5 * k, y - 0.5 * k)
+        page.mouse.up()
+        page.wait_for_function(settled, arg=n, timeout=10_000)
+        page.screenshot(path=str(path))
+    finally:
+        page.context.close()
+        viewer.interrupt()
+        viewer.close()
+
+
 def main(argv=None) -> None:
     from playwright.sync_api import sync_playwright
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     parser.add_argument("--sizes", nargs="+", type=int, default=[256, 512])
+    parser.add_argument("--screenshot", type=Path, metavar="PNG", help="only take the README's picture of the page")
     args = parser.parse_args(argv)
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if args.screenshot:
+        with sync_playwright() as driver:
+            browser = driver.chromium.launch(executable_path=chromium, args=["--headless=new", "--no-sandbox"])
+            screenshot(browser, args.screenshot)
+            browser.close()
+        return
     results = []
     with tempfile.TemporaryDirectory() as folder, sync_playwright() as driver:
         browser = driver.chromium.launch(executable_path=chromium, args=["--headless=new", "--no-sandbox",
