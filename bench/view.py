@@ -77,15 +77,15 @@ def measure(browser, folder: Path, name: str, size: int) -> dict:
     context = browser.new_context(bypass_csp=True, viewport={"width": 1200, "height": 900})
     page = context.new_page()
     page.goto(viewer.url)
-    paints = "window.pyclrayView.paints"
-    settled = f"n => {paints}.length > n && {paints}[{paints}.length - 1].lossless"
+    paints, count = "window.pyclrayView.paints", "window.pyclrayView.painted"
+    settled = f"n => {count} > n && {paints}.at(-1).lossless"
     page.wait_for_function(settled, arg=0, timeout=60_000)
     result = {"scene": name, "size": size}
     try:
         box = page.locator("#view").bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
         # -- a drag: input to paint, frames per second, settle after the release ------------------
-        n = page.evaluate(f"{paints}.length")
+        n = page.evaluate(count)
         page.mouse.move(x, y)
         page.mouse.down()
         start = time.perf_counter()
@@ -94,9 +94,9 @@ def measure(browser, folder: Path, name: str, size: int) -> dict:
             time.sleep(max(0.0, start + k * MOVE_SECONDS - time.perf_counter()))
         page.mouse.up()
         page.wait_for_function(settled, arg=n, timeout=10_000)
-        stats = page.evaluate("({sent: window.pyclrayView.sent, paints: window.pyclrayView.paints})")
+        stats = page.evaluate("window.pyclrayView")
         sent = {int(k): v for k, v in stats["sent"].items()}
-        drag = [p for p in stats["paints"][n:]]
+        drag = stats["paints"][len(stats["paints"]) - (stats["painted"] - n):]  # the paints since the drag began
         inputs = sorted(sent)[-(MOVES + 1):]  # the moves and the release
         moves, release = inputs[:-1], inputs[-1]
         latencies = []
@@ -113,28 +113,28 @@ def measure(browser, folder: Path, name: str, size: int) -> dict:
             "settle_after_release_ms": final["time"] - sent[moves[-1]],
         })
         # -- a wheel turn (no release): the full image SETTLE after the last notch ----------------
-        n = page.evaluate(f"{paints}.length")
+        n = page.evaluate(count)
         for _ in range(5):
             page.mouse.wheel(0, -100)
             time.sleep(MOVE_SECONDS)
         page.wait_for_function(settled, arg=n, timeout=10_000)
         last = max(int(k) for k in page.evaluate("Object.keys(window.pyclrayView.sent)"))
         wheel_sent = page.evaluate(f"window.pyclrayView.sent[{last}]")
-        final = page.evaluate(f"{paints}[{paints}.length - 1].time")
+        final = page.evaluate(f"{paints}.at(-1).time")
         result["settle_after_wheel_ms"] = final - wheel_sent
         # -- idle ----------------------------------------------------------------------------------
-        n = page.evaluate(f"{paints}.length")
+        n = page.evaluate(count)
         time.sleep(2.0)
-        result["frames_while_idle_2s"] = page.evaluate(f"{paints}.length") - n
+        result["frames_while_idle_2s"] = page.evaluate(count) - n
         # -- edits: a shape, a light, a bad one and back ------------------------------------------
         for label, (old, new) in (("edit_shape_to_image_ms", SHAPE_EDIT[name]), ("edit_light_to_image_ms", LIGHT_EDIT)):
             text = scene.read_text()
             assert old in text, (name, old)
-            n = page.evaluate(f"{paints}.length")
+            n = page.evaluate(count)
             t0 = page.evaluate("performance.now()")
             scene.write_text(text.replace(old, new))
             page.wait_for_function(settled, arg=n, timeout=20_000)
-            result[label] = page.evaluate(f"{paints}[{paints}.length - 1].time") - t0
+            result[label] = page.evaluate(f"{paints}.at(-1).time") - t0
             scene.write_text(text)  # back, and wait for it
             page.wait_for_function(settled, arg=n + 1, timeout=20_000)
         page.evaluate("window.errorAt = null; new MutationObserver(() => { if (document.getElementById('error')"
@@ -185,11 +185,11 @@ def screenshot(browser, path: Path) -> None:
     page = browser.new_context(bypass_csp=True, viewport={"width": 720, "height": 470}).new_page()
     try:
         page.goto(viewer.url)
-        settled = "n => window.pyclrayView.paints.length > n && window.pyclrayView.paints.at(-1).lossless"
+        settled = "n => window.pyclrayView.painted > n && window.pyclrayView.paints.at(-1).lossless"
         page.wait_for_function(settled, arg=0, timeout=60_000)
         box = page.locator("#view").bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-        n = page.evaluate("window.pyclrayView.paints.length")
+        n = page.evaluate("window.pyclrayView.painted")
         page.mouse.move(x, y)
         page.mouse.down()
         for k in range(1, 11):

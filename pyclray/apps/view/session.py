@@ -22,7 +22,9 @@ from .controls import Orbit, camera_toml
 from .frames import encode, render_picture
 
 SETTLE = 0.08  # seconds without motion after which the motion has stopped (mouse events come every ~16 ms)
-MOVING_BUDGET = 0.022  # seconds a frame may take while moving: >= 30 frames/s with the page's decode and paint
+# seconds a frame's render and preview may take while moving: >= 30 frames/s with its JPEG (about
+# 1 ms at 512 x 512), the page's decode and paint
+MOVING_BUDGET = 0.022
 MAX_IN_FLIGHT = 2
 MAX_DIVISOR = 8  # the coarsest frame while moving: an eighth of each side
 COST_WEIGHT = 0.5  # the weight of the newest frame in the estimate of a frame's seconds per pixel
@@ -52,7 +54,7 @@ class Session:
         self.moving_until = 0.0
         self.in_flight = self.sent = self.seq = 0
         self.render_error = None
-        self.cost = {}  # AOV -> seconds per pixel of a frame (render, preview and encoding)
+        self.cost = {}  # AOV -> seconds per pixel of a frame's render and preview
         self.wake = asyncio.Event()
         self.timer = None
         self._scene_at = (None, None, None)
@@ -206,25 +208,26 @@ class Session:
         try:
             camera = self.camera()
             full_size = (self.app.scene.image.width, self.app.scene.image.height)
+            rendered = 0.0
             if self.full is not None and self.full[0] == version and not moving:
-                rgb, seconds = self.full[1], 0.0  # the full image shown while moving, now lossless
+                rgb = self.full[1]  # the full image shown while moving, now lossless
             else:
                 size = self._size(moving)
                 picture = await self.app.run(render_picture, self.scene(), camera, aov, size)
-                rgb, seconds = picture.rgb, picture.seconds
+                rgb, rendered = picture.rgb, picture.seconds
                 self.full = (version, rgb) if size == full_size else None
             lossless = not moving and rgb.shape[:2] == full_size[::-1]
             start = time.perf_counter()
             kind, data = await self.app.run(encode, rgb, lossless)
-            seconds += time.perf_counter() - start
+            seconds = rendered + time.perf_counter() - start
         except PyclrayError as error:  # a camera or a scene the device cannot render: said, not fatal
             self.shown, self.settled = version, True
             self.render_error = str(error)
             await self.send_error()
             return False
-        if seconds:
+        if rendered:
             known = self.cost.get(aov)
-            per_pixel = seconds / rgb.shape[0] / rgb.shape[1]
+            per_pixel = rendered / rgb.shape[0] / rgb.shape[1]
             self.cost[aov] = per_pixel if known is None else COST_WEIGHT * per_pixel + (1 - COST_WEIGHT) * known
         if self.render_error is not None:
             self.render_error = None

@@ -7,8 +7,10 @@ const view = $("view"), context = view.getContext("2d");
 const socket = new WebSocket(`ws://${location.host}/ws${location.search}`);
 socket.binaryType = "arraybuffer";
 
-// what the page measured, for bench/view.py: when each input was sent, when each image was painted
-const stats = { sent: {}, paints: [] };
+// what the page measured, for bench/view.py and the tests: when each input was sent, when each
+// image was painted (the latest KEEP of each), the images painted, the camera shown
+const KEEP = 2000;
+const stats = { sent: {}, paints: [], painted: 0, camera: "" };
 window.pyclrayView = stats;
 let seq = 0, painted = 0, last = null, playing = null, animation = null;
 
@@ -17,6 +19,7 @@ function send(message) {
   if (message.type !== "painted") {
     message.seq = ++seq;
     stats.sent[seq] = performance.now();
+    delete stats.sent[seq - KEEP];
   }
   socket.send(JSON.stringify(message));
 }
@@ -36,7 +39,9 @@ function paint(header, bitmap) {
   bitmap.close();
   painted += 1;
   view.dataset.frame = String(painted);
+  stats.painted = painted;
   stats.paints.push({ time: performance.now(), seq: header.seq, width: header.width, lossless: header.lossless });
+  if (stats.paints.length > 2 * KEEP) stats.paints.splice(0, KEEP);
   stats.camera = header.camera;
   send({ type: "painted", frame: header.frame });
   last = header;
@@ -59,9 +64,10 @@ function showScene(scene) {
   $("clock").hidden = animation === null;
   if (animation === null) {
     stop();
+    $("time")?.remove();  // only an animated scene has a clock
     return;
   }
-  const time = $("time");
+  const time = $("time") ?? makeSlider();
   time.max = String(animation.duration);
   time.step = String(1 / animation.fps);
   time.value = String(scene.t);
@@ -92,10 +98,15 @@ function stop() {
   playing = null;
   $("play").textContent = "play";
 }
-$("time").addEventListener("input", () => {
-  showTime();
-  send({ type: "time", t: Number($("time").value) });
-});
+function makeSlider() {
+  const time = Object.assign(document.createElement("input"), { type: "range", id: "time", min: "0", value: "0" });
+  time.addEventListener("input", () => {
+    showTime();
+    send({ type: "time", t: Number(time.value) });
+  });
+  $("time-value").before(time);
+  return time;
+}
 $("play").addEventListener("click", () => {
   if (playing !== null || animation === null) {
     stop();
