@@ -168,3 +168,16 @@ def test_bad_input_is_one_line_and_exit_2(args, expected):
                             text=True, cwd=REPO, timeout=60)
     assert result.returncode == 2 and result.stdout == "" and result.stderr.startswith(expected), result.stderr
     assert len(result.stderr.splitlines()) == 1
+
+
+def test_a_port_in_use_is_one_line_and_exit_2():
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([sys.executable, "-m", "pyclray", "view", "scenes/tp02.toml", "--port", str(port),
+                                 "--no-browser"], capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr == f"pyclray view: error: --port {port}: cannot listen on 127.0.0.1:{port}: address already in use\n"

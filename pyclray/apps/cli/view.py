@@ -28,21 +28,19 @@ def view_aov(text: str) -> str:
 
 def run(args) -> int:
     import asyncio
+    from importlib.util import find_spec
 
-    try:
-        from ..view.server import App
-        import PIL  # noqa: F401  (the page's images)
-        import websockets  # noqa: F401
-    except ModuleNotFoundError as error:
-        if error.name not in ("websockets", "PIL"):
-            raise
-        raise BadInput(f"pyclray view needs {error.name}: pip install 'pyclray[view]'") from None
+    for module, package in (("websockets", "websockets"), ("PIL", "Pillow")):  # the server, the images
+        if find_spec(module) is None:
+            raise BadInput(f"pyclray view needs {package}: pip install 'pyclray[view]'")
+    from ..view.server import App, ListenError
+
     scene = load(args.scene, args.size)  # a bad scene is one line and exit 2, before anything is served
     app = App(args.scene, scene, args.aov, args.size)
     try:
         return asyncio.run(app.serve(args.port, not args.no_browser))
-    except OSError as error:  # the port is taken, or not ours to take
-        raise BadInput(f"--port {args.port}: cannot listen on 127.0.0.1: {(error.strerror or str(error)).lower()}") from None
+    except ListenError as error:  # the port is taken, or not ours to take
+        raise BadInput(f"--port {args.port}: {error}") from None
 
 
 def add_command(commands) -> None:

@@ -12,6 +12,7 @@ import concurrent.futures
 import hmac
 import http.cookies
 import logging
+import os
 import secrets
 import signal
 import sys
@@ -42,6 +43,10 @@ SECURITY_HEADERS = (
     ("Content-Security-Policy", "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
                                 "frame-ancestors 'none'"),
 )
+
+
+class ListenError(Exception):
+    """The port cannot be listened on (taken, or privileged): the command's one-line error."""
 
 
 def page_assets() -> dict[str, bytes]:
@@ -178,8 +183,13 @@ class App:
         quiet = logging.getLogger("pyclray.view")  # refused requests are answered, not logged
         quiet.addHandler(logging.NullHandler())
         quiet.propagate = False
-        async with serve(self.connected, HOST, port, process_request=self.answer, compression=None,
-                         max_size=MAX_MESSAGE, close_timeout=1, server_header=None, logger=quiet) as server:
+        try:
+            server = await serve(self.connected, HOST, port, process_request=self.answer, compression=None,
+                                 max_size=MAX_MESSAGE, close_timeout=1, server_header=None, logger=quiet)
+        except OSError as error:
+            reason = os.strerror(error.errno) if error.errno else str(error)  # (asyncio's text repeats the address)
+            raise ListenError(f"cannot listen on {HOST}:{port}: {reason.lower()}") from None
+        async with server:
             port = server.sockets[0].getsockname()[1]
             self.cookie = f"pyclray_view_{port}"  # cookies ignore ports: one per server
             # the first frame's program and prepared scene, made while the browser starts
