@@ -146,10 +146,14 @@ def measure(browser, folder: Path, name: str, size: int) -> dict:
         result["bad_edit_to_banner_ms"] = page.evaluate("window.errorAt") - t0
         scene.write_text(text)
         page.wait_for_function("document.getElementById('error').textContent === ''", timeout=10_000)
-    finally:
+    except Exception:
         context.close()
-        status, _, _ = viewer.interrupt()
+        print(f"{name} {size}: failed; the server said: {viewer.interrupt()[2]}", flush=True)
         viewer.close()
+        raise
+    context.close()
+    status, _, _ = viewer.interrupt()
+    viewer.close()
     result["exit_status"] = status
     return result
 

@@ -147,7 +147,11 @@ class App:
             await asyncio.sleep(watch.POLL_SECONDS)
             now = watch.signature(self.files)
             if now != self.loaded and now == seen:
-                await self.reload(now)
+                try:
+                    await self.reload(now)
+                except Exception as error:  # a bug of ours: said, and the next save tries again
+                    print(f"pyclray view: warning: reloading failed: {type(error).__name__}: {error}", file=sys.stderr,
+                          flush=True)
                 now = self.loaded
             seen = now
 
@@ -155,10 +159,10 @@ class App:
         self.loaded = signature
         try:
             scene, files = await self.run(watch.load, self.path, self.size, self.scene)
-        except PyclrayError as error:
-            self.error = " ".join(str(error).split())
+        except Exception as error:  # a bad edit (or a file caught half-written): said, the last image kept
+            self.error = str(error) if isinstance(error, PyclrayError) else \
+                f"{self.path}: cannot load: {type(error).__name__}: {error}"
             print(f"pyclray view: error: {self.error}", file=sys.stderr, flush=True)
-            self.files = self.files if self.path in self.files else (self.path,)
             for session in list(self.sessions):
                 await _quietly(session.send_error())
             return
