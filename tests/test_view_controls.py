@@ -75,7 +75,7 @@ def test_the_wheel_scales_the_distance_by_notches_and_never_reaches_the_target()
 
 @pytest.mark.parametrize("camera", [TP02, INTRINSICS, pyclray.Camera((1e-3, 5e6, -2.5), (0, 0, 0.125), (0, 0, 1), 30.5, "y")])
 def test_copy_camera_writes_a_table_that_loads_as_the_view(camera):
-    """The scene's own camera comes back exactly; a moved one to the 12 digits written."""
+    """The scene's own camera comes back (to float64 rounding); a moved one to the 12 digits written."""
     start = Orbit.of(camera)
     assert camera_from_table(tomllib.loads(camera_toml(start.camera()))["camera"]).pose() == pytest.approx(camera.pose(), abs=1e-12)
     moved = start.orbit(0.123, 0.0456).camera()

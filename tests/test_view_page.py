@@ -128,6 +128,10 @@ def test_orbit_and_pan_change_the_image_and_r_restores_it(page, scene_file):
     page.keyboard.press("r")
     settle(page, n)
     assert np.array_equal(shown(page), first)
+    page.keyboard.press("h")  # the keys, shown and hidden
+    assert page.locator("#help").is_visible() and "restore the scene file's camera" in page.locator("#help").text_content()
+    page.keyboard.press("h")
+    assert page.locator("#help").is_hidden()
     assert "eye [0.000, 2.000, 6.000] · target [0.000, 0.500, 0.000]" in page.locator("#info").text_content()
 
 
@@ -228,6 +232,16 @@ def test_the_time_slider_shows_the_animation_at_that_time(browser):
         settle(page, n)
         assert np.array_equal(shown(page), expected(scene, "depth", t=float(slider.input_value())))
         assert not np.array_equal(shown(page), first)
+        # play: the clock advances by 1 / fps at the animation's rate and the images follow; pause stops it
+        n, t = painted(page), float(slider.input_value())
+        page.click("#play")
+        page.wait_for_function("n => window.pyclrayView.painted >= n + 3", arg=n, timeout=5000)
+        page.click("#play")
+        assert float(slider.input_value()) != t and page.locator("#play").text_content() == "play"
+        settle(page, painted(page) - 1)
+        n = painted(page)
+        time.sleep(0.5)
+        assert painted(page) == n  # paused: nothing more
         page.context.close()
     finally:
         viewer.close()
