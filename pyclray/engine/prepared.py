@@ -69,6 +69,8 @@ class Kind:
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
     frame: cl.Buffer  # the entries in the frame of the last view (the render kernel's shape array)
     frame_host: np.ndarray  # the frame buffer's memory on a CPU device (its bytes, elsewhere)
+    smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
+    smooth_host: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -126,7 +128,7 @@ class PreparedScene:
             mine, ids = by_type[t]
             world = cls.pack_world(mine)
             entry_ids, primitives = entries(mine, ids)
-            worlds[t] = (world, entry_ids, primitives)
+            worlds[t] = (world, entry_ids, primitives, cls.pack_smooth(mine, precision))
             self.on_device = self.on_device or len(world) >= DEVICE_REBASE_FROM
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
@@ -137,11 +139,17 @@ class PreparedScene:
         self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
-            world, ids, primitives = worlds[t]
+            world, ids, primitives, smooth = worlds[t]
             if t in self.bvh.order:  # bounded: in leaf order
                 order = self.bvh.order[t]
                 world, ids, primitives = world[order], ids[order], primitives[order]
+                smooth = None if smooth is None else smooth[order]
             self.kinds[t] = self._kind(t, world, ids, primitives)
+            if smooth is not None:
+                self.kinds[t].smooth_host = aligned(smooth)
+                self.kinds[t].smooth = _buffer(ctx, self.kinds[t].smooth_host)
+        # the types lit by their shapes' own normals (smooth meshes): the shaded image's variant
+        self.smooth = tuple(t for t in self.types if self.kinds[t].smooth is not None)
         self.bounded = sum(k.count for k in self.kinds.values() if k.cls.bounded)
         self.nodes = self.refs = None
         # The BVH's boxes around a fixed anchor, the root box's centre, rounded outward to float once:
@@ -190,6 +198,7 @@ class PreparedScene:
         total = self._materials_host.nbytes
         for kind in self.kinds.values():
             total += kind.world.nbytes + kind.frame_host.nbytes
+            total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
         if self.bvh.types:
             total += self._nodes_host.nbytes + self._refs_host.nbytes
         return total

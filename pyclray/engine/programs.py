@@ -83,6 +83,7 @@ class Variant:
     lanes: int = 1
     shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
+    smooth: tuple[str, ...] = ()  # with "shaded": the types with a shape lit by its own normals (a smooth mesh)
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -114,6 +115,12 @@ class Variant:
             lines.append("#define PYCLRAY_REBASE 1")
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
+        if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
+            smooth = [REGISTRY[t] for t in self.smooth]
+            lines.append("#define PYCLRAY_SMOOTH 1")
+            lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
+            lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
+                         + " ".join(f"P(__global const {c.smooth_struct.name}*, {c.type}_smooth)" for c in smooth))
         return lines
 
     def source(self, inline_builtins: bool = False) -> str:
@@ -136,7 +143,8 @@ class Variant:
         shading = "shaded" in self.aovs
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
         structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast else [])
-                          + (list(SHADING_STRUCTS) if shading else []))
+                          + (list(SHADING_STRUCTS) if shading else [])
+                          + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
         parts += [_read("camera.h"), _read("bvh.h")] + ([_read("cast.h")] if cast else [])
         parts += [_read(name) for name in _kernel_files(shapes)]

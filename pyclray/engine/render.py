@@ -71,7 +71,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     _, inputs = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
     shadows = "shaded" in aovs and scene.shading.shadows
-    variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh")
+    smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
+    variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth)
     # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
     shape_args = inputs.shape_args(prepared, acceleration)
     shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]
@@ -83,7 +84,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     lighting = inputs.lighting
     extra = {
         "position": [lighting["eye_high"], lighting["eye_low"]],
-        "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")],
+        "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")]
+        + [prepared.kinds[t].smooth for t in smooth],
     }
     # one packet of `lanes` pixels per work-item, packets aligned to multiples of lanes in the image;
     # work-groups of one tile (tile / lanes packets by tile rows) where the device allows (the kernel

@@ -84,6 +84,12 @@ def curvature_radii(scene: Scene) -> np.ndarray:
     return np.array([shape.curvature_radius() for shape in scene.shapes] or [np.inf], np.float64)
 
 
+def silhouette_radii(scene: Scene) -> np.ndarray:
+    """The radius of curvature at silhouettes per shape id (Shape.silhouette_radius: inf for a mesh,
+    whose silhouettes are edges), for the silhouette rule."""
+    return np.array([shape.silhouette_radius() for shape in scene.shapes] or [np.inf], np.float64)
+
+
 def world_sizes(scene: Scene, point) -> np.ndarray:
     """Per shape: the size of float32 world coordinates in which an engine that does not move the
     origin (Mitsuba) intersects it from ``point``: max(|point|, |anchor|, |point - anchor|)."""
@@ -245,7 +251,7 @@ def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
             if mine.any():
                 points = origins[mine] + depth[mine][:, None] * directions[mine]
                 cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), directions[mine]))
-                grazing = silhouettes(np.zeros(len(cos)), cos, reach[mine] / cos, shape.curvature_radius())
+                grazing = silhouettes(np.zeros(len(cos)), cos, reach[mine] / cos, shape.silhouette_radius())
                 out[mine] |= grazing | (shape.edge_distance(points) <= reach[mine] / np.maximum(cos, SILHOUETTE_COS))
     return out
 
@@ -309,7 +315,7 @@ def judged_pixels(images: dict, ref: dict, engine: str = "fp32") -> dict:
         reach = render_reach(scene, t, ref["id"], ref["directions"], engine)
     else:
         reach = depth_tolerance(t, ref["id"], ref["cos"]) * ref["cos"]
-    radius = curvature_radii(scene)[np.maximum(ref["id"], 0)]
+    radius = silhouette_radii(scene)[np.maximum(ref["id"], 0)]
     with np.errstate(invalid="ignore", divide="ignore"):
         silhouette = silhouettes(ref["id"], ref["cos"], reach / ref["cos"], radius)
     edge = at_edges(scene, ref["origins"], ref["directions"], hits, reach)

@@ -74,15 +74,19 @@ def _is_mesh(value) -> bool:
 
 def _mesh(mi, value: dict, name: str):
     """An mi.Mesh of a dict of type 'mesh' with numpy arrays vertex_positions (V, 3) and faces (F, 3)
-    (Mitsuba's float32 positions, face normals; its id is name) and its 'bsdf', if any, as a dict."""
+    (Mitsuba's float32 positions, face normals, or vertex_normals (V, 3) where given; its id is name) and its 'bsdf', if any, as a dict."""
     positions, faces = value["vertex_positions"], np.asarray(value["faces"])
     props = mi.Properties()
     if "bsdf" in value:
         props["bsdf"] = mi.load_dict(value["bsdf"])
-    mesh = mi.Mesh(name, len(positions), len(faces), props=props, has_vertex_normals=False, has_vertex_texcoords=False)
+    normals = value.get("vertex_normals")  # a smooth mesh's (V, 3): Mitsuba interpolates them (sh_frame)
+    mesh = mi.Mesh(name, len(positions), len(faces), props=props, has_vertex_normals=normals is not None,
+                   has_vertex_texcoords=False)
     params = mi.traverse(mesh)
     params["vertex_positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1)
     params["faces"] = np.ascontiguousarray(faces, np.uint32).reshape(-1)
+    if normals is not None:
+        params["vertex_normals"] = np.ascontiguousarray(normals, np.float32).reshape(-1)
     params.update()
     return mesh
 

@@ -15,6 +15,19 @@ def facing_normals(normals, directions) -> np.ndarray:
     return np.where(front[..., None], normals, -normals)
 
 
+def lighting_normals(scene, hits) -> np.ndarray:
+    """The normals that light each hit: the geometric ``hits["normal"]``, or a shape's own shading
+    normal at the hit point (Shape.oracle_shading_normal: a smooth mesh's interpolated vertex
+    normals), float64."""
+    normals = np.array(hits["normal"], np.float64)
+    ids, points = hits["id"], hits["points"]
+    for index, shape in enumerate(scene.shapes):
+        mine = ids == index
+        if mine.any():
+            normals[mine] = shape.oracle_shading_normal(points[mine], normals[mine])
+    return normals
+
+
 def light_terms(light, points):
     """(L unit toward the light, E per point (..., 3), distance to the light (inf: directional))."""
     if isinstance(light, PointLight):
@@ -34,11 +47,11 @@ def reference_shading(scene, directions, hits, visibility=None) -> np.ndarray:
     arrays, one per light, 1 lit and 0 shadowed; default all lit). Misses get the background."""
     ids = hits["id"]
     hit = ids >= 0
-    points, normals = hits["points"], hits["normal"]
+    points = hits["points"]
     color = np.array([s.material.color for s in scene.shapes] or [(0, 0, 0)])[np.maximum(ids, 0)]
     specular = np.array([s.material.specular for s in scene.shapes] or [0.0])[np.maximum(ids, 0)]
     shininess = np.array([s.material.shininess for s in scene.shapes] or [1.0])[np.maximum(ids, 0)]
-    n_s = facing_normals(normals, directions)
+    n_s = facing_normals(lighting_normals(scene, hits), directions)  # the shading normal, toward the viewer
     out = color * np.array(scene.shading.ambient)
     for index, light in enumerate(effective_lights(scene)):
         L, E, _ = light_terms(light, points)
@@ -55,16 +68,18 @@ def reference_shading(scene, directions, hits, visibility=None) -> np.ndarray:
     return np.where(hit[..., None], out, np.array(scene.shading.background))
 
 
-def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0):
+def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0, lighting=None):
     """Per light, V (1 lit, 0 shadowed) of each hit point in float64: the nearest hit of the ray from
     p toward the light, beyond skip times the scene's size (the surface at p itself never shadows p,
     and a float64 test of it from p errs by far less), before the light.
 
     blur > 0 (scene units, one number or one per point) also tests rays from points moved by blur
     along six directions, and returns per light a second array: True where the moved rays disagree
-    (a shadow boundary)."""
+    (a shadow boundary). lighting: the normals that decide whether a light is in front (cos > 0;
+    default the geometric ``normals``: see lighting_normals)."""
     size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
     n_s = facing_normals(normals, directions)
+    n_lit = n_s if lighting is None else facing_normals(lighting, directions)
     out, unsure = [], []
     for light in effective_lights(scene):
         def visible(origins):
@@ -85,7 +100,7 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
                     moved = step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s
                     mixed |= visible(points + reach * (moved + 0.5 * n_s)) != base
         # where the light is behind the surface (cos <= 0) it adds nothing, shadow or not
-        lit = np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0
+        lit = np.einsum("...k,...k", n_lit, light_terms(light, points)[0]) > 0
         if np.any(blur > 0):
             unsure.append(mixed & lit & (ids >= 0))
         out.append((base & lit & (ids >= 0)).astype(np.float64))
@@ -118,11 +133,11 @@ def tolerance(scene, directions, hits, depth_tolerance, normal_tolerance, eps):
     ids = hits["id"]
     hit = ids >= 0
     index = np.maximum(ids, 0)
-    points, normals = hits["points"], hits["normal"]
+    points = hits["points"]
     albedo = np.array([s.material.color for s in scene.shapes] or [(0, 0, 0)])[index].max(axis=-1)
     specular = np.array([s.material.specular for s in scene.shapes] or [0.0])[index]
     shininess = np.array([s.material.shininess for s in scene.shapes] or [1.0])[index]
-    n_s = facing_normals(normals, directions)
+    n_s = facing_normals(lighting_normals(scene, hits), directions)
     dp = np.where(hit, depth_tolerance, 0.0)
     angle = np.where(hit, normal_tolerance, 0.0)
     bound = 8 * eps * albedo * max(scene.shading.ambient) + np.zeros(ids.shape)

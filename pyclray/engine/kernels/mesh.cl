@@ -151,4 +151,21 @@ inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* r
     *v = e.e2 / det;
 }
 
+#ifdef PYCLRAY_SMOOTH
+/* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,
+ * (1 - u - v) n_a + u n_b + v n_c, normalized; (0, 0, 0) (the geometric normal lights) where the
+ * mesh is flat (its normals are 0) or the interpolation is 0 (opposite vertex normals). */
+inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray,
+                                 __global const TriangleNormals* normals)
+{
+    realv u, v;
+    mesh_barycentric(tri, ray, &u, &v);
+    const realv w = (SPLAT(1) - u) - v;
+    const real4 na = normals->a, nb = normals->b, nc = normals->c;
+    const vec3v n = v3((w * na.x + u * nb.x) + v * nc.x, (w * na.y + u * nb.y) + v * nc.y, (w * na.z + u * nb.z) + v * nc.z);
+    const realv length2 = v3_dot(n, n);
+    return v3_scale(n, length2 > 0 ? SPLAT(1) / v_sqrt(length2) : SPLAT(0));
+}
+#endif
+
 #endif

@@ -36,6 +36,7 @@
 #define PYCLRAY_MATERIALS_BEGIN
 #define PYCLRAY_MATERIAL_OF(id, mine, flat)
 #define PYCLRAY_WRITE_SHADED(index, first, end)
+#define PYCLRAY_SMOOTH_NORMALS
 #endif
 
 /* Each list of arguments is written once, as P(type, name) for each: PYCLRAY_DECLARE makes it a
@@ -208,6 +209,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             const intv mine = key == SPLAT_INT(winner);                               \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
             PYCLRAY_BARYCENTRICS                                                      \
+            PYCLRAY_SMOOTH_NORMALS                                                    \
             pending = mine ? SPLAT_INT(0) : pending;                                  \
         }                                                                             \
     }

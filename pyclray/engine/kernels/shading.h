@@ -38,16 +38,42 @@
 #endif
 #define SHADOW_OFFSET_K 16  /* pyclray.engine.shading.SHADOW_OFFSET_K */
 
+/* Smooth shading (PYCLRAY_SMOOTH: a shape of a type in PYCLRAY_SMOOTH_TYPES, a smooth mesh, is
+ * present): the winner's shading normal, <type>_shading_normal (world, unit; (0, 0, 0) where the
+ * shape is flat), lights the hit instead of the geometric normal, turned toward the viewer as n_s
+ * is (as Mitsuba's two-sided BSDF does in its shading frame). The geometric normal still decides
+ * the side (front), and the shadow ray starts on the geometric surface: at p, the triangle itself
+ * skipped (flat), so a shading normal never moves a shadow ray's origin. */
+#ifdef PYCLRAY_SMOOTH
+#define PYCLRAY_SMOOTH_BEGIN vec3v shading_normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+#define PYCLRAY_SMOOTH_OF(Type, type)                                                 \
+    if (kind == KIND_##type)                                                          \
+        shading_normal = v3_select(shading_normal, type##_shading_normal(&type##s[k], &ray, &type##_smooth[k]), mine);
+#define PYCLRAY_SMOOTH_NORMALS PYCLRAY_SMOOTH_TYPES(PYCLRAY_SMOOTH_OF)
+/* n_l: the normal that lights, facing the viewer: the shading normal where there is one, else n_s */
+#define PYCLRAY_LIGHTING_NORMAL                                                       \
+    const vec3v n_shading = frame_from_world(camera, shading_normal);                 \
+    const intv has_shading = v3_dot(n_shading, n_shading) > 0;                        \
+    const vec3v n_facing = v3_select(v3_scale(n_shading, SPLAT(-1)), n_shading, v3_dot(n_shading, D) < 0); \
+    const vec3v n_l = v3_select(n_s, n_facing, has_shading);
+#else
+#define PYCLRAY_SMOOTH_ARGS(P)
+#define PYCLRAY_SMOOTH_BEGIN
+#define PYCLRAY_SMOOTH_NORMALS
+#define PYCLRAY_LIGHTING_NORMAL const vec3v n_l = n_s;
+#endif
+
 #define PYCLRAY_SHADED_ARGS(P)                                                        \
     P(__global const Material*, materials) P(__global const Light*, lights) P(const int, n_lights) \
-    P(const real4, ambient) P(const real4, background) P(__global real*, shaded_out)
+    P(const real4, ambient) P(const real4, background) PYCLRAY_SMOOTH_ARGS(P) P(__global real*, shaded_out)
 
 /* per lane: the winner's material (albedo, specular, shininess) and whether its type is flat,
  * gathered in the winners' loop of kernels/pyclray.cl (each distinct winner once) */
 #define PYCLRAY_MATERIALS_BEGIN                                                       \
     vec3v albedo = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
     realv specular = SPLAT(0), shininess = SPLAT(1);                                  \
-    intv flat = SPLAT_INT(0);
+    intv flat = SPLAT_INT(0);                                                         \
+    PYCLRAY_SMOOTH_BEGIN
 #define PYCLRAY_MATERIAL_OF(id, mine, is_flat)                                        \
     {                                                                                 \
         __global const Material* m = &materials[id];                                  \
@@ -189,6 +215,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
         const vec3v n = frame_from_world(camera, normal);                             \
         const intv front = v3_dot(n, D) < 0;                                          \
         const vec3v n_s = v3_select(v3_scale(n, SPLAT(-1)), n, front);                \
+        PYCLRAY_LIGHTING_NORMAL                                                       \
         vec3v color = v3_mul(albedo, v3_splat(ambient));                              \
         PYCLRAY_SHADOW_ORIGIN                                                         \
         for (int l = 0; l < n_lights; ++l) {                                          \
@@ -203,11 +230,11 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
             } else {                                                                  \
                 L = v3_splat(light.position);                                         \
             }                                                                         \
-            const realv cos_l = v3_dot(n_s, L);                                       \
+            const realv cos_l = v3_dot(n_l, L);                                       \
             intv lit = hit && cos_l > 0;                                              \
             if (!ANY(lit)) continue;                                                  \
             PYCLRAY_SHADOW_RAY                                                        \
-            const vec3v add = shade_light(albedo, specular, shininess, n_s, L, D, cos_l, E); \
+            const vec3v add = shade_light(albedo, specular, shininess, n_l, L, D, cos_l, E); \
             const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                      \
             color = v3_add(color, v3_select(zero, add, lit));                         \
         }                                                                             \

@@ -102,6 +102,22 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
+    # a type whose shapes may shade with their own normals (a smooth mesh's interpolated vertex
+    # normals): the struct of one entry's shading data (a buffer passed to the shaded image only when
+    # a shape of the type asks for it: pack_smooth) and <type>_shading_normal in its kernel file
+    smooth_struct: ClassVar[Struct | None] = None
+
+    @classmethod
+    def pack_smooth(cls, shapes, precision: str):
+        """The smooth_struct array of these shapes' entries (in pack_world's order), or None where
+        none of them shades with its own normals."""
+        return None
+
+    def oracle_shading_normal(self, points, normals) -> np.ndarray:
+        """The float64 normal the shaded image lights with at these points of the surface, whose
+        geometric normals are ``normals``: the geometric normal (a smooth mesh: its interpolated
+        vertex normal)."""
+        return normals
 
     def primitive_count(self) -> int:
         """How many entries of the packed arrays this shape is (a batch: one per primitive)."""
@@ -205,6 +221,11 @@ class Shape:
         """Unsigned distance from points (N, 3) to the surface."""
         raise NotImplementedError
 
+    def oracle_primitives(self, origins, directions):
+        """The index of the primitive each ray's nearest hit is on (-1 on a miss), float64; None for
+        a shape of one primitive."""
+        return None
+
     def edge_distance(self, points) -> np.ndarray:
         """Distance from points on the surface to its nearest edge (a rim, a border, a box's edge),
         where a ray within rounding may go either way; inf for a shape without edges."""
@@ -225,6 +246,12 @@ class Shape:
         """The smallest radius of curvature (inf for flat shapes): a position error e along the
         surface turns the normal by e / radius."""
         return np.inf
+
+    def silhouette_radius(self) -> float:
+        """The radius of curvature at its silhouettes, for the silhouette rule's square-root law
+        (error_model.silhouettes): the curvature radius, unless the surface is flat pieces (a mesh),
+        whose silhouettes lie on edges that the edge rule judges."""
+        return self.curvature_radius()
 
     def extent_from(self, point) -> float:
         """How far from ``point`` the shape reaches (for Mitsuba's clip range)."""

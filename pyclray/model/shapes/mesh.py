@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from ..errors import SceneError, _shown, number, vector3
-from ..layout import Struct
+from ..layout import Struct, layout
 from . import mesh_io
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import rotation
@@ -122,6 +122,15 @@ class Mesh(Shape):
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
     kernel_files = ("mesh.cl",)
+    smooth_struct = Struct(
+        "TriangleNormals",
+        (
+            ("a", "real4"),  # the unit world vertex normals at a, b, c (smooth shading); all 0: flat
+            ("b", "real4"),
+            ("c", "real4"),
+        ),
+        "A triangle's unit world vertex normals for smooth shading (zero for a flat mesh's triangles).",
+    )
     barycentric = True
     mitsuba_primitives = True
 
@@ -157,8 +166,6 @@ class Mesh(Shape):
                                  key="matrix")
             object.__setattr__(self, "matrix", _matrix(self.matrix))
         object.__setattr__(self, "smooth", flag("smooth", self.smooth))
-        if self.smooth:  # refused rather than ignored: the shaded image would silently be flat
-            raise SceneError("smooth = true (interpolated vertex normals) is not implemented yet; use false", key="smooth")
         if self.normals is not None:
             object.__setattr__(self, "normals", _vertices(self.normals, "normals"))
             if len(self.normals) != len(vertices):
@@ -290,6 +297,24 @@ class Mesh(Shape):
             start += len(a)
 
     @classmethod
+    def pack_smooth(cls, meshes, precision: str):
+        """Per triangle its vertex normals (vertex_normals: unit, world) where its mesh is smooth,
+        zeros where it is not (the kernel then lights with the geometric normal); None without a
+        smooth mesh. In the world frame: the kernel turns the interpolated normal into the view's."""
+        if not any(mesh.smooth for mesh in meshes):
+            return None
+        out = np.zeros(sum(len(m.faces) for m in meshes), dtype=layout(cls.smooth_struct, precision).dtype)
+        start = 0
+        for mesh in meshes:
+            rows = slice(start, start + len(mesh.faces))
+            if mesh.smooth:
+                normals = mesh.vertex_normals()
+                for k, name in enumerate("abc"):
+                    out[name][rows, :3] = normals[mesh.faces[:, k]]
+            start += len(mesh.faces)
+        return out
+
+    @classmethod
     def _rebase(cls, out, world, origin, rotation_rows):
         # each vertex minus the frame's origin in float64, along the frame's axes, rounded once: a
         # vertex shared by two triangles gets the same bits in both (the watertight test needs it)
@@ -332,6 +357,9 @@ class Mesh(Shape):
         directions = np.asarray(directions, np.float64).reshape(-1, 3)
         return self._hierarchy().intersect(origins, directions)
 
+    def oracle_primitives(self, origins, directions):
+        return self.oracle_hits(origins, directions)[1]
+
     def oracle_distance(self, origins, directions):
         shape = np.shape(directions)[:-1]
         return self.oracle_hits(origins, directions)[0].reshape(shape)
@@ -344,6 +372,28 @@ class Mesh(Shape):
     def surface_distance(self, points):
         points = np.asarray(points, np.float64)
         return self._hierarchy().nearest(points.reshape(-1, 3))[0].reshape(points.shape[:-1])
+
+    def oracle_shading_normal(self, points, normals):
+        """Smooth: the vertex normals interpolated at the barycentrics of each point's nearest
+        triangle (float64), normalized; the geometric normal where the mesh is flat or the
+        interpolation is zero (as kernels/mesh.cl's mesh_shading_normal)."""
+        if not self.smooth:
+            return normals
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        _, which, _ = self._hierarchy().nearest(points)
+        a, b, c = (x[which] for x in self.corners())
+        # (u, v) of the point's projection onto the triangle's plane: the 2x2 normal equations
+        e1, e2, f = b - a, c - a, points - a
+        d11, d12, d22 = (np.einsum("ij,ij->i", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
+        f1, f2 = np.einsum("ij,ij->i", f, e1), np.einsum("ij,ij->i", f, e2)
+        det = d11 * d22 - d12 * d12
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u, v = (d22 * f1 - d12 * f2) / det, (d11 * f2 - d12 * f1) / det
+        vertex = self.vertex_normals()[self.faces[which]]  # (N, 3 corners, 3)
+        n = (1 - u - v)[:, None] * vertex[:, 0] + u[:, None] * vertex[:, 1] + v[:, None] * vertex[:, 2]
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        good = np.isfinite(length) & (length > 0)
+        return np.where(good, n / np.where(good, length, 1.0), np.asarray(normals).reshape(-1, 3)).reshape(np.shape(normals))
 
     def edge_distance(self, points):
         """Distance to the nearest edge of the nearest triangle: at every edge (shared or not) a ray
@@ -380,13 +430,25 @@ class Mesh(Shape):
             longest = np.maximum.reduce([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))])
             valid = self.face_normals().any(axis=1)
             self._cache["altitude"] = float((twice_area[valid] / longest[valid]).min()) if valid.any() else np.inf
-        return self._cache["altitude"]
+        # smooth: a hit moved by e along a triangle moves its barycentrics by e / altitude and the
+        # interpolated normal by up to |n_b - n_a| e / altitude <= 2 e / altitude
+        return self._cache["altitude"] / (2 if self.smooth else 1)
+
+    def silhouette_radius(self) -> float:
+        """inf: each triangle is flat, so a grazing hit inside it is the plane's |cos| rule only; a
+        mesh's silhouettes lie on its edges, where edge_distance (the edge rule) sets them apart.
+        The smallest altitude (curvature_radius) here made every pixel of a mesh 1e6 away a
+        silhouette (cos^2 < 2 e / r with r ~ 0.01), leaving nothing to judge."""
+        return np.inf
 
     # -- Mitsuba 3 -------------------------------------------------------------------------------
     def mitsuba_shapes(self, scene):
         """Mitsuba's mesh from the same arrays: world vertices (float64 here, float32 there) and faces
         (the bridge builds an mi.Mesh of a dict of type 'mesh')."""
-        return [{"type": "mesh", "vertex_positions": self.world_vertices(), "faces": self.faces}]
+        out = {"type": "mesh", "vertex_positions": self.world_vertices(), "faces": self.faces}
+        if self.smooth:  # Mitsuba interpolates them at the hit's barycentrics too (its sh_frame)
+            out["vertex_normals"] = self.vertex_normals()
+        return [out]
 
 
 def _ready(array, dtype) -> bool:

@@ -139,6 +139,9 @@ class Spheres(Shape):
             best = np.minimum(best, sphere.oracle_distance(origins, directions))
         return best
 
+    def oracle_primitives(self, origins, directions):
+        return self.oracle_hits(origins, directions)[1]
+
     def oracle_hits(self, origins, directions):
         """(distance, primitive index) of the nearest sphere of the batch per ray (inf, -1 on a miss)."""
         best = np.full(np.shape(directions)[:-1], np.inf)

@@ -77,7 +77,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
 
     # the pixels each comparison covers
     beyond = mitsuba.beyond_counterparts(scene, origins, directions)
-    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    radius = error_model.silhouette_radii(scene)[np.maximum(truth["id"], 0)]
     silhouette = error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
     band, _ = error_model.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=True)
@@ -109,6 +109,23 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     numbered = np.array([s.mitsuba_primitives for s in scene.shapes] or [False])[np.maximum(ours["id"], 0)]
     primitive_judged = judged & numbered
     primitive_wrong = primitive_judged & (ours["primitive"] != theirs["primitive"])
+    # primitives against the float64 oracle, judged by pyclray's own edge band (error_model's
+    # render_reach: camera-relative float32, a few eps of the hit's distance from the axis): far from
+    # the origin Mitsuba's float32 vertices move by up to eps |v| per coordinate (1/32 at 1e6, the
+    # size of a scanned mesh's triangles), its edge band covers whole triangles and it judges no
+    # primitive there; pyclray's does not grow with the distance to the origin
+    truth.update(cos=cos, origins=origins, directions=directions, scene=scene)
+    ours_apart = error_model.judged_pixels(ours, truth, "fp32")
+    oracle_judged = (ours["id"] == truth["id"]) & (ours["id"] >= 0) & ~ours_apart["silhouette"] & ~ours_apart["edge"]
+    oracle_primitive = np.full(ours["id"].shape, -1, np.int64)
+    for index, shape in enumerate(scene.shapes):
+        mine = oracle_judged & (ours["id"] == index)
+        found = shape.oracle_primitives(origins[mine], directions[mine]) if mine.any() else None
+        if found is None:
+            oracle_judged &= ~mine
+        else:
+            oracle_primitive[mine] = found
+    oracle_wrong = oracle_judged & (ours["primitive"] != oracle_primitive)
 
     counts = {
         "pixels": ours["id"].size,
@@ -118,6 +135,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
         "  of which at edges (apart)": int((same & edge & ~silhouette).sum()),
         "  of which primitives compared (meshes)": int(primitive_judged.sum()),
         "  of which primitives that differ": int(primitive_wrong.sum()),
+        "primitives against the float64 oracle": int(oracle_judged.sum()),
+        "  of which differ": int(oracle_wrong.sum()),
         "both miss": int(both_miss.sum()),
         "beyond a Mitsuba stand-in (left out)": int(beyond.sum()),
     }
@@ -147,6 +166,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
         result.failures.append(f"normal outside the tolerance at {int((judged & (angle > normal_tolerance)).sum())} pixels")
     if primitive_wrong.any():
         result.failures.append(f"{int(primitive_wrong.sum())} judged pixels where the primitive (prim_index) differs")
+    if oracle_wrong.any():
+        result.failures.append(f"{int(oracle_wrong.sum())} judged pixels where the primitive differs from the float64 oracle's")
     if result.ids["unexplained"]:
         result.failures.append(f"{result.ids['unexplained']} unexplained id disagreements")
     for name, kinds in result.misses.items():

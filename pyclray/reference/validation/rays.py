@@ -78,7 +78,7 @@ def ray_level(
         scene, truth["depth"], truth["id"], cos, cameras=False, origin_scale=origin_scale
     )
     beyond = mitsuba.beyond_counterparts(scene, origins, unit)
-    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    radius = error_model.silhouette_radii(scene)[np.maximum(truth["id"], 0)]
     silhouette = error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) & ~beyond
     farthest = np.fmax.reduce([np.where(np.isfinite(d), d, 0.0) for d in (truth["depth"], ours["depth"], theirs["depth"])])
     band, _ = error_model.mitsuba_tolerances(scene, farthest, truth["id"], cos, cameras=False, origin_scale=origin_scale)
