@@ -68,18 +68,18 @@ def reference_shading(scene, directions, hits, visibility=None) -> np.ndarray:
     return np.where(hit[..., None], out, np.array(scene.shading.background))
 
 
-def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0, lighting=None):
+def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0):
     """Per light, V (1 lit, 0 shadowed) of each hit point in float64: the nearest hit of the ray from
     p toward the light, beyond skip times the scene's size (the surface at p itself never shadows p,
     and a float64 test of it from p errs by far less), before the light.
 
     blur > 0 (scene units, one number or one per point) also tests rays from points moved by blur
     along six directions, and returns per light a second array: True where the moved rays disagree
-    (a shadow boundary). lighting: the normals that decide whether a light is in front (cos > 0;
-    default the geometric ``normals``: see lighting_normals)."""
+    (a shadow boundary). Whether a light is in front (cos > 0) is the lighting normal's
+    (lighting_normals: a smooth mesh's interpolated one); the rays start at p, on the surface."""
     size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
     n_s = facing_normals(normals, directions)
-    n_lit = n_s if lighting is None else facing_normals(lighting, directions)
+    n_lit = facing_normals(lighting_normals(scene, {"normal": normals, "id": ids, "points": points}), directions)
     out, unsure = [], []
     for light in effective_lights(scene):
         def visible(origins):

@@ -125,8 +125,7 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
     ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
-    V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur,
-                                            lighting=shading.lighting_normals(scene, ref))
+    V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
     # the error model's bounds on each engine's hit point and normal, made bounds on the colour
     our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", scene.camera.eye)
     their_depth, their_normal = error_model.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
