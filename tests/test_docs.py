@@ -32,8 +32,9 @@ def test_the_readme_keeps_its_two_commands_and_ci_runs_the_test_command():
 
 def test_the_readme_is_a_page_that_reads_in_minutes():
     lines = README.read_text().splitlines()
-    assert len(lines) < 200
-    for heading in ("## Install and render", "## Two commands", "## From Python", "## A data set of views"):
+    assert len(lines) < 215
+    for heading in ("## Install and render", "## Two commands", "## From Python", "## A data set of views",
+                    "## Triangle meshes"):
         assert heading in lines, heading
 
 
@@ -47,15 +48,20 @@ def test_every_link_and_picture_of_the_docs_exists(page):
 
 
 def test_the_readme_python_examples_run_as_written(tmp_path):
-    """In a folder of their own (scenes/ linked in): the ten-line example and the data set of views."""
+    """In a folder of their own (scenes/ linked in): the ten-line example, the data set of views and
+    the meshes (one file placed three times)."""
     (tmp_path / "scenes").symlink_to(REPO / "scenes")
     blocks = code_blocks(README.read_text(), "python")
-    assert len(blocks) == 2
+    assert len(blocks) == 3
+    outputs = []
     for number, block in enumerate(blocks):
         (tmp_path / f"example{number}.py").write_text(block)
         result = subprocess.run([sys.executable, f"example{number}.py"], cwd=tmp_path, capture_output=True,
                                 text=True, env=dict(os.environ))
         assert result.returncode == 0, block + result.stderr
+        outputs.append(result.stdout)
+    # the middle bunny (id 1) at the image's centre: a triangle index and its (u, v)
+    assert re.match(r"1 \d+ \[[-0-9.e]+ +[-0-9.e]+\]", outputs[2].strip()), outputs[2]
     assert (tmp_path / "tp02.exr").is_file()
     views = sorted((tmp_path / "views").iterdir())
     assert len(views) == 24

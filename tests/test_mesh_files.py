@@ -124,7 +124,6 @@ INLINE = 'vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]\nfaces 
     (INLINE + 'scale = [1.0, 0.0, 1.0]\n', "scale", "non-zero"),
     (INLINE + 'axis = [0.0, 0.0, 0.0]\nangle = 10.0\n', "axis", "non-zero"),
     (INLINE + 'smooth = 1\n', "smooth", "true or false"),
-    (INLINE + 'smooth = true\n', "smooth", "not implemented yet"),
     (INLINE + 'colour = [1.0, 0.0, 0.0]\n', "colour", "unknown key"),
 ])
 def test_bad_input_names_the_shape_and_key(tmp_path, table, key, message):

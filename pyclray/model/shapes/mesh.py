@@ -16,65 +16,13 @@ import numpy as np
 from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
 from . import mesh_io
+from .mesh_keys import _ready, faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import rotation
 from .mesh_oracle import Hierarchy
 
 FIXED = {"animatable": False}
 PLACEMENT = ("scale", "axis", "angle", "translate")
-
-
-def _vertices(value, key="vertices") -> np.ndarray:
-    try:
-        array = value if _ready(value, np.float64) else np.array(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise SceneError(f"expected an array of shape (V, 3) of numbers, got {_shown(value)}", key=key) from None
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise SceneError(f"expected an array of shape (V, 3), got shape {array.shape}", key=key)
-    bad = ~np.isfinite(array).all(axis=1)
-    if bad.any():
-        index = int(np.argmax(bad))
-        raise SceneError(f"expected finite numbers, got {array[index].tolist()!r} at index {index}", key=key)
-    if array.flags.writeable:
-        array.setflags(write=False)
-    return array
-
-
-def _faces(value, count: int) -> np.ndarray:
-    try:
-        array = value if _ready(value, np.int64) else np.array(value)
-    except (TypeError, ValueError):
-        raise SceneError(f"expected an array of shape (F, 3) of vertex indices, got {_shown(value)}", key="faces") from None
-    if array.size == 0:
-        raise SceneError("expected at least one triangle, got none", key="faces")
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise SceneError(f"expected an array of shape (F, 3) of vertex indices (triangles), got shape {array.shape}",
-                         key="faces")
-    if array.dtype.kind not in "iu":
-        if array.dtype.kind != "f" or not np.all(np.isfinite(array) & (array == np.round(array))):
-            raise SceneError("expected whole-number vertex indices", key="faces")
-    array = array.astype(np.int64, copy=False)
-    bad = ((array < 0) | (array >= count)).any(axis=1)
-    if bad.any():
-        index = int(np.argmax(bad))
-        raise SceneError(f"face {index} is {array[index].tolist()}: expected indices 0 .. {count - 1} "
-                         f"(the mesh has {count} vertices)", key="faces")
-    array.setflags(write=False)
-    return array
-
-
-def _matrix(value) -> tuple:
-    try:
-        m = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"expected a 4x4 matrix of numbers, got {_shown(value)}", key="matrix") from None
-    if m.shape != (4, 4) or not np.isfinite(m).all():
-        raise SceneError(f"expected a 4x4 matrix of finite numbers, got shape {m.shape}", key="matrix")
-    if not np.array_equal(m[3], [0, 0, 0, 1]):
-        raise SceneError(f"expected an affine matrix (last row 0 0 0 1), got last row {m[3].tolist()}", key="matrix")
-    if not abs(np.linalg.det(m[:3, :3])) > 0:
-        raise SceneError("expected an invertible matrix, got a singular one", key="matrix")
-    return tuple(map(tuple, m.tolist()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,9 +83,9 @@ class Mesh(Shape):
     mitsuba_primitives = True
 
     def __post_init__(self):
-        vertices = _vertices(self.vertices)
+        vertices = vertices_of(self.vertices)
         object.__setattr__(self, "vertices", vertices)
-        object.__setattr__(self, "faces", _faces(self.faces, len(vertices)))
+        object.__setattr__(self, "faces", faces_of(self.faces, len(vertices)))
         scale = self.scale
         if np.ndim(scale) == 0:
             scale = number("scale", scale)
@@ -164,10 +112,10 @@ class Mesh(Shape):
             if placed:
                 raise SceneError(f"expected 'matrix' or scale/axis/angle/translate, not both (got '{placed[0]}' too)",
                                  key="matrix")
-            object.__setattr__(self, "matrix", _matrix(self.matrix))
+            object.__setattr__(self, "matrix", matrix_of(self.matrix))
         object.__setattr__(self, "smooth", flag("smooth", self.smooth))
         if self.normals is not None:
-            object.__setattr__(self, "normals", _vertices(self.normals, "normals"))
+            object.__setattr__(self, "normals", vertices_of(self.normals, "normals"))
             if len(self.normals) != len(vertices):
                 raise SceneError(f"expected {len(vertices)} normals, one per vertex, got {len(self.normals)}", key="normals")
         object.__setattr__(self, "_cache", {})
@@ -449,8 +397,3 @@ class Mesh(Shape):
         if self.smooth:  # Mitsuba interpolates them at the hit's barycentrics too (its sh_frame)
             out["vertex_normals"] = self.vertex_normals()
         return [out]
-
-
-def _ready(array, dtype) -> bool:
-    """A read-only array of this type (a file's, or another Mesh's): checked and shared, not copied."""
-    return isinstance(array, np.ndarray) and array.dtype == dtype and not array.flags.writeable
