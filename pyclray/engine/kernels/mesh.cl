@@ -132,6 +132,7 @@ inline realv mesh_hit(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
     const intv negative = e.e0 < 0 || e.e1 < 0 || e.e2 < 0;
     const intv positive = e.e0 > 0 || e.e1 > 0 || e.e2 > 0;
     const intv inside = !(negative && positive) && e.det != 0;
+    if (!ANY(inside)) return SPLAT(MISS);  /* most tests of a packet miss: no division for them */
     const realv s = e.numerator / (inside ? e.det * e.dz : SPLAT(1));
     return inside && s > 0 ? s : SPLAT(MISS);
 }

@@ -102,6 +102,9 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
+    # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
+    # takes the largest of its bounded types'
+    leaf_size: ClassVar[int | None] = None
     # a type whose shapes may shade with their own normals (a smooth mesh's interpolated vertex
     # normals): the struct of one entry's shading data (a buffer passed to the shaded image only when
     # a shape of the type asks for it: pack_smooth) and <type>_shading_normal in its kernel file
