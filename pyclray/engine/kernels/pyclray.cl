@@ -417,7 +417,10 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #endif
 
 /* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
- * the largest distance that counts (float64, limits[r * limit_stride]).
+ * the largest distance that counts (float64, limits[i * limit_stride]). Where ordered is 1 the
+ * host has put the rays in a coherent order (neighbouring work-items then walk the same nodes):
+ * work-item i traces the i-th ray of that order, whose results go to element order[i], the ray's
+ * own place (scattered writes: cheaper than scattered reads of the rays); else element i.
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
  * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
@@ -496,13 +499,13 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
  * origin for every ray where origin_stride is 0), its direction made unit */
 #define PYCLRAY_CAST_RAY                                                            \
     RayPacket ray;                                                                  \
-    ray.world = vload3(r * origin_stride, origins);                                 \
-    ray.dir_exact = unit_direction(vload3(r, directions));                          \
+    ray.world = vload3(i * origin_stride, origins);                                 \
+    ray.dir_exact = unit_direction(vload3(i, directions));                          \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
     const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
-    const double t_max = limits[(size_t)r * (size_t)limit_stride];
+    const double t_max = limits[(size_t)i * (size_t)limit_stride];
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \
@@ -547,13 +550,14 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
 #define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \
-    P(const int, n_rays) P(__global const double*, origins) P(const int, origin_stride) \
+    P(const int, n_rays) P(__global const int*, order) P(const int, ordered)          \
+    P(__global const double*, origins) P(const int, origin_stride)                    \
     P(__global const double*, directions) P(__global const double*, limits)           \
     P(const int, limit_stride) P(const double4, scene_anchor)                         \
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_OUTPUT_ARGS(P)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int r, __global const Camera* camera
+PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int i, const int r, __global const Camera* camera
                                          PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
@@ -596,8 +600,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int r, __global const Camera* cam
 
 __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int r = get_global_id(0);
-    if (r < n_rays) cast_ray(r, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int i = get_global_id(0);
+    if (i < n_rays) cast_ray(i, ordered ? order[i] : i, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #else
@@ -609,13 +613,14 @@ __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLA
 
 /* the occluded kernel's arguments after the first (SHAPE as for render) */
 #define PYCLRAY_OCCLUDED_ARGS(P, SHAPE)                                               \
+    P(__global const int*, order) P(const int, ordered)                               \
     P(__global const double*, origins) P(const int, origin_stride)                    \
     P(__global const double*, directions) P(__global const double*, limits)           \
     P(const int, limit_stride) P(const double4, scene_anchor)                         \
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) P(__global char*, occluded_out)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int r, const int n_rays
+PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int i, const int r, const int n_rays
                                              PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
@@ -633,8 +638,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int r, const int n_rays
 
 __kernel void occluded(const int n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int r = get_global_id(0);
-    if (r < n_rays) occluded_ray(r, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int i = get_global_id(0);
+    if (i < n_rays) occluded_ray(i, ordered ? order[i] : i, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #endif
