@@ -45,14 +45,16 @@ inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
 {
     BoxRay b;
     b.negative = d < (float3)(0.0f);
-    const float3 s = select((float3)(1.0f), (float3)(-1.0f), b.negative);
+    /* selects written as the vector ?: (the same operation: OpenCL's select is a call into PoCL's
+     * library on its CPU device, which LLVM does not inline there, kernels/lanes.h) */
+    const float3 s = b.negative ? (float3)(-1.0f) : (float3)(1.0f);
     const float3 size = s * d;
     b.near_origin = o + s * margin;
     b.far_origin = o - s * margin;
     b.near_inverse = s / (size + BVH_WIDEN);
     const int3 steep = size > (float3)(BVH_WIDEN);
-    b.far_inverse = select((float3)(0.0f), s / (size - BVH_WIDEN), steep);
-    b.far_add = select((float3)(INFINITY), (float3)(0.0f), steep);
+    b.far_inverse = steep ? s / (size - BVH_WIDEN) : (float3)(0.0f);
+    b.far_add = steep ? (float3)(0.0f) : (float3)(INFINITY);
     return b;
 }
 
@@ -60,11 +62,13 @@ inline float bvh_max(const float a, const float b) { return a > b ? a : b; }
 inline float bvh_min(const float a, const float b) { return a < b ? a : b; }
 
 #ifdef PYCLRAY_CAST
-/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
+/* The smallest float not below x >= 0 (a box test's limit never cuts below the nearest hit): f
+ * rounded to nearest, or where that is below x, the next float up, one unit in its bits (f >= 0
+ * and finite there: nextafter(f, inf) without the call into PoCL's library) */
 inline float float_above_wide(const double x)
 {
     const float f = (float)x;
-    return (double)f < x ? nextafter(f, (float)INFINITY) : f;
+    return (double)f < x ? as_float(as_int(f) + 1) : f;
 }
 #endif
 
@@ -82,13 +86,13 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
     const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
     /* max and min by comparison: no NaN reaches here (kernels/bvh.h's box frame) */
-    float8 enter = select(enter_x, enter_y, enter_y > enter_x);
-    enter = select(enter, enter_z, enter_z > enter);
-    enter = select(enter, (float8)(0.0f), enter < (float8)(0.0f));
-    float8 leave = select(leave_x, leave_y, leave_y < leave_x);
-    leave = select(leave, leave_z, leave_z < leave);
-    leave = select(leave, (float8)(limit), (float8)(limit) < leave) * BVH_GAMMA3_2;
-    return select((float8)(INFINITY), enter, enter <= leave);
+    float8 enter = enter_y > enter_x ? enter_y : enter_x;
+    enter = enter_z > enter ? enter_z : enter;
+    enter = enter < (float8)(0.0f) ? (float8)(0.0f) : enter;
+    float8 leave = leave_y < leave_x ? leave_y : leave_x;
+    leave = leave_z < leave ? leave_z : leave;
+    leave = ((float8)(limit) < leave ? (float8)(limit) : leave) * BVH_GAMMA3_2;
+    return enter <= leave ? enter : (float8)(INFINITY);
 }
 
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
@@ -111,11 +115,11 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
                 for (int q = first; q < first + count; ++q) { VISIT(q) }                \
                 continue;                                                               \
             }                                                                           \
-            float entries[8];                                                           \
-            vstore8(wide_entries(&nodes[code], &box, limit), 0, entries);               \
+            union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
+            entries.v = wide_entries(&nodes[code], &box, limit);                        \
             const int bottom = top;                                                     \
             for (int slot = 0; slot < 8; ++slot) {                                      \
-                const float entry = entries[slot];                                      \
+                const float entry = entries.a[slot];                                    \
                 if (entry < INFINITY) {                                                 \
                     /* insert among this node's pushed children, farthest deepest */    \
                     const int child = nodes[code].child[slot];                          \

@@ -469,9 +469,9 @@ inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v
  * bit), so that neither a tiny nor a huge finite direction under- or overflows in the length */
 inline double3 unit_direction(const double3 d)
 {
-    const double3 size = select(d, -d, d < (double3)(0.0));
+    const double3 size = d < (double3)(0.0) ? -d : d;
     const double3 scaled = d / (size.x > size.y ? (size.x > size.z ? size.x : size.z) : (size.y > size.z ? size.y : size.z));
-    return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
+    return scaled / CAST_SQRT((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
 /* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
@@ -484,7 +484,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 {
     const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
-    const double size = (fabs(F.x) + fabs(F.y)) + fabs(F.z);
+    const double size = (CAST_FABS(F.x) + CAST_FABS(F.y)) + CAST_FABS(F.z);
     const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w - 0x1p-50 * size;
     *s0 = along > 0 ? along : 0;
     const double3 G = F - *s0 * D;
@@ -499,8 +499,8 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
  * origin for every ray where origin_stride is 0), its direction made unit */
 #define PYCLRAY_CAST_RAY                                                            \
     RayPacket ray;                                                                  \
-    ray.world = vload3(i * origin_stride, origins);                                 \
-    ray.dir_exact = unit_direction(vload3(i, directions));                          \
+    ray.world = load_double3(origins, i * origin_stride);                           \
+    ray.dir_exact = unit_direction(load_double3(directions, i));                    \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
@@ -511,7 +511,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_BOX                                                            \
     const double3 from_anchor = ray.world - scene_anchor.xyz;                       \
     const float3 o = convert_float3(from_anchor);                                   \
-    const float3 size = select(o, -o, o < (float3)(0.0f));                          \
+    const float3 size = o < (float3)(0.0f) ? -o : o;                                \
     const float margin = 0x1p-20f * ((size.x + size.y) + size.z);                   \
     const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
 
@@ -519,8 +519,8 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
  * or a scene that large (scene_anchor.w != 0), would overflow them; such a ray tests every bounded
  * shape instead, one after the other (exactly as through the BVH, only slower). */
 #define PYCLRAY_CAST_BOUNDED(VISIT)                                                 \
-    if (scene_anchor.w != 0 || !(fabs(from_anchor.x) < 0x1p100 && fabs(from_anchor.y) < 0x1p100 \
-                                  && fabs(from_anchor.z) < 0x1p100)) {              \
+    if (scene_anchor.w != 0 || !(CAST_FABS(from_anchor.x) < 0x1p100 && CAST_FABS(from_anchor.y) < 0x1p100 \
+                                  && CAST_FABS(from_anchor.z) < 0x1p100)) {         \
         int n_bounded = 0;                                                          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_COUNT)                                         \
         for (int q = 0; q < n_bounded; ++q) { VISIT(q) }                            \
@@ -562,7 +562,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int i, const int r, __global cons
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
-    double best = nextafter(t_max, (double)INFINITY);
+    double best = t_max < INFINITY ? as_double(as_long(t_max) + 1) : t_max;  /* nextafter up, t_max > 0 */
     int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
     PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
 #ifdef PYCLRAY_HAS_BOUNDED
