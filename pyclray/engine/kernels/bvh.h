@@ -96,7 +96,9 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
 }
 
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
- * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf. The stack holds
+ * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf, after
+ * PYCLRAY_LEAF_PREFETCH(first, count) (defined by the kernel: its shapes' entries asked for from
+ * memory at once, rather than one miss after the other). The stack holds
  * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
  * go on it farthest first, so that the nearest is visited next. */
 #define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
@@ -112,6 +114,7 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
+                PYCLRAY_LEAF_PREFETCH(first, count)                                     \
                 for (int q = first; q < first + count; ++q) { VISIT(q) }                \
                 continue;                                                               \
             }                                                                           \

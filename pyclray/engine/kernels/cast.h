@@ -21,6 +21,13 @@
 #define CAST_FABS(x) fabs(x)
 #define CAST_SQRT(x) sqrt(x)
 #endif
+/* a hint that the bytes [p, p + size) will be read soon (nothing where the compiler has no prefetch) */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define CAST_PREFETCH(p, size)                                                                   \
+    for (int byte = 0; byte < (size); byte += 64) __builtin_prefetch((__global const char*)(p) + byte);
+#else
+#define CAST_PREFETCH(p, size) {}
+#endif
 inline double3 load_double3(__global const double* p, const int i)
 {
     p += 3 * (size_t)i;
