@@ -95,6 +95,20 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     return enter <= leave ? enter : (float8)(INFINITY);
 }
 
+/* the index of the lowest set bit of a non-zero mask (ctz: OpenCL 2.0's, or a call into PoCL's
+ * library: clang's own on PoCL's CPU device, else from clz, which OpenCL 1.2 has) */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define BVH_LOWEST_BIT(mask) __builtin_ctz(mask)
+#else
+#define BVH_LOWEST_BIT(mask) (31 - clz((mask) & -(mask)))
+#endif
+/* cast visits the nearest child first (its limit falls with each hit); occluded stops at any hit */
+#ifdef PYCLRAY_OCCLUDED
+#define BVH_NEAREST_FIRST 0
+#else
+#define BVH_NEAREST_FIRST 1
+#endif
+
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
  * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf, after
  * PYCLRAY_LEAF_PREFETCH(first, count) (defined by the kernel: its shapes' entries asked for from
@@ -121,20 +135,24 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
             union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
             entries.v = wide_entries(&nodes[code], &box, limit);                        \
             const int bottom = top;                                                     \
-            for (int slot = 0; slot < 8; ++slot) {                                      \
+            /* the children entered, as the bits of a mask (no branch per empty slot) */  \
+            const int8 entered = (entries.v < (float8)(INFINITY)) & (int8)(1, 2, 4, 8, 16, 32, 64, 128); \
+            const int4 entered4 = entered.lo | entered.hi;                              \
+            const int2 entered2 = entered4.lo | entered4.hi;                            \
+            for (int mask = entered2.x | entered2.y; mask != 0; mask &= mask - 1) {     \
+                const int slot = BVH_LOWEST_BIT(mask);                                  \
                 const float entry = entries.a[slot];                                    \
-                if (entry < INFINITY) {                                                 \
-                    /* insert among this node's pushed children, farthest deepest */    \
-                    const int child = nodes[code].child[slot];                          \
-                    int at = top++;                                                     \
-                    while (at > bottom && stack_entry[at - 1] < entry) {                \
-                        stack_entry[at] = stack_entry[at - 1];                          \
-                        stack_child[at] = stack_child[at - 1];                          \
-                        --at;                                                           \
-                    }                                                                   \
-                    stack_entry[at] = entry;                                            \
-                    stack_child[at] = child;                                            \
+                const int child = nodes[code].child[slot];                              \
+                /* insert among this node's pushed children, farthest deepest (any order \
+                 * for an any-hit query) */                                             \
+                int at = top++;                                                         \
+                while (BVH_NEAREST_FIRST && at > bottom && stack_entry[at - 1] < entry) { \
+                    stack_entry[at] = stack_entry[at - 1];                              \
+                    stack_child[at] = stack_child[at - 1];                              \
+                    --at;                                                               \
                 }                                                                       \
+                stack_entry[at] = entry;                                                \
+                stack_child[at] = child;                                                \
             }                                                                           \
         }                                                                               \
     }
