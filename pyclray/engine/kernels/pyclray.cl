@@ -507,7 +507,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_LEAF_PREFETCH(first, count)                                         \
     {                                                                               \
         CAST_PREFETCH(&anchors[first], (count) * sizeof(double4))                   \
-        const int leaf_kind = refs[first] & 7, leaf_k = refs[first] >> 3;           \
+        const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
