@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for
+from pyclray.engine.device import context_for, has_fp64
 from pyclray.engine.prepared import prepared_scene
 from pyclray.engine.programs import Variant
 from pyclray.model.lights import DirectionalLight, PointLight, Shading
@@ -58,7 +58,8 @@ def test_geometric_images_and_the_ground_stay_as_flat():
     assert ground.sum() > 1000 and np.array_equal(smooth["shaded"][ground], flat["shaded"][ground])
 
 
-def test_given_normals_light_the_mesh():
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_given_normals_light_the_mesh(precision):
     """A grid facing the camera with one given normal n0 at every vertex, under a directional light:
     every mesh pixel is albedo E max(0, n0.L) (the interpolation of equal unit normals is n0), which a
     geometric normal (0, 0, 1) would not give."""
@@ -70,11 +71,14 @@ def test_given_normals_light_the_mesh():
     light = DirectionalLight(direction=(-1.0, 0.0, -1.0), irradiance=(2.0, 2.0, 2.0))
     scene = pyclray.Scene(pyclray.Camera((0, 0, 5), (0, 0, 0)), pyclray.Image(32, 24), (mesh,), lights=(light,),
                           shading=Shading(ambient=(0, 0, 0), shadows=False))
-    frame = pyclray.render(scene, aovs=("id", "shaded"))
+    if precision == "fp64" and not has_fp64(context_for().device):
+        pytest.skip("device lacks cl_khr_fp64")
+    frame = pyclray.render(scene, aovs=("id", "shaded"), precision=precision)
     expected = 0.5 * 2.0 * float(n0 @ light.toward_light())
     hit = frame["id"] == 0
     assert hit.sum() > 100
-    np.testing.assert_allclose(frame["shaded"][hit], expected, rtol=1e-5)
+    # the interpolation, normalization and dot: a few roundings of the precision's unit
+    np.testing.assert_allclose(frame["shaded"][hit], expected, rtol={"fp32": 1e-5, "fp64": 1e-12}[precision])
 
 
 def test_smooth_is_compiled_in_only_with_a_smooth_mesh_and_shading():
