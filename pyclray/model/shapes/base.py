@@ -14,7 +14,11 @@ type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 - the error model (pyclray.reference.error_model): ``anchor`` (the point its coordinates are measured from)
   and ``curvature_radius`` (how a position error turns the normal);
 - Mitsuba 3 (pyclray.mitsuba): ``mitsuba_shapes`` (its counterpart, one or more Mitsuba shapes that
-  all map back to this shape's id) and ``mitsuba_covers`` (where that counterpart ends).
+  all map back to this shape's id) and ``mitsuba_covers`` (where that counterpart ends);
+- optional: ``silhouette_radius`` (the silhouette rule's radius: inf for flat pieces),
+  ``oracle_primitives`` (primitives of many), ``leaf_size`` (entries per BVH leaf), and for shapes
+  lit by their own normals ``smooth_struct``, ``pack_smooth``, ``oracle_shading_normal`` and
+  ``<type>_shading_normal`` in the kernel file (a smooth mesh).
 """
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from . import mesh_io
 from .mesh_keys import _ready, faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import rotation
-from .mesh_oracle import Hierarchy
+from .mesh_oracle import Hierarchy, barycentrics
 
 FIXED = {"animatable": False}
 PLACEMENT = ("scale", "axis", "angle", "translate")
@@ -335,14 +335,7 @@ class Mesh(Shape):
             return normals
         points = np.asarray(points, np.float64).reshape(-1, 3)
         _, which, _ = self._hierarchy().nearest(points)
-        a, b, c = (x[which] for x in self.corners())
-        # (u, v) of the point's projection onto the triangle's plane: the 2x2 normal equations
-        e1, e2, f = b - a, c - a, points - a
-        d11, d12, d22 = (np.einsum("ij,ij->i", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
-        f1, f2 = np.einsum("ij,ij->i", f, e1), np.einsum("ij,ij->i", f, e2)
-        det = d11 * d22 - d12 * d12
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u, v = (d22 * f1 - d12 * f2) / det, (d11 * f2 - d12 * f1) / det
+        u, v = barycentrics(points, *(x[which] for x in self.corners()))
         vertex = self.vertex_normals()[self.faces[which]]  # (N, 3 corners, 3)
         n = (1 - u - v)[:, None] * vertex[:, 0] + u[:, None] * vertex[:, 1] + v[:, None] * vertex[:, 2]
         length = np.linalg.norm(n, axis=1, keepdims=True)

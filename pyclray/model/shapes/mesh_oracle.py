@@ -127,6 +127,17 @@ class Hierarchy:
         return out
 
 
+def barycentrics(points, a, b, c):
+    """(u, v) per row of the points' projections onto their triangles' planes, p = a + u (b - a)
+    + v (c - a) (the 2x2 normal equations, float64; nan for a zero-area triangle)."""
+    e1, e2, f = b - a, c - a, points - a
+    d11, d12, d22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    f1, f2 = _dot(f, e1), _dot(f, e2)
+    det = d11 * d22 - d12 * d12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (d22 * f1 - d12 * f2) / det, (d11 * f2 - d12 * f1) / det
+
+
 def _cross(x, y):
     return np.stack([x[:, 1] * y[:, 2] - x[:, 2] * y[:, 1], x[:, 2] * y[:, 0] - x[:, 0] * y[:, 2],
                      x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]], axis=1)
