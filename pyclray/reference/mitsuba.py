@@ -74,7 +74,8 @@ def _is_mesh(value) -> bool:
 
 def _mesh(mi, value: dict, name: str):
     """An mi.Mesh of a dict of type 'mesh' with numpy arrays vertex_positions (V, 3) and faces (F, 3)
-    (Mitsuba's float32 positions, face normals, or vertex_normals (V, 3) where given; its id is name) and its 'bsdf', if any, as a dict."""
+    (Mitsuba's float32 positions; face normals, or vertex_normals (V, 3) where given; its id is name)
+    and its 'bsdf', if any, as a dict."""
     positions, faces = value["vertex_positions"], np.asarray(value["faces"])
     props = mi.Properties()
     if "bsdf" in value:
