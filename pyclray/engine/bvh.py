@@ -42,6 +42,10 @@ NODE = Struct(
 )
 _FLOAT_MAX = float(np.finfo(np.float32).max)
 BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK: the deepest binary tree the kernels traverse
+# The SAH tree's levels at most: a wide level takes at least one binary level, and the wide
+# traversal's stack holds 7 entries a level (bvh_wide.STACK = 256 >= 7 * 36 + 1)
+MAX_SAH_DEPTH = 36
+SAH_FROM = 16_384  # shapes from which build() takes the binned SAH (bvh_sah): see the docstring
 
 
 @dataclass(frozen=True)
@@ -176,14 +180,23 @@ def _radix_tree(keys: np.ndarray):
     return np.minimum(i, j), np.maximum(i, j), gamma
 
 
-def build(bounds: np.ndarray, leaf_size: int | None = None) -> BVH:
+def build(bounds: np.ndarray, leaf_size: int | None = None, method: str | None = None) -> BVH:
     """The BVH of shapes with these world bounds ((N, 2, 3) float64: lo, hi per shape), leaves of
-    at most leaf_size (default LEAF_SIZE) shapes."""
+    at most leaf_size (default LEAF_SIZE) shapes. method: "sah" (the binned SAH of bvh_sah),
+    "lbvh" (the Morton LBVH below), or None: the SAH from SAH_FROM shapes on, else the LBVH."""
     leaf_size = LEAF_SIZE if leaf_size is None else leaf_size
     bounds = np.asarray(bounds, np.float64)
     n = len(bounds)
     if n == 0:
         return empty()
+    if method is None:
+        method = "sah" if n >= SAH_FROM else "lbvh"
+    if method == "sah" and n > 1:
+        from . import bvh_sah  # numba: imported for large scenes only (see bvh_sah)
+
+        return BVH(*bvh_sah.build(bounds, leaf_size, MAX_SAH_DEPTH))
+    if method not in ("sah", "lbvh"):
+        raise ValueError(f"BVH build method: expected 'sah' or 'lbvh', got {method!r}")
     order, keys = morton_order(0.5 * (bounds[:, 0] + bounds[:, 1]))
     lo_sorted, hi_sorted = bounds[order, 0], bounds[order, 1]
     if n <= leaf_size:
