@@ -16,10 +16,11 @@ and the rows are float32 boxes relative to the root's centre (24 bytes a primiti
 a node: passes stream memory instead of gathering). They only steer the splits: the final boxes are
 recomputed from the float64 bounds, bottom up, as exact unions.
 
-Threads: the nodes of at least N / TASKS primitives are split first, on one thread; the subtrees
-below them are then built on all cores (numba's nogil: Python threads run them at once), each
-numbering its nodes in a range of its own (2 per primitive from twice its first primitive: a
-binary tree over m primitives has fewer than 2 m nodes); the unused numbers are squeezed out after.
+Threads: a node of at least N / (8 threads) primitives is split on its own and its two children
+handed on to a pool of threads (numba's nogil: they run at once); a smaller one is built whole by
+the thread that takes it. Every node's number follows from the splits above it (see _grow), so the
+tree is the same whatever the number of threads; the numbers left unused (a leaf of several
+primitives leaves a gap) are squeezed out after.
 
 Depth: the kernels' stacks bound the tree's depth (bvh.MAX_SAH_DEPTH). A node at level d with m
 primitives keeps d + ceil(log2 m) <= max_depth; a split whose larger side would break that for a
@@ -29,17 +30,17 @@ which always keeps it: pathological inputs end in balanced subtrees instead of a
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numba
 import numpy as np
 
 BINS = 32
-TASKS = 32  # subtrees handed to the threads, about: enough to balance two to sixteen cores
 _STACK = 256  # pending nodes: one per level of the tree (right siblings) at most, with margin
 _BIG = np.float32(3.4e38)
-# a pending node: range start, end, node number, level; and its box and centroid box (float32)
-_INTS, _GEOMETRY = 4, 12
+# a pending node: range start, end, node number, level, the first number of its descendants' range;
+# and its box and centroid box (float32)
+_INTS, _GEOMETRY = 5, 12
 
 
 @numba.njit(cache=True, inline="always")
@@ -70,6 +71,19 @@ def _empty_box(geometry):
 
 
 @numba.njit(cache=True, nogil=True)
+def _extent(bounds):
+    """The (2, 3) box of all the bounds (numpy's min and max over the strided (N, 2, 3) array
+    cost ten times as much)."""
+    box = np.empty((2, 3))
+    box[0], box[1] = np.inf, -np.inf
+    for i in range(bounds.shape[0]):
+        for a in range(3):
+            box[0, a] = min(box[0, a], bounds[i, 0, a])
+            box[1, a] = max(box[1, a], bounds[i, 1, a])
+    return box
+
+
+@numba.njit(cache=True, nogil=True)
 def _rows(bounds, centre, unit, rows):
     """rows[i] = (bounds[i] - centre) * unit in float32, kept within +-1e30 (no inf in a sum)."""
     for i in range(bounds.shape[0]):
@@ -92,12 +106,15 @@ def _root(rows, geometry):
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow(rows, index, first, count, start, geometry, next_node, leaf_size, bins, max_depth, task_from,
-          tasks, task_geometry):
-    """Build the subtree of the node start = (s, e, node, level) with geometry (its box, its
-    centroid box), numbering new nodes from next_node; a child of fewer than task_from primitives
-    (0: none) is not built but appended to tasks (its start and geometry). Returns (the next free
-    node number, the number of tasks)."""
+def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth, task_from, tasks, task_geometry):
+    """Build the subtree of the node start = (s, e, node, level, r) with geometry (its box, its
+    centroid box); a child of fewer than task_from primitives (0: none) is not built but appended to
+    tasks (its start and geometry). Returns the number of tasks.
+
+    Numbers: a node over m primitives has at most 2 m - 2 descendants, numbered from its r: its
+    children r and r + 1, the left one's descendants from r + 2 (2 m_left - 2 of them at most),
+    the right one's from r + 2 m_left. The numbers depend on the splits only, not on which thread
+    builds which subtree: any number of threads builds the same tree."""
     stack = np.empty((_STACK, _INTS), np.int64)
     stack_geometry = np.empty((_STACK, _GEOMETRY), np.float32)
     bin_n = np.empty((3, bins), np.int64)
@@ -108,12 +125,13 @@ def _grow(rows, index, first, count, start, geometry, next_node, leaf_size, bins
     g = np.empty(_GEOMETRY, np.float32)  # the node's (its stack slot is the first child's)
     left = np.empty(_GEOMETRY, np.float32)
     right = np.empty(_GEOMETRY, np.float32)
+    sides = np.empty((2, 6), np.float32)  # the partition's left and right centroid boxes
     stack[0] = start
     stack_geometry[0] = geometry
     top, found = 1, 0
     while top > 0:
         top -= 1
-        s, e, node, level = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
+        s, e, node, level, r = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4]
         g[:] = stack_geometry[top]
         m = e - s
         if m == 1:
@@ -194,50 +212,48 @@ def _grow(rows, index, first, count, start, geometry, next_node, leaf_size, bins
                     side[a + 6] = min(side[a + 6], c)
                     side[a + 9] = max(side[a + 9], c)
         else:
-            # partition in place (bins 0..best_k to the left), each side's centroid box on the way
+            # partition in place (bins 0..best_k to the left), each side's centroid box on the way:
+            # every row is swapped to the end of the left side and that end moves by one where the
+            # row belongs there (no branch on the side: it is a coin toss per row, and mispredicted
+            # branches cost 2.5 times as much as the swaps)
             a = best_axis
-            i, j = s, e - 1
-            while True:
-                while i <= j:
-                    cx, cy, cz = rows[i, 0] + rows[i, 3], rows[i, 1] + rows[i, 4], rows[i, 2] + rows[i, 5]
-                    if _bin(rows[i, a] + rows[i, a + 3], g[a + 6], scale[a], nb) > best_k:
-                        break
-                    left[6], left[7], left[8] = min(left[6], cx), min(left[7], cy), min(left[8], cz)
-                    left[9], left[10], left[11] = max(left[9], cx), max(left[10], cy), max(left[11], cz)
-                    i += 1
-                while i <= j:
-                    cx, cy, cz = rows[j, 0] + rows[j, 3], rows[j, 1] + rows[j, 4], rows[j, 2] + rows[j, 5]
-                    if _bin(rows[j, a] + rows[j, a + 3], g[a + 6], scale[a], nb) <= best_k:
-                        break
-                    right[6], right[7], right[8] = min(right[6], cx), min(right[7], cy), min(right[8], cz)
-                    right[9], right[10], right[11] = max(right[9], cx), max(right[10], cy), max(right[11], cz)
-                    j -= 1
-                if i > j:
-                    break
-                for c in range(6):  # rows[i] belongs right, rows[j] left: the next scans take them
-                    rows[i, c], rows[j, c] = rows[j, c], rows[i, c]
-                index[i], index[j] = index[j], index[i]
-            mid = i
+            sides[:, 0:3] = _BIG
+            sides[:, 3:6] = -_BIG
+            mid = s
+            for i in range(s, e):
+                is_left = _bin(rows[i, a] + rows[i, a + 3], g[a + 6], scale[a], nb) <= best_k
+                side = 0 if is_left else 1
+                for c in range(3):
+                    centroid = rows[i, c] + rows[i, c + 3]
+                    sides[side, c] = min(sides[side, c], centroid)
+                    sides[side, c + 3] = max(sides[side, c + 3], centroid)
+                for c in range(6):
+                    rows[i, c], rows[mid, c] = rows[mid, c], rows[i, c]
+                index[i], index[mid] = index[mid], index[i]
+                mid += 1 if is_left else 0
+            left[6:12] = sides[0]
+            right[6:12] = sides[1]
             # each side's box: the union of its bins
             for k in range(nb):
                 side = left if k <= best_k else right
                 for c in range(3):
                     side[c] = min(side[c], bin_box[a, k, c])
                     side[c + 3] = max(side[c + 3], bin_box[a, k, c + 3])
-        first[node], count[node] = next_node, 0
+        first[node], count[node] = r, 0
         for child in range(2):  # the right child first on the stack: the left one is built next
             cs, ce = (mid, e) if child == 0 else (s, mid)
-            number = next_node + 1 - child
+            number, descendants = (r + 1, r + 2 * (mid - s)) if child == 0 else (r, r + 2)
             if ce - cs < task_from:
-                tasks[found, 0], tasks[found, 1], tasks[found, 2], tasks[found, 3] = cs, ce, number, level + 1
+                tasks[found, 0], tasks[found, 1], tasks[found, 2] = cs, ce, number
+                tasks[found, 3], tasks[found, 4] = level + 1, descendants
                 task_geometry[found] = right if child == 0 else left
                 found += 1
             else:
-                stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = cs, ce, number, level + 1
+                stack[top, 0], stack[top, 1], stack[top, 2] = cs, ce, number
+                stack[top, 3], stack[top, 4] = level + 1, descendants
                 stack_geometry[top] = right if child == 0 else left
                 top += 1
-        next_node += 2
-    return next_node, found
+    return found
 
 
 @numba.njit(cache=True, nogil=True)
@@ -300,38 +316,39 @@ def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, 
     # the rows: relative to the root box's centre and scaled by a power of two to about unit size
     # (exact in float64, then one rounding to float32), so that far-away or huge scenes bin as well
     # as small ones at the origin
-    low, high = bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)
-    centre = 0.5 * low + 0.5 * high
-    size = float(np.max(high - low))
+    box = _extent(bounds)
+    centre = 0.5 * box[0] + 0.5 * box[1]
+    size = float(np.max(box[1] - box[0]))
     unit = 2.0 ** -np.frexp(size)[1] if 0 < size < np.inf else 1.0
     rows = np.empty((n, 6), np.float32)
     _rows(bounds, centre, unit, rows)
     index = np.arange(n, dtype=np.int64)
-    # node numbers: the top's from 0 (fewer than 2 per task and level), then each subtree's from
-    # top + 2 * (its first primitive)
-    task_from = n // TASKS if threads > 1 else 0
-    most = 2 * (max_depth + 1) * (TASKS + 1)
-    first = np.full(2 * n + 2 * most + 1, -1, np.int32)
-    count = np.full(2 * n + 2 * most + 1, -1, np.int32)
-    geometry = np.empty(_GEOMETRY, np.float32)
-    _root(rows, geometry)
-    tasks = np.empty((most, _INTS), np.int64)
-    task_geometry = np.empty((most, _GEOMETRY), np.float32)
-    top, found = _grow(rows, index, first, count, np.array([0, n, 0, 1]), geometry, 1, leaf_size, bins, max_depth,
-                       task_from, tasks, task_geometry)
-    none = np.empty((0, _INTS), np.int64), np.empty((0, _GEOMETRY), np.float32)
+    first = np.full(max(2 * n - 1, 1), -1, np.int32)
+    count = np.full(max(2 * n - 1, 1), -1, np.int32)
+    root = np.array([0, n, 0, 1, 1]), np.empty(_GEOMETRY, np.float32)
+    _root(rows, root[1])
+    # a node of at least split_alone primitives is split on its own (one pass over its rows) and its
+    # children handed on; smaller ones are built whole, on whichever thread is free
+    split_alone = n // (8 * threads) if threads > 1 else n + 1
 
-    def subtree(t):
-        _grow(rows, index, first, count, tasks[t], task_geometry[t], top + 2 * tasks[t, 0], leaf_size, bins,
-              max_depth, 0, *none)
+    def work(task):
+        """Split or build the node task = (start, geometry); returns the children to hand on."""
+        start, geometry = task
+        m = start[1] - start[0]
+        children = np.empty((2, _INTS), np.int64), np.empty((2, _GEOMETRY), np.float32)
+        found = _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth,
+                      m if m >= split_alone else 0, *children)
+        return [(children[0][k], children[1][k]) for k in range(found)]
 
-    by_size = sorted(range(found), key=lambda t: tasks[t, 0] - tasks[t, 1])  # largest first
-    if threads > 1 and found > 1:
-        with ThreadPoolExecutor(min(threads, found)) as pool:
-            list(pool.map(subtree, by_size))
+    if threads > 1:
+        with ThreadPoolExecutor(threads) as pool:
+            running = {pool.submit(work, root)}
+            while running:
+                done, running = wait(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    running |= {pool.submit(work, child) for child in future.result()}
     else:
-        for t in by_size:
-            subtree(t)
+        work(root)
     nodes = _squeeze(first, count)
     first, count = first[:nodes].copy(), count[:nodes].copy()
     lo = np.empty((nodes, 3))
