@@ -241,6 +241,7 @@ def quality(quick: bool, meshes=()) -> list[str]:
     lines = ["| primitives | N | SAH cost: reference | pyclray (SAH) | ratio | LBVH | ratio | "
              "build ms: pyclray warm | cold | LBVH warm | reference |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    print("\n".join(lines), flush=True)
     for name, make in cases(quick, meshes).items():
         bounds = make()
         start = time.perf_counter()

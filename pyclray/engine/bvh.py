@@ -1,22 +1,32 @@
-"""A bounding volume hierarchy over shapes' world bounds, built in vectorized numpy.
+"""A bounding volume hierarchy over shapes' world bounds: a binned SAH tree for large scenes
+(pyclray.engine.bvh_sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
 
-Construction: a linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees
-and k-d trees", HPG 2012). The shapes are sorted along a Morton curve of their bounds' centres; the
-binary radix tree of the sorted codes is found for every internal node at once (each node's range
-and split by binary searches over the codes, vectorized over all nodes); subtrees of at most
-LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, so that a node's two
-children are adjacent, and bounded bottom-up.
+The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves
+where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is within 2% of a full
+binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.000 on sphere fields, tessellated
+spheres, tori, grids and the Stanford bunny, 1.02 on clustered spheres), where the LBVH's is 5-47%
+above it. Rendered, that is 1.1x (uniform spheres) to 1.3x (clustered) faster traversal, for
+camera packets and single rays alike (bench/bvh_render.py).
 
-Why an LBVH and not a binned SAH (measured by bench/bvh_build.py, both in vectorized numpy, on
-the benchmark's sphere fields): the LBVH builds 100,000 shapes in 0.07 s of CPU time (1,000,000 in
-0.7 s); a level-synchronous binned SAH (16 bins, one sort and reduceat per level) takes 12 times as
-long (1.8 s and 24 s on the same loaded machine, against 0.15 s and 1.9 s for the LBVH there), for a
-tree whose SAH cost is 25% lower. The targets (0.15 s and 1.5 s) leave no room for the SAH.
+The linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees and k-d
+trees", HPG 2012), below SAH_FROM: the shapes are sorted along a Morton curve of their bounds'
+centres; the binary radix tree of the sorted codes is found for every internal node at once (each
+node's range and split by binary searches over the codes, vectorized over all nodes); subtrees of
+at most LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, and bounded bottom-up.
+
+Why two: numba's import and the load of the compiled builder from its disk cache cost a new process
+about 0.4 s, once, where the LBVH of 16,384 shapes takes about 10 ms: a small scene's first render
+(tp02's cold start) never pays it. From SAH_FROM on the better tree pays for it within a few views,
+and from a few hundred thousand shapes on the SAH build is faster than the LBVH's too (measured on
+the loaded 2-core machine, bench/bvh_build.py: 100,000 shapes in 50-80 ms, 1,000,000 in XXX s
+warm, XXX s cold; the LBVH 0.05-0.15 s and 0.7-1.6 s).
 
 Flat layout, ready for a kernel: node k has bounds lo[k], hi[k] (float64 here; the packer rounds
 them outward to the kernel's precision) and two integers: ``first`` and ``count``. count > 0: a
 leaf holding the shapes order[first : first + count]; count == 0: an internal node whose children
-are nodes first and first + 1. Node 0 is the root.
+are nodes first and first + 1, numbered after it. Node 0 is the root. Both builders give their
+nodes exactly the union of their shapes' boxes (float64 min and max); the refit of an animation
+(pyclray.engine.refit) and the wide tree (bvh_wide) read only this layout.
 """
 from __future__ import annotations
 

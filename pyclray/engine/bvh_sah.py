@@ -9,12 +9,13 @@ Each node in turn (depth first, from an explicit stack): one pass over its primi
 boxes by centroid into up to BINS bins along each of the three axes at once (as many bins as
 primitives below BINS: a small node's bins cost more than its primitives); a sweep of each axis'
 bins from both ends gives the SAH cost of every split between bins; the node becomes a leaf where it
-holds at most leaf_size primitives and testing them costs no more than the best split; else a
-second pass partitions its primitives in place by the best split, and finds each side's centroid
-box on the way (a child's box is the union of its side's bins). Two passes over a node's rows then,
-and the rows are float32 boxes relative to the root's centre (24 bytes a primitive, contiguous for
-a node: passes stream memory instead of gathering). They only steer the splits: the final boxes are
-recomputed from the float64 bounds, bottom up, as exact unions.
+holds at most leaf_size primitives and testing them costs no more than the best split (a node's
+visit costing TRAVERSAL primitive tests); else a second pass partitions its primitives in place by
+the best split, and finds each side's centroid box on the way (a child's box is the union of its
+side's bins). Two passes over a node's rows then, and the rows are float32 boxes relative to the
+root's centre (24 bytes a primitive, contiguous for a node: passes stream memory instead of
+gathering). They only steer the splits: the final boxes are recomputed from the float64 bounds,
+bottom up, as exact unions.
 
 Threads: a node of at least N / (8 threads) primitives is split on its own and its two children
 handed on to a pool of threads (numba's nogil: they run at once); a smaller one is built whole by
@@ -36,6 +37,12 @@ import numba
 import numpy as np
 
 BINS = 32
+# The SAH's cost of visiting a node, relative to a primitive's test. 1 (bvh.sah_cost's) makes leaves
+# of 1.4 primitives on average, 1.1 to 1.4 nodes a primitive: twice the LBVH's memory (nodes are 32
+# bytes on the device, 64 more as float64 world corners). 2 makes 0.7 to 0.8 nodes a primitive, as
+# the LBVH, for an SAH cost (counted with 1) 2-6% above the tree built with 1 (bench/bvh_build.py);
+# render times differed by less than the noise of the shared machine.
+TRAVERSAL = 2.0
 _STACK = 256  # pending nodes: one per level of the tree (right siblings) at most, with margin
 _BIG = np.float32(3.4e38)
 # a pending node: range start, end, node number, level, the first number of its descendants' range;
@@ -106,7 +113,8 @@ def _root(rows, geometry):
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth, task_from, tasks, task_geometry):
+def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth, traversal, task_from, tasks,
+          task_geometry):
     """Build the subtree of the node start = (s, e, node, level, r) with geometry (its box, its
     centroid box); a child of fewer than task_from primitives (0: none) is not built but appended to
     tasks (its start and geometry). Returns the number of tasks.
@@ -184,8 +192,8 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
                 if cost < best_cost:
                     best_cost, best_axis, best_k, best_left = cost, a, k, total
         # a leaf where it is small enough and testing its primitives costs no more than a split
-        # (SAH with traversal and intersection costs 1: bvh.sah_cost's)
-        split_cost = 1.0 + best_cost / area if area > 0 else np.inf
+        # (SAH: a primitive test costs 1, a node's traversal costs traversal)
+        split_cost = traversal + best_cost / area if area > 0 else np.inf
         if m <= leaf_size and (best_axis < 0 or m <= split_cost):
             first[node], count[node] = s, m
             continue
@@ -308,7 +316,8 @@ def _threads() -> int:
         return max(os.cpu_count() or 1, 1)
 
 
-def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, threads: int | None = None):
+def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, threads: int | None = None,
+          traversal: float = TRAVERSAL):
     """(lo, hi, first, count, order) of the binned SAH tree over these (N, 2, 3) float64 bounds
     (N >= 2), in bvh.BVH's layout."""
     n = len(bounds)
@@ -336,7 +345,7 @@ def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, 
         start, geometry = task
         m = start[1] - start[0]
         children = np.empty((2, _INTS), np.int64), np.empty((2, _GEOMETRY), np.float32)
-        found = _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth,
+        found = _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth, traversal,
                       m if m >= split_alone else 0, *children)
         return [(children[0][k], children[1][k]) for k in range(found)]
 
