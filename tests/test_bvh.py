@@ -114,6 +114,18 @@ def test_the_reference_build_is_a_valid_tree():
     check_structure(reference_sah()(bounds), bounds)
 
 
+def test_the_sah_tree_is_the_same_whatever_the_threads():
+    """Node numbers follow from the splits alone (bvh_sah._grow), not from which thread built what:
+    one, two or three threads build the same arrays, bit for bit, and a valid tree."""
+    from pyclray.engine import bvh_sah
+
+    bounds = random_bounds(8, 30000)
+    trees = [bvh_sah.build(bounds, bvh.LEAF_SIZE, bvh.MAX_SAH_DEPTH, threads=t) for t in (1, 2, 3)]
+    check_structure(bvh.BVH(*trees[0]), bounds)
+    for other in trees[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(trees[0], other))
+
+
 def test_far_away_scenes_get_as_good_a_tree():
     """The SAH's binning works relative to the scene's centre, scaled to its size: a torus moved to
     1e7 gets a tree of the same cost as at the origin (float32 at 1e7 alone would merge its

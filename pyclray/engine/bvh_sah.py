@@ -43,6 +43,7 @@ BINS = 32
 # the LBVH, for an SAH cost (counted with 1) 2-6% above the tree built with 1 (bench/bvh_build.py);
 # render times differed by less than the noise of the shared machine.
 TRAVERSAL = 2.0
+SPLIT_ALONE_MIN = 4096
 _STACK = 256  # pending nodes: one per level of the tree (right siblings) at most, with margin
 _BIG = np.float32(3.4e38)
 # a pending node: range start, end, node number, level, the first number of its descendants' range;
@@ -320,6 +321,7 @@ def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, 
           traversal: float = TRAVERSAL):
     """(lo, hi, first, count, order) of the binned SAH tree over these (N, 2, 3) float64 bounds
     (N >= 2), in bvh.BVH's layout."""
+    bounds = np.ascontiguousarray(bounds, np.float64)  # one layout: one compiled version, cached once
     n = len(bounds)
     threads = _threads() if threads is None else threads
     # the rows: relative to the root box's centre and scaled by a power of two to about unit size
@@ -337,8 +339,9 @@ def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, 
     root = np.array([0, n, 0, 1, 1]), np.empty(_GEOMETRY, np.float32)
     _root(rows, root[1])
     # a node of at least split_alone primitives is split on its own (one pass over its rows) and its
-    # children handed on; smaller ones are built whole, on whichever thread is free
-    split_alone = n // (8 * threads) if threads > 1 else n + 1
+    # children handed on; smaller ones are built whole, on whichever thread is free (a task costs
+    # the pool some 50 us: none of fewer than SPLIT_ALONE_MIN primitives is handed on)
+    split_alone = max(n // (8 * threads), SPLIT_ALONE_MIN) if threads > 1 else n + 1
 
     def work(task):
         """Split or build the node task = (start, geometry); returns the children to hand on."""
