@@ -16,7 +16,7 @@ import pytest
 
 import pyclray
 from pyclray import SceneError
-from pyclray.engine.shading import shape_extent
+from pyclray.engine.shading import shadow_reach
 from pyclray.reference import error_model, oracle, shading
 from pyclray.engine.programs import Variant
 from pyclray.model.lights import DirectionalLight, Material, PointLight, Shading
@@ -28,13 +28,12 @@ EPS = {"fp32": 2.0**-24, "fp64": 2.0**-53}
 
 def reference(scene, precision="fp32"):
     """The float64 hits, visibility per light and its shadow edges: where the float64 visibility
-    changes when the hit point moves by 4 times the kernel's shadow-ray offset, 16 eps (|p| + R)
-    (kernels/shading.h; |p| from the eye, R the hit shape's extent)."""
+    changes when the hit point moves by 4 times how far the kernel's shadow ray may start from it,
+    16 eps |p| (engine.shading.shadow_reach; |p| from the eye, whatever the shape's size)."""
     ref = error_model.reference(scene)
     O, D = ref["origins"], ref["directions"]
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
-    extent = np.array([shape_extent(s) for s in scene.shapes])[np.maximum(ref["id"], 0)]
-    blur = 4 * 16 * EPS[precision] * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
+    blur = 4 * shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPS[precision])
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
     ref["visibility"], ref["shadow_edge"] = V, np.any(edges, axis=0)
     return ref
@@ -385,3 +384,23 @@ def test_shadows_of_many_spheres_through_the_bvh():
     through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh")["shaded"]
     np.testing.assert_array_equal(tiles, through_bvh)
     assert (tiles == 0).all(axis=-1).mean() > 0.05  # shadows there are
+
+
+def test_the_srgb_preview_of_float32_is_the_formulas_bit_for_bit():
+    """io/png.py looks float32 up in tables (pyclray view's frames): the same levels as the float64
+    formula on both sides of every step, on random values in and around [0, 1], and the specials."""
+    from pyclray.io import png
+
+    _, _, thr = png._srgb_tables()
+    steps = thr[np.isfinite(thr)].view(np.uint32).astype(np.int64)
+    assert len(steps) == 255  # one per level
+    near = (steps[:, None] + np.arange(-3, 4)).astype(np.uint32).view(np.float32).ravel()
+    rng = np.random.default_rng(24)
+    values = np.concatenate([near, rng.integers(0, 0x3F800001, 2_000_000, dtype=np.uint32).view(np.float32),
+                             rng.uniform(-0.5, 1.5, 1_000_000).astype(np.float32),
+                             np.array([np.nan, -np.nan, np.inf, -np.inf, 0.0, -0.0, 1.0, 2.0, 3e38, -1e-45, 1e-45,
+                                       0.0031308, np.float32(0.0031308) * 1.0000001], np.float32)])
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(png.srgb_preview(values), png._srgb_levels(values))
+    image = rng.uniform(0, 1, (7, 5, 3)).astype(np.float32)[:, ::2]  # not contiguous
+    assert np.array_equal(png.srgb_preview(image), png._srgb_levels(image))

@@ -96,6 +96,8 @@ class Variant:
         bounded = self.bounded_types()
         lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
         lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        # the types whose kernel file has <type>_barycentric (the barycentric image; 0, 0 for the others)
+        lines.append(f"#define PYCLRAY_BARYCENTRIC_TYPES(X) {listed(t for t in self.shape_types if REGISTRY[t].barycentric)}")
         lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
         if bounded:
             lines.append("#define PYCLRAY_HAS_BOUNDED 1")
@@ -132,9 +134,12 @@ class Variant:
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else []))
+        cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
+        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast else [])
+                          + (list(SHADING_STRUCTS) if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read("camera.h"), _read("bvh.h")] + [_read(name) for name in _kernel_files(shapes)]
+        parts += [_read("camera.h"), _read("bvh.h")] + ([_read("cast.h")] if cast else [])
+        parts += [_read(name) for name in _kernel_files(shapes)]
         if shading:  # materials, lights and shadows: only in the programs that shade
             parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels

@@ -103,13 +103,13 @@ _checked = PerObject(16)
 
 
 def check_entry_count(prepared: PreparedScene) -> None:
-    """Refuse more entries of one type than the kernels can index (8 x index + type in 32 bits)."""
+    """Refuse more entries of one type than the kernels can index (16 x index + type in 32 bits)."""
     from ..model import scene as scene_model
 
     for kind in prepared.kinds.values():
         if kind.count > scene_model.MAX_SHAPES:
             raise SceneError(f"{kind.count} {kind.name} primitives; pyclray renders at most {scene_model.MAX_SHAPES} of a "
-                             "type (the kernels index one by 8 x its position + its type in 32 bits)")
+                             "type (the kernels index one by 16 x its position + its type in 32 bits)")
 
 
 def check_renderable_once(scene: Scene, precision: str, prepared: PreparedScene) -> None:
@@ -139,7 +139,8 @@ class ViewInputs:
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
         plane = scene.camera.image_plane(width, height)
-        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision))
+        self.anchor = prepared.anchor
+        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - self.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
@@ -185,6 +186,6 @@ def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
     per_scene = _views.get(scene, dict)
     key = (ctx.device.int_ptr, precision, acceleration)
     inputs = per_scene.get(key)
-    if inputs is None:
+    if inputs is None or not np.array_equal(inputs.anchor, prepared.anchor):  # a scene rebuilt: its own anchor
         inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)
     return prepared, inputs

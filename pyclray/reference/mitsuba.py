@@ -31,7 +31,7 @@ from ..model.scene import Scene
 from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
 DEFAULT_VARIANT = "scalar_rgb"
-AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index"
+AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index,pi:prim_index"
 
 
 def import_mitsuba(variant: str = DEFAULT_VARIANT):
@@ -68,8 +68,37 @@ def pyclray_id(mitsuba_id: str) -> int:
     return int(mitsuba_id.removeprefix("shape_").split("_")[0])
 
 
-def _mitsuba_values(mi, value):
-    """A shape dict's values for Mitsuba: 4x4 numpy matrices become ScalarTransform4f."""
+def _is_mesh(value) -> bool:
+    return isinstance(value, dict) and value.get("type") == "mesh" and isinstance(value.get("vertex_positions"), np.ndarray)
+
+
+def _mesh(mi, value: dict, name: str):
+    """An mi.Mesh of a dict of type 'mesh' with numpy arrays vertex_positions (V, 3) and faces (F, 3)
+    (Mitsuba's float32 positions, face normals; its id is name) and its 'bsdf', if any, as a dict."""
+    positions, faces = value["vertex_positions"], np.asarray(value["faces"])
+    props = mi.Properties()
+    if "bsdf" in value:
+        props["bsdf"] = mi.load_dict(value["bsdf"])
+    mesh = mi.Mesh(name, len(positions), len(faces), props=props, has_vertex_normals=False, has_vertex_texcoords=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1)
+    params["faces"] = np.ascontiguousarray(faces, np.uint32).reshape(-1)
+    params.update()
+    return mesh
+
+
+def load_dict(mi, description: dict):
+    """mi.load_dict of a scene_dict (its shapes kept in order), the meshes made mi.Mesh objects there:
+    after the caller has added what it needs to their dicts (a BSDF)."""
+    ready = {key: _mesh(mi, value, key) if _is_mesh(value) else value for key, value in description.items()}
+    return mi.load_dict(ready, optimize=False)
+
+
+def _mitsuba_values(mi, value, name: str = "shape"):
+    """A shape dict's values for Mitsuba: 4x4 numpy matrices become ScalarTransform4f; a mesh's dict
+    stays a dict (load_dict makes it an mi.Mesh)."""
+    if _is_mesh(value):
+        return value
     if isinstance(value, np.ndarray) and value.shape == (4, 4):
         return mi.ScalarTransform4f(value.tolist())
     if isinstance(value, dict):
@@ -137,14 +166,14 @@ def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPE
     }
     for index, shape in enumerate(scene.shapes):
         for part, counterpart in enumerate(shape.mitsuba_shapes(scene)):
-            out[shape_key(index, part)] = _mitsuba_values(mi, counterpart)
+            out[shape_key(index, part)] = _mitsuba_values(mi, counterpart, shape_key(index, part))
     return out
 
 
 def load(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC):
     """(Mitsuba scene, {Mitsuba shape_index value: pyclray id})."""
     mi = import_mitsuba(variant)
-    mi_scene = mi.load_dict(scene_dict(scene, variant, aovs), optimize=False)  # keeps shapes and order
+    mi_scene = load_dict(mi, scene_dict(scene, variant, aovs))  # keeps shapes and order
     ids = {}
     for position, shape in enumerate(mi_scene.shapes()):
         ids[shape_index_value(mi, shape, position)] = pyclray_id(shape.id())
@@ -171,7 +200,8 @@ def axis_cosines(scene: Scene) -> np.ndarray:
 
 def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     """Mitsuba's images in pyclray's conventions: depth (distance from the eye, inf on a miss),
-    normal (geo_normal), sh_normal, id (-1 on a miss), all (height, width[, 3])."""
+    normal (geo_normal), sh_normal, id (-1 on a miss), primitive (prim_index, -1 on a miss), all
+    (height, width[, 3])."""
     import_mitsuba(variant)
     mi_scene, ids = load(scene, variant)
     image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
@@ -184,6 +214,7 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
         "normal": np.where(hit[..., None], image[..., 1:4], 0.0),
         "sh_normal": np.where(hit[..., None], image[..., 4:7], 0.0),
         "id": np.where(hit, lookup(np.where(hit, index, 0)) if hit.any() else -1, -1).astype(np.int32),
+        "primitive": np.where(hit, np.rint(image[..., 8]), -1).astype(np.int32),  # prim_index
     }
     return out
 

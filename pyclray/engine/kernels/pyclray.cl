@@ -20,20 +20,21 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE) \
+    || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
 #endif
-#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE) || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_WINNER_LOOP 1  /* the packet's distinct winners are visited once each */
 #endif
 /* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
 #ifndef PYCLRAY_AOV_SHADED
 #define PYCLRAY_SHADED_ARGS(P)
 #define PYCLRAY_MATERIALS_BEGIN
-#define PYCLRAY_MATERIAL_OF(id, mine)
+#define PYCLRAY_MATERIAL_OF(id, mine, flat)
 #define PYCLRAY_WRITE_SHADED(index, first, end)
 #endif
 
@@ -44,8 +45,14 @@
 
 #if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
 /* one argument pair per shape type present: the packed array and its length; the bounded types'
- * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray */
+ * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray.
+ * cast adds the float64 world entries, on which it frames each shape it tests (kernels/cast.h). */
+#ifdef PYCLRAY_CAST
+#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
+    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds) P(const int, n_##type##s)
+#else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type) P(__global const Type*, type##s) P(const int, n_##type##s)
+#endif
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
 #define PYCLRAY_SHAPE_AT(type, q) (q)
@@ -88,8 +95,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 /* -- the nearest hit of each lane ----------------------------------------------------------------
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
- * A lane's winner is also kept as one key, 8 k + kind (k its index in its type's array; kinds are
- * 1 to 7, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
+ * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
+ * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
@@ -98,7 +105,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         if (ANY(nearer)) {                                                            \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_key = nearer ? SPLAT_INT((k) * 8 + (kind)) : best_key;               \
+            best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
         }                                                                             \
     }
 #define PYCLRAY_BEST                                                                  \
@@ -118,7 +125,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
+/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &ray);                                \
@@ -126,7 +133,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 
@@ -159,19 +166,36 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_PRIMITIVE_BEGIN
 #endif
 
+/* the winner's barycentric (u, v) (triangles; 0, 0 for the other types and on a miss) */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_OF(Type, type)                                            \
+    if (kind == KIND_##type) {                                                        \
+        realv u, v;                                                                   \
+        type##_barycentric(&type##s[k], &ray, &u, &v);                                \
+        bary_u = mine ? u : bary_u;                                                   \
+        bary_v = mine ? v : bary_v;                                                   \
+    }
+#define PYCLRAY_BARYCENTRIC_BEGIN realv bary_u = SPLAT(0), bary_v = SPLAT(0);
+#define PYCLRAY_BARYCENTRICS PYCLRAY_BARYCENTRIC_TYPES(PYCLRAY_BARYCENTRIC_OF)
+#else
+#define PYCLRAY_BARYCENTRIC_BEGIN
+#define PYCLRAY_BARYCENTRICS
+#endif
+
 #ifdef PYCLRAY_WINNER_LOOP
 /* what one winning shape gives the lanes it won: its normal (and with shading, its material), its
  * primitive index */
 #define PYCLRAY_NORMAL(Type, type)                                                    \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_NORMAL_OF(type)                                                       \
-        PYCLRAY_MATERIAL_OF(type##s[k].id, mine)                                      \
+        PYCLRAY_MATERIAL_OF(type##s[k].id, mine, PYCLRAY_FLAT_##type)                 \
         PYCLRAY_PRIMITIVE_OF(type)                                                    \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
 #define PYCLRAY_WINNERS                                                               \
     PYCLRAY_NORMAL_BEGIN                                                              \
     PYCLRAY_PRIMITIVE_BEGIN                                                           \
+    PYCLRAY_BARYCENTRIC_BEGIN                                                         \
     PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
         /* each distinct winner once, the largest key first: one reduction finds the    \
@@ -180,9 +204,10 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         intv pending = key;                                                           \
         for (int winner = (int)lanes_max_int(pending); winner > 0;                    \
              winner = (int)lanes_max_int(pending)) {                                  \
-            const int kind = winner & 7, k = winner >> 3;                             \
+            const int kind = winner & 15, k = winner >> 4;                             \
             const intv mine = key == SPLAT_INT(winner);                               \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            PYCLRAY_BARYCENTRICS                                                      \
             pending = mine ? SPLAT_INT(0) : pending;                                  \
         }                                                                             \
     }
@@ -243,9 +268,34 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_PRIMITIVE(index, first, end)
 #endif
 
+/* render only: the winner's barycentric (u, v), interleaved per pixel */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_ARG(P) P(__global real*, barycentric_out)
+#define PYCLRAY_STORE_UV_LANE(l, c) \
+    if (bary_first <= l && l < bary_end) {                                            \
+        barycentric_out[2 * (bary_index + l)] = bary_u.c;                             \
+        barycentric_out[2 * (bary_index + l) + 1] = bary_v.c;                         \
+    }
+#if LANES == 1
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end) \
+    { barycentric_out[2 * (index)] = bary_u; barycentric_out[2 * (index) + 1] = bary_v; }
+#else
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)                                 \
+    {                                                                                 \
+        const size_t bary_index = (index);                                            \
+        const int bary_first = (first), bary_end = (end);                             \
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_UV_LANE)                                      \
+    }
+#endif
+#else
+#define PYCLRAY_BARYCENTRIC_ARG(P)
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_DEPTH_ARG(P) PYCLRAY_NORMAL_ARG(P) PYCLRAY_ID_ARG(P)
 #define PYCLRAY_RENDER_OUTPUT_ARGS(P) \
-    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P)
+    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P) \
+    PYCLRAY_BARYCENTRIC_ARG(P)
 /* the shapes' arguments as parameters and as the arguments of a call */
 #define PYCLRAY_SHAPE_PARAMETERS(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_DECLARE, Type, type)
 #define PYCLRAY_SHAPE_PASSED(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_PASS, Type, type)
@@ -255,7 +305,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_RENDER_WRITE(index, first, end) \
     PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
     PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end) \
-    PYCLRAY_WRITE_PRIMITIVE(index, first, end)
+    PYCLRAY_WRITE_PRIMITIVE(index, first, end) PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int
@@ -391,8 +441,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-    /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
-    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir));
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
     /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
@@ -414,21 +464,30 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
  * the largest distance that counts (float64, limits[r * limit_stride]).
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
- * before it. For a bounded shape of anchor A and bounding radius R (its packed data is relative
- * to A), the ray's origin O moves along the unit direction D to O + s0 D, s0 = max(0, (A - O).D - R),
- * which no point of the shape precedes; the new origin relative to A, s0 D - (A - O), is taken in
- * float64 and rounded once. A ray from 1e8 away thus meets a sphere of radius 1e-4 with errors
- * relative to the sphere's size, as a camera next to it would; its distance is s0 + s (s: the
- * shape's own, from the new origin). Unbounded shapes (planes) take the world origin in float64. */
+ * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
+ * R, the ray's origin O moves along the unit direction D to O' = O + s0 D, s0 = max(0, (A - O).D - R),
+ * which no point of the shape precedes (float64); the shape is then framed on O' from its float64
+ * world entry (kernels/cast.h: its coordinates relative to O' rounded once, and the terms O' decides,
+ * such as a sphere's c = |C - O'|^2 - r^2, in float64) and tested from the frame's origin. A ray
+ * from 1e8 away thus meets a sphere of radius 1e-4 with errors relative to the sphere's size, and a
+ * ray starting on a surface, or 1e-9 off it, knows which side it starts on; its distance is s0 + s
+ * (s: the shape's own, from O'). Unbounded shapes (planes) are framed on the ray's own origin. */
+#define PYCLRAY_CAST_FRAMED(Type, type, k, from)                                    \
+    Type framed = type##s[k];                                                       \
+    {                                                                               \
+        const Frame frame = {(from)};                                               \
+        type##_rebase(&type##_worlds[k], &framed, &frame);                          \
+    }
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                      \
-        const real s = type##_hit(&type##s[k], &moved);                             \
+        PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
+        const real s = type##_hit(&framed, &moved);                                 \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
     }
 #define PYCLRAY_CAST_VISIT(q)                                                       \
     {                                                                               \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                      \
         double s0;                                                                  \
         bool near;                                                                  \
         const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \
@@ -439,7 +498,8 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
-        const real s = type##_hit(&type##s[q], &ray);                               \
+        PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
+        const real s = type##_hit(&framed, &ray);                                   \
         const double t = s < MISS ? (double)s * length : INFINITY;                  \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
@@ -455,7 +515,7 @@ inline double3 unit_direction(const double3 d)
     return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
-/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m), relative to anchor A: see above. m = 2^-50
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
  * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
  * shape's near side, however far O is (at 1e40 the rounding of (A - O).D alone exceeds a unit R).
  * near: whether the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without
@@ -472,7 +532,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
     *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
     RayPacket moved = *ray;
-    moved.origin = v3_round(-G);
+    moved.world = O + *s0 * D;  /* where the shape is framed */
     return moved;
 }
 
@@ -484,7 +544,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     ray.dir_exact = unit_direction(vload3(r, directions));                          \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
-    ray.origin = v3_round(ray.world);                                               \
+    ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
     const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];
 
@@ -523,8 +583,11 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
 #define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
-#define PYCLRAY_CAST_NORMAL(Type, type) \
-    if (best_kind == KIND_##type) normal = type##_normal(&type##s[best_k], &ray, camera);
+#define PYCLRAY_CAST_NORMAL(Type, type)                                             \
+    if (best_kind == KIND_##type) {                                                 \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        normal = type##_normal(&framed, &ray, camera);                              \
+    }
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
 #define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \

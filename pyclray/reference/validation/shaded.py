@@ -31,13 +31,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...engine.shading import shape_extent
+from ...engine.shading import shadow_reach
 from ...model.lights import DirectionalLight, Material, PointLight, Shading, effective_lights
 from .. import error_model, shading
 
 EPSILON = 2.0**-24
 MITSUBA_RAY_EPSILON = 1500 * EPSILON  # Mitsuba 3's math::RayEpsilon<float>
-PYCLRAY_OFFSET_K = 16  # kernels/shading.h's SHADOW_OFFSET_K
 SHADOW_EDGE_K = 4
 
 
@@ -75,14 +74,14 @@ def direct_scene_dict(scene, light, variant: str) -> dict:
 
 def render_direct(scene, variant: str = "scalar_rgb") -> np.ndarray:
     """pi x Mitsuba's direct illumination of the scene's diffuse version, (height, width, 3) float64."""
-    from ..mitsuba import import_mitsuba
+    from .. import mitsuba
 
-    mi = import_mitsuba(variant)
+    mi = mitsuba.import_mitsuba(variant)
     total = np.zeros((scene.image.height, scene.image.width, 3))
     for light in effective_lights(scene):
         if not scene.shading.shadows:
             raise ValueError("Mitsuba's direct integrator always casts shadow rays: the scene has shadows = false")
-        mi_scene = mi.load_dict(direct_scene_dict(scene, light, variant), optimize=False)
+        mi_scene = mitsuba.load_dict(mi, direct_scene_dict(scene, light, variant))
         image = mi.render(mi_scene, spp=1)
         total += np.array(image, np.float64)[..., :3]
     return np.pi * total
@@ -122,8 +121,7 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None) -> Shade
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
     hit = ref["id"] >= 0
     # per pixel: the larger of the two engines' shadow-ray offsets at its hit point
-    extent = np.array([shape_extent(s) for s in scene.shapes] or [0.0])[np.maximum(ref["id"], 0)]
-    ours_offset = PYCLRAY_OFFSET_K * EPSILON * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
+    ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
