@@ -1,12 +1,13 @@
 """A bounding volume hierarchy over shapes' world bounds: a binned SAH tree for large scenes
 (pyclray.engine.bvh_sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
 
-The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves
-where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is within 2% of a full
-binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.000 on sphere fields, tessellated
-spheres, tori, grids and the Stanford bunny, 1.02 on clustered spheres), where the LBVH's is 5-47%
-above it. Rendered, that is 1.1x (uniform spheres) to 1.3x (clustered) faster traversal, for
-camera packets and single rays alike (bench/bvh_render.py).
+The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves of
+at most LEAF_SIZE where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is
+within 6% of a full binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.02-1.06 on
+sphere fields, tessellated spheres, tori, a grid, the Stanford bunny and the armadillo; 2-6% spent
+on purpose for the LBVH's memory, bvh_sah.TRAVERSAL), where the LBVH's is 4-47% above it. Rendered
+(bench/bvh_render.py), camera packets go 1.04x (uniform spheres) to 1.5x (clustered) faster through
+it, and single rays cast from inside the field 1.1x to 2.5x.
 
 The linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees and k-d
 trees", HPG 2012), below SAH_FROM: the shapes are sorted along a Morton curve of their bounds'
@@ -16,10 +17,11 @@ at most LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, a
 
 Why two: numba's import and the load of the compiled builder from its disk cache cost a new process
 about 0.4 s, once, where the LBVH of 16,384 shapes takes about 10 ms: a small scene's first render
-(tp02's cold start) never pays it. From SAH_FROM on the better tree pays for it within a few views,
-and from a few hundred thousand shapes on the SAH build is faster than the LBVH's too (measured on
-the loaded 2-core machine, bench/bvh_build.py: 100,000 shapes in 50-80 ms, 1,000,000 in XXX s
-warm, XXX s cold; the LBVH 0.05-0.15 s and 0.7-1.6 s).
+(tp02's cold start) never pays it (numba is not even imported). From SAH_FROM on the better tree
+pays for it over a few views. Build times on the shared 2-core machine (bench/bvh_build.py, load
+average 3 to 5, so up to twice a quiet machine's): 100,000 shapes in 30-70 ms warm (the LBVH
+25-120 ms); 1,000,000 in 0.5-1.4 s warm, about 0.6 s of CPU time (the LBVH 0.5-1.3 s in the same
+runs), 0.9-2.3 s cold.
 
 Flat layout, ready for a kernel: node k has bounds lo[k], hi[k] (float64 here; the packer rounds
 them outward to the kernel's precision) and two integers: ``first`` and ``count``. count > 0: a
