@@ -6,8 +6,8 @@ at most LEAF_SIZE where the surface area heuristic says so; see bvh_sah. Its tre
 within 6% of a full binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.02-1.06 on
 sphere fields, tessellated spheres, tori, a grid, the Stanford bunny and the armadillo; 2-6% spent
 on purpose for the LBVH's memory, bvh_sah.TRAVERSAL), where the LBVH's is 4-47% above it. Rendered
-(bench/bvh_render.py), camera packets go 1.04x (uniform spheres) to 1.5x (clustered) faster through
-it, and single rays cast from inside the field 1.1x to 2.5x.
+(bench/bvh_render.py, CPU time), camera packets go 1.05x (uniform spheres) to 1.3x (clustered
+spheres, meshes) faster through it, single rays 1.07x to 1.26x.
 
 The linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees and k-d
 trees", HPG 2012), below SAH_FROM: the shapes are sorted along a Morton curve of their bounds'
