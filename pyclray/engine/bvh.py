@@ -18,10 +18,9 @@ at most LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, a
 Why two: numba's import and the load of the compiled builder from its disk cache cost a new process
 about 0.4 s, once, where the LBVH of 16,384 shapes takes about 10 ms: a small scene's first render
 (tp02's cold start) never pays it (numba is not even imported). From SAH_FROM on the better tree
-pays for it over a few views. Build times on the shared 2-core machine (bench/bvh_build.py, load
-average 3 to 5, so up to twice a quiet machine's): 100,000 shapes in 30-70 ms warm (the LBVH
-25-120 ms); 1,000,000 in 0.5-1.4 s warm, about 0.6 s of CPU time (the LBVH 0.5-1.3 s in the same
-runs), 0.9-2.3 s cold.
+pays for it over a few views. Build times on the shared 2-core machine (bench/bvh_build.py,
+docs/benchmarks.md; at load average 2): 100,000 shapes in 43-60 ms warm, 0.36-0.52 s cold (the
+LBVH 47-85 ms); 1,000,000 in 0.40-0.62 s warm, 0.72-1.4 s cold (the LBVH 0.62-0.70 s).
 
 Flat layout, ready for a kernel: node k has bounds lo[k], hi[k] (float64 here; the packer rounds
 them outward to the kernel's precision) and two integers: ``first`` and ``count``. count > 0: a
