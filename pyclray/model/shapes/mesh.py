@@ -70,11 +70,12 @@ class Mesh(Shape):
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
     kernel_files = ("mesh.cl",)
-    # Triangles per BVH leaf: 7, the most the wide BVH's leaf code holds (engine/bvh_wide.py: count < 8),
-    # about a packet's 8 lanes. Measured (process CPU time of a 512x512 render of depth, normal, id,
-    # primitive; the LBVH of main; python -m bench.mesh_leaves): leaves of 4, 6, 7 took 26.9, 25.0,
-    # 24.6 ms on the 75,408-triangle bunny and 145, 127, 120 ms on a 998,000-triangle sphere: a
-    # triangle test is cheap next to a node's box test and the stack.
+    # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh_wide.py:
+    # count < 8), about a packet's 8 lanes. Measured (python -m bench.mesh_leaves: process CPU time of
+    # a 512x512 render of depth, normal, id, primitive), leaves of at most 4, 6, 7: with the binned SAH
+    # (bvh_sah) 24.0, 24.2, 24.1 ms on the 75,408-triangle bunny, 117, 107, 107 ms on a 998,000-triangle
+    # sphere; with the LBVH 26.9, 25.0, 24.6 and 145, 127, 120 ms. A triangle test is cheap next to
+    # a node's box test and the stack.
     leaf_size = 7
     smooth_struct = Struct(
         "TriangleNormals",
