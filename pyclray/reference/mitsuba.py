@@ -24,9 +24,12 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..model.errors import SceneError
+from ..model.lights import PointLight
 from ..model.scene import Scene
 from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
@@ -68,8 +71,19 @@ def pyclray_id(mitsuba_id: str) -> int:
     return int(mitsuba_id.removeprefix("shape_").split("_")[0])
 
 
+class LookAt(NamedTuple):
+    """A sensor's to_world given as Mitsuba's look_at (its own float32 rounding of the camera's frame,
+    as the check's error model measures it; <lookat origin=... target=... up=...> in XML)."""
+
+    origin: list
+    target: list
+    up: list
+
+
 def _mitsuba_values(mi, value):
-    """A shape dict's values for Mitsuba: 4x4 numpy matrices become ScalarTransform4f."""
+    """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f."""
+    if isinstance(value, LookAt):
+        return mi.ScalarTransform4f().look_at(origin=value.origin, target=value.target, up=value.up)
     if isinstance(value, np.ndarray) and value.shape == (4, 4):
         return mi.ScalarTransform4f(value.tolist())
     if isinstance(value, dict):
@@ -105,17 +119,19 @@ def sensor_of(scene: Scene) -> dict:
             "to_world": to_world}
 
 
-def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
-    """The Mitsuba scene description: pixel-centre perspective sensor, aov integrator, shapes."""
-    mi = import_mitsuba(variant)
+def mitsuba_dict(scene: Scene, aovs: str = AOV_SPEC, key=shape_key) -> dict:
+    """The Mitsuba scene description ``pyclray check`` builds, as plain values (no Mitsuba needed):
+    a perspective sensor with one unjittered ray through each pixel centre, the aov integrator
+    (``aovs``), and each shape's counterpart (``Shape.mitsuba_shapes``) under the id key(index, part)
+    (default shape_000003, shape_000003_1, ...: how the check maps Mitsuba's shapes back to ids).
+    A to_world is a 4x4 float64 numpy matrix or a LookAt. ``scene_dict`` gives it to Mitsuba,
+    ``pyclray.reference.mitsuba_export`` writes it as XML."""
     image = scene.image
     near, far = clip_range(scene)
     camera = sensor_of(scene)
     look_at = camera.pop("look_at", None)
     if look_at is not None:
-        camera["to_world"] = mi.ScalarTransform4f().look_at(**look_at)
-    else:
-        camera["to_world"] = mi.ScalarTransform4f(camera["to_world"].tolist())
+        camera["to_world"] = LookAt(**look_at)
     out = {
         "type": "scene",
         "integrator": {"type": "aov", "aovs": aovs},
@@ -137,8 +153,22 @@ def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPE
     }
     for index, shape in enumerate(scene.shapes):
         for part, counterpart in enumerate(shape.mitsuba_shapes(scene)):
-            out[shape_key(index, part)] = _mitsuba_values(mi, counterpart)
+            out[key(index, part)] = counterpart
     return out
+
+
+def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
+    """mitsuba_dict with Mitsuba's own values (ScalarTransform4f), ready for mi.load_dict."""
+    return _mitsuba_values(import_mitsuba(variant), mitsuba_dict(scene, aovs))
+
+
+def emitter_dict(light) -> dict:
+    """A pyclray light as a Mitsuba emitter: point (intensity) or directional (irradiance)."""
+    if isinstance(light, PointLight):
+        return {"type": "point", "position": list(light.position),
+                "intensity": {"type": "rgb", "value": list(light.intensity)}}
+    return {"type": "directional", "direction": list(light.direction),
+            "irradiance": {"type": "rgb", "value": list(light.irradiance)}}
 
 
 def load(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC):

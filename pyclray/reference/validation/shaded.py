@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...engine.shading import shape_extent
-from ...model.lights import DirectionalLight, Material, PointLight, Shading, effective_lights
+from ...model.lights import DirectionalLight, Material, Shading, effective_lights
 from .. import error_model, shading
 
 EPSILON = 2.0**-24
@@ -48,14 +48,6 @@ def diffuse_version(scene):
     return replace(scene, shapes=shapes, shading=Shading((0, 0, 0), (0, 0, 0), scene.shading.shadows))
 
 
-def _emitter(light) -> dict:
-    if isinstance(light, PointLight):
-        return {"type": "point", "position": list(light.position),
-                "intensity": {"type": "rgb", "value": list(light.intensity)}}
-    return {"type": "directional", "direction": list(light.direction),
-            "irradiance": {"type": "rgb", "value": list(light.irradiance)}}
-
-
 def direct_scene_dict(scene, light, variant: str) -> dict:
     """Mitsuba's scene for one light: the shapes with two-sided diffuse BSDFs, the direct integrator."""
     from .. import mitsuba
@@ -69,7 +61,7 @@ def direct_scene_dict(scene, light, variant: str) -> dict:
             color = scene.shapes[int(found.group(1))].material.color
             value["bsdf"] = {"type": "twosided",
                              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(color)}}}
-    out["light"] = _emitter(light)
+    out["light"] = mitsuba.emitter_dict(light)
     return out
 
 
