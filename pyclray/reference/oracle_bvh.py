@@ -1,0 +1,107 @@
+"""Which shapes each ray may hit, from the scene's BVH, and the oracle's two nearest hits.
+
+The BVH is pyclray's own (engine.bvh: an LBVH over each bounded shape's box, widened); it is
+traversed for a whole chunk of rays at once, breadth first: the (ray, node) pairs of one level are
+slab-tested together, the hits' children form the next level's pairs, and the leaves give the
+(ray, shape) pairs to test. The slab test is conservative (boxes widened by bvh.WIDEN of their size,
+and a margin on the entry and exit distances), so a shape whose test would hit is never dropped;
+a pair too many only costs its test. Unbounded shapes (a plane) are tested against every ray.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+CHUNK = 1 << 16  # rays traversed together: bounded memory (a level's pairs) and progress steps
+
+
+def shape_tree(scene):
+    """(BVH over the bounded shapes' boxes, their shape indices, the unbounded shapes' indices)."""
+    from ..engine.bvh import build, widened
+
+    bounded = [index for index, shape in enumerate(scene.shapes) if shape.bounded]
+    unbounded = [index for index, shape in enumerate(scene.shapes) if not shape.bounded]
+    boxes = np.array([scene.shapes[index].box() for index in bounded]).reshape(-1, 2, 3)
+    return build(widened(boxes)), np.array(bounded, np.int64), np.array(unbounded, np.int64)
+
+
+def _slab_hits(tree, O, D, inverse, rays, nodes) -> np.ndarray:
+    """Whether each ray meets each node's box at some t >= 0 (conservatively)."""
+    lo, hi, o, d, inv = tree.lo[nodes], tree.hi[nodes], O[rays], D[rays], inverse[rays]
+    with np.errstate(invalid="ignore", over="ignore"):
+        t0 = (lo - o) * inv
+        t1 = (hi - o) * inv
+    parallel = d == 0  # inside the slab or never in it
+    inside = (o >= lo) & (o <= hi)
+    near = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1))
+    far = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1))
+    enter, leave = near.max(axis=1), far.min(axis=1)
+    margin = 1e-9 * (np.abs(enter) + np.abs(leave))  # the rounding of the slab distances
+    return (np.maximum(enter, 0.0) - margin <= leave + margin) & np.isfinite(np.maximum(enter, 0.0) - margin)
+
+
+def candidates(tree, order, O, D) -> tuple[np.ndarray, np.ndarray]:
+    """(rays, shapes) index pairs: each bounded shape whose (widened) box a ray crosses."""
+    if not order.size:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    with np.errstate(divide="ignore"):
+        inverse = 1.0 / D
+    rays, nodes = np.arange(len(D)), np.zeros(len(D), np.int64)
+    found_rays, found_shapes = [], []
+    while rays.size:
+        hit = _slab_hits(tree, O, D, inverse, rays, nodes)
+        rays, nodes = rays[hit], nodes[hit]
+        count = tree.count[nodes]
+        leaf = count > 0
+        if leaf.any():  # each leaf's shapes: order[first .. first + count - 1]
+            leaf_rays, first, n = rays[leaf], tree.first[nodes[leaf]].astype(np.int64), count[leaf].astype(np.int64)
+            repeat = np.repeat(np.arange(len(n)), n)
+            offset = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+            found_rays.append(leaf_rays[repeat])
+            found_shapes.append(order[tree.order[first[repeat] + offset]])
+        inner = ~leaf
+        first = tree.first[nodes[inner]].astype(np.int64)
+        rays = np.concatenate([rays[inner], rays[inner]])
+        nodes = np.concatenate([first, first + 1])
+    if not found_rays:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(found_rays), np.concatenate(found_shapes)
+
+
+def hits(scene, tree, order, unbounded, O, D):
+    """(rays, shapes, t) of every finite hit t > 0 of a shape test on these rays."""
+    pair_rays, pair_shapes = candidates(tree, order, O, D)
+    if unbounded.size:
+        pair_rays = np.concatenate([pair_rays, np.tile(np.arange(len(D)), len(unbounded))])
+        pair_shapes = np.concatenate([pair_shapes, np.repeat(unbounded, len(D))])
+    from .oracle import by_shape
+
+    t = np.full(len(pair_rays), np.inf)
+    for index, mine in by_shape(pair_shapes):
+        rays = pair_rays[mine]
+        t[mine] = scene.shapes[index].oracle_distance(O[rays], D[rays])
+    finite = np.isfinite(t)
+    return pair_rays[finite], pair_shapes[finite], t[finite]
+
+
+def nearest_two(scene, O, D, update=None):
+    """(best t, its shape, second t, its shape) per ray: the nearest hit and the nearest of any other
+    shape (inf and -1 where none); an exact tie of t goes to the lower shape index."""
+    n = len(D)
+    best, second = np.full(n, np.inf), np.full(n, np.inf)
+    best_id, second_id = np.full(n, -1, np.int32), np.full(n, -1, np.int32)
+    tree, order, unbounded = shape_tree(scene)
+    for start in range(0, n, CHUNK):
+        stop = min(start + CHUNK, n)
+        rays, shapes, t = hits(scene, tree, order, unbounded, O[start:stop], D[start:stop])
+        # per ray, its hits by increasing t, then shape index: the first is the nearest, the next the second
+        sort = np.lexsort((shapes, t, rays))
+        rays, shapes, t = rays[sort], shapes[sort], t[sort]
+        first = np.flatnonzero(np.r_[True, rays[1:] != rays[:-1]]) if rays.size else np.zeros(0, np.int64)
+        best[start + rays[first]], best_id[start + rays[first]] = t[first], shapes[first]
+        runner = first + 1
+        has = runner < len(rays)
+        has[has] &= rays[runner[has]] == rays[first[has]]
+        second[start + rays[first[has]]], second_id[start + rays[first[has]]] = t[runner[has]], shapes[runner[has]]
+        if update is not None:
+            update(stop - start)
+    return best, best_id, second, second_id
