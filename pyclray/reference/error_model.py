@@ -253,11 +253,13 @@ def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
 
 
 # -- a render against the oracle -------------------------------------------------------------------
-def reference(scene: Scene) -> dict:
+def reference(scene: Scene, truth: dict | None = None) -> dict:
     """The float64 images plus what the error model needs: |cos incidence|, the second-nearest
-    distance, the normal's conditioning and the silhouettes."""
+    distance, the normal's conditioning and the silhouettes. truth: the oracle's trace of these
+    pixels with "second", if already at hand (the same geometry)."""
     origins, directions = oracle.camera_rays(scene)
-    ref = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
+    ref = dict(truth) if truth is not None else oracle.trace(scene, origins, directions,
+                                                             aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, directions, ref["id"], ref["normal"])
     ref["cos"] = cos
     # how far the float64 reference's own rounding (2^-53 of the ray's length and of the world

@@ -14,8 +14,19 @@ import numpy as np
 CHUNK = 1 << 16  # rays traversed together: bounded memory (a level's pairs) and progress steps
 
 
+_last: list = []  # [(shapes tuple, tree)]: the scene last traced (a check traces one scene many times)
+
+
 def shape_tree(scene):
-    """(BVH over the bounded shapes' boxes, their shape indices, the unbounded shapes' indices)."""
+    """(BVH over the bounded shapes' boxes, their shape indices, the unbounded shapes' indices),
+    kept for the last tuple of shapes."""
+    if _last and _last[0][0] is scene.shapes:
+        return _last[0][1]
+    _last[:] = [(scene.shapes, _build_tree(scene))]
+    return _last[0][1]
+
+
+def _build_tree(scene):
     from ..engine.bvh import build, widened
 
     bounded = [index for index, shape in enumerate(scene.shapes) if shape.bounded]
@@ -34,9 +45,11 @@ def _slab_hits(tree, O, D, inverse, rays, nodes) -> np.ndarray:
     inside = (o >= lo) & (o <= hi)
     near = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1))
     far = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1))
-    enter, leave = near.max(axis=1), far.min(axis=1)
-    margin = 1e-9 * (np.abs(enter) + np.abs(leave))  # the rounding of the slab distances
-    return (np.maximum(enter, 0.0) - margin <= leave + margin) & np.isfinite(np.maximum(enter, 0.0) - margin)
+    enter, leave = np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
+    crossed = np.isfinite(enter) & (leave >= 0)  # a box behind the ray, or an axis it never enters: none
+    enter, leave = np.where(crossed, enter, 0.0), np.where(crossed, leave, -1.0)
+    margin = 1e-9 * (enter + np.abs(leave))  # the rounding of the slab distances
+    return crossed & (enter - margin <= leave + margin)
 
 
 def candidates(tree, order, O, D) -> tuple[np.ndarray, np.ndarray]:

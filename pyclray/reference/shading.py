@@ -55,14 +55,17 @@ def reference_shading(scene, directions, hits, visibility=None) -> np.ndarray:
     return np.where(hit[..., None], out, np.array(scene.shading.background))
 
 
-def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0):
+def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0, lifts=()):
     """Per light, V (1 lit, 0 shadowed) of each hit point in float64: the nearest hit of the ray from
     p toward the light, beyond skip times the scene's size (the surface at p itself never shadows p,
     and a float64 test of it from p errs by far less), before the light.
 
     blur > 0 (scene units, one number or one per point) also tests rays from points moved by blur
     along six directions, and returns per light a second array: True where the moved rays disagree
-    (a shadow boundary)."""
+    (a shadow boundary). lifts (each one number or one per point, scene units): more moved points,
+    p + lift n_s, the origins an engine's shadow rays start from (the kernel's offset along the
+    normal, Mitsuba's spawn_ray): where one of them sees another visibility than p, the engine's
+    own offset decides, which the error model counts as rounding (a shadow boundary too)."""
     size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
     n_s = facing_normals(normals, directions)
     out, unsure = [], []
@@ -84,6 +87,8 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
                     # move within the surface's tangent plane (and slightly off it, to the lit side)
                     moved = step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s
                     mixed |= visible(points + reach * (moved + 0.5 * n_s)) != base
+            for lift in lifts:
+                mixed |= visible(points + np.broadcast_to(lift, base.shape)[..., None] * n_s) != base
         # where the light is behind the surface (cos <= 0) it adds nothing, shadow or not
         lit = np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0
         if np.any(blur > 0):
