@@ -24,6 +24,7 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
@@ -89,6 +90,18 @@ def _mitsuba_values(mi, value):
     if isinstance(value, dict):
         return {k: _mitsuba_values(mi, v) for k, v in value.items()}
     return value
+
+
+@contextmanager
+def quiet_interrupts(mi):
+    """Mitsuba's render loops answer Ctrl-C by winding down with a WARN line on stderr; pyclray's
+    commands end quietly instead (status 130): Mitsuba logs only errors while it renders."""
+    previous = mi.log_level()
+    mi.set_log_level(mi.LogLevel.Error)
+    try:
+        yield
+    finally:
+        mi.set_log_level(previous)
 
 
 # Mitsuba's pixels are square: a camera from intrinsics maps to its sensor where fx and fy agree
@@ -216,7 +229,8 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
         return {"depth": np.where(hit, depth + near / axis_cosines(scene), np.inf), "normal": normal,
                 "sh_normal": sh_normal, "id": found}
     mi_scene, ids = load(scene, variant)
-    image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
+    with quiet_interrupts(mi):
+        image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
     index = np.rint(image[..., 7]).astype(np.int64)
     hit = index > 0
     lookup = np.vectorize(lambda k: ids.get(int(k), -1), otypes=[np.int32])

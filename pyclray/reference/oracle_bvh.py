@@ -18,50 +18,66 @@ _last: list = []  # [(shapes tuple, tree)]: the scene last traced (a check trace
 
 
 def shape_tree(scene):
-    """(BVH over the bounded shapes' boxes, their shape indices, the unbounded shapes' indices),
-    kept for the last tuple of shapes."""
+    """(BVH over the bounded shapes' boxes, their shape indices, the indices of the shapes tested
+    against every ray), kept for the last tuple of shapes."""
     if _last and _last[0][0] is scene.shapes:
         return _last[0][1]
     _last[:] = [(scene.shapes, _build_tree(scene))]
     return _last[0][1]
 
 
+LARGE = 0.25  # a shape whose box spans more than this part of all the boxes' is tested against every ray
+
+
 def _build_tree(scene):
+    """The tree over the bounded shapes but the large ones: a box as large as the scene (the ground
+    sphere of radius 1000 under the book's 486 spheres) holds every ray anyway, and would make the
+    Morton codes of all the others' centres coarse (an LBVH of ties); such shapes, and the unbounded
+    ones, are tested against every ray."""
     from ..engine.bvh import build, widened
 
     bounded = [index for index, shape in enumerate(scene.shapes) if shape.bounded]
-    unbounded = [index for index, shape in enumerate(scene.shapes) if not shape.bounded]
     boxes = np.array([scene.shapes[index].box() for index in bounded]).reshape(-1, 2, 3)
-    return build(widened(boxes)), np.array(bounded, np.int64), np.array(unbounded, np.int64)
+    diagonal = np.linalg.norm(boxes[:, 1] - boxes[:, 0], axis=1)
+    span = np.linalg.norm(boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0)) if len(boxes) else 0.0
+    large = diagonal > LARGE * span if len(boxes) > 8 else np.zeros(len(boxes), bool)
+    everywhere = sorted([index for index, shape in enumerate(scene.shapes) if not shape.bounded]
+                        + [b for b, big in zip(bounded, large) if big])
+    kept = np.array(bounded, np.int64)[~large]
+    return build(widened(boxes[~large])), kept, np.array(everywhere, np.int64)
 
 
-def _slab_hits(tree, O, D, inverse, rays, nodes) -> np.ndarray:
-    """Whether each ray meets each node's box at some t >= 0 (conservatively)."""
-    lo, hi, o, d, inv = tree.lo[nodes], tree.hi[nodes], O[rays], D[rays], inverse[rays]
-    with np.errstate(invalid="ignore", over="ignore"):
-        t0 = (lo - o) * inv
-        t1 = (hi - o) * inv
-    parallel = d == 0  # inside the slab or never in it
-    inside = (o >= lo) & (o <= hi)
-    near = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1))
-    far = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1))
-    enter, leave = np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
-    crossed = np.isfinite(enter) & (leave >= 0)  # a box behind the ray, or an axis it never enters: none
-    enter, leave = np.where(crossed, enter, 0.0), np.where(crossed, leave, -1.0)
-    margin = 1e-9 * (enter + np.abs(leave))  # the rounding of the slab distances
-    return crossed & (enter - margin <= leave + margin)
+def _slab_hits(tree, O, inverse, rays, nodes) -> np.ndarray:
+    """Whether each ray meets each node's box at some t >= 0, conservatively: the slab distances are
+    compared with a relative margin of 2e-9 (far above their rounding), so that a box the ray only
+    grazes is kept. A direction's zero component has an inverse of +-1e300 (ray_inverses): a slab
+    the origin lies in gives -+1e300 on its two sides (never a NaN), one it lies outside a distance
+    beyond any other slab's."""
+    o, inv = O[rays], inverse[rays]
+    with np.errstate(over="ignore"):
+        t0 = (tree.lo[nodes] - o) * inv
+        t1 = (tree.hi[nodes] - o) * inv
+    near, far = np.minimum(t0, t1), np.maximum(t0, t1)  # per axis (columns: numpy's reduce over 3 is slow)
+    enter = np.maximum(np.maximum(near[:, 0], near[:, 1]), np.maximum(near[:, 2], 0.0))
+    leave = np.minimum(np.minimum(far[:, 0], far[:, 1]), far[:, 2])
+    return (leave >= 0) & (enter * (1 - 2e-9) <= leave * (1 + 2e-9))
+
+
+def ray_inverses(D) -> np.ndarray:
+    """1 / D, with +-1e300 for components of magnitude below 1e-300 (zero, or whose inverse overflows)."""
+    with np.errstate(divide="ignore", over="ignore"):
+        return np.where(np.abs(D) < 1e-300, np.copysign(1e300, D), 1.0 / D)
 
 
 def candidates(tree, order, O, D) -> tuple[np.ndarray, np.ndarray]:
     """(rays, shapes) index pairs: each bounded shape whose (widened) box a ray crosses."""
     if not order.size:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    with np.errstate(divide="ignore"):
-        inverse = 1.0 / D
+    inverse = ray_inverses(D)
     rays, nodes = np.arange(len(D)), np.zeros(len(D), np.int64)
     found_rays, found_shapes = [], []
     while rays.size:
-        hit = _slab_hits(tree, O, D, inverse, rays, nodes)
+        hit = _slab_hits(tree, O, inverse, rays, nodes)
         rays, nodes = rays[hit], nodes[hit]
         count = tree.count[nodes]
         leaf = count > 0
