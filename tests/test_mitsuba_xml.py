@@ -51,7 +51,7 @@ def test_pyclray_reads_the_file_as_mitsuba_does(path):
     transforms (composed in Mitsuba's order) and every shape mean what Mitsuba makes of them."""
     scene = pyclray.load_scene(path)
     mi = mitsuba.import_mitsuba("scalar_rgb")
-    mi_scene = mi.load_file(str(path))
+    mi_scene = mi.load_file(str(path), optimize=False)  # one Mitsuba shape per shape (no merged meshes)
     assert len(mi_scene.shapes()) == len(scene.shapes)
     width, height = scene.image.width, scene.image.height
     rows, columns = np.meshgrid(np.linspace(0, height - 1, 30).astype(int), np.linspace(0, width - 1, 40).astype(int))

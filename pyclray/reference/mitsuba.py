@@ -73,8 +73,9 @@ def pyclray_id(mitsuba_id: str) -> int:
 
 
 class LookAt(NamedTuple):
-    """A sensor's to_world given as Mitsuba's look_at (its own float32 rounding of the camera's frame,
-    as the check's error model measures it; <lookat origin=... target=... up=...> in XML)."""
+    """A sensor's to_world given as a look-at: <lookat origin=... target=... up=...> in XML, and
+    for mi.load_dict the matrix Mitsuba's XML parser makes of it (Transform4f::look_at in float64,
+    rounded once to float32), so that the check's scene and an exported file are the same bit for bit."""
 
     origin: list
     target: list
@@ -84,9 +85,13 @@ class LookAt(NamedTuple):
 def _mitsuba_values(mi, value):
     """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f."""
     if isinstance(value, LookAt):
-        return mi.ScalarTransform4f().look_at(origin=value.origin, target=value.target, up=value.up)
+        from ..model.mitsuba_xml.properties import look_at
+
+        value = look_at(*(np.array(v, np.float64) for v in value))
     if isinstance(value, np.ndarray) and value.shape == (4, 4):
-        return mi.ScalarTransform4f(value.tolist())
+        # as Mitsuba's XML parser builds a transform: the matrix and its inverse transpose in float64,
+        # each rounded once to float32 (a Transform4f of the matrix alone inverts it in float32)
+        return mi.ScalarTransform4f(mi.ScalarMatrix4f(value.tolist()), mi.ScalarMatrix4f(np.linalg.inv(value).T.tolist()))
     if isinstance(value, dict):
         return {k: _mitsuba_values(mi, v) for k, v in value.items()}
     return value
