@@ -10,6 +10,7 @@ import numpy as np
 
 from ..model.aovs import AOVS
 from ..model.scene import Scene
+from .oracle_bvh import by_shape, nearest_two
 
 
 def image_plane(scene: Scene):
@@ -49,7 +50,6 @@ def trace(scene: Scene, origins, directions, aovs=AOVS, desc: str = "float64 ora
     tests as trace_every_shape, on fewer rays, so the same results bit for bit. A progress bar
     (``desc``) counts the rays on a terminal."""
     from ..io.progress import progress
-    from .oracle_bvh import nearest_two
 
     shape = directions.shape[:-1]
     O = np.asarray(origins, np.float64).reshape(-1, 3)
@@ -78,18 +78,6 @@ def trace_every_shape(scene: Scene, origins, directions, aovs=AOVS) -> dict:
         best = np.where(closer, t, best)
         best_id = np.where(closer, index, best_id)
     return _finish(scene, O, D, shape, best, best_id, second, second_id, aovs)
-
-
-def by_shape(ids: np.ndarray):
-    """(shape index, positions) for each shape index >= 0 present in ids: one sort, not a pass over
-    all rays per shape."""
-    order = np.argsort(ids, kind="stable")
-    sorted_ids = ids[order]
-    starts = np.flatnonzero(np.r_[True, sorted_ids[1:] != sorted_ids[:-1]])
-    ends = np.r_[starts[1:], len(ids)]
-    for start, end in zip(starts, ends):
-        if sorted_ids[start] >= 0:
-            yield int(sorted_ids[start]), order[start:end]
 
 
 def _finish(scene, O, D, shape, best, best_id, second, second_id, aovs) -> dict:

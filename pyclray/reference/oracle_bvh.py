@@ -14,6 +14,18 @@ import numpy as np
 CHUNK = 1 << 16  # rays traversed together: bounded memory (a level's pairs) and progress steps
 
 
+def by_shape(ids: np.ndarray):
+    """(shape index, positions) for each shape index >= 0 present in ids: one sort, not a pass over
+    all rays per shape."""
+    order = np.argsort(ids, kind="stable")
+    sorted_ids = ids[order]
+    starts = np.flatnonzero(np.r_[True, sorted_ids[1:] != sorted_ids[:-1]])
+    ends = np.r_[starts[1:], len(ids)]
+    for start, end in zip(starts, ends):
+        if sorted_ids[start] >= 0:
+            yield int(sorted_ids[start]), order[start:end]
+
+
 _last: list = []  # [(shapes tuple, tree)]: the scene last traced (a check traces one scene many times)
 
 
@@ -102,8 +114,6 @@ def hits(scene, tree, order, unbounded, O, D):
     if unbounded.size:
         pair_rays = np.concatenate([pair_rays, np.tile(np.arange(len(D)), len(unbounded))])
         pair_shapes = np.concatenate([pair_shapes, np.repeat(unbounded, len(D))])
-    from .oracle import by_shape
-
     t = np.full(len(pair_rays), np.inf)
     for index, mine in by_shape(pair_shapes):
         rays = pair_rays[mine]
