@@ -24,7 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pyclray",
         description="pyclray: an exact OpenCL ray caster. It renders depth, normal, id, label and shaded images "
         "of scenes of planes, spheres, cylinders, disks, rectangles, boxes and batches of spheres described in "
-        "TOML files.",
+        "TOML files (or Mitsuba 3 XML scenes).",
         epilog=EXIT_STATUS_HELP,
     )
     parser.add_argument("--version", action="version", version=f"pyclray {_version()}")

@@ -17,7 +17,7 @@ def add_command(subparsers) -> None:
         "through both) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
-    parser.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
+    parser.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
     parser.add_argument("--variant", choices=VARIANTS, default="scalar_rgb", help="Mitsuba variant (default scalar_rgb)")
     parser.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--rays", type=int, default=DEFAULT_RAYS, metavar="N",

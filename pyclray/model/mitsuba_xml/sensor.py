@@ -77,11 +77,8 @@ def perspective(element: Element, reading: Reading) -> None:
         reading.camera = checked(element, Camera, origin, target, up, fov, axis)
         return
     columns = to_world.columns()  # left, up, forward
+    to_world.similarity(element, "a camera's frame: anything else stretches the image")
     lengths = np.linalg.norm(columns, axis=1)
-    gram = columns @ columns.T / np.outer(lengths, lengths)
-    if np.abs(gram - np.eye(3)).max() > 1e-9 or lengths.max() - lengths.min() > 1e-9 * lengths.max():
-        raise element.error("to_world: expected a rotation, translation and uniform scale (a camera's frame); "
-                            "a non-uniform scale or a shear stretches the image")
     if np.linalg.det(matrix[:3, :3]) < 0:
         raise element.error("to_world mirrors the image (a negative determinant): pyclray's cameras do not")
     left, up, forward = columns / lengths[:, None]
