@@ -29,10 +29,12 @@ def judge(scene, origins, directions, result, precision, reference_point=None):
     return truth, cos, judged, explained, depth_tolerance, normal_tolerance
 
 
-def assert_agrees_with_oracle(scene, origins, directions, result, precision, min_judged=0.1):
+def assert_agrees_with_oracle(scene, origins, directions, result, precision, min_judged=0.1, reference_point=None):
     """Ids exact except where explained; depth and normal within the error model where judged;
-    the miss convention (inf, (0, 0, 0), -1 together); unit normals."""
-    truth, cos, judged, explained, depth_tolerance, normal_tolerance = judge(scene, origins, directions, result, precision)
+    the miss convention (inf, (0, 0, 0), -1 together); unit normals. reference_point: a render's
+    eye (its kernel's frame); None: the rays are a cast's."""
+    truth, cos, judged, explained, depth_tolerance, normal_tolerance = judge(scene, origins, directions, result, precision,
+                                                                             reference_point)
     wrong = (result["id"] != truth["id"]) & ~explained
     assert not wrong.any(), f"{wrong.sum()} unexplained id disagreements, e.g. ray {np.argmax(wrong)}"
     assert judged.sum() > min_judged * len(origins), f"too few hits ({judged.sum()}) for the test to mean anything"

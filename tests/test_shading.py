@@ -16,7 +16,7 @@ import pytest
 
 import pyclray
 from pyclray import SceneError
-from pyclray.engine.shading import shape_extent
+from pyclray.engine.shading import shadow_reach
 from pyclray.reference import error_model, oracle, shading
 from pyclray.engine.programs import Variant
 from pyclray.model.lights import DirectionalLight, Material, PointLight, Shading
@@ -28,13 +28,12 @@ EPS = {"fp32": 2.0**-24, "fp64": 2.0**-53}
 
 def reference(scene, precision="fp32"):
     """The float64 hits, visibility per light and its shadow edges: where the float64 visibility
-    changes when the hit point moves by 4 times the kernel's shadow-ray offset, 16 eps (|p| + R)
-    (kernels/shading.h; |p| from the eye, R the hit shape's extent)."""
+    changes when the hit point moves by 4 times how far the kernel's shadow ray may start from it,
+    16 eps |p| (engine.shading.shadow_reach; |p| from the eye, whatever the shape's size)."""
     ref = error_model.reference(scene)
     O, D = ref["origins"], ref["directions"]
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
-    extent = np.array([shape_extent(s) for s in scene.shapes])[np.maximum(ref["id"], 0)]
-    blur = 4 * 16 * EPS[precision] * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
+    blur = 4 * shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPS[precision])
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
     ref["visibility"], ref["shadow_edge"] = V, np.any(edges, axis=0)
     return ref

@@ -14,6 +14,9 @@ import pyclray
 from pyclray.engine import prepared
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.model.aovs import RENDER_AOVS
+from pyclray.reference import oracle
+
+from oracle_checks import assert_agrees_with_oracle
 
 ALL = RENDER_AOVS
 
@@ -172,3 +175,31 @@ def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monke
         at = scene.at(t)
         still = pyclray.Scene(at.camera, scene.image, at.shapes)  # no derivation: a new scene
         same(frame, fresh(still, aovs=ALL))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("extent", [1e4, 1e6])
+def test_boxes_around_the_anchor_drop_no_shape_seen_from_far_off_it(precision, extent):
+    """The BVH's boxes stay around the scene's anchor (its root box's centre) and a view passes the
+    eye relative to it, rounded to float with a margin (kernels/bvh.h: box_entries). Here the eye is
+    `extent` away from the anchor, 0.05 from tiny spheres (r = 2e-3): at 1e6 the rounding of the eye
+    (extent 2^-24, 0.06) is 30 times their size, so a margin that did not cover it would drop them. Held to the float64 oracle, pixel by pixel, within the error model."""
+    need(precision)
+    rng = np.random.default_rng(7)
+    corner = np.array([extent, 0.5 * extent, -extent])
+    tiny = corner + rng.uniform(-0.01, 0.01, (40, 3)) * [1, 1, 0.5] + np.array([0.0, 0.0, -0.05])
+    far = rng.uniform(-extent, extent, (50, 3))  # the rest of the field: the anchor near the origin
+    centres = np.concatenate([tiny, far, -corner[None]])
+    radii = np.concatenate([np.full(40, 2e-3), np.full(50, 1.0), [1.0]])
+    camera = pyclray.Camera(tuple(corner), tuple(corner + np.array([0.0, 0.0, -1.0])), fov=25.0)
+    # Sphere objects, not a batch: the error model's frame is per shape (a batch's is its own centre)
+    shapes = tuple(pyclray.Sphere(tuple(c), float(r)) for c, r in zip(centres, radii))
+    scene = pyclray.Scene(camera, pyclray.Image(40, 32), shapes)
+    prepared.clear()
+    image = pyclray.render(scene, precision=precision, acceleration="bvh")
+    anchor = prepared.prepared_scene(context_for(None), scene, precision).anchor
+    assert np.linalg.norm(anchor - corner) > 0.5 * extent  # the case this test is about
+    origins, directions = oracle.camera_rays(scene)
+    result = {name: image[name].reshape(-1, *image[name].shape[2:]) for name in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), result, precision,
+                              reference_point=corner)

@@ -143,7 +143,9 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
             packed = kind.cls.rebase(kind.world, origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
             raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
-        args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)), np.int32(kind.count)]
+        # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
+        args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
+                 input_buffer(ctx, np.ascontiguousarray(kind.world)), np.int32(kind.count)]
     with render_lock:
         _cast_prepared[key] = (scene.shapes, shape_types, args, anchor)
         while len(_cast_prepared) > PREPARED_MAX:

@@ -6,8 +6,9 @@ primitive, never a Python object per primitive), the BVH over the bounded entrie
 type's entries in leaf order), the refs, the materials, and per type a buffer of the entries in a
 camera's frame, which is what the render kernel's shape tests read. A view rebases that buffer
 from the world entries for its camera (kernels/rebase.cl: the differences of coordinates in
-float64, what every ray from the eye shares from error-free sums) on the device, and the BVH's
-boxes around the eye with it; a view with the same camera as the last rebases nothing. Devices
+float64, what every ray from the eye shares from error-free sums) on the device; the BVH's boxes
+stay around the scene's anchor (the kernel takes the eye relative to it); a view with the same
+camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
 So a moved camera uploads the camera only, whatever the number of shapes.
 
@@ -33,7 +34,6 @@ from ..model.shapes import REGISTRY
 from ..model.animation import derivation
 from ..model.shapes.base import entries
 from . import culling, refit, shading
-from .bvh import outward32
 from .device import has_fp64
 from .programs import Variant, kernels_for
 from .request import render_lock
@@ -143,18 +143,20 @@ class PreparedScene:
                 world, ids, primitives = world[order], ids[order], primitives[order]
             self.kinds[t] = self._kind(t, world, ids, primitives)
         self.bounded = sum(k.count for k in self.kinds.values() if k.cls.bounded)
-        self.nodes = self.refs = self.world_nodes = None
+        self.nodes = self.refs = None
+        # The BVH's boxes around a fixed anchor, the root box's centre, rounded outward to float once:
+        # a view passes the eye relative to the anchor (and a margin over its rounding) instead of
+        # re-expressing every box around the eye (kernels/bvh.h: box_entries).
+        self.anchor = np.zeros(3)
         if self.bvh.types:
-            nodes = aligned(np.zeros(self.bvh.tree.nodes, dtype=self.bvh.binary_nodes(np.zeros(3))[:0].dtype))
-            nodes["lo"][:, 3] = self.bvh.tree.first.astype(np.int32).view(np.float32)
-            nodes["hi"][:, 3] = self.bvh.tree.count.astype(np.int32).view(np.float32)
-            self._nodes_host = nodes
-            self.nodes = _buffer(ctx, nodes, writable=True)
+            with np.errstate(over="ignore", invalid="ignore"):
+                anchor = 0.5 * self.bvh.tree.lo[0] + 0.5 * self.bvh.tree.hi[0]
+            self.anchor = anchor if np.isfinite(anchor).all() else np.zeros(3)
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
+            self.nodes = _buffer(ctx, self._nodes_host, writable=True)
             self._refs_host = aligned(self.bvh.refs(self.types))
             self.refs = _buffer(ctx, self._refs_host)
-            if self.on_device:
-                self._world_nodes_host = aligned(self.bvh.world_corners())
-                self.world_nodes = _buffer(ctx, self._world_nodes_host)
         with np.errstate(over="ignore", invalid="ignore"):
             self._materials_host = aligned(shading.pack_materials(shapes, precision))
         self.base, self.dirty = shapes, set()  # see update
@@ -190,8 +192,6 @@ class PreparedScene:
             total += kind.world.nbytes + kind.frame_host.nbytes
         if self.bvh.types:
             total += self._nodes_host.nbytes + self._refs_host.nbytes
-            if self.on_device:
-                total += self._world_nodes_host.nbytes
         return total
 
     # -- the range check, once per view in O(1) ---------------------------------------------------
@@ -244,14 +244,6 @@ class PreparedScene:
             else:  # on the host: a few entries (a ground plane) cost less than a launch
                 packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
                 cl.enqueue_copy(queue, kind.frame, packed)
-        if self.bvh.types:
-            if self.on_device:
-                kernels["rebase_nodes"](queue, *self._groups(self.bvh.tree.nodes), self.world_nodes, self.nodes,
-                                        np.int32(self.bvh.tree.nodes), frame[0])
-            else:
-                nodes = self._nodes_host.copy()  # not the buffer's own memory (a CPU device's) as the source
-                nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(self.bvh.tree.lo - eye, self.bvh.tree.hi - eye)
-                cl.enqueue_copy(queue, self.nodes, nodes)
         self.view_key, self.view = key, (eye, rows)
 
     GROUP = 256

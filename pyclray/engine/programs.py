@@ -132,9 +132,12 @@ class Variant:
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + (list(SHADING_STRUCTS) if shading else []))
+        cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
+        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast else [])
+                          + (list(SHADING_STRUCTS) if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read("camera.h"), _read("bvh.h")] + [_read(name) for name in _kernel_files(shapes)]
+        parts += [_read("camera.h"), _read("bvh.h")] + ([_read("cast.h")] if cast else [])
+        parts += [_read(name) for name in _kernel_files(shapes)]
         if shading:  # materials, lights and shadows: only in the programs that shade
             parts.append(_read("shading.h"))
         parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels

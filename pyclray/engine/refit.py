@@ -58,8 +58,17 @@ def update(prepared, shapes: tuple, changed) -> bool:
         kind.world[where] = rows
         if prepared.on_device:
             prepared.stale.setdefault(name, set()).update(where.tolist())
-    if refitted is not None and prepared.on_device:
-        prepared.stale.setdefault("nodes", set()).update(refitted.tolist())
+    if refitted is not None:
+        # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view
+        tree = prepared.bvh.tree
+        nodes = prepared._nodes_host[refitted].copy()
+        nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - prepared.anchor,
+                                                           tree.hi[refitted] - prepared.anchor)
+        prepared._nodes_host[refitted] = nodes
+        if prepared.on_device:
+            scatter(prepared, prepared.nodes, refitted, nodes)
+        else:  # no float64 program to scatter with: the whole array (devices without float64 only)
+            cl.enqueue_copy(prepared.ctx.queue, prepared.nodes, prepared._nodes_host.copy())
     if prepared.on_device and prepared.view is not None:
         # the frame buffers hold the last view: bring the changed entries and nodes to it in place
         # (the same floats as a whole pass: the host's rebase is the device's, bit for bit)
@@ -69,11 +78,6 @@ def update(prepared, shapes: tuple, changed) -> bool:
             where = np.concatenate(where)
             scatter(prepared, kind.frame, where, kind.cls.rebase(kind.world[where], eye, rows, prepared.precision,
                                                              kind.ids[where], kind.primitives[where]))
-        if refitted is not None:
-            tree = prepared.bvh.tree
-            nodes = prepared._nodes_host[refitted].copy()
-            nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - eye, tree.hi[refitted] - eye)
-            scatter(prepared, prepared.nodes, refitted, nodes)
     # materials (an animated colour or size): the rows that differ
     materials = shading.pack_materials([shapes[i] for i in indices], prepared.precision)
     if not (materials == prepared._materials_host[indices]).all():
@@ -87,15 +91,11 @@ def update(prepared, shapes: tuple, changed) -> bool:
 
 
 def flush_world(prepared) -> None:
-    """Write the world entries and BVH corners that animation frames changed to the device."""
+    """Write the world entries that animation frames changed to the device."""
     for name, where in prepared.stale.items():
         where = np.array(sorted(where), np.int64)
-        if name == "nodes":
-            corners = prepared._world_nodes_host.reshape(-1, 2, 4)[where]  # a node's two corners: 64 bytes
-            scatter(prepared, prepared.world_nodes, where, corners.reshape(len(where), 8).view([("corners", "f8", 8)]).reshape(-1))
-        else:
-            kind = prepared.kinds[name]
-            scatter(prepared, kind.world_buffer, where, kind.world[where])
+        kind = prepared.kinds[name]
+        scatter(prepared, kind.world_buffer, where, kind.world[where])
     prepared.stale = {}
 
 
@@ -196,8 +196,4 @@ class RefitState:
             bvh.bounds[positions], self.widened[positions] = old[2], old[3]
             self.cost_sum -= after - before
             return None
-        changed = every
-        if self.prepared.on_device:
-            corners = self.prepared._world_nodes_host.reshape(-1, 2, 4)
-            corners[changed, 0, :3], corners[changed, 1, :3] = tree.lo[changed], tree.hi[changed]
-        return changed
+        return every

@@ -92,14 +92,20 @@ def check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple
     return tuple(a for a in known if a in aovs)  # canonical order: one program per set
 
 
-def camera_struct(rows, plane, width, height, precision):
-    """The kernel's Camera (model/layout.py): the frame's rows u, v, w and the image plane (a
-    model.camera.ImagePlane at this size). Twice the principal point goes as an integer and the
-    rest, so that the kernel's numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum
-    (and exactly width - 1 - 2 i, as ever, for a centred camera)."""
+def camera_struct(rows, plane, width, height, precision, box_origin=(0.0, 0.0, 0.0)):
+    """The kernel's Camera (model/layout.py): the frame's rows u, v, w, the image plane (a
+    model.camera.ImagePlane at this size) and the eye in the BVH's frame (box_origin: the eye minus
+    the scene's anchor, float64). Twice the principal point goes as an integer and the rest, so
+    that the kernel's numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum (and exactly
+    width - 1 - 2 i, as ever, for a centred camera)."""
     camera = np.zeros(1, dtype=layout(CAMERA, precision).dtype)
     for name, row in zip("uvw", rows):
         camera[name][0, :3] = row
+    # rounded to float: the box tests are in float; the margin, 2^-20 |o|_1 (as cast's box rays),
+    # covers that rounding and the kernel's differences of faces and origin (kernels/bvh.h)
+    origin = np.asarray(box_origin, np.float64)
+    camera["box_origin"][0, :3] = origin
+    camera["box_origin"][0, 3] = 2.0**-20 * float(np.abs(origin).sum())
     camera["tan_x"], camera["tan_y"] = plane.tan_x, plane.tan_y
     camera["width"], camera["height"] = width, height
     for axis, c in (("x", plane.cx), ("y", plane.cy)):

@@ -32,13 +32,6 @@ class SceneBVH:
         """The binary nodes with their boxes relative to origin (see pack_nodes)."""
         return pack_nodes(self.tree, origin)
 
-    def world_corners(self) -> np.ndarray:
-        """(2 M, 4) float64: each binary node's low and high corner in world coordinates (the device's
-        per-view pass rounds them outward around the eye: kernels/rebase_kernels.cl)."""
-        out = np.zeros((2 * self.tree.nodes, 4))
-        out[0::2, :3], out[1::2, :3] = self.tree.lo, self.tree.hi
-        return out
-
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
         program's shape types)."""

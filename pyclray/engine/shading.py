@@ -8,16 +8,14 @@ import numpy as np
 from ..model.layout import Struct, layout
 from ..model.lights import PointLight, effective_lights
 
-# Per shape id: its material, and its extent R (the size of the coordinates its intersection works
-# with, for the shadow rays' offset: kernels/shading.h).
+# Per shape id: its material.
 MATERIAL = Struct(
     "Material",
     (
         ("color", "real4"),  # albedo rgb; w: specular
         ("shininess", "real"),
-        ("extent", "real"),  # R: how far the shape reaches from its own centre (0: unbounded)
     ),
-    "A shape's material by id: color.xyz albedo, color.w specular, shininess; its extent R.",
+    "A shape's material by id: color.xyz albedo, color.w specular, shininess.",
 )
 # Per light: a point light's position in the frame (w = 1) or a directional light's unit direction
 # toward the light in the frame (w = 0), and its intensity or irradiance.
@@ -32,25 +30,23 @@ LIGHT = Struct(
 STRUCTS = (MATERIAL, LIGHT)
 
 
-def shape_extent(shape) -> float:
-    """R for the shadow rays' offset: the radius of a sphere around the shape's centre that holds it
-    (from the shape's own bounds where it has them), 0 for a shape without bounds (a plane), whose
-    intersection works with the ray's origin only."""
-    if getattr(shape, "bounded", True) is False:
-        return 0.0
-    if hasattr(shape, "bounding_spheres"):  # a batch: its largest primitive's
-        return float(shape.bounding_spheres([shape])[1].max(initial=0.0))
-    return float(getattr(shape, "radius", 0.0))
+SHADOW_OFFSET_K = 16  # kernels/shading.h: the shadow ray's offset K eps |n_s| . |p|, where it is offset
+
+
+def shadow_reach(distance, eps: float) -> np.ndarray:
+    """How far a shadow ray's start may lie from the exact hit point at ``distance`` from the eye
+    (kernels/shading.h): the hit's rounding and the offset, K eps |n_s| . |p| <= K eps |p|, whatever
+    the shape's size (skip-self starts at p itself)."""
+    return SHADOW_OFFSET_K * eps * np.asarray(distance, np.float64)
 
 
 def pack_materials(shapes, precision: str) -> np.ndarray:
-    """Each shape's material and extent, by id."""
+    """Each shape's material, by id."""
     out = np.zeros(max(len(shapes), 1), dtype=layout(MATERIAL, precision).dtype)
     for index, shape in enumerate(shapes):
         material = shape.material
         out["color"][index] = (*material.color, material.specular)
         out["shininess"][index] = material.shininess
-        out["extent"][index] = shape_extent(shape)
     return out
 
 

@@ -139,7 +139,8 @@ class ViewInputs:
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
         plane = scene.camera.image_plane(width, height)
-        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision))
+        self.anchor = prepared.anchor
+        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - self.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
@@ -185,6 +186,6 @@ def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
     per_scene = _views.get(scene, dict)
     key = (ctx.device.int_ptr, precision, acceleration)
     inputs = per_scene.get(key)
-    if inputs is None:
+    if inputs is None or not np.array_equal(inputs.anchor, prepared.anchor):  # a scene rebuilt: its own anchor
         inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)
     return prepared, inputs

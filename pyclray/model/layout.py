@@ -100,6 +100,9 @@ CAMERA = Struct(
         ("u", "real4"),  # world_from_camera: columns u (left), v (up), w (forward)
         ("v", "real4"),
         ("w", "real4"),
+        # the eye in the render BVH's frame (world axes around the scene's anchor), rounded to float,
+        # and (w) a margin over that rounding (kernels/bvh.h: box_entries)
+        ("box_origin", "float4"),
         # pixel (row j, column i) looks through sx = tan_x (centre_x - 1 - 2 i + centre_x_low) / width,
         # sy = tan_y (centre_y - 1 - 2 j + centre_y_low) / height (model.camera.ImagePlane):
         ("tan_x", "real"),  # width / (2 fx), height / (2 fy): a centred camera's tan of half its opening angles

@@ -11,11 +11,11 @@
  * taken (an edge case where either answer is right). A ray starting inside has entry <= 0 < exit
  * and sees the far side. */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The box in the camera's frame: its centre and axes along the frame's axes, and its slabs'
  * offsets (C - origin) . e_k -+ h_k from error-free sums (an eye next to a face keeps its distance). */
-inline void box_rebase(__global const BoxWorld* world, __global Box* out, const Frame* frame)
+inline void box_rebase(__global const BoxWorld* world, PYCLRAY_FRAME_OUT Box* out, const Frame* frame)
 {
     const double3 F = world->center.xyz - frame->origin;
     const double3 h = world->half_size.xyz;
@@ -33,7 +33,12 @@ inline void box_rebase(__global const BoxWorld* world, __global Box* out, const 
     out->world_axis2 = (real4)(convert_real3(e2), 0);
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* a shadow ray leaving its outer side toward the light never meets it again (convex) */
+#define PYCLRAY_FLAT_box 0
 
 
 typedef struct {
@@ -66,7 +71,7 @@ inline realv box_plane(const realv low, const realv high, const realv along, con
     return (high_side ? high : low) / along;
 }
 
-inline BoxSlabs box_slabs(__global const Box* box, const RayPacket* ray)
+inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
 {
     const vec3v D = ray->dir;
     const vec3v e0 = v3_splat(box->axis0), e1 = v3_splat(box->axis1), e2 = v3_splat(box->axis2);
@@ -106,7 +111,7 @@ inline BoxSlabs box_slabs(__global const Box* box, const RayPacket* ray)
 
 /* The entry if it lies ahead, else the exit (from inside: the far side); MISS if the slabs do not
  * overlap or lie behind. */
-inline realv box_hit(__global const Box* box, const RayPacket* ray)
+inline realv box_hit(SHAPE_SPACE const Box* box, const RayPacket* ray)
 {
     const BoxSlabs slabs = box_slabs(box, ray);
     const realv s = slabs.entry > 0 ? slabs.entry : slabs.exit;
@@ -114,7 +119,7 @@ inline realv box_hit(__global const Box* box, const RayPacket* ray)
 }
 /* The outward normal of the face hit: against the ray along the entry slab's axis, with it along
  * the exit slab's; the box's world axes are packed as is, so an unrotated box's normals are exact. */
-inline vec3v box_normal(__global const Box* box, const RayPacket* ray, __global const Camera* camera)
+inline vec3v box_normal(SHAPE_SPACE const Box* box, const RayPacket* ray, __global const Camera* camera)
 {
     const BoxSlabs slabs = box_slabs(box, ray);
     const intv entering = slabs.entry > 0;

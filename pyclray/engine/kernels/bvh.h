@@ -135,11 +135,13 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
 
 /* -- packets (render): the binary tree, one box against all the lanes ---------------------------- */
 
-/* A packet's rays from the box frame's origin (the eye), per axis: sign / (|d| + widen), sign /
- * (|d| - widen) or 0, and +inf where |d| <= widen (see box_ray). */
+/* A packet's rays from one origin (the eye), per axis: sign / (|d| + widen), sign / (|d| - widen)
+ * or 0, and +inf where |d| <= widen (see box_ray); and that origin in the box frame (xyz: the eye
+ * from the scene's anchor, rounded to float) with a margin over its rounding (w). */
 typedef struct {
     vec3v near_inverse, far_inverse, far_add;
     intv negative_x, negative_y, negative_z;
+    float4 from;
 } BoxPacket;
 
 inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, intv* negative)
@@ -153,20 +155,33 @@ inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, rea
     *far_add = steep ? SPLAT(0) : SPLAT(INFINITY);
 }
 
-inline BoxPacket box_packet(const vec3v d)
+inline BoxPacket box_packet(const vec3v d, const float4 from)
 {
     BoxPacket b;
+    b.from = from;
     box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.negative_x);
     box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.negative_y);
     box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.negative_z);
     return b;
 }
 
-/* Per lane, the distance at which the ray (widened, from the origin) enters node's box, or +inf
- * where it misses the box before limit. */
+/* x kept within the float range (a face beyond it is as good as there; a box test then never
+ * meets inf - inf or 0 * inf) */
+inline float3 finite3(const float3 x)
+{
+    return select(select(x, (float3)(-FLT_MAX), x < (float3)(-FLT_MAX)), (float3)(FLT_MAX), x > (float3)(FLT_MAX));
+}
+
+/* Per lane, the distance at which the ray (widened, from the packet's origin) enters node's box,
+ * or +inf where it misses the box before limit. The node's faces (around the scene's anchor) are
+ * taken relative to the origin once for all lanes, widened by the margin: it covers the rounding
+ * of the origin and of these differences (each within an ulp of the origin's size, or of the
+ * face's distance from the origin, which the ray's cone covers). */
 inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const realv limit)
 {
-    const float4 lo = node->lo, hi = node->hi;
+    const float3 o = b->from.xyz;
+    const float m = b->from.w;
+    const float3 lo = finite3((node->lo.xyz - m) - o), hi = finite3((node->hi.xyz + m) - o);
     const realv near_x = b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x), far_x = b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x);
     const realv near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
     const realv near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);

@@ -14,12 +14,12 @@
  * within r of the cap's centre.
  * The nearest of the four candidates with s > 0 wins (from inside the solid: the far side). */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The cylinder in the camera's frame: both ends and the axis along the frame's axes, and what every
  * ray from the frame's origin shares, from error-free products and sums: c = |(p0 - o) x A|^2 - r^2,
  * d0 = (p0 - o) . A and d1 = (p1 - o) . A. */
-inline void cylinder_rebase(__global const CylinderWorld* world, __global Cylinder* out, const Frame* frame)
+inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_OUT Cylinder* out, const Frame* frame)
 {
     const double3 p0 = world->p0.xyz - frame->origin, p1 = world->p1.xyz - frame->origin, A = world->axis.xyz;
     const double r = world->p0.w;
@@ -31,7 +31,13 @@ inline void cylinder_rebase(__global const CylinderWorld* world, __global Cylind
     out->caps = world->caps;
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* leaving the outer side of the tube or a cap toward the light never meets it again (convex);
+ * its inner side may (the opposite wall) */
+#define PYCLRAY_FLAT_cylinder 0
 
 
 typedef struct {
@@ -51,7 +57,7 @@ inline void cylinder_candidate(CylinderHit* hit, const realv s, const realv key,
     hit->kind = nearer ? SPLAT_INT(kind) : hit->kind;
 }
 
-inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const RayPacket* ray)
+inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray)
 {
     CylinderHit hit;
     const vec3v A = v3_splat(cylinder->axis);
@@ -65,10 +71,15 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
         c = SPLAT(cylinder->axis.w);
         d0 = SPLAT(cylinder->world_axis.w);
         d1 = SPLAT(cylinder->d1);
-    } else {  /* cast and shadow rays */
+    } else {  /* shadow rays, from a point p of the scene */
         F = v3_sub(v3_splat(cylinder->p0), ray->origin);
         FxA = v3_cross(F, A);
-        c = v3_dot(FxA, FxA) - r2;
+        /* c = |F x A|^2 - r^2 directly, or moved from the eye's exact c, c_eye - (p x A).(p0 x A + F x A):
+         * the form whose terms are smaller, as for the sphere (kernels/sphere.cl) */
+        const vec3v pxA = v3_cross(ray->origin, A), sum = v3_add(v3_cross(v3_splat(cylinder->p0), A), FxA);
+        const realv moved = SPLAT(cylinder->axis.w) - v3_dot(pxA, sum);
+        const realv moved_size = v_abs(SPLAT(cylinder->axis.w)) + v3_dot(v3_abs(pxA), v3_abs(sum));
+        c = moved_size < v3_dot(FxA, FxA) + r2 ? moved : v3_dot(FxA, FxA) - r2;
         d0 = v3_dot(F, A);
         d1 = v3_dot(v3_sub(v3_splat(cylinder->p1), ray->origin), A);
     }
@@ -117,7 +128,7 @@ inline CylinderHit cylinder_intersect(__global const Cylinder* cylinder, const R
     return hit;
 }
 
-inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ray)
+inline realv cylinder_hit(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray)
 {
     return cylinder_intersect(cylinder, ray).best;
 }
@@ -127,7 +138,7 @@ inline realv cylinder_hit(__global const Cylinder* cylinder, const RayPacket* ra
  * subtracting large nearly equal vectors, as for the sphere: a R = -+sqrt(disc) D_perp - triple (D x A)
  * (near root: -, far root: +), D_perp = A x (D x A); the open tube's inner side has the same
  * outward normal. */
-inline vec3v cylinder_normal(__global const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
+inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
 {
     const CylinderHit hit = cylinder_intersect(cylinder, ray);
     const realv side = hit.kind == SPLAT_INT(1) ? SPLAT(-1) : SPLAT(1);

@@ -4,11 +4,11 @@
  * difference small); it equals n x (D x F) / (n . D), whose cross product keeps the digits of the
  * small sideways offsets of the camera frame, so the border is as sharp far away as near. */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The disk in the camera's frame (rebase_flat: its centre, normal and the origin's distance to its
  * plane), and r^2. */
-inline void disk_rebase(__global const DiskWorld* world, __global Disk* out, const Frame* frame)
+inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk* out, const Frame* frame)
 {
     const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
     const double r = world->center.w;
@@ -17,10 +17,15 @@ inline void disk_rebase(__global const DiskWorld* world, __global Disk* out, con
     out->world_normal = (real4)(convert_real3(n), 0);
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* a shadow ray leaving it on either side never meets it again (flat) */
+#define PYCLRAY_FLAT_disk 1
 
 
-inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
+inline realv disk_hit(SHAPE_SPACE const Disk* disk, const RayPacket* ray)
 {
     const vec3v n = v3_splat(disk->normal);
     /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
@@ -33,7 +38,7 @@ inline realv disk_hit(__global const Disk* disk, const RayPacket* ray)
 }
 
 /* The disk's own normalized normal in world space (packed as is), never flipped. */
-inline vec3v disk_normal(__global const Disk* disk, const RayPacket* ray, __global const Camera* camera)
+inline vec3v disk_normal(SHAPE_SPACE const Disk* disk, const RayPacket* ray, __global const Camera* camera)
 {
     return v3_splat(disk->world_normal);
 }

@@ -169,6 +169,7 @@ inline vec3v v3(const realv x, const realv y, const realv z)
 }
 /* one point or direction (xyz of a packed real4) in every lane */
 inline vec3v v3_splat(const real4 p) { return v3(SPLAT(p.x), SPLAT(p.y), SPLAT(p.z)); }
+inline vec3v v3_abs(const vec3v v) { return v3(v_abs(v.x), v_abs(v.y), v_abs(v.z)); }
 inline vec3v v3_add(const vec3v a, const vec3v b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
 inline vec3v v3_sub(const vec3v a, const vec3v b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 inline vec3v v3_scale(const vec3v a, const realv s) { return v3(a.x * s, a.y * s, a.z * s); }
@@ -233,12 +234,21 @@ typedef struct {
 #endif
 } RayPacket;
 
+/* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
+ * private copy framed on the ray's origin (kernels/cast.h) */
+#ifdef PYCLRAY_CAST
+#define SHAPE_SPACE
+#else
+#define SHAPE_SPACE __global
+#endif
+
 /* FROM_EYE(ray): whether the packet starts at the frame's origin, the eye, where the terms the host
- * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). Cast's rays never
- * do; a render's camera rays always, and its shadow rays (only compiled with shadows) never: a
- * constant wherever the shape functions are inlined into the kernel. */
+ * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). A render's camera
+ * rays always do, and its shadow rays (only compiled with shadows) never; cast frames every shape on
+ * its ray's origin first (kernels/cast.h), so its rays always do: a constant wherever the shape
+ * functions are inlined into the kernel. */
 #if defined(PYCLRAY_CAST)
-#define FROM_EYE(ray) 0
+#define FROM_EYE(ray) 1  /* each shape is framed on the ray's own origin (kernels/cast.h) */
 #elif defined(PYCLRAY_SHADOWS)
 #define FROM_EYE(ray) ((ray)->from_eye)
 #else

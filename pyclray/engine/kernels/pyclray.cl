@@ -33,7 +33,7 @@
 #ifndef PYCLRAY_AOV_SHADED
 #define PYCLRAY_SHADED_ARGS(P)
 #define PYCLRAY_MATERIALS_BEGIN
-#define PYCLRAY_MATERIAL_OF(id, mine)
+#define PYCLRAY_MATERIAL_OF(id, mine, flat)
 #define PYCLRAY_WRITE_SHADED(index, first, end)
 #endif
 
@@ -44,8 +44,14 @@
 
 #if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
 /* one argument pair per shape type present: the packed array and its length; the bounded types'
- * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray */
+ * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray.
+ * cast adds the float64 world entries, on which it frames each shape it tests (kernels/cast.h). */
+#ifdef PYCLRAY_CAST
+#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
+    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds) P(const int, n_##type##s)
+#else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type) P(__global const Type*, type##s) P(const int, n_##type##s)
+#endif
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
 #define PYCLRAY_SHAPE_AT(type, q) (q)
@@ -165,7 +171,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_NORMAL(Type, type)                                                    \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_NORMAL_OF(type)                                                       \
-        PYCLRAY_MATERIAL_OF(type##s[k].id, mine)                                      \
+        PYCLRAY_MATERIAL_OF(type##s[k].id, mine, PYCLRAY_FLAT_##type)                 \
         PYCLRAY_PRIMITIVE_OF(type)                                                    \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
@@ -391,8 +397,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-    /* the bounded shapes through the BVH, whose boxes are in world axes around the eye */
-    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir));
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
     /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
@@ -414,15 +420,24 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
  * the largest distance that counts (float64, limits[r * limit_stride]).
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
- * before it. For a bounded shape of anchor A and bounding radius R (its packed data is relative
- * to A), the ray's origin O moves along the unit direction D to O + s0 D, s0 = max(0, (A - O).D - R),
- * which no point of the shape precedes; the new origin relative to A, s0 D - (A - O), is taken in
- * float64 and rounded once. A ray from 1e8 away thus meets a sphere of radius 1e-4 with errors
- * relative to the sphere's size, as a camera next to it would; its distance is s0 + s (s: the
- * shape's own, from the new origin). Unbounded shapes (planes) take the world origin in float64. */
+ * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
+ * R, the ray's origin O moves along the unit direction D to O' = O + s0 D, s0 = max(0, (A - O).D - R),
+ * which no point of the shape precedes (float64); the shape is then framed on O' from its float64
+ * world entry (kernels/cast.h: its coordinates relative to O' rounded once, and the terms O' decides,
+ * such as a sphere's c = |C - O'|^2 - r^2, in float64) and tested from the frame's origin. A ray
+ * from 1e8 away thus meets a sphere of radius 1e-4 with errors relative to the sphere's size, and a
+ * ray starting on a surface, or 1e-9 off it, knows which side it starts on; its distance is s0 + s
+ * (s: the shape's own, from O'). Unbounded shapes (planes) are framed on the ray's own origin. */
+#define PYCLRAY_CAST_FRAMED(Type, type, k, from)                                    \
+    Type framed = type##s[k];                                                       \
+    {                                                                               \
+        const Frame frame = {(from)};                                               \
+        type##_rebase(&type##_worlds[k], &framed, &frame);                          \
+    }
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                      \
-        const real s = type##_hit(&type##s[k], &moved);                             \
+        PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
+        const real s = type##_hit(&framed, &moved);                                 \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
     }
@@ -439,7 +454,8 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
     }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
-        const real s = type##_hit(&type##s[q], &ray);                               \
+        PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
+        const real s = type##_hit(&framed, &ray);                                   \
         const double t = s < MISS ? (double)s * length : INFINITY;                  \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
@@ -455,7 +471,7 @@ inline double3 unit_direction(const double3 d)
     return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
-/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m), relative to anchor A: see above. m = 2^-50
+/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
  * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
  * shape's near side, however far O is (at 1e40 the rounding of (A - O).D alone exceeds a unit R).
  * near: whether the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without
@@ -472,7 +488,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
     *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
     RayPacket moved = *ray;
-    moved.origin = v3_round(-G);
+    moved.world = O + *s0 * D;  /* where the shape is framed */
     return moved;
 }
 
@@ -484,7 +500,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     ray.dir_exact = unit_direction(vload3(r, directions));                          \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
-    ray.origin = v3_round(ray.world);                                               \
+    ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
     const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];
 
@@ -523,8 +539,11 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
 #define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
-#define PYCLRAY_CAST_NORMAL(Type, type) \
-    if (best_kind == KIND_##type) normal = type##_normal(&type##s[best_k], &ray, camera);
+#define PYCLRAY_CAST_NORMAL(Type, type)                                             \
+    if (best_kind == KIND_##type) {                                                 \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        normal = type##_normal(&framed, &ray, camera);                              \
+    }
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
 #define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \

@@ -13,6 +13,9 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 
+/* the per-view pass writes each frame entry to its buffer (cast frames into private copies: cast.h) */
+#define PYCLRAY_FRAME_OUT __global
+
 typedef struct {
     double3 origin;  /* the eye (render) */
     double3 u, v, w; /* the frame's axes in world coordinates (rows of frame_from_world) */

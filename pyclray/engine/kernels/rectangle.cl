@@ -4,11 +4,11 @@
  * point from the centre is n x (D x F) / (n . D) rather than s D - F, which cancels far away (see
  * kernels/disk.cl). */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The rectangle in the camera's frame: its centre, normal and the origin's distance to its plane,
  * and the dual vectors of its sides along the frame's axes. */
-inline void rectangle_rebase(__global const RectangleWorld* world, __global Rectangle* out, const Frame* frame)
+inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME_OUT Rectangle* out, const Frame* frame)
 {
     const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
     out->center = (real4)(to_frame(frame, F), 0);
@@ -18,10 +18,15 @@ inline void rectangle_rebase(__global const RectangleWorld* world, __global Rect
     out->world_normal = (real4)(convert_real3(n), 0);
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* a shadow ray leaving it on either side never meets it again (flat) */
+#define PYCLRAY_FLAT_rectangle 1
 
 
-inline realv rectangle_hit(__global const Rectangle* rectangle, const RayPacket* ray)
+inline realv rectangle_hit(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray)
 {
     const vec3v n = v3_splat(rectangle->normal);
     /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
@@ -34,7 +39,7 @@ inline realv rectangle_hit(__global const Rectangle* rectangle, const RayPacket*
 }
 
 /* normalize(u x v) in world space (packed as is), never flipped. */
-inline vec3v rectangle_normal(__global const Rectangle* rectangle, const RayPacket* ray, __global const Camera* camera)
+inline vec3v rectangle_normal(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray, __global const Camera* camera)
 {
     return v3_splat(rectangle->world_normal);
 }

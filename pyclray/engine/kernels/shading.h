@@ -11,20 +11,24 @@
  * E = intensity / |light - p|^2 (point) or the irradiance (directional), V = 0 where the shadow ray
  * from p toward the light meets a shape before the light, else 1.
  *
- * Shadow rays without acne or leaks, at any scale (pbrt-v4's OffsetRayOrigin): a float hit point is
- * off the true surface by a rounding error, and a shadow ray's test of the surface it leaves errs by the
- * rounding of the coordinates that test works with: p's own (|p|: the frame's origin is the eye) and
- * the shape's (its extent R: a sphere's c = |F|^2 - r^2 carries an error of about eps r^2, that is a
- * position error of eps r; a plane's h one of eps |p|). The error model bounds both by a few eps
- * (|p| + R): the error along the ray is a few eps t / cos, which the cosine takes back across the
- * surface; the shadow test's own roundings add about 4 eps (|p| + R) (F's rounding, the dot and the
- * subtraction, over 2r). The ray therefore starts at p + delta n_s, on the lit side,
- *   delta = SHADOW_OFFSET_K eps (|p| + R),
- * with SHADOW_OFFSET_K = 16, about twice the sum of those terms: from there no test of the surface
- * itself can return a hit in front of the ray (a flat or convex surface left on its outer side),
- * whatever the scene's scale, and no other surface is skipped unless it lies within delta of p, which
- * is within rounding of touching it. A point light's shadow ray ends at the light: a hit counts
- * below the distance from the origin to the light.
+ * Shadow rays without acne or leaks, at any scale. The shadow ray of a hit p starts where the
+ * point hit and the shape it lies on say:
+ * - skip-self: where the winner cannot meet its own shadow ray, the ray starts at p itself and that
+ *   shape (the winning primitive) is not tested: a flat primitive (plane, disk, rectangle:
+ *   PYCLRAY_FLAT_<type> 1 in its kernel file) on either side, a convex one (sphere, box, cylinder:
+ *   0) seen from its outer side (n.D < 0, the lit side is then outward: n_s.L > 0). Nothing else is
+ *   moved or skipped: an occluder touching p (a ball on the ground) still shadows it.
+ * - otherwise (a convex shape's inner side, where the ray may meet the opposite wall), pbrt-v4's
+ *   OffsetRayOrigin: p moved along n_s by d = |n_s| . e, e the rounding bound of p's coordinates
+ *   and of the shadow test's own roundings. The hit is p = s D in the eye's frame, with s from the
+ *   host's exact terms: s and each D_i carry a relative error of a few eps (the render's depth is
+ *   within a few ulps of t), so p is off by a few eps |p|; the shadow ray's test of the surface from
+ *   p rounds terms of about eps |p| too where it takes the better of two forms (a sphere's c directly
+ *   or moved from the eye's exact c, kernels/sphere.cl, kernels/cylinder.cl). So d = K eps |p|,
+ *   K = SHADOW_OFFSET_K = 16 about twice their sum. It does not grow with the shape's size: the
+ *   inside of a dome of radius 1e8 gets the offset of a plane.
+ * A point light's shadow ray ends at the light: a hit counts below the distance from the origin to
+ * the light.
  */
 
 #ifdef PYCLRAY_FP64
@@ -32,24 +36,25 @@
 #else
 #define SHADING_EPSILON 0x1p-24f
 #endif
-#define SHADOW_OFFSET_K 16
+#define SHADOW_OFFSET_K 16  /* pyclray.engine.shading.SHADOW_OFFSET_K */
 
 #define PYCLRAY_SHADED_ARGS(P)                                                        \
     P(__global const Material*, materials) P(__global const Light*, lights) P(const int, n_lights) \
     P(const real4, ambient) P(const real4, background) P(__global real*, shaded_out)
 
-/* per lane: the winner's material (albedo, specular, shininess) and extent R, gathered in the
- * winners' loop of kernels/pyclray.cl (each distinct winner once) */
+/* per lane: the winner's material (albedo, specular, shininess) and whether its type is flat,
+ * gathered in the winners' loop of kernels/pyclray.cl (each distinct winner once) */
 #define PYCLRAY_MATERIALS_BEGIN                                                       \
     vec3v albedo = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
-    realv specular = SPLAT(0), shininess = SPLAT(1), extent = SPLAT(0);
-#define PYCLRAY_MATERIAL_OF(id, mine)                                                 \
+    realv specular = SPLAT(0), shininess = SPLAT(1);                                  \
+    intv flat = SPLAT_INT(0);
+#define PYCLRAY_MATERIAL_OF(id, mine, is_flat)                                        \
     {                                                                                 \
         __global const Material* m = &materials[id];                                  \
         albedo = v3_select(albedo, v3_splat(m->color), mine);                         \
         specular = (mine) ? SPLAT(m->color.w) : specular;                             \
         shininess = (mine) ? SPLAT(m->shininess) : shininess;                         \
-        extent = (mine) ? SPLAT(m->extent) : extent;                                  \
+        flat = (mine) ? SPLAT_INT(is_flat) : flat;                                    \
     }
 
 inline vec3v v3_mul(const vec3v a, const vec3v b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
@@ -85,12 +90,14 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
         const realv s = type##_hit(&type##s[q], &shadow);                             \
-        open = open && !(s < limit);                                                  \
+        const intv self = skip && best_key == SPLAT_INT(q * 8 + KIND_##type);         \
+        open = open && (self || !(s < limit));                                        \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-/* The shadow packet for box tests, in the BVH's frame (world axes around the eye): its unit
- * directions, its per-lane origins, and a margin over their rounding and over a shape test's error
- * from an origin of that size (2^-20 |o|_1, as cast's box rays). */
+/* The shadow packet for box tests, in the BVH's frame (world axes around the scene's anchor): its
+ * unit directions, its per-lane origins, and a margin over their rounding and over a shape test's
+ * error from an origin of that size (2^-20 |o|_1, as cast's box rays), and over the rounding of
+ * the eye from the anchor (the camera's box origin). */
 typedef struct {
     BoxPacket box;
     vec3v origin;
@@ -120,7 +127,8 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &shadow);                             \
-        open = open && !(s < limit);                                                  \
+        const intv self = skip && best_key == SPLAT_INT(ref);                         \
+        open = open && (self || !(s < limit));                                        \
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
@@ -132,9 +140,12 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
     if (ANY(open)) {                                                                  \
         ShadowBoxes boxes;                                                            \
-        boxes.box = box_packet(world_from_frame(camera, shadow.dir));                 \
-        boxes.origin = world_from_frame(camera, shadow.origin);                       \
-        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)); \
+        boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
+        const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
+        boxes.origin = v3_add(from_eye, v3_splat((real4)(convert_real3(camera->box_origin.xyz), 0))); \
+        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)) \
+                       + SPLAT(0x1p-20) * ((v_abs(from_eye.x) + v_abs(from_eye.y)) + v_abs(from_eye.z)) \
+                       + SPLAT(camera->box_origin.w);                                 \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
         PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
     }
@@ -157,9 +168,11 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 #define PYCLRAY_SHADOW_ORIGIN                                                         \
     RayPacket shadow;                                                                 \
     shadow.from_eye = 0;                                                              \
+    /* skip-self (see above), or the offset d = K eps |p| along n_s */               \
+    const intv skip = flat != 0 || front;                                             \
     {                                                                                 \
-        const realv delta = SPLAT(SHADOW_OFFSET_K * SHADING_EPSILON) * (v_sqrt(v3_dot(p, p)) + extent); \
-        shadow.origin = v3_add(p, v3_scale(n_s, delta));                              \
+        const realv d = SPLAT(SHADOW_OFFSET_K * SHADING_EPSILON) * v_sqrt(v3_dot(p, p)); \
+        shadow.origin = v3_add(p, v3_scale(n_s, skip ? SPLAT(0) : d));                \
     }                                                                                 \
     realv limit;
 #else

@@ -6,11 +6,11 @@
  * eye's squared distance to the surface, exact even for a huge sphere just below the camera).
  */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* The sphere in the camera's frame, from its world centre and radius: F = C - origin (float64),
  * its coordinates along the frame's axes, r^2, and c = |F|^2 - r^2 from error-free sums. */
-inline void sphere_rebase(__global const SphereWorld* world, __global Sphere* out, const Frame* frame)
+inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT Sphere* out, const Frame* frame)
 {
     const double3 F = world->center.xyz - frame->origin;
     const double r = world->center.w;
@@ -18,7 +18,12 @@ inline void sphere_rebase(__global const SphereWorld* world, __global Sphere* ou
     out->c = (real)dot2_4((double4)(F, r), (double4)(F, -r));
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* a shadow ray leaving a sphere's outer side toward the light never meets it again (convex) */
+#define PYCLRAY_FLAT_sphere 0
 
 
 /* F (the centre from the ray's origin), c = |F|^2 - r^2, b = F.D and the discriminant b^2 - a c. */
@@ -27,16 +32,25 @@ typedef struct {
     realv c, b, disc;
 } SphereTerms;
 
-inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* ray)
+inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
     SphereTerms t;
     const realv r2 = SPLAT(sphere->center.w);
     if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: c from the host, exact */
         t.F = v3_splat(sphere->center);
         t.c = SPLAT(sphere->c);
-    } else {
+    } else {  /* a shadow ray from a point p of the scene */
         t.F = v3_sub(v3_splat(sphere->center), ray->origin);
-        t.c = v3_dot(t.F, t.F) - r2;
+        /* c = |F|^2 - r^2 taken directly rounds terms of size |F|^2 + r^2: eps r^2 for a huge
+         * sphere, a position error of eps r (a unit at r = 1e6); moved from the eye's exact c,
+         * c_eye - p.(C + F), it rounds terms of size |c_eye| + |p| |C + F|, a position error of
+         * about eps |p| |C| / r (a huge sphere's). Each lane takes the form whose terms are smaller:
+         * either way about eps (|p| + min(r, |p| |C| / r)) <= 2 eps |p| where |p| >= r. */
+        const vec3v sum = v3_add(v3_splat(sphere->center), t.F);
+        const realv moved = SPLAT(sphere->c) - v3_dot(ray->origin, sum);
+        const realv direct = v3_dot(t.F, t.F) - r2;
+        const realv moved_size = v_abs(SPLAT(sphere->c)) + v3_dot(v3_abs(ray->origin), v3_abs(sum));
+        t.c = moved_size < v3_dot(t.F, t.F) + r2 ? moved : direct;
     }
     const vec3v D = ray->dir;
     const realv a = ray->a;
@@ -53,7 +67,7 @@ inline SphereTerms sphere_terms(__global const Sphere* sphere, const RayPacket* 
 }
 
 /* Nearest root s > 0 per lane, or MISS. */
-inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
+inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
     /* stable roots: q = b + sign(b) sqrt(disc) never cancels; the roots are c/q and q/a
@@ -71,7 +85,7 @@ inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
  * nearly equal vectors, so a far sphere's normal keeps its digits. The sign needs no root: from
  * outside (c > 0) a ray hits the near side, b - sqrt(disc); from inside or on the surface
  * (c <= 0) only the far root is positive, b + sqrt(disc). */
-inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+inline vec3v sphere_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
     const vec3v D = ray->dir;

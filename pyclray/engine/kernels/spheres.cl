@@ -1,18 +1,22 @@
 /* A batch of spheres (pyclray.Spheres): each entry is a Sphere, tested by sphere.cl's code (put
  * before this file); its primitive is its index in the batch. */
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-inline void spheres_rebase(__global const SphereWorld* world, __global Sphere* out, const Frame* frame)
+inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT Sphere* out, const Frame* frame)
 {
     sphere_rebase(world, out, frame);
 }
 
-#else
+#endif
 
-inline realv spheres_hit(__global const Sphere* sphere, const RayPacket* ray) { return sphere_hit(sphere, ray); }
+#ifndef PYCLRAY_REBASE
 
-inline vec3v spheres_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+#define PYCLRAY_FLAT_spheres 0  /* each primitive a sphere: convex */
+
+inline realv spheres_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray) { return sphere_hit(sphere, ray); }
+
+inline vec3v spheres_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
 {
     return sphere_normal(sphere, ray, camera);
 }

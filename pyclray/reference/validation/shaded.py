@@ -32,14 +32,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...engine.shading import shape_extent
+from ...engine.shading import shadow_reach
 from ...model.lights import DirectionalLight, Material, Shading, effective_lights
 from .. import error_model, shading
 from .arbitrate import Verdicts, decide
 
 EPSILON = 2.0**-24
 MITSUBA_RAY_EPSILON = 1500 * EPSILON  # Mitsuba 3's math::RayEpsilon<float>
-PYCLRAY_OFFSET_K = 16  # kernels/shading.h's SHADOW_OFFSET_K
 SHADOW_EDGE_K = 4
 
 
@@ -123,8 +122,7 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None, truth=No
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
     hit = ref["id"] >= 0
     # per pixel: the larger of the two engines' shadow-ray offsets at its hit point
-    extent = np.array([shape_extent(s) for s in scene.shapes] or [0.0])[np.maximum(ref["id"], 0)]
-    ours_offset = PYCLRAY_OFFSET_K * EPSILON * (np.linalg.norm(ref["points"] - O, axis=-1) + extent)
+    ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur,
