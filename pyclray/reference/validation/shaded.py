@@ -21,7 +21,7 @@ bounds, pyclray's against the float64 oracle (K = 4) and Mitsuba's (K = 6, plus 
 two cameras); ``pyclray.reference.shading.tolerance`` turns each into a bound on the colour, and the two bounds
 add. Left out, each counted: silhouettes and pixels whose ids differ (the image check judges those),
 terminators, and shadow edges: where the float64 visibility changes when the hit point moves by
-SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps (|p| + R);
+SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps |p|;
 Mitsuba's spawn_ray offset, RayEpsilon (1 + max |p_k|) with RayEpsilon = 1500 eps), or when it is
 lifted along the normal by either engine's own offset (where that offset decides the shadow).
 """
@@ -175,7 +175,8 @@ def format_shaded_check(result: ShadedCheck) -> str:
         f"shaded (diffuse version: specular, ambient, background 0) against pi x Mitsuba's direct integrator ({result.variant})",
         "  tolerance per pixel: pyclray.reference.shading.tolerance of pyclray's (K=4 vs the oracle) and of Mitsuba's",
         "  (K=6, plus the cameras) hit-point and normal bounds (pyclray.reference.error_model), added; shadow edges: visibility changes",
-        f"  within {SHADOW_EDGE_K} x max(pyclray's 16 eps (|p| + R), Mitsuba's 1500 eps (1 + |p|)) of the hit",
+        f"  within {SHADOW_EDGE_K} x max(pyclray's 16 eps |p|, Mitsuba's 1500 eps (1 + |p|)) of the hit, or where",
+        "  the hit point lifted along its normal by either engine's offset sees the light otherwise",
         f"  judged {result.pixels} pixels ({result.lit} lit, {result.shadowed} in shadow); max |difference| "
         f"{result.max_difference:.3g}, median tolerance {result.median_tolerance:.3g}; worst difference / tolerance "
         f"{result.worst:.3g}",
