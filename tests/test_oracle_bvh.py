@@ -64,3 +64,55 @@ def test_ctrl_c_during_a_check_is_quiet():
     out, err = process.communicate(timeout=60)
     assert process.returncode == 130, err
     assert out == "" and err == ""
+
+
+def plain_visibility(scene, points, normals, directions, ids, skip, blur, lifts):
+    """reference_visibility's definition, the plain way: every moved point's ray traced through
+    every shape (trace_every_shape)."""
+    from pyclray.model.lights import effective_lights
+    from pyclray.reference.shading import facing_normals, light_terms
+
+    size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
+    n_s = facing_normals(normals, directions)
+    out, unsure = [], []
+    for light in effective_lights(scene):
+        def visible(origins):
+            L, _, distance = light_terms(light, origins)
+            t = oracle.trace_every_shape(scene, origins + skip * size * L, L, aovs=("depth",))["depth"]
+            return ~(t < distance - skip * size)
+
+        base = visible(points)
+        mixed = np.zeros_like(base)
+        for axis in range(3):
+            for sign in (-1.0, 1.0):
+                step = np.zeros(3)
+                step[axis] = sign
+                moved = step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s + 0.5 * n_s
+                mixed |= visible(points + blur[..., None] * moved) != base
+        for lift in lifts:
+            mixed |= visible(points + lift[..., None] * n_s) != base
+        lit = (np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0) & (ids >= 0)
+        out.append((base & lit).astype(np.float64))
+        unsure.append(mixed & lit)
+    return out, unsure
+
+
+@pytest.mark.parametrize("name", ["shapes-lit.toml", "rtiow.toml", "tp02-lit.toml"])
+def test_shadow_visibility_tests_only_the_shapes_near_each_ray(name):
+    """reference_visibility traces each light's shadow rays (and those of the moved points that find
+    shadow edges) against the shapes near p's own ray only: the same V and the same edges as every
+    moved ray traced through every shape."""
+    from pyclray.reference.shading import reference_visibility
+
+    scene = pyclray.load_scene(SCENES / name).with_size(40, 30)
+    origins, directions = oracle.camera_rays(scene)
+    truth = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id"))
+    points = origins + np.where(np.isfinite(truth["depth"]), truth["depth"], 0)[..., None] * directions
+    blur = 1e-3 * (1 + np.abs(points).max(axis=-1))
+    lifts = (1e-4 * np.linalg.norm(points, axis=-1), 2e-3 * np.ones(truth["id"].shape))
+    args = (scene, points, truth["normal"], directions, truth["id"])
+    fast_v, fast_edges = reference_visibility(*args, skip=1e-9, blur=blur, lifts=lifts)
+    plain_v, plain_edges = plain_visibility(*args, 1e-9, blur, lifts)
+    for a, b in zip(fast_v + fast_edges, plain_v + plain_edges):
+        assert np.array_equal(a, b)
+    assert sum(e.sum() for e in fast_edges) > 0 and sum((v == 0).sum() for v in fast_v) > 0

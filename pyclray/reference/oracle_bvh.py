@@ -26,22 +26,25 @@ def by_shape(ids: np.ndarray):
             yield int(sorted_ids[start]), order[start:end]
 
 
-_last: list = []  # [(shapes tuple, tree)]: the scene last traced (a check traces one scene many times)
+_last: dict = {}  # pad -> (shapes tuple, tree): the scene last traced (a check traces one scene many times)
 
 
-def shape_tree(scene):
-    """(BVH over the bounded shapes' boxes, their shape indices, the indices of the shapes tested
-    against every ray), kept for the last tuple of shapes."""
-    if _last and _last[0][0] is scene.shapes:
-        return _last[0][1]
-    _last[:] = [(scene.shapes, _build_tree(scene))]
-    return _last[0][1]
+def shape_tree(scene, pad: float = 0.0):
+    """(BVH over the bounded shapes' boxes, each widened by pad too, their shape indices, the
+    indices of the shapes tested against every ray), kept for the last tuple of shapes."""
+    kept = _last.get(pad)
+    if kept is not None and kept[0] is scene.shapes:
+        return kept[1]
+    if len(_last) > 4:
+        _last.clear()
+    _last[pad] = (scene.shapes, _build_tree(scene, pad))
+    return _last[pad][1]
 
 
 LARGE = 0.25  # a shape whose box spans more than this part of all the boxes' is tested against every ray
 
 
-def _build_tree(scene):
+def _build_tree(scene, pad: float = 0.0):
     """The tree over the bounded shapes but the large ones: a box as large as the scene (the ground
     sphere of radius 1000 under the book's 486 spheres) holds every ray anyway, and would make the
     Morton codes of all the others' centres coarse (an LBVH of ties); such shapes, and the unbounded
@@ -56,7 +59,8 @@ def _build_tree(scene):
     everywhere = sorted([index for index, shape in enumerate(scene.shapes) if not shape.bounded]
                         + [b for b, big in zip(bounded, large) if big])
     kept = np.array(bounded, np.int64)[~large]
-    return build(widened(boxes[~large])), kept, np.array(everywhere, np.int64)
+    boxes = widened(boxes[~large]) + np.array([-pad, pad])[None, :, None]
+    return build(boxes), kept, np.array(everywhere, np.int64)
 
 
 def _slab_hits(tree, O, inverse, rays, nodes) -> np.ndarray:
@@ -108,12 +112,36 @@ def candidates(tree, order, O, D) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(found_rays), np.concatenate(found_shapes)
 
 
-def hits(scene, tree, order, unbounded, O, D):
-    """(rays, shapes, t) of every finite hit t > 0 of a shape test on these rays."""
+def ray_shape_pairs(tree, order, unbounded, O, D):
+    """(rays, shapes): each ray with each shape whose box it crosses, and with each shape tested
+    against every ray."""
     pair_rays, pair_shapes = candidates(tree, order, O, D)
     if unbounded.size:
         pair_rays = np.concatenate([pair_rays, np.tile(np.arange(len(D)), len(unbounded))])
         pair_shapes = np.concatenate([pair_shapes, np.repeat(unbounded, len(D))])
+    return pair_rays, pair_shapes
+
+
+def near_pairs(scene, O, D, pad: float):
+    """(rays, shapes): every shape that a ray parallel to one of these, at most pad from it, may
+    meet (its box, widened by pad, crosses the ray): the shapes a slightly moved ray is tested with."""
+    return ray_shape_pairs(*shape_tree(scene, pad), O, D)
+
+
+def any_hit(scene, pairs, O, D, limit) -> np.ndarray:
+    """Per ray, whether one of its pairs' shapes is hit at some 0 < t < limit (limit per ray)."""
+    pair_rays, pair_shapes = pairs
+    blocked = np.zeros(len(D), bool)
+    for index, mine in by_shape(pair_shapes):
+        rays = pair_rays[mine]
+        t = scene.shapes[index].oracle_distance(O[rays], D[rays])
+        blocked[rays[t < limit[rays]]] = True
+    return blocked
+
+
+def hits(scene, tree, order, unbounded, O, D):
+    """(rays, shapes, t) of every finite hit t > 0 of a shape test on these rays."""
+    pair_rays, pair_shapes = ray_shape_pairs(tree, order, unbounded, O, D)
     t = np.full(len(pair_rays), np.inf)
     for index, mine in by_shape(pair_shapes):
         rays = pair_rays[mine]
