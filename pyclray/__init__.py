@@ -29,14 +29,14 @@ from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, Py
 from .model.lights import DirectionalLight, Material, PointLight, Shading
 from .model.loader import load_scene, scene_from_dict
 from .model.scene import Scene
-from .model.shapes import Box, Cylinder, Disk, Plane, Rectangle, Sphere, Spheres
+from .model.shapes import Box, Cylinder, Disk, Mesh, Plane, Rectangle, Sphere, Spheres
 from .version import __version__
 
 
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
+    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
     "read_exr", "read_npz", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
     "write_npz",
 ]

@@ -155,7 +155,7 @@ def test_every_number_or_vector_key_of_every_shape_and_the_camera_can_be_animate
     with open(path, "rb") as handle:
         data = tomllib.load(handle)
     data.pop("animation", None)
-    base = scene_from_dict(data)
+    base = scene_from_dict(data, str(path))  # its folder: where a mesh's file is
     entries = []
     for thing, target in [(base.camera, "camera")] + [(s, s.name) for s in base.shapes]:
         if target != "camera" and sum(s.name == target for s in base.shapes) > 1:

@@ -32,3 +32,32 @@ def test_device_feature_skip_is_allowed_in_ci(tmp_path):
     """
     result = _run(tmp_path, body, ci=True)
     assert result.returncode == 0, result.stdout
+
+
+
+def test_ci_installs_chromium_only_when_it_is_missing(tmp_path):
+    """The test command's first line (README, .ci/run; tests/test_docs.py holds them equal): with
+    chromium on the PATH nothing runs; without it apt-get installs it, through sudo where there is
+    one. The PATH holds only sh and stand-ins for sudo, apt-get and chromium that log their arguments."""
+    from test_docs import CHROMIUM
+
+    bin_, log = tmp_path / "bin", tmp_path / "log"
+    bin_.mkdir()
+    (bin_ / "sh").symlink_to("/bin/sh")
+
+    def stub(name, body):
+        (bin_ / name).write_text(f"#!/bin/sh\n{body}\n")
+        (bin_ / name).chmod(0o755)
+
+    def run():
+        log.write_text("")
+        subprocess.run(["/bin/bash", "-c", CHROMIUM], env={"PATH": str(bin_)}, check=True)
+        return log.read_text().splitlines()
+
+    stub("apt-get", f'echo "apt-get $*" >> {log}')
+    assert run() == ["apt-get update -q", "apt-get install -y -q chromium"]  # root without sudo
+    stub("sudo", f'echo "sudo $*" >> {log}; exec "$@"')
+    assert run() == ["sudo sh -c apt-get update -q && apt-get install -y -q chromium",
+                     "apt-get update -q", "apt-get install -y -q chromium"]
+    stub("chromium", "")
+    assert run() == []

@@ -14,7 +14,9 @@ from conftest import REPO
 README = REPO / "README.md"
 INSTALL = ('python3 -m venv .venv && .venv/bin/pip install -e ".[test]" && '
            '.venv/bin/pyclray render scenes/tp02.toml -o tp02.exr --png')
-TESTS = 'python3 -m venv .venv && .venv/bin/pip install -q -e ".[test]" && .venv/bin/python -m pytest'
+# Debian's chromium (the view's page tests drive it), installed when missing, then the tests
+CHROMIUM = "command -v chromium >/dev/null || $(command -v sudo) sh -c 'apt-get update -q && apt-get install -y -q chromium'"
+TESTS = f'({CHROMIUM}) && python3 -m venv .venv && .venv/bin/pip install -q -e ".[test]" && .venv/bin/python -m pytest'
 
 
 def code_blocks(text: str, language: str) -> list[str]:

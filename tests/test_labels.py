@@ -16,7 +16,7 @@ from pyclray.model.shapes import REGISTRY
 from conftest import REPO, SCENES
 
 # the ground unlabelled; the others' classes (two shapes share class 7); every shape type is here
-LABELS = {"ball": 7, "log": 2, "tube": 7, "mat": 0, "panel": 5, "crate": 2147483647, "pebbles": 9}
+LABELS = {"ball": 7, "log": 2, "tube": 7, "mat": 0, "panel": 5, "crate": 2147483647, "pebbles": 9, "pyramid": 4}
 
 
 def labelled(size=(96, 72)):

@@ -17,6 +17,8 @@ def test_wheel_ships_the_kernels_and_renders_from_outside_the_repo(tmp_path):
     for kernel in sorted(p.name for p in (REPO / "pyclray" / "engine" / "kernels").iterdir() if p.suffix in (".cl", ".h")):
         assert f"pyclray/engine/kernels/{kernel}" in names
     assert "pyclray/model/shapes/sphere.py" in names
+    for page in ("index.html", "view.js", "controls.js", "view.css"):  # pyclray view's page (package data)
+        assert f"pyclray/apps/view/page/{page}" in names
     assert not any(n.startswith(("tests/", "bench/", "scenes/")) for n in names)
     site = tmp_path / "site"
     zipfile.ZipFile(wheel).extractall(site)

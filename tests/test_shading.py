@@ -384,3 +384,23 @@ def test_shadows_of_many_spheres_through_the_bvh():
     through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh")["shaded"]
     np.testing.assert_array_equal(tiles, through_bvh)
     assert (tiles == 0).all(axis=-1).mean() > 0.05  # shadows there are
+
+
+def test_the_srgb_preview_of_float32_is_the_formulas_bit_for_bit():
+    """io/png.py looks float32 up in tables (pyclray view's frames): the same levels as the float64
+    formula on both sides of every step, on random values in and around [0, 1], and the specials."""
+    from pyclray.io import png
+
+    _, _, thr = png._srgb_tables()
+    steps = thr[np.isfinite(thr)].view(np.uint32).astype(np.int64)
+    assert len(steps) == 255  # one per level
+    near = (steps[:, None] + np.arange(-3, 4)).astype(np.uint32).view(np.float32).ravel()
+    rng = np.random.default_rng(24)
+    values = np.concatenate([near, rng.integers(0, 0x3F800001, 2_000_000, dtype=np.uint32).view(np.float32),
+                             rng.uniform(-0.5, 1.5, 1_000_000).astype(np.float32),
+                             np.array([np.nan, -np.nan, np.inf, -np.inf, 0.0, -0.0, 1.0, 2.0, 3e38, -1e-45, 1e-45,
+                                       0.0031308, np.float32(0.0031308) * 1.0000001], np.float32)])
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(png.srgb_preview(values), png._srgb_levels(values))
+    image = rng.uniform(0, 1, (7, 5, 3)).astype(np.float32)[:, ::2]  # not contiguous
+    assert np.array_equal(png.srgb_preview(image), png._srgb_levels(image))

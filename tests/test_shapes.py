@@ -174,7 +174,7 @@ def test_the_model_catches_a_moved_shape(kind):
         changes = {}
         for field in dataclasses.fields(shape):
             value = getattr(shape, field.name)
-            if field.name in ("center", "p0", "p1"):
+            if field.name in ("center", "p0", "p1", "translate"):
                 changes[field.name] = tuple(np.add(value, move))
         if isinstance(shape, pyclray.Plane):
             changes["offset"] = shape.offset - float(np.dot(shape.normal, move))

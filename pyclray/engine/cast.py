@@ -127,6 +127,11 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
     args = []
     if tree.types:
         anchors = tree.anchors()
+        for name in tree.types:  # a type may anchor its entries otherwise (a mesh: on its whole box)
+            kind = prepared.kinds[name]
+            own = kind.cls.cast_anchors(kind.world, kind.ids)
+            if own is not None:
+                anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
         args += [
             input_buffer(ctx, tree.nodes(anchor[:3])),
             input_buffer(ctx, tree.refs(shape_types)),

@@ -96,6 +96,8 @@ class Variant:
         bounded = self.bounded_types()
         lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
         lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
+        # the types whose kernel file has <type>_barycentric (the barycentric image; 0, 0 for the others)
+        lines.append(f"#define PYCLRAY_BARYCENTRIC_TYPES(X) {listed(t for t in self.shape_types if REGISTRY[t].barycentric)}")
         lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
         if bounded:
             lines.append("#define PYCLRAY_HAS_BOUNDED 1")

@@ -33,10 +33,10 @@ class SceneBVH:
         return pack_nodes(self.tree, origin)
 
     def refs(self, shape_types) -> np.ndarray:
-        """refs[q] = index * 8 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
+        """refs[q] = index * 16 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
         program's shape types)."""
         kinds = np.array([1 + list(shape_types).index(t) for t in self.types], np.int64)
-        refs = self.leaf_index * 8 + kinds[self.leaf_type]
+        refs = self.leaf_index * 16 + kinds[self.leaf_type]
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
 
     def anchors(self) -> np.ndarray:

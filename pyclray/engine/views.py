@@ -103,13 +103,13 @@ _checked = PerObject(16)
 
 
 def check_entry_count(prepared: PreparedScene) -> None:
-    """Refuse more entries of one type than the kernels can index (8 x index + type in 32 bits)."""
+    """Refuse more entries of one type than the kernels can index (16 x index + type in 32 bits)."""
     from ..model import scene as scene_model
 
     for kind in prepared.kinds.values():
         if kind.count > scene_model.MAX_SHAPES:
             raise SceneError(f"{kind.count} {kind.name} primitives; pyclray renders at most {scene_model.MAX_SHAPES} of a "
-                             "type (the kernels index one by 8 x its position + its type in 32 bits)")
+                             "type (the kernels index one by 16 x its position + its type in 32 bits)")
 
 
 def check_renderable_once(scene: Scene, precision: str, prepared: PreparedScene) -> None:

@@ -296,6 +296,17 @@ def _remember(shapes: tuple, base: tuple, changed: tuple) -> None:
         del _derived[next(iter(_derived))]
 
 
+def derived_from(shapes: tuple, base: tuple) -> tuple:
+    """``shapes``, recorded as ``base`` but for the shapes that are not base's own objects (as an
+    animation's frame is): the scene prepared for ``base`` is then updated in place for it. For a
+    scene file loaded again after an edit (``pyclray view``), whose unchanged shapes are the old
+    objects; a tuple of another length is returned as it is."""
+    shapes = tuple(shapes)
+    if len(shapes) == len(base):
+        _remember(shapes, base, tuple(i for i, (a, b) in enumerate(zip(shapes, base)) if a is not b))
+    return shapes
+
+
 def scene_at(scene, t: float, *, frame: int | None = None):
     """The static scene at time t: every animated key takes its track's value at t; the result has
     no animation. Raises SceneError naming the target, the key and the time if that scene is invalid."""

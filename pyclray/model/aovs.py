@@ -16,7 +16,7 @@ _REAL = {"fp32": np.float32, "fp64": np.float64}
 @dataclass(frozen=True)
 class Aov:
     name: str
-    channels: int  # 1: an (H, W) image; 3: (H, W, 3)
+    channels: int  # 1: an (H, W) image; 2 or 3: (H, W, channels)
     real: bool  # the render's precision (float32 or float64); False: int32
     miss: str  # what a pixel without a hit holds (for messages and the docs)
     exr: tuple[str, ...]  # its EXR channel names, one per channel
@@ -51,6 +51,8 @@ TABLE = {
         Aov("position", 3, True, "(0, 0, 0)", ("P.X", "P.Y", "P.Z"), False),
         Aov("shaded", 3, True, "the background colour", ("R", "G", "B"), False),
         Aov("primitive", 1, False, "-1", ("primitive",), False),  # index within its shape (batch)
+        # (u, v) of the triangle hit, hit = (1 - u - v) a + u b + v c; (0, 0) for other shapes
+        Aov("barycentric", 2, True, "(0, 0)", ("bary.u", "bary.v"), False),
         # the hit shape's `label` (class masks beside the instance ids): labels[id], -1 for a miss
         # or a shape without one
         Aov("label", 1, False, "-1", ("label",), False, from_aov="id"),

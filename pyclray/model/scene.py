@@ -138,7 +138,7 @@ def check_image_plane(camera: Camera, image: Image, source=None) -> None:
 
 # The kernels keep a shape as 8 x its index in its type's array + its type (the BVH's refs, the
 # winner key of a packet's lanes) in a 32-bit int.
-MAX_SHAPES = (2**31 - 1) // 8
+MAX_SHAPES = (2**31 - 1) // 16
 
 
 def check_shape_count(scene: Scene) -> None:

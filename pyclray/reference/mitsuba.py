@@ -35,7 +35,7 @@ from ..model.scene import Scene
 from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
 DEFAULT_VARIANT = "scalar_rgb"
-AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index"
+AOV_SPEC = "dd:depth,gn:geo_normal,sn:sh_normal,si:shape_index,pi:prim_index"
 
 
 def import_mitsuba(variant: str = DEFAULT_VARIANT):
@@ -72,6 +72,32 @@ def pyclray_id(mitsuba_id: str) -> int:
     return int(mitsuba_id.removeprefix("shape_").split("_")[0])
 
 
+def _is_mesh(value) -> bool:
+    return isinstance(value, dict) and value.get("type") == "mesh" and isinstance(value.get("vertex_positions"), np.ndarray)
+
+
+def _mesh(mi, value: dict, name: str):
+    """An mi.Mesh of a dict of type 'mesh' with numpy arrays vertex_positions (V, 3) and faces (F, 3)
+    (Mitsuba's float32 positions, face normals; its id is name) and its 'bsdf', if any, as a dict."""
+    positions, faces = value["vertex_positions"], np.asarray(value["faces"])
+    props = mi.Properties()
+    if "bsdf" in value:
+        props["bsdf"] = mi.load_dict(value["bsdf"])
+    mesh = mi.Mesh(name, len(positions), len(faces), props=props, has_vertex_normals=False, has_vertex_texcoords=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1)
+    params["faces"] = np.ascontiguousarray(faces, np.uint32).reshape(-1)
+    params.update()
+    return mesh
+
+
+def load_dict(mi, description: dict):
+    """mi.load_dict of a scene_dict (its shapes kept in order), the meshes made mi.Mesh objects there:
+    after the caller has added what it needs to their dicts (a BSDF)."""
+    ready = {key: _mesh(mi, value, key) if _is_mesh(value) else value for key, value in description.items()}
+    return mi.load_dict(ready, optimize=False)
+
+
 class LookAt(NamedTuple):
     """A sensor's to_world given as a look-at: <lookat origin=... target=... up=...> in XML, and
     for mi.load_dict the matrix Mitsuba's XML parser makes of it (Transform4f::look_at in float64,
@@ -83,7 +109,10 @@ class LookAt(NamedTuple):
 
 
 def _mitsuba_values(mi, value):
-    """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f."""
+    """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f;
+    a mesh's dict stays a dict (load_dict makes it an mi.Mesh)."""
+    if _is_mesh(value):
+        return value
     if isinstance(value, LookAt):
         from ..model.mitsuba_xml.properties import look_at
 
@@ -192,7 +221,7 @@ def emitter_dict(light) -> dict:
 def load(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC):
     """(Mitsuba scene, {Mitsuba shape_index value: pyclray id})."""
     mi = import_mitsuba(variant)
-    mi_scene = mi.load_dict(scene_dict(scene, variant, aovs), optimize=False)  # keeps shapes and order
+    mi_scene = load_dict(mi, scene_dict(scene, variant, aovs))  # keeps shapes and order
     ids = {}
     for position, shape in enumerate(mi_scene.shapes()):
         ids[shape_index_value(mi, shape, position)] = pyclray_id(shape.id())
@@ -219,7 +248,8 @@ def axis_cosines(scene: Scene) -> np.ndarray:
 
 def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     """Mitsuba's images in pyclray's conventions: depth (distance from the eye, inf on a miss),
-    normal (geo_normal), sh_normal, id (-1 on a miss), all (height, width[, 3]).
+    normal (geo_normal), sh_normal, id (-1 on a miss), primitive (prim_index, -1 on a miss), all
+    (height, width[, 3]).
 
     The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one
     (the sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does
@@ -229,10 +259,10 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     mi = import_mitsuba(variant)
     near, _ = clip_range(scene)
     if mi.variant().startswith("scalar"):
-        depth, normal, sh_normal, found = _cast_pixels(mi, scene)
+        depth, normal, sh_normal, found, primitive = _cast_pixels(mi, scene)
         hit = found >= 0
         return {"depth": np.where(hit, depth + near / axis_cosines(scene), np.inf), "normal": normal,
-                "sh_normal": sh_normal, "id": found}
+                "sh_normal": sh_normal, "id": found, "primitive": primitive}
     mi_scene, ids = load(scene, variant)
     with quiet_interrupts(mi):
         image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
@@ -244,21 +274,22 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
         "normal": np.where(hit[..., None], image[..., 1:4], 0.0),
         "sh_normal": np.where(hit[..., None], image[..., 4:7], 0.0),
         "id": np.where(hit, lookup(np.where(hit, index, 0)) if hit.any() else -1, -1).astype(np.int32),
+        "primitive": np.where(hit, np.rint(image[..., 8]), -1).astype(np.int32),  # prim_index
     }
     return out
 
 
 def _cast_pixels(mi, scene: Scene):
-    """(t from the near-clip plane, geo_normal, sh_normal, pyclray id) of Mitsuba's primary ray of
-    every pixel centre (scalar variants), with a progress bar over the rows."""
+    """(t from the near-clip plane, geo_normal, sh_normal, pyclray id, prim_index; -1 on a miss) of
+    Mitsuba's primary ray of every pixel centre (scalar variants), with a progress bar over the rows."""
     from ..io.progress import progress
 
-    mi_scene = mi.load_dict(scene_dict(scene, mi.variant()), optimize=False)
+    mi_scene = load_dict(mi, scene_dict(scene, mi.variant()))
     shapes = list(mi_scene.shapes())  # kept alive: the lookup is by the Python objects' identity
     lookup = {id(shape): pyclray_id(shape.id()) for shape in shapes}
     sensor = mi_scene.sensors()[0]
     width, height = scene.image.width, scene.image.height
-    depth, found = np.zeros((height, width)), np.full((height, width), -1, np.int32)
+    depth, found, primitive = np.zeros((height, width)), np.full((height, width), -1, np.int32), np.full((height, width), -1, np.int32)
     normal, sh_normal = np.zeros((height, width, 3)), np.zeros((height, width, 3))
     half = mi.Point2f(0.5, 0.5)
     xs, ys = pixel_positions(scene, np.arange(height), np.arange(width))
@@ -270,10 +301,10 @@ def _cast_pixels(mi, scene: Scene):
                 ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(xs[i], y), half)
                 si = mi_scene.ray_intersect(ray)
                 if si.is_valid():
-                    depth[j, i], found[j, i] = si.t, lookup[id(si.shape)]
+                    depth[j, i], found[j, i], primitive[j, i] = si.t, lookup[id(si.shape)], si.prim_index
                     normal[j, i], sh_normal[j, i] = tuple(si.n), tuple(si.sh_frame.n)
             bar.update(1)
-    return depth, normal, sh_normal, found
+    return depth, normal, sh_normal, found, primitive
 
 
 def beyond_counterparts(scene: Scene, origins, directions) -> np.ndarray:

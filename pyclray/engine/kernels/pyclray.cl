@@ -20,13 +20,14 @@
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  */
 
-#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE) \
+    || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_TRACK_ID 1   /* the winner matters, not only its distance */
 #endif
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_SHADED)
 #define PYCLRAY_WINNER_NORMAL 1  /* the winner's normal is computed */
 #endif
-#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE)
+#if defined(PYCLRAY_WINNER_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE) || defined(PYCLRAY_AOV_BARYCENTRIC)
 #define PYCLRAY_WINNER_LOOP 1  /* the packet's distinct winners are visited once each */
 #endif
 /* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
@@ -94,8 +95,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 /* -- the nearest hit of each lane ----------------------------------------------------------------
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
- * A lane's winner is also kept as one key, 8 k + kind (k its index in its type's array; kinds are
- * 1 to 7, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
+ * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
+ * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
@@ -104,7 +105,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         if (ANY(nearer)) {                                                            \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_key = nearer ? SPLAT_INT((k) * 8 + (kind)) : best_key;               \
+            best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
         }                                                                             \
     }
 #define PYCLRAY_BEST                                                                  \
@@ -124,7 +125,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 8 + kind */
+/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
         const realv s = type##_hit(&type##s[k], &ray);                                \
@@ -132,7 +133,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 
@@ -165,6 +166,22 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_PRIMITIVE_BEGIN
 #endif
 
+/* the winner's barycentric (u, v) (triangles; 0, 0 for the other types and on a miss) */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_OF(Type, type)                                            \
+    if (kind == KIND_##type) {                                                        \
+        realv u, v;                                                                   \
+        type##_barycentric(&type##s[k], &ray, &u, &v);                                \
+        bary_u = mine ? u : bary_u;                                                   \
+        bary_v = mine ? v : bary_v;                                                   \
+    }
+#define PYCLRAY_BARYCENTRIC_BEGIN realv bary_u = SPLAT(0), bary_v = SPLAT(0);
+#define PYCLRAY_BARYCENTRICS PYCLRAY_BARYCENTRIC_TYPES(PYCLRAY_BARYCENTRIC_OF)
+#else
+#define PYCLRAY_BARYCENTRIC_BEGIN
+#define PYCLRAY_BARYCENTRICS
+#endif
+
 #ifdef PYCLRAY_WINNER_LOOP
 /* what one winning shape gives the lanes it won: its normal (and with shading, its material), its
  * primitive index */
@@ -178,6 +195,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WINNERS                                                               \
     PYCLRAY_NORMAL_BEGIN                                                              \
     PYCLRAY_PRIMITIVE_BEGIN                                                           \
+    PYCLRAY_BARYCENTRIC_BEGIN                                                         \
     PYCLRAY_MATERIALS_BEGIN                                                           \
     {                                                                                 \
         /* each distinct winner once, the largest key first: one reduction finds the    \
@@ -186,9 +204,10 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         intv pending = key;                                                           \
         for (int winner = (int)lanes_max_int(pending); winner > 0;                    \
              winner = (int)lanes_max_int(pending)) {                                  \
-            const int kind = winner & 7, k = winner >> 3;                             \
+            const int kind = winner & 15, k = winner >> 4;                             \
             const intv mine = key == SPLAT_INT(winner);                               \
             PYCLRAY_SHAPES(PYCLRAY_NORMAL)                                            \
+            PYCLRAY_BARYCENTRICS                                                      \
             pending = mine ? SPLAT_INT(0) : pending;                                  \
         }                                                                             \
     }
@@ -249,9 +268,34 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_WRITE_PRIMITIVE(index, first, end)
 #endif
 
+/* render only: the winner's barycentric (u, v), interleaved per pixel */
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+#define PYCLRAY_BARYCENTRIC_ARG(P) P(__global real*, barycentric_out)
+#define PYCLRAY_STORE_UV_LANE(l, c) \
+    if (bary_first <= l && l < bary_end) {                                            \
+        barycentric_out[2 * (bary_index + l)] = bary_u.c;                             \
+        barycentric_out[2 * (bary_index + l) + 1] = bary_v.c;                         \
+    }
+#if LANES == 1
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end) \
+    { barycentric_out[2 * (index)] = bary_u; barycentric_out[2 * (index) + 1] = bary_v; }
+#else
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)                                 \
+    {                                                                                 \
+        const size_t bary_index = (index);                                            \
+        const int bary_first = (first), bary_end = (end);                             \
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_UV_LANE)                                      \
+    }
+#endif
+#else
+#define PYCLRAY_BARYCENTRIC_ARG(P)
+#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
+#endif
+
 #define PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_DEPTH_ARG(P) PYCLRAY_NORMAL_ARG(P) PYCLRAY_ID_ARG(P)
 #define PYCLRAY_RENDER_OUTPUT_ARGS(P) \
-    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P)
+    PYCLRAY_OUTPUT_ARGS(P) PYCLRAY_ZDEPTH_ARG(P) PYCLRAY_POSITION_ARG(P) PYCLRAY_SHADED_ARGS(P) PYCLRAY_PRIMITIVE_ARG(P) \
+    PYCLRAY_BARYCENTRIC_ARG(P)
 /* the shapes' arguments as parameters and as the arguments of a call */
 #define PYCLRAY_SHAPE_PARAMETERS(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_DECLARE, Type, type)
 #define PYCLRAY_SHAPE_PASSED(Type, type) PYCLRAY_SHAPE_ARGS(PYCLRAY_PASS, Type, type)
@@ -261,7 +305,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_RENDER_WRITE(index, first, end) \
     PYCLRAY_WRITE(index, first, end) PYCLRAY_WRITE_ZDEPTH(index, first, end) \
     PYCLRAY_WRITE_POSITION(index, first, end) PYCLRAY_WRITE_SHADED(index, first, end) \
-    PYCLRAY_WRITE_PRIMITIVE(index, first, end)
+    PYCLRAY_WRITE_PRIMITIVE(index, first, end) PYCLRAY_WRITE_BARYCENTRIC(index, first, end)
 
 #if LANES == 1
 #define PYCLRAY_INT32V int
@@ -443,7 +487,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
     }
 #define PYCLRAY_CAST_VISIT(q)                                                       \
     {                                                                               \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                      \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                      \
         double s0;                                                                  \
         bool near;                                                                  \
         const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \

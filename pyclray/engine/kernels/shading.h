@@ -90,7 +90,7 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
         const realv s = type##_hit(&type##s[q], &shadow);                             \
-        const intv self = skip && best_key == SPLAT_INT(q * 8 + KIND_##type);         \
+        const intv self = skip && best_key == SPLAT_INT(q * 16 + KIND_##type);        \
         open = open && (self || !(s < limit));                                        \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
@@ -132,7 +132,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 7, k = ref >> 3;                        \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
         PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
         reach = open ? reach : SPLAT(-INFINITY);                                      \
     }

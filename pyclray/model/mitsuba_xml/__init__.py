@@ -34,7 +34,7 @@ def scene_from_tree(root: Element, source: str | None = None) -> Scene:
     if root.tag != "scene":
         raise root.error("expected a Mitsuba scene: the root element <scene version=...>")
     substitute(root)
-    reading = Reading()
+    reading = Reading(folder=Path(source).parent if source else None)
     for element in root.children:
         if element.tag in IGNORED:
             continue

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -28,8 +29,9 @@ FILM_SETTINGS = ("pixel_format", "component_format", "banner", "sample_border", 
 
 @dataclass
 class Reading:
-    """What a scene file has given so far."""
+    """What a scene file has given so far (folder: the file's, which a mesh's filename is relative to)."""
 
+    folder: Path | None = None
     camera: Camera | None = None
     image: Image | None = None
     shapes: list = field(default_factory=list)

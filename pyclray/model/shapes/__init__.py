@@ -7,12 +7,13 @@ from __future__ import annotations
 from .box import Box
 from .cylinder import Cylinder
 from .disk import Disk
+from .mesh import Mesh
 from .plane import Plane
 from .rectangle import Rectangle
 from .sphere import Sphere
 from .spheres import Spheres
 
 # type name in scene files -> shape class, in the order the kernel visits them
-REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box, Spheres)}
+REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box, Spheres, Mesh)}
 
-__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Plane", "Rectangle", "Sphere", "Spheres"]
+__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Mesh", "Plane", "Rectangle", "Sphere", "Spheres"]

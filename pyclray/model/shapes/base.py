@@ -97,6 +97,9 @@ class Shape:
     # Both compute what every ray from the frame's origin shares in float64 (error-free sums where
     # a difference cancels), from the world fields.
     world: ClassVar[Struct]
+    # True for a type whose kernel file has <type>_barycentric(shape, ray, &u, &v) (triangles): the
+    # barycentric image's (u, v); the other types give (0, 0)
+    barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
 
@@ -168,6 +171,13 @@ class Shape:
         return centre, 0.5 * np.linalg.norm(bounds[:, 1] - bounds[:, 0], axis=1) * (1 + 1e-12)
 
     @classmethod
+    def cast_anchors(cls, world, ids):
+        """(N, 4) float64 per world entry (ids: their shapes' ids): the point cast packs the entry
+        relative to (xyz) and a radius about it holding the entry (w), or None for the default, the
+        centre of each entry's own box (pyclray.engine.scene_bvh.SceneBVH.anchors)."""
+        return None
+
+    @classmethod
     def world_bounds(cls, shapes) -> np.ndarray:
         """(N, 2, 3) bounds of these shapes' primitives (see bounds_of)."""
         return cls.bounds_of(cls.pack_world(shapes))
@@ -227,6 +237,10 @@ class Shape:
         """Mitsuba scene dicts of this shape's counterpart (one or more; they all map back to this
         shape's id). A ``to_world`` value is a 4x4 float64 numpy matrix (the bridge converts it)."""
         raise NotImplementedError
+
+    # True where the Mitsuba counterpart is one shape numbering its primitives as this type does
+    # (a mesh's triangles: Mitsuba's prim_index is pyclray's primitive), so checks compare them
+    mitsuba_primitives: ClassVar[bool] = False
 
     def mitsuba_covers(self, scene, points) -> np.ndarray:
         """Whether Mitsuba's counterpart holds these points of the shape (False where a stand-in

@@ -69,7 +69,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     from ...io.progress import step
 
     step("pyclray render")
-    ours = render(scene, precision="fp32", device=device)
+    ours = render(scene, aovs=("depth", "normal", "id", "primitive"), precision="fp32", device=device)
     step(f"Mitsuba {variant} render")
     theirs = mitsuba.render(scene if mitsuba_scene is None else mitsuba_scene, variant)
     step("float64 oracle")
@@ -109,12 +109,19 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     ours_only = disagree & (ours["id"] >= 0) & (theirs["id"] < 0)
     theirs_only = disagree & (ours["id"] < 0) & (theirs["id"] >= 0)
 
+    # primitives (a mesh's triangle: Mitsuba's prim_index) where both judge the same shape
+    numbered = np.array([s.mitsuba_primitives for s in scene.shapes] or [False])[np.maximum(ours["id"], 0)]
+    primitive_judged = judged & numbered
+    primitive_wrong = primitive_judged & (ours["primitive"] != theirs["primitive"])
+
     counts = {
         "pixels": ours["id"].size,
         "both hit the same shape": int(same.sum()),
         "  of which judged": int(judged.sum()),
         "  of which silhouettes (apart)": int((same & silhouette).sum()),
         "  of which at edges (apart)": int((same & edge & ~silhouette).sum()),
+        "  of which primitives compared (meshes)": int(primitive_judged.sum()),
+        "  of which primitives that differ": int(primitive_wrong.sum()),
         "both miss": int(both_miss.sum()),
         "beyond a Mitsuba stand-in (left out)": int(beyond.sum()),
     }
@@ -154,6 +161,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
         if verdict.pyclray:
             result.failures.append(f"{name}: pyclray wrong by the float64 oracle at {verdict.pyclray} pixels "
                                    "where it disagrees with Mitsuba")
+    if primitive_wrong.any():  # (the oracle has no primitive to arbitrate by)
+        result.failures.append(f"{int(primitive_wrong.sum())} judged pixels where the primitive (prim_index) differs")
     return result
 
 

@@ -68,15 +68,15 @@ def direct_scene_dict(scene, light, variant: str) -> dict:
 
 def render_direct(scene, variant: str = "scalar_rgb") -> np.ndarray:
     """pi x Mitsuba's direct illumination of the scene's diffuse version, (height, width, 3) float64."""
-    from ..mitsuba import import_mitsuba, quiet_interrupts
+    from .. import mitsuba
 
-    mi = import_mitsuba(variant)
+    mi = mitsuba.import_mitsuba(variant)
     total = np.zeros((scene.image.height, scene.image.width, 3))
     for light in effective_lights(scene):
         if not scene.shading.shadows:
             raise ValueError("Mitsuba's direct integrator always casts shadow rays: the scene has shadows = false")
-        mi_scene = mi.load_dict(direct_scene_dict(scene, light, variant), optimize=False)
-        with quiet_interrupts(mi):
+        mi_scene = mitsuba.load_dict(mi, direct_scene_dict(scene, light, variant))
+        with mitsuba.quiet_interrupts(mi):
             image = mi.render(mi_scene, spp=1)
         total += np.array(image, np.float64)[..., :3]
     return np.pi * total

@@ -1,0 +1,130 @@
+"""Triangle meshes against Open3D's RaycastingScene (Embree) in one process (issue 23's targets).
+
+    python -m bench.meshes [--bunny PATH] [--rounds 3] [--block 5]
+
+Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_compare.blocks):
+- primary rays 512x512 on a ~70k-triangle scanned mesh (the 75,408-triangle Stanford bunny of CGAL's
+  demo data when --bunny names it, else scenes/meshes/bunny.ply subdivided twice: 80,000 triangles)
+  and on a 1,000,000-triangle mesh (a perturbed UV sphere): pyclray's render of depth, normal, id
+  and primitive against Open3D's cast_rays of the same pinhole rays (t_hit, normals, ids,
+  primitive ids, uvs);
+- 100,000 incoherent rays (random origins and directions in the mesh's bounds): pyclray.cast
+  (depth, normal, id) against cast_rays;
+- the scene build: pyclray's first render after pyclray.clear_cache() (preparation: packing, the BVH,
+  the per-view pass) and Open3D's add_triangles + first cast (Embree builds lazily).
+Prints a table of medians (ms) and the ratios. The machine is shared: compare ratios.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+import pyclray
+from pyclray.model.shapes.mesh_shapes import perturbed_sphere
+
+from .open3d_compare import blocks
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def subdivided(vertices, faces, times: int):
+    """Each triangle split into four (midpoints), times over."""
+    for _ in range(times):
+        edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mid = len(vertices) + inverse.reshape(3, -1).T  # (F, 3): midpoints of ab, bc, ca
+        vertices = np.concatenate([vertices, 0.5 * (vertices[unique[:, 0]] + vertices[unique[:, 1]])])
+        a, b, c = faces.T
+        ab, bc, ca = mid.T
+        faces = np.concatenate([np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    return vertices, faces
+
+
+def meshes(bunny_path):
+    if bunny_path:
+        bunny = pyclray.Mesh.load(bunny_path)
+        bunny = pyclray.Mesh(bunny.vertices, bunny.faces, name="bunny")
+    else:
+        base = pyclray.Mesh.load(SCENES / "meshes" / "bunny.ply")
+        bunny = pyclray.Mesh(*subdivided(base.vertices, base.faces, 2), name="bunny")
+    v, f = perturbed_sphere(500, 1000, 0.5, 0.02, np.random.default_rng(0))
+    big = pyclray.Mesh(v, f, name="sphere")
+    return {"bunny": bunny, "1M": big}
+
+
+def camera_for(mesh, size):
+    lo, hi = mesh.box()
+    centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo)
+    eye = centre + np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0]) * radius * 2.6
+    return pyclray.Scene(pyclray.Camera(tuple(eye), tuple(centre), fov=45.0), pyclray.Image(size, size), (mesh,))
+
+
+def open3d_scene(mesh):
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    a = mesh.world_vertices().astype(np.float32)
+    scene.add_triangles(o3d.core.Tensor(a), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    return scene
+
+
+def pinhole_rays(scene):
+    """The scene's own unit camera rays as Open3D's (N, 6) float32 tensor."""
+    import open3d as o3d
+    from pyclray.reference import oracle
+
+    origins, directions = oracle.camera_rays(scene)
+    return o3d.core.Tensor(np.concatenate([origins, directions], -1).reshape(-1, 6).astype(np.float32))
+
+
+def run(bunny_path=None, rounds=3, block=5):
+    import open3d as o3d
+
+    rows = []
+    for label, mesh in meshes(bunny_path).items():
+        scene = camera_for(mesh, 512)
+        # the build: pyclray's first render from cold (its program cached on disk), Open3D's first cast
+        pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
+        pyclray.clear_cache()
+        start = time.perf_counter()
+        pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
+        ours_build = time.perf_counter() - start
+        rays = pinhole_rays(scene)
+        start = time.perf_counter()
+        o3d_scene = open3d_scene(mesh)
+        o3d_scene.cast_rays(rays[:1])
+        theirs_build = time.perf_counter() - start
+        rows.append((f"{label} ({len(mesh.faces):,} triangles): first render / build + first cast",
+                     {"pyclray": {"median": ours_build * 1e3}, "open3d": {"median": theirs_build * 1e3}}))
+        timed = blocks({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
+                        "open3d": lambda: o3d_scene.cast_rays(rays)}, rounds, block)
+        rows.append((f"{label}: primary rays 512x512", timed))
+        rng = np.random.default_rng(1)
+        lo, hi = mesh.box()
+        origins = rng.uniform(lo, hi, (100_000, 3))
+        directions = rng.normal(size=(100_000, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        o3d_rays = o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32))
+        timed = blocks({"pyclray": lambda: pyclray.cast(scene, origins, directions),
+                        "open3d": lambda: o3d_scene.cast_rays(o3d_rays)}, rounds, block)
+        rows.append((f"{label}: 100,000 incoherent rays", timed))
+        del o3d_scene
+    return rows
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bunny", help="the 75,408-triangle bunny00.off of CGAL's demo data")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--block", type=int, default=5)
+    args = parser.parse_args(argv)
+    for name, timed in run(args.bunny, args.rounds, args.block):
+        ours, theirs = timed["pyclray"]["median"], timed["open3d"]["median"]
+        print(f"{name:70s} pyclray {ours:9.1f} ms  open3d {theirs:9.1f} ms  speed-up {theirs / ours:5.2f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,394 @@
+"""The triangle mesh: one shape (one id, one material) of many triangles held as numpy arrays.
+
+Each triangle is one entry of the packed arrays (as a batch's spheres are), with its three world
+vertices in float64 and its world normal; the per-view pass subtracts the eye from each vertex in
+float64 and rounds once, so that a vertex shared by two triangles has the same bits in both and the
+watertight test of kernels/mesh.cl (Woop, Benthin and Wald 2013) sees one edge, whatever the
+distance to the world's origin. A world point is translate + R(axis, angle) (scale * p), or matrix
+applied to p (scene-format.md, "Triangle meshes").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from ..errors import SceneError, _shown, number, vector3
+from ..layout import Struct
+from . import mesh_io
+from .base import Shape, flag, in_frame, padded_bounds
+from .box import rotation
+from .mesh_oracle import Hierarchy
+
+FIXED = {"animatable": False}
+PLACEMENT = ("scale", "axis", "angle", "translate")
+
+
+def _vertices(value, key="vertices") -> np.ndarray:
+    try:
+        array = value if _ready(value, np.float64) else np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise SceneError(f"expected an array of shape (V, 3) of numbers, got {_shown(value)}", key=key) from None
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise SceneError(f"expected an array of shape (V, 3), got shape {array.shape}", key=key)
+    bad = ~np.isfinite(array).all(axis=1)
+    if bad.any():
+        index = int(np.argmax(bad))
+        raise SceneError(f"expected finite numbers, got {array[index].tolist()!r} at index {index}", key=key)
+    if array.flags.writeable:
+        array.setflags(write=False)
+    return array
+
+
+def _faces(value, count: int) -> np.ndarray:
+    try:
+        array = value if _ready(value, np.int64) else np.array(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"expected an array of shape (F, 3) of vertex indices, got {_shown(value)}", key="faces") from None
+    if array.size == 0:
+        raise SceneError("expected at least one triangle, got none", key="faces")
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise SceneError(f"expected an array of shape (F, 3) of vertex indices (triangles), got shape {array.shape}",
+                         key="faces")
+    if array.dtype.kind not in "iu":
+        if array.dtype.kind != "f" or not np.all(np.isfinite(array) & (array == np.round(array))):
+            raise SceneError("expected whole-number vertex indices", key="faces")
+    array = array.astype(np.int64, copy=False)
+    bad = ((array < 0) | (array >= count)).any(axis=1)
+    if bad.any():
+        index = int(np.argmax(bad))
+        raise SceneError(f"face {index} is {array[index].tolist()}: expected indices 0 .. {count - 1} "
+                         f"(the mesh has {count} vertices)", key="faces")
+    array.setflags(write=False)
+    return array
+
+
+def _matrix(value) -> tuple:
+    try:
+        m = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"expected a 4x4 matrix of numbers, got {_shown(value)}", key="matrix") from None
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise SceneError(f"expected a 4x4 matrix of finite numbers, got shape {m.shape}", key="matrix")
+    if not np.array_equal(m[3], [0, 0, 0, 1]):
+        raise SceneError(f"expected an affine matrix (last row 0 0 0 1), got last row {m[3].tolist()}", key="matrix")
+    if not abs(np.linalg.det(m[:3, :3])) > 0:
+        raise SceneError("expected an invertible matrix, got a singular one", key="matrix")
+    return tuple(map(tuple, m.tolist()))
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh(Shape):
+    """A triangle mesh: vertices (V, 3) and faces (F, 3) (0-based vertex indices), placed by scale,
+    axis and angle, translate, or a 4x4 matrix; smooth: the shaded image interpolates vertex normals
+    (normals (V, 3), else area-weighted). Compared by identity, like a batch of spheres.
+
+    ``Mesh.load(path)`` reads a file once; ``mesh.placed(translate=...)`` places the same arrays
+    again (the vertices and faces are shared, not copied)."""
+
+    vertices: np.ndarray = field(metadata=FIXED)
+    faces: np.ndarray = field(metadata=FIXED)
+    scale: float | tuple = 1.0
+    axis: tuple | None = None
+    angle: float = 0.0
+    translate: tuple = (0.0, 0.0, 0.0)
+    matrix: tuple | None = field(default=None, metadata=FIXED)
+    smooth: bool = field(default=False, metadata=FIXED)
+    normals: np.ndarray | None = field(default=None, metadata=FIXED)
+    name: str = "mesh"
+
+    type = "mesh"
+    c_type = "Triangle"
+    keys = ("file", "vertices", "faces", "scale", "axis", "angle", "translate", "matrix", "smooth")
+    reads_files = True
+    struct = Struct(
+        "Triangle",
+        (
+            ("a", "real4"),  # vertex a in the frame (from float64, rounded once); w: the world normal's x
+            ("b", "real4"),  # vertex b; w: the world normal's y
+            ("c", "real4"),  # vertex c; w: the world normal's z (a zero normal: a zero-area triangle)
+            ("id", "int"),
+            ("primitive", "int"),  # the triangle's index in its mesh
+        ),
+        "Triangle: its vertices in the frame and (in w) its unit world normal from float64.",
+    )
+    world = Struct(
+        "TriangleWorld",
+        (
+            ("a", "double4"),  # world vertices; w: the unit world normal normalize(cross(b - a, c - a))
+            ("b", "double4"),
+            ("c", "double4"),
+        ),
+        "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
+    )
+    kernel_files = ("mesh.cl",)
+    barycentric = True
+    mitsuba_primitives = True
+
+    def __post_init__(self):
+        vertices = _vertices(self.vertices)
+        object.__setattr__(self, "vertices", vertices)
+        object.__setattr__(self, "faces", _faces(self.faces, len(vertices)))
+        scale = self.scale
+        if np.ndim(scale) == 0:
+            scale = number("scale", scale)
+            bad = scale == 0
+        else:
+            scale = vector3("scale", scale)
+            bad = any(s == 0 for s in scale)
+        if bad:
+            raise SceneError(f"expected non-zero scale factors, got {_shown(self.scale)}", key="scale")
+        object.__setattr__(self, "scale", scale)
+        if self.axis is not None:
+            axis = vector3("axis", self.axis)
+            if not any(axis):
+                raise SceneError("expected a non-zero rotation axis, got [0, 0, 0]", key="axis")
+            object.__setattr__(self, "axis", axis)
+        angle = number("angle", self.angle)
+        if self.axis is None and angle != 0:
+            raise SceneError("expected an axis to rotate about (key 'axis') with a non-zero angle", key="angle")
+        object.__setattr__(self, "angle", angle)
+        object.__setattr__(self, "translate", vector3("translate", self.translate))
+        if self.matrix is not None:
+            placed = [k for k in PLACEMENT if getattr(self, k) != getattr(Mesh, k, None)
+                      and not (k == "translate" and self.translate == (0.0, 0.0, 0.0))]
+            if placed:
+                raise SceneError(f"expected 'matrix' or scale/axis/angle/translate, not both (got '{placed[0]}' too)",
+                                 key="matrix")
+            object.__setattr__(self, "matrix", _matrix(self.matrix))
+        object.__setattr__(self, "smooth", flag("smooth", self.smooth))
+        if self.smooth:  # refused rather than ignored: the shaded image would silently be flat
+            raise SceneError("smooth = true (interpolated vertex normals) is not implemented yet; use false", key="smooth")
+        if self.normals is not None:
+            object.__setattr__(self, "normals", _vertices(self.normals, "normals"))
+            if len(self.normals) != len(vertices):
+                raise SceneError(f"expected {len(vertices)} normals, one per vertex, got {len(self.normals)}", key="normals")
+        object.__setattr__(self, "_cache", {})
+
+    def __eq__(self, other) -> bool:
+        """The same arrays (by identity: a mesh is one object however many triangles it holds) and
+        equal other fields (an animation frame that keys a placement to its own value is equal)."""
+        if type(other) is not Mesh:
+            return NotImplemented
+        same = all(getattr(self, k) is getattr(other, k) for k in ("vertices", "faces", "normals"))
+        return same and all(getattr(self, f.name) == getattr(other, f.name) for f in fields(self)
+                            if f.name not in ("vertices", "faces", "normals"))
+
+    def __hash__(self) -> int:
+        return hash((id(self.vertices), id(self.faces), self.scale, self.axis, self.angle, self.translate, self.name))
+
+    def __repr__(self) -> str:
+        return f"Mesh({len(self.faces)} triangles, {len(self.vertices)} vertices, name={self.name!r})"
+
+    def describe(self) -> str:
+        return f"mesh '{self.name}' ({len(self.faces)} triangles)"
+
+    # -- files and placement -------------------------------------------------------------------
+    @classmethod
+    def load(cls, path, **keys) -> "Mesh":
+        """The mesh of a file (OBJ, PLY, STL, OFF, glTF/GLB; read once per unchanged file), with
+        these keys (scale, axis, angle, translate, matrix, smooth, name, material, label)."""
+        vertices, faces, normals = mesh_io.read_mesh(path)
+        return cls(vertices, faces, normals=normals, **keys)
+
+    def placed(self, **keys) -> "Mesh":
+        """The same triangles (shared arrays) placed anew: scale, axis, angle, translate or matrix
+        (the placement keys not given are reset), and any other key to change (name, smooth ...)."""
+        reset = {k: getattr(Mesh, k, None) for k in PLACEMENT + ("matrix",)}
+        reset["translate"] = (0.0, 0.0, 0.0)
+        return replace(self, **{**reset, **keys})
+
+    @classmethod
+    def _from_table(cls, table, name, folder=None):
+        keys = {k: table[k] for k in ("scale", "axis", "angle", "translate", "matrix", "smooth") if k in table}
+        if "file" in table:
+            inline = [k for k in ("vertices", "faces") if k in table]
+            if inline:
+                raise SceneError(f"expected 'file' or inline 'vertices' and 'faces', not both (got 'file' and "
+                                 f"'{inline[0]}')", key="file")
+            vertices, faces, normals = mesh_io.read_mesh(table["file"], folder)
+            return cls(vertices, faces, normals=normals, name=name, **keys)
+        for key in ("vertices", "faces"):
+            if key not in table:
+                raise SceneError("expected 'file' (a mesh file) or inline 'vertices' and 'faces'", key=key)
+        return cls(table["vertices"], table["faces"], name=name, **keys)
+
+    # -- world geometry ------------------------------------------------------------------------
+    def transform(self) -> np.ndarray:
+        """The 4x4 float64 matrix world_from_object."""
+        if self.matrix is not None:
+            return np.array(self.matrix, np.float64)
+        out = np.eye(4)
+        out[:3, :3] = rotation(self.axis, self.angle) * np.asarray(self.scale, np.float64)
+        out[:3, 3] = self.translate
+        return out
+
+    def world_vertices(self) -> np.ndarray:
+        """(V, 3) float64: translate + R (scale p) (or the matrix's), per vertex (computed once)."""
+        if "vertices" not in self._cache:
+            m = self.transform()
+            rotated = self.vertices @ m[:3, :3].T
+            world = rotated + m[:3, 3]
+            world.setflags(write=False)
+            self._cache["vertices"] = world
+        return self._cache["vertices"]
+
+    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        w = self.world_vertices()
+        return w[self.faces[:, 0]], w[self.faces[:, 1]], w[self.faces[:, 2]]
+
+    def face_normals(self) -> np.ndarray:
+        """(F, 3) unit world normals normalize(cross(b - a, c - a)) in float64, (0, 0, 0) for a
+        triangle of zero area (within the float64 rounding of the cross product: such a triangle is
+        never hit)."""
+        if "normals" not in self._cache:
+            a, b, c = self.corners()
+            e1, e2 = b - a, c - a
+            n = np.cross(e1, e2)
+            length = np.linalg.norm(n, axis=1)
+            size = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+            flat = ~(length > 8 * 2.0**-53 * size)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                n = np.where(flat[:, None], 0.0, n / np.where(flat, 1.0, length)[:, None])
+            self._cache["normals"] = n
+        return self._cache["normals"]
+
+    def vertex_normals(self) -> np.ndarray:
+        """(V, 3) unit world vertex normals for smooth shading: the file's (or the given ones),
+        turned by the inverse transpose of the placement, else the area-weighted sum of the faces'."""
+        if "vertex_normals" not in self._cache:
+            if self.normals is not None:
+                n = self.normals @ np.linalg.inv(self.transform()[:3, :3])
+            else:
+                a, b, c = self.corners()
+                weighted = np.cross(b - a, c - a)  # twice the area times the unit normal
+                n = np.zeros_like(self.world_vertices())
+                for k in range(3):
+                    np.add.at(n, self.faces[:, k], weighted)
+            length = np.linalg.norm(n, axis=1, keepdims=True)
+            self._cache["vertex_normals"] = np.where(length > 0, n / np.where(length > 0, length, 1.0), 0.0)
+        return self._cache["vertex_normals"]
+
+    def primitive_count(self) -> int:
+        return len(self.faces)
+
+    def lengths(self, eye) -> dict[str, float]:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return {"vertices": float(np.linalg.norm(self.world_vertices() - np.asarray(eye), axis=1).max())}
+
+    # -- device ----------------------------------------------------------------------------------
+    @classmethod
+    def _pack_world(cls, out, meshes):
+        start = 0
+        for mesh in meshes:
+            a, b, c = mesh.corners()
+            rows = slice(start, start + len(a))
+            for name, v in (("a", a), ("b", b), ("c", c)):
+                out[name][rows, :3] = v
+            normal = mesh.face_normals()
+            out["a"][rows, 3], out["b"][rows, 3], out["c"][rows, 3] = normal[:, 0], normal[:, 1], normal[:, 2]
+            start += len(a)
+
+    @classmethod
+    def _rebase(cls, out, world, origin, rotation_rows):
+        # each vertex minus the frame's origin in float64, along the frame's axes, rounded once: a
+        # vertex shared by two triangles gets the same bits in both (the watertight test needs it)
+        for name in ("a", "b", "c"):
+            out[name][:, :3] = in_frame(world[name][:, :3] - origin, rotation_rows)
+            out[name][:, 3] = world[name][:, 3]
+
+    @classmethod
+    def bounds_of(cls, world):
+        a, b, c = (world[k][:, :3] for k in ("a", "b", "c"))
+        return padded_bounds(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c))
+
+    @classmethod
+    def cast_anchors(cls, world, ids) -> np.ndarray:
+        """(N, 4) per entry: cast's anchor (xyz) and bounding radius (w) of its whole mesh (the box
+        of the entries of its id), so that a cast ray meets every triangle of a mesh from one
+        rounded origin and the shared vertices keep their bits (watertight, as for camera rays)."""
+        bounds = cls.bounds_of(world)
+        unique, group = np.unique(ids, return_inverse=True)
+        lo = np.full((len(unique), 3), np.inf)
+        hi = np.full((len(unique), 3), -np.inf)
+        np.minimum.at(lo, group, bounds[:, 0])
+        np.maximum.at(hi, group, bounds[:, 1])
+        out = np.empty((len(ids), 4))
+        out[:, :3] = (0.5 * (lo + hi))[group]
+        # the radius with the margin of the BVH's boxes (2^-12 of their size: engine/bvh.py's WIDEN)
+        out[:, 3] = (0.5 * np.linalg.norm(hi - lo, axis=1) * (1 + 2.0**-12))[group]
+        return out
+
+    # -- the float64 oracle ----------------------------------------------------------------------
+    def _hierarchy(self) -> Hierarchy:
+        if "hierarchy" not in self._cache:
+            a, b, c = self.corners()
+            self._cache["hierarchy"] = Hierarchy(a, b, c, self.face_normals().any(axis=1))
+        return self._cache["hierarchy"]
+
+    def oracle_hits(self, origins, directions):
+        """(t, triangle index, (u, v)) of each ray's nearest hit (inf, -1, (0, 0) on a miss)."""
+        origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions)).reshape(-1, 3)
+        directions = np.asarray(directions, np.float64).reshape(-1, 3)
+        return self._hierarchy().intersect(origins, directions)
+
+    def oracle_distance(self, origins, directions):
+        shape = np.shape(directions)[:-1]
+        return self.oracle_hits(origins, directions)[0].reshape(shape)
+
+    def oracle_normal(self, points):
+        points = np.asarray(points, np.float64)
+        _, which, _ = self._hierarchy().nearest(points.reshape(-1, 3))
+        return self.face_normals()[which].reshape(points.shape)
+
+    def surface_distance(self, points):
+        points = np.asarray(points, np.float64)
+        return self._hierarchy().nearest(points.reshape(-1, 3))[0].reshape(points.shape[:-1])
+
+    def edge_distance(self, points):
+        """Distance to the nearest edge of the nearest triangle: at every edge (shared or not) a ray
+        within rounding may meet either triangle (another normal, another primitive)."""
+        points = np.asarray(points, np.float64)
+        return self._hierarchy().nearest(points.reshape(-1, 3))[2].reshape(points.shape[:-1])
+
+    @classmethod
+    def random(cls, rng, shift=0.0):
+        """A closed, perturbed, randomly placed icosphere-like mesh (a UV sphere of 6 x 8 cells
+        with random radii per vertex) of about unit size near ``shift``."""
+        from .mesh_shapes import perturbed_sphere
+
+        vertices, faces = perturbed_sphere(6, 8, 1.0, 0.2, rng)
+        axis = tuple(rng.normal(size=3))
+        return cls(vertices, faces, scale=float(10 ** rng.uniform(-0.6, 0.1)), axis=axis,
+                   angle=float(rng.uniform(0, 360)), translate=tuple(rng.uniform(-3, 3, 3) + shift))
+
+    # -- the error model: as its farthest vertex (a bound for any of its triangles) ---------------
+    def anchor(self, point):
+        w = self.world_vertices()
+        return w[np.linalg.norm(w - np.asarray(point, np.float64), axis=1).argmax()]
+
+    def extent_from(self, point) -> float:
+        return float(np.linalg.norm(self.world_vertices() - np.asarray(point, np.float64), axis=1).max())
+
+    def curvature_radius(self) -> float:
+        """The smallest altitude of its (non-degenerate) triangles: a vertex moved by e (Mitsuba's
+        float32 positions) turns a triangle's normal by up to about e / altitude, as a position error
+        turns a curved surface's normal by e / radius."""
+        if "altitude" not in self._cache:
+            a, b, c = self.corners()
+            twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+            longest = np.maximum.reduce([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))])
+            valid = self.face_normals().any(axis=1)
+            self._cache["altitude"] = float((twice_area[valid] / longest[valid]).min()) if valid.any() else np.inf
+        return self._cache["altitude"]
+
+    # -- Mitsuba 3 -------------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene):
+        """Mitsuba's mesh from the same arrays: world vertices (float64 here, float32 there) and faces
+        (the bridge builds an mi.Mesh of a dict of type 'mesh')."""
+        return [{"type": "mesh", "vertex_positions": self.world_vertices(), "faces": self.faces}]
+
+
+def _ready(array, dtype) -> bool:
+    """A read-only array of this type (a file's, or another Mesh's): checked and shared, not copied."""
+    return isinstance(array, np.ndarray) and array.dtype == dtype and not array.flags.writeable

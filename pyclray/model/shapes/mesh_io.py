@@ -1,0 +1,209 @@
+"""Reading a triangle mesh's file: OBJ, PLY, STL, OFF, glTF/GLB.
+
+What the contract asks (scene-format.md, "Triangle meshes"): the file's vertex and face order kept,
+a polygon of k vertices becoming the k - 2 triangles (0, i, i + 1) in its place, a multi-object file
+one mesh with its objects in file order. trimesh reads the binary formats (STL, glTF/GLB) with
+``process=False, maintain_order=True``; its triangulation of polygons is neither a fan nor in place
+(a quad's second triangles all go after the first ones), so the formats that hold polygons (OBJ, OFF,
+PLY) have their faces read here (PLY through trimesh's own parser of the file's elements) and fanned.
+
+Every failure is a SceneError at the key 'file' that says what is wrong with which file. A file is
+read once per (path, size, modification time): scenes that name the same file share its arrays.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError, _shown
+
+FORMATS = (".obj", ".ply", ".stl", ".off", ".gltf", ".glb")
+_cache: OrderedDict = OrderedDict()
+_CACHE_MAX = 16
+_lock = threading.Lock()
+
+
+class _Bad(Exception):
+    """A file's contents are not what its format says (turned into a SceneError with the file's name)."""
+
+
+def read_mesh(path, folder=None):
+    """(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or None) of a mesh file,
+    read-only arrays shared by every caller that names the same unchanged file."""
+    if not isinstance(path, (str, os.PathLike)) or isinstance(path, bytes):
+        raise SceneError(f"expected the path of a mesh file ({', '.join(FORMATS)}), got {_shown(path)}", key="file")
+    full = Path(folder or ".") / path
+    suffix = full.suffix.lower()
+    if suffix not in FORMATS:
+        raise SceneError(f"{path}: expected a mesh file ending in {', '.join(FORMATS)}", key="file")
+    try:
+        stat = full.stat()
+    except OSError as error:
+        raise SceneError(f"cannot read {path}: {(error.strerror or str(error)).lower()}", key="file") from None
+    if full.is_dir():
+        raise SceneError(f"cannot read {path}: is a folder", key="file")
+    key = (str(full.resolve()), stat.st_size, stat.st_mtime_ns)
+    with _lock:
+        if key in _cache:
+            _cache.move_to_end(key)
+            return _cache[key]
+    try:
+        vertices, faces, normals = _READERS[suffix](full)
+    except _Bad as error:
+        raise SceneError(f"{path}: {error}", key="file") from None
+    except OSError as error:
+        raise SceneError(f"cannot read {path}: {(error.strerror or str(error)).lower()}", key="file") from None
+    except Exception as error:  # a parser's own failure on a malformed file
+        raise SceneError(f"{path}: not a readable {suffix[1:].upper()} file ({type(error).__name__}: {error})",
+                         key="file") from None
+    vertices = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    if not len(faces):
+        raise SceneError(f"{path}: the file holds no triangles", key="file")
+    if normals is not None:
+        normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        if len(normals) != len(vertices) or not np.isfinite(normals).all():
+            normals = None  # unusable normals: the smooth shading computes its own
+    for array in (vertices, faces, normals):
+        if array is not None:
+            array.setflags(write=False)
+    out = (vertices, faces, normals)
+    with _lock:
+        _cache[key] = out
+        while len(_cache) > _CACHE_MAX:
+            _cache.popitem(last=False)
+    return out
+
+
+def fan(polygons) -> np.ndarray:
+    """The triangles (0, i, i + 1) of each polygon (a sequence of index sequences), in place."""
+    sizes = np.fromiter((len(p) for p in polygons), np.int64, len(polygons))
+    if len(sizes) and (sizes < 3).any():
+        index = int(np.argmax(sizes < 3))
+        raise _Bad(f"face {index} has {int(sizes[index])} vertices (a face needs at least 3)")
+    if len(sizes) and (sizes == 3).all():
+        return np.array(polygons, np.int64).reshape(-1, 3)
+    out = []
+    for polygon in polygons:
+        first = polygon[0]
+        out.extend((first, polygon[i], polygon[i + 1]) for i in range(1, len(polygon) - 1))
+    return np.array(out, np.int64).reshape(-1, 3)
+
+
+def _read_off(path: Path):
+    """OFF (and NOFF, COFF): counts, vertex lines (x y z [nx ny nz] [colour]), face lines (k i_0 .. i_k-1 [colour])."""
+    lines = []
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            lines.append(line)
+    if not lines or not lines[0].split()[0].upper().endswith("OFF"):
+        raise _Bad("expected an OFF header ('OFF' on the first line)")
+    header = lines[0].split()
+    with_normals = header[0].upper().startswith(("NOFF", "CNOFF"))
+    rest = header[1:] or lines[1].split()
+    body = lines[1:] if header[1:] else lines[2:]
+    try:
+        n_vertices, n_faces = int(rest[0]), int(rest[1])
+    except (IndexError, ValueError):
+        raise _Bad("expected the counts 'vertices faces edges' after the header") from None
+    if len(body) < n_vertices + n_faces:
+        raise _Bad(f"expected {n_vertices} vertex and {n_faces} face lines, the file ends after {len(body)}")
+    rows = [line.split() for line in body[:n_vertices]]
+    try:
+        vertices = np.array([row[:3] for row in rows], np.float64).reshape(-1, 3)
+        normals = np.array([row[3:6] for row in rows], np.float64).reshape(-1, 3) if with_normals else None
+        polygons = []
+        for line in body[n_vertices:n_vertices + n_faces]:
+            fields = line.split()
+            count = int(fields[0])
+            polygons.append([int(v) for v in fields[1:1 + count]])
+            if len(polygons[-1]) != count:
+                raise _Bad(f"face {len(polygons) - 1}: expected {count} vertex indices, got {len(polygons[-1])}")
+    except ValueError as error:
+        raise _Bad(f"expected numbers ({error})") from None
+    return vertices, fan(polygons), normals
+
+
+def _read_obj(path: Path):
+    """OBJ: 'v x y z' and 'f a b c ...' (a/t/n forms, negative indices from the end); every object and
+    group of the file, in file order, is one mesh."""
+    vertices, polygons = [], []
+    for number, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        fields = line.split("#", 1)[0].split()
+        if not fields:
+            continue
+        try:
+            if fields[0] == "v":
+                vertices.append([float(c) for c in fields[1:4]])
+                if len(vertices[-1]) != 3:
+                    raise ValueError("a vertex needs 3 coordinates")
+            elif fields[0] == "f":
+                count = len(vertices)
+                indices = [int(f.split("/")[0]) for f in fields[1:]]
+                polygons.append([i - 1 if i > 0 else count + i for i in indices])
+        except ValueError as error:
+            raise _Bad(f"line {number}: {error}") from None
+    return np.array(vertices, np.float64).reshape(-1, 3), fan(polygons), None
+
+
+def _read_ply(path: Path):
+    """PLY (ASCII or binary): the elements as trimesh's parser reads them, the faces fanned here."""
+    from trimesh.exchange import ply
+
+    with open(path, "rb") as handle:
+        try:
+            elements, is_ascii, _ = ply._parse_header(handle)
+        except Exception as error:
+            raise _Bad(f"not a PLY file ({error})") from None
+        (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, handle)
+    if "vertex" not in elements:
+        raise _Bad("expected a 'vertex' element")
+    data = elements["vertex"]["data"]
+    data = {k: data[k] for k in (data.dtype.names if isinstance(data, np.ndarray) else data)}
+    vertices = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("x", "y", "z")], axis=1)
+    normals = None
+    if all(k in data for k in ("nx", "ny", "nz")):
+        normals = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("nx", "ny", "nz")], axis=1)
+    faces = elements.get("face", {}).get("data", {})
+    names = faces.dtype.names or () if isinstance(faces, np.ndarray) else tuple(faces)
+    key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
+    if key is None:
+        raise _Bad("expected a 'face' element with 'vertex_indices'")
+    lists = np.asarray(faces[key])
+    if lists.dtype.names:  # a binary file whose lists all have one length: (count, indices) records
+        return vertices, fan(np.asarray(lists[lists.dtype.names[1]], np.int64).reshape(len(lists), -1)), normals
+    if lists.dtype != object and lists.ndim == 2:
+        return vertices, fan(lists.astype(np.int64)), normals
+    return vertices, fan([np.asarray(p, np.int64).reshape(-1) for p in lists]), normals
+
+
+def _read_trimesh(path: Path):
+    """STL, glTF and GLB through trimesh (triangles only): a scene's meshes, in the file's order,
+    with their nodes' transforms, as one mesh."""
+    import trimesh
+
+    loaded = trimesh.load(str(path), process=False, maintain_order=True)
+    parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+    parts = [p for p in (parts if isinstance(parts, (list, tuple, np.ndarray)) else [parts])
+             if isinstance(p, trimesh.Trimesh)]
+    if not parts:
+        raise _Bad("the file holds no triangle mesh")
+    vertices, faces, normals, offset = [], [], [], 0
+    for part in parts:
+        vertices.append(np.asarray(part.vertices, np.float64))
+        faces.append(np.asarray(part.faces, np.int64) + offset)
+        offset += len(part.vertices)
+        # the file's own vertex normals only (trimesh computes them when asked, into its cache)
+        own = part._cache.cache.get("vertex_normals") if hasattr(part._cache, "cache") else None
+        normals.append(None if own is None else np.asarray(own, np.float64))
+    normals = None if any(n is None for n in normals) else np.concatenate(normals)
+    return np.concatenate(vertices), np.concatenate(faces), normals
+
+
+_READERS = {".off": _read_off, ".obj": _read_obj, ".ply": _read_ply, ".stl": _read_trimesh,
+            ".gltf": _read_trimesh, ".glb": _read_trimesh}

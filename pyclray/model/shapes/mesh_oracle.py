@@ -1,0 +1,174 @@
+"""The float64 oracle of a triangle mesh: nearest hits of rays, nearest triangles of points.
+
+A check traces every pixel of an image through meshes of tens of thousands of triangles, so the
+oracle is not a loop over triangles: the triangles are sorted along a Morton curve of their
+centroids and grouped eight by eight, level after level (a fixed-fanout hierarchy of boxes, built by
+one sort, nothing like the device's BVH), and queries descend it for all rays or points at once as
+arrays of (node, query) pairs. The tests themselves are plain float64 formulas in coordinates
+relative to the ray's origin (Moller and Trumbore's, two-sided), independent of the kernel's
+watertight test: agreement between the two is what the tests check.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+FANOUT = 8
+CHUNK = 1 << 15  # queries per pass (bounds the pairs' memory)
+
+
+def _morton(points: np.ndarray) -> np.ndarray:
+    lo = points.min(axis=0)
+    extent = np.maximum(points.max(axis=0) - lo, 1e-300)
+    q = np.clip((points - lo) / extent * 1023, 0, 1023).astype(np.uint64)
+    code = np.zeros(len(points), np.uint64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return code
+
+
+class Hierarchy:
+    """Boxes of 8, 64, 512 ... consecutive triangles of a Morton order (levels[0]: groups of triangles)."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, valid: np.ndarray):
+        self.order = np.argsort(_morton((a + b + c) / 3.0), kind="stable")
+        self.a, self.b, self.c = a[self.order], b[self.order], c[self.order]
+        self.valid = valid[self.order]
+        lo = np.minimum(np.minimum(self.a, self.b), self.c)
+        hi = np.maximum(np.maximum(self.a, self.b), self.c)
+        self.levels = []
+        while True:
+            starts = np.arange(0, len(lo), FANOUT)
+            lo, hi = np.minimum.reduceat(lo, starts), np.maximum.reduceat(hi, starts)
+            self.levels.append((lo, hi))
+            if len(lo) <= FANOUT:
+                break
+
+    def _descend(self, count: int, keep) -> tuple[np.ndarray, np.ndarray]:
+        """(triangle positions, query indices) of the pairs whose boxes keep(lo, hi, query) accepts
+        at every level (keep may also prune with what it learnt: see nearest)."""
+        top_lo, _ = self.levels[-1]
+        node = np.tile(np.arange(len(top_lo)), count)
+        query = np.repeat(np.arange(count), len(top_lo))
+        for level in range(len(self.levels) - 1, -1, -1):
+            lo, hi = self.levels[level]
+            take = keep(lo[node], hi[node], query)
+            node, query = node[take], query[take]
+            below = len(self.a) if level == 0 else len(self.levels[level - 1][0])
+            node = (node[:, None] * FANOUT + np.arange(FANOUT)).reshape(-1)
+            query = np.repeat(query, FANOUT)
+            inside = node < below
+            node, query = node[inside], query[inside]
+        return node, query
+
+    # -- rays ----------------------------------------------------------------------------------
+    def intersect(self, origins, directions):
+        """(t, triangle index in the input order, u, v) of each ray's nearest hit with t > 0
+        (inf, -1, 0, 0 on a miss). Rays: float64 (N, 3), directions unit."""
+        n = len(directions)
+        best = np.full(n, np.inf)
+        which = np.full(n, -1, np.int64)
+        uv = np.zeros((n, 2))
+        for start in range(0, n, CHUNK):
+            O, D = origins[start:start + CHUNK], directions[start:start + CHUNK]
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                inverse = 1.0 / D
+
+                def slabs(lo, hi, q):
+                    t0, t1 = (lo - O[q]) * inverse[q], (hi - O[q]) * inverse[q]
+                    t0 = np.where(np.isnan(t0), -np.inf, t0)  # 0 * inf: a ray on a slab's face
+                    t1 = np.where(np.isnan(t1), np.inf, t1)
+                    near = np.minimum(t0, t1).max(axis=1)
+                    far = np.maximum(t0, t1).min(axis=1)
+                    return (near <= far * (1 + 1e-9)) & (far >= 0)
+
+                tri, q = self._descend(len(D), slabs)
+                t, u, v = triangle_hits(self.a[tri] - O[q], self.b[tri] - O[q], self.c[tri] - O[q], D[q])
+            t = np.where(self.valid[tri], t, np.inf)
+            hit = np.isfinite(t)
+            tri, q, t, u, v = tri[hit], q[hit], t[hit], u[hit], v[hit]
+            first = np.lexsort((self.order[tri], t, q))  # per ray, the nearest (lowest index on a tie)
+            q_sorted = q[first]
+            lead = np.ones(len(first), bool)
+            lead[1:] = q_sorted[1:] != q_sorted[:-1]
+            pick = first[lead]
+            rows = start + q[pick]
+            best[rows], which[rows] = t[pick], self.order[tri[pick]]
+            uv[rows, 0], uv[rows, 1] = u[pick], v[pick]
+        return best, which, uv
+
+    # -- points --------------------------------------------------------------------------------
+    def nearest(self, points):
+        """(distance, triangle index in the input order, distance to that triangle's nearest edge)
+        of each point's nearest triangle."""
+        n = len(points)
+        out = np.full(n, np.inf), np.full(n, -1, np.int64), np.full(n, np.inf)
+        for start in range(0, n, CHUNK):
+            P = points[start:start + CHUNK]
+            bound = np.full(len(P), np.inf)
+
+            def near_boxes(lo, hi, q):
+                gap = np.maximum(np.maximum(lo - P[q], P[q] - hi), 0.0)
+                low = np.sqrt(np.einsum("ij,ij->i", gap, gap))
+                span = np.maximum(np.abs(P[q] - lo), np.abs(P[q] - hi))
+                high = np.sqrt(np.einsum("ij,ij->i", span, span))  # every point of the box is nearer
+                np.minimum.at(bound, q, high)
+                return low <= bound[q]
+
+            tri, q = self._descend(len(P), near_boxes)
+            d, edge = point_triangle(P[q], self.a[tri], self.b[tri], self.c[tri])
+            first = np.lexsort((self.order[tri], d, q))
+            q_sorted = q[first]
+            lead = np.ones(len(first), bool)
+            lead[1:] = q_sorted[1:] != q_sorted[:-1]
+            pick = first[lead]
+            rows = start + q[pick]
+            out[0][rows], out[1][rows], out[2][rows] = d[pick], self.order[tri[pick]], edge[pick]
+        return out
+
+
+def _cross(x, y):
+    return np.stack([x[:, 1] * y[:, 2] - x[:, 2] * y[:, 1], x[:, 2] * y[:, 0] - x[:, 0] * y[:, 2],
+                     x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]], axis=1)
+
+
+def _dot(x, y):
+    return np.einsum("ij,ij->i", x, y)
+
+
+def triangle_hits(A, B, C, D):
+    """Moller-Trumbore, two-sided, for vertices relative to the ray's origin: (t, u, v) per pair,
+    t = inf where the ray misses (t > 0 only)."""
+    e1, e2 = B - A, C - A
+    p = _cross(D, e2)
+    det = _dot(e1, p)
+    s = -A  # origin - a
+    u = _dot(s, p) / det
+    q = _cross(s, e1)
+    v = _dot(D, q) / det
+    t = _dot(e2, q) / det
+    hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(t)
+    return np.where(hit, t, np.inf), u, v
+
+
+def _segment(P, X, Y):
+    d = Y - X
+    length2 = _dot(d, d)
+    s = np.clip(np.where(length2 > 0, _dot(P - X, d) / np.where(length2 > 0, length2, 1), 0.0), 0.0, 1.0)
+    r = P - (X + s[:, None] * d)
+    return np.sqrt(_dot(r, r))
+
+
+def point_triangle(P, a, b, c):
+    """(distance from P to the triangle, distance from P to the triangle's nearest edge) per row."""
+    edges = np.minimum(np.minimum(_segment(P, a, b), _segment(P, b, c)), _segment(P, c, a))
+    n = _cross(b - a, c - a)
+    n2 = _dot(n, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # the barycentric coordinates of P's projection: inside when all three are >= 0
+        w_a = _dot(_cross(b - P, c - P), n) / n2
+        w_b = _dot(_cross(c - P, a - P), n) / n2
+        w_c = _dot(_cross(a - P, b - P), n) / n2
+        plane = np.abs(_dot(P - a, n)) / np.sqrt(n2)
+    inside = (n2 > 0) & (w_a >= 0) & (w_b >= 0) & (w_c >= 0)
+    return np.where(inside, plane, edges), edges
