@@ -6,6 +6,7 @@ intersections agree bit for bit. A round trip XML -> pyclray -> XML renders the 
 as the first file, within the error model's bounds for two float32 renders of one scene.
 """
 import os
+import re
 import subprocess
 import sys
 
@@ -61,7 +62,7 @@ def test_the_file_is_the_checks_scene_bit_for_bit(name, tmp_path):
     assert cli.main(["export", str(SCENES / name), "-o", str(path), "--size", f"{scene.image.width}x{scene.image.height}"]) == 0
     mi = mitsuba.import_mitsuba("scalar_rgb")
     from_file = mi.load_file(str(path), optimize=False)
-    from_dict = mi.load_dict(mitsuba.scene_dict(scene, "scalar_rgb"), optimize=False)
+    from_dict = mitsuba.load_dict(mi, mitsuba.scene_dict(scene, "scalar_rgb"))
     assert len(from_file.shapes()) == len(from_dict.shapes())
     read = pyclray.load_scene(path)
     from pyclray.reference.mitsuba_export import shape_keys
@@ -88,9 +89,10 @@ def test_round_trip_xml_pyclray_xml_renders_the_same_aovs_in_mitsuba(path, tmp_p
     pixel (silhouettes and edges aside), depths from the eye within twice the error model's image
     bound (two float32 renders), the same normals."""
     scene = pyclray.load_scene(path).with_size(*SIZE)
-    first = tmp_path / "first.xml"  # the file at SIZE (its film's width and height)
-    first.write_text(path.read_text().replace('value="960"', f'value="{SIZE[0]}"').replace('value="720"', f'value="{SIZE[1]}"')
-                     .replace('value="$res"', f'value="{SIZE[0]}"').replace('"height" value="48"', f'"height" value="{SIZE[1]}"'))
+    first = tmp_path / "first.xml"  # the file at SIZE (its film's width and height), its meshes beside it
+    text = re.sub(r'name="width" value="[^"]*"', f'name="width" value="{SIZE[0]}"', path.read_text())
+    first.write_text(re.sub(r'name="height" value="[^"]*"', f'name="height" value="{SIZE[1]}"', text))
+    (tmp_path / "meshes").symlink_to(SCENES / "meshes")
     again = tmp_path / "again.xml"
     assert cli.main(["export", str(first), "-o", str(again)]) == 0
     mi = mitsuba.import_mitsuba("scalar_rgb")
@@ -123,7 +125,8 @@ def test_round_trip_xml_pyclray_xml_renders_the_same_aovs_in_mitsuba(path, tmp_p
 
 def test_export_names_shapes_and_parts_and_needs_no_mitsuba(tmp_path):
     """A capped cylinder is three Mitsuba shapes (its name, name_1, name_2); scenes built in Python
-    with repeated names get their index; the writer runs with Mitsuba unimportable."""
+    with repeated names get their index; a mesh is a ply shape of a PLY file beside the XML (its
+    world vertices in float64, its faces in order); the writer runs with Mitsuba unimportable."""
     scene = pyclray.Scene(pyclray.Camera((0, 1, 5), (0, 0, 0)), pyclray.Image(16, 12),
                           (pyclray.Cylinder((0, 0, 0), (0, 1, 0), 0.5), pyclray.Sphere((1, 0, 0), 0.5)))
     keys = [k for k in export_dict(scene) if k.startswith("cylinder") or k.startswith("sphere")]
@@ -136,7 +139,12 @@ def test_export_names_shapes_and_parts_and_needs_no_mitsuba(tmp_path):
     result = subprocess.run([sys.executable, "-c", code, "export", str(SCENES / "shapes.toml"), "-o", str(tmp_path / "s.xml")],
                             capture_output=True, text=True, env=dict(os.environ))
     assert result.returncode == 0, result.stderr
-    assert (tmp_path / "s.xml").read_text().count("<shape ") == 14  # 9 shapes: a cylinder's 2 caps, 5 pebbles
+    text = (tmp_path / "s.xml").read_text()
+    assert text.count("<shape ") == 15  # 10 shapes: a cylinder's 2 caps, 5 pebbles, a mesh
+    assert '<shape type="ply" id="pyramid">' in text and '<string name="filename" value="s.pyramid.ply"/>' in text
+    vertices, faces, _ = __import__("pyclray.model.shapes.mesh_io", fromlist=["read_mesh"]).read_mesh(tmp_path / "s.pyramid.ply")
+    pyramid = next(shape for shape in pyclray.load_scene(SCENES / "shapes.toml").shapes if shape.name == "pyramid")
+    assert np.array_equal(vertices, pyramid.world_vertices()) and np.array_equal(faces, pyramid.faces)
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,7 @@ from pyclray.reference.error_model import angle_between
 
 from conftest import REPO, SCENES
 
-EXAMPLES = sorted((REPO / "tests/data/mitsuba").glob("*.xml")) + [SCENES / "mitsuba-shapes.xml"]
+EXAMPLES = sorted((REPO / "tests/data/mitsuba").glob("*.xml")) + [SCENES / "mitsuba-shapes.xml", SCENES / "mitsuba-meshes.xml"]
 
 
 def mitsuba_intersect(mi_scene, scene, origins, directions):
@@ -39,7 +39,8 @@ def mitsuba_intersect(mi_scene, scene, origins, directions):
     for k, (o, d) in enumerate(zip(origins, directions)):
         si = mi_scene.ray_intersect(mi.Ray3f(mi.Point3f(*o), mi.Vector3f(*d)))
         if si.is_valid():
-            t[k], normal[k], found[k] = si.t, tuple(si.n), position[id(si.shape)]
+            hit = si.instance if si.instance is not None else si.shape  # an instance's meshes are its
+            t[k], normal[k], found[k] = si.t, tuple(si.n), position[id(hit)]
     return t, normal, found
 
 
@@ -113,7 +114,12 @@ SENSOR = ('<sensor type="perspective"><float name="fov" value="45"/><transform n
     "body, words",
     [
         ('<shape type="torus"/>', ["line 3", '<shape type="torus">', "unknown shape plugin 'torus'", "sphere"]),
-        ('<shape type="obj"><string name="filename" value="a.obj"/></shape>', ["line 3", "'obj'", "triangle meshes"]),
+        ('<shape type="obj"><string name="filename" value="a.obj"/></shape>', ["line 3", '<shape type="obj">', "a.obj",
+                                                                                "no such file"]),
+        ('<shape type="ply"/>', ["line 3", "missing property 'filename'"]),
+        ('<shape type="serialized"/>', ["line 3", "unknown shape plugin 'serialized'"]),
+        ('<shape type="instance"><ref id="g"/></shape>', ["line 3", "no <shape type=\"shapegroup\" id=\"g\">"]),
+        ('<shape type="shapegroup" id="g"><shape type="sphere"/></shape>', ["line 3", "'sphere' shape in a shapegroup"]),
         ('<shape type="sphere"><float value="1"/></shape>', ["line 3", "<float>", "missing attribute 'name'"]),
         ('<shape type="sphere"><float name="radius"/></shape>', ["line 3", "missing attribute 'value'"]),
         ('<shape type="sphere"><float name="radius" value="big"/></shape>', ["line 3", "expected numbers, got 'big'"]),

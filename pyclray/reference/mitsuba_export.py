@@ -25,6 +25,7 @@ TAGS = {
     "obj": "shape", "ply": "shape", "point": "emitter", "directional": "emitter",
 }
 VECTORS = ("direction",)  # 3-vectors written as <vector>; the others are <point>s
+MESH_ARRAYS = ("vertex_positions", "faces")  # a mesh's arrays: written to its PLY file, not the XML
 
 
 def shape_keys(scene):
@@ -40,10 +41,17 @@ def shape_keys(scene):
     return key
 
 
-def export_dict(scene) -> dict:
-    """The Mitsuba scene description that ``pyclray export`` writes (plain values, see mitsuba_dict)."""
+def export_dict(scene, mesh_file=lambda key: f"{key}.ply") -> dict:
+    """The Mitsuba scene description that ``pyclray export`` writes (plain values, see mitsuba_dict).
+    A triangle mesh becomes a ``ply`` shape of the file mesh_file(its id) (face normals: the check's
+    mi.Mesh has no vertex normals), its world vertices and faces under "vertex_positions" and "faces"
+    for the writer (export_files), which leaves them out of the XML."""
     key = shape_keys(scene)
     out = mitsuba_dict(scene, AOV_SPEC, key)
+    for name, value in out.items():
+        if isinstance(value, dict) and value.get("type") == "mesh":
+            out[name] = {"type": "ply", "filename": mesh_file(name), "face_normals": True,
+                         "vertex_positions": value["vertex_positions"], "faces": value["faces"]}
     out["integrator"]["inner"] = {"type": "direct"}
     for index, shape in enumerate(scene.shapes):
         bsdf = {"type": "twosided", "bsdf": {"type": "diffuse",
@@ -68,7 +76,8 @@ def _element(tag: str, name: str | None, body: dict, indent: str, identifier: st
         attributes += f" id={quoteattr(identifier)}"
     if name is not None:
         attributes += f" name={quoteattr(name)}"
-    inner = [line for key, value in body.items() if key != "type" for line in _property(key, value, indent + "    ")]
+    inner = [line for key, value in body.items() if key not in ("type", *MESH_ARRAYS)
+             for line in _property(key, value, indent + "    ")]
     if not inner:
         return [f"{indent}<{tag}{attributes}/>"]
     return [f"{indent}<{tag}{attributes}>", *inner, f"{indent}</{tag}>"]
@@ -122,7 +131,35 @@ def to_xml(description: dict, comment: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def scene_xml(scene) -> str:
-    """The Mitsuba 3 XML text of a pyclray scene (export_dict)."""
+def scene_xml(scene, mesh_file=lambda key: f"{key}.ply") -> str:
+    """The Mitsuba 3 XML text of a pyclray scene (export_dict; its meshes' PLY files: export_files)."""
     source = f" from {scene.source}" if scene.source else ""
-    return to_xml(export_dict(scene), f"written by pyclray export{source}")
+    return to_xml(export_dict(scene, mesh_file), f"written by pyclray export{source}")
+
+
+def ply_bytes(vertices, faces) -> bytes:
+    """A binary PLY file of triangles: float64 vertices (Mitsuba rounds them once to float32, as the
+    check's mi.Mesh of the same arrays) and int32 vertex indices."""
+    vertices = np.ascontiguousarray(vertices, "<f8").reshape(-1, 3)
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    header = ("ply\nformat binary_little_endian 1.0\ncomment written by pyclray export\n"
+              f"element vertex {len(vertices)}\nproperty double x\nproperty double y\nproperty double z\n"
+              f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    rows = np.zeros(len(faces), dtype=[("n", "u1"), ("v", "<i4", 3)])
+    rows["n"], rows["v"] = 3, faces
+    return header + vertices.tobytes() + rows.tobytes()
+
+
+def export_files(scene, path) -> dict:
+    """{path: bytes} of every file ``pyclray export SCENE -o path`` writes: the XML, and beside it one
+    PLY file per triangle mesh, named STEM.ID.ply (STEM: the XML's, ID: the mesh's id)."""
+    from pathlib import Path
+
+    path = Path(path)
+    description = export_dict(scene, lambda key: f"{path.stem}.{key}.ply")
+    source = f" from {scene.source}" if scene.source else ""
+    files = {path: to_xml(description, f"written by pyclray export{source}").encode("utf-8")}
+    for value in description.values():
+        if isinstance(value, dict) and value.get("type") == "ply":
+            files[path.with_name(value["filename"])] = ply_bytes(value["vertex_positions"], value["faces"])
+    return files

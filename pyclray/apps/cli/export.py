@@ -18,7 +18,8 @@ def add_command(subparsers) -> None:
         "Mitsuba is not needed to write it.",
     )
     parser.add_argument("scene", metavar="SCENE", help="scene file (TOML or Mitsuba XML)")
-    parser.add_argument("-o", "--output", required=True, metavar="OUT.xml", help="the Mitsuba scene to write")
+    parser.add_argument("-o", "--output", required=True, metavar="OUT.xml",
+                        help="the Mitsuba scene to write (a triangle mesh goes to OUT.ID.ply beside it)")
     parser.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--time", type=time_value, metavar="T", help="the time (seconds) of an animated scene")
     parser.set_defaults(run=run)
@@ -36,11 +37,15 @@ def run(args) -> int:
     check_target(out)
     scene = load(args.scene, args.size, args.time)
     from ...reference.mitsuba import sensor_of
-    from ...reference.mitsuba_export import scene_xml
+    from ...reference.mitsuba_export import export_files
 
     sensor_of(scene)  # a camera Mitsuba has no sensor for (fx != fy) is bad input
-    text = scene_xml(scene)
-    with replace_together([out]) as (temporary,):
-        Path(temporary).write_text(text, encoding="utf-8")
-    print(f"wrote {out}")
+    files = export_files(scene, out)  # the XML and a PLY file per triangle mesh, replaced together
+    if any(path.resolve() == scene_path.resolve() for path in files):
+        raise BadInput(f"-o {args.output}: a file it writes, {next(p for p in files if p.resolve() == scene_path.resolve())}, "
+                       "is the scene file itself; give another output path")
+    with replace_together(list(files)) as temporaries:
+        for temporary, content in zip(temporaries, files.values()):
+            Path(temporary).write_bytes(content)
+    print("wrote " + ", ".join(map(str, files)))
     return 0

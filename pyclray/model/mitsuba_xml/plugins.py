@@ -2,8 +2,7 @@
 
 A builder takes the element and the scene being read (``Reading``) and adds what it makes to it.
 A plugin of Mitsuba's that pyclray has no counterpart for is not in the table: reading one is an
-error naming the element and its line. Triangle meshes (obj, ply, shapegroup, instance) come with
-pyclray's meshes: each is then one more entry here.
+error naming the element and its line.
 """
 from __future__ import annotations
 
@@ -16,7 +15,7 @@ import numpy as np
 from ..camera import Camera, Image
 from ..errors import SceneError
 from ..lights import DirectionalLight, Material, PointLight
-from ..shapes import Box, Cylinder, Disk, Rectangle, Sphere
+from ..shapes import Box, Cylinder, Disk, Mesh, Rectangle, Sphere
 from .properties import IDENTITY, Properties, Transform
 from .tree import Element
 
@@ -37,6 +36,7 @@ class Reading:
     shapes: list = field(default_factory=list)
     lights: list = field(default_factory=list)
     bsdfs: dict = field(default_factory=dict)  # id -> Material
+    groups: dict = field(default_factory=dict)  # shapegroup id -> its meshes
 
 
 def checked(element: Element, make, *args, **kwargs):
@@ -121,10 +121,11 @@ def shape_properties(element: Element) -> Properties:
     return props
 
 
-def add_shape(element: Element, reading: Reading, props: Properties, make, *args) -> None:
+def add_shape(element: Element, reading: Reading, props: Properties, make, *args, **keys) -> None:
     material_ = shape_material(element, props, reading)
     props.finish()
-    reading.shapes.append(checked(element, make, *args, name=name_of(element, reading, "shape"), material=material_))
+    reading.shapes.append(checked(element, make, *args, name=name_of(element, reading, "shape"), material=material_,
+                                  **keys))
 
 
 def sphere(element: Element, reading: Reading) -> None:
@@ -233,14 +234,62 @@ def cylinder(element: Element, reading: Reading) -> None:
               float(0.5 * (rx + ry)), False)
 
 
-def needs_meshes(element: Element, reading: Reading) -> None:
-    raise element.error(f"a {element.attrs['type']!r} shape needs pyclray's triangle meshes (issue 23), "
-                        "which this version does not have")
+def as_matrix(to_world: Transform):
+    """A mesh's matrix key (row by row), or None for the identity."""
+    return None if np.array_equal(to_world.matrix, np.eye(4)) else tuple(map(tuple, to_world.matrix.tolist()))
+
+
+def mesh_file(element: Element, reading: Reading) -> None:
+    """Mitsuba's obj and ply: pyclray's triangle mesh of the file (relative to the scene file's
+    folder), placed by to_world. Its geometric normals are the faces' in both; face_normals (whether
+    Mitsuba shades with them rather than the file's vertex normals) changes no geometry, and pyclray
+    shades with the faces' normals (its smooth shading is not there yet)."""
+    props = shape_properties(element)
+    filename = props.take("filename", "string", required=True)
+    to_world = props.take("to_world", "transform", IDENTITY)
+    props.ignore.update(("face_normals", "flip_tex_coords", "maintain_order"))  # shading, textures, merging
+    path = (reading.folder or Path(".")) / filename
+    add_shape(element, reading, props, Mesh.load, path, matrix=as_matrix(to_world))
+
+
+def shapegroup(element: Element, reading: Reading) -> None:
+    """A named group of shapes, drawn only where an instance places it: its meshes are read here."""
+    if "id" not in element.attrs:
+        raise element.error("a shapegroup needs an id for instances to refer to")
+    props = Properties(element)
+    props.finish()
+    group = Reading(folder=reading.folder, bsdfs=reading.bsdfs)
+    for child in props.plugins:
+        if child.tag != "shape":
+            raise child.error("not read inside a shapegroup: pyclray reads its <shape>s")
+        kind = plugin_type(child, SHAPES)
+        if kind not in ("obj", "ply"):
+            raise child.error(f"a {kind!r} shape in a shapegroup: pyclray instances triangle meshes (obj, ply)")
+        SHAPES[kind](child, group)
+    reading.groups[element.attrs["id"]] = group.shapes
+
+
+def instance(element: Element, reading: Reading) -> None:
+    """A shapegroup's meshes placed by to_world (after their own placement): the same triangles,
+    shared, named ID_k (ID the instance's id or instance<index>)."""
+    props = Properties(element)
+    to_world = props.take("to_world", "transform", IDENTITY)
+    props.finish()
+    refs = [child for child in props.plugins if child.tag == "ref"]
+    only_plugins(element, props, ("ref",))
+    if len(refs) != 1:
+        raise element.error("expected one <ref id=...> to a shapegroup")
+    group = reading.groups.get(refs[0].attribute("id"))
+    if group is None:
+        raise refs[0].error(f"no <shape type=\"shapegroup\" id=\"{refs[0].attrs['id']}\"> before this reference")
+    name = name_of(element, reading, "shape")
+    for k, mesh in enumerate(group):
+        matrix = tuple(map(tuple, (to_world.matrix @ mesh.transform()).tolist()))
+        reading.shapes.append(checked(element, mesh.placed, matrix=matrix, name=f"{name}_{k}"))
 
 
 SHAPES = {"sphere": sphere, "rectangle": rectangle, "disk": disk, "cube": cube, "cylinder": cylinder,
-          "obj": needs_meshes, "ply": needs_meshes, "serialized": needs_meshes, "shapegroup": needs_meshes,
-          "instance": needs_meshes}
+          "obj": mesh_file, "ply": mesh_file, "shapegroup": shapegroup, "instance": instance}
 
 
 # -- emitters --------------------------------------------------------------------------------------
