@@ -88,11 +88,13 @@ def test_toml_inline_one_radius_and_npz_files(tmp_path):
         ('file = "nowhere.npz"', "file", "cannot read nowhere.npz"),
         ('file = "cloud.npz"\nradius = 1.0', "file", "not both"),
         ('file = "other.npz"', "file", "expected arrays 'centers' and 'radii'"),
+        ('file = "broken.npz"', "file", "cannot read broken.npz"),  # a truncated archive (BadZipFile)
     ],
 )
 def test_bad_batches_are_one_scene_error_naming_the_key(tmp_path, body, key, message):
     np.savez(tmp_path / "cloud.npz", centers=np.zeros((2, 3)), radii=np.ones(2))
     np.savez(tmp_path / "other.npz", points=np.zeros((2, 3)))
+    (tmp_path / "broken.npz").write_bytes((tmp_path / "cloud.npz").read_bytes()[:100])
     path = tmp_path / "bad.toml"
     path.write_text('[camera]\neye = [0, 2, 8]\ntarget = [0, 0, 0]\nfov = 45.0\n[[shapes]]\ntype = "spheres"\n' + body + "\n")
     with pytest.raises(pyclray.SceneError) as error:

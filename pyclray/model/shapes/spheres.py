@@ -3,6 +3,7 @@ Python object per sphere. Each sphere is one entry of the packed arrays, tested 
 kernel code; the ``primitive`` image says which sphere of the batch a pixel sees."""
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,7 +104,7 @@ class Spheres(Shape):
                 return data["centers"], data["radii"]
         except SceneError:
             raise
-        except (OSError, ValueError, EOFError) as error:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:  # a truncated or foreign file too
             reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
             raise SceneError(f"cannot read {path}: {reason.lower()}", key="file") from None
 
