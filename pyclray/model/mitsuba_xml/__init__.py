@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import SceneError
 from ..scene import Scene
 from .plugins import BSDFS, EMITTERS, SHAPES, Reading, material, plugin_type
@@ -42,7 +44,14 @@ def scene_from_tree(root: Element, source: str | None = None) -> Scene:
             top_level_bsdf(element, reading)
         elif element.tag in PLUGINS:
             table = PLUGINS[element.tag]
-            table[plugin_type(element, table)](element, reading)
+            builder = table[plugin_type(element, table)]
+            try:
+                # numbers that overflow once placed (a point at 1e308 minus another): one line, not
+                # a numpy warning and an inf or NaN shape
+                with np.errstate(over="raise", invalid="raise", divide="raise"):
+                    builder(element, reading)
+            except FloatingPointError:
+                raise element.error("its numbers overflow once placed (beyond float64's range)") from None
         else:
             known = ", ".join(f"<{tag}>" for tag in (*PLUGINS, "bsdf", *IGNORED, "default"))
             raise element.error(f"not read by pyclray (it reads {known}; docs/mitsuba.md)")
