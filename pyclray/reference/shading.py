@@ -80,16 +80,25 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
             step[axis] = sign
             moves.append(reach * (step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s + 0.5 * n_s))
         moves += [np.broadcast_to(lift, ids.shape)[..., None] * n_s for lift in lifts]
-    pad = max((float(np.linalg.norm(m, axis=-1).max(initial=0.0)) for m in moves), default=0.0)
+    # how far each pixel's moved points go, rounded up to a power of 2 (one padded tree per level)
+    reach = np.max([np.linalg.norm(m, axis=-1) for m in moves], axis=0) if moves else np.zeros(ids.shape)
+    level = np.ceil(np.log2(np.maximum(reach, 2.0**-1000)))
     out, unsure = [], []
     for light in effective_lights(scene):
         # only hit points the light is in front of (cos > 0) are traced: elsewhere it adds nothing
         lit = (ids >= 0) & (np.einsum("...k,...k", n_s, light_terms(light, points)[0]) > 0)
         P = points[lit]
         L0 = light_terms(light, P)[0]
-        # a moved point's ray stays within pad of p's (parallel for a directional light, ending at
-        # the same point light): the shapes near p's ray are all it may meet
-        rays, shapes = near_pairs(scene, P + skip * size * L0, L0, pad)
+        # a moved point's ray stays within its move of p's (parallel for a directional light, ending
+        # at the same point light): the shapes within that of p's ray are all it may meet
+        starts, levels = P + skip * size * L0, level[lit]
+        found = []
+        for value in np.unique(levels):
+            mine = np.flatnonzero(levels == value)
+            near_rays, near_shapes = near_pairs(scene, starts[mine], L0[mine], float(2.0**value))
+            found.append((mine[near_rays], near_shapes))
+        rays = np.concatenate([r for r, _ in found] or [np.zeros(0, np.int64)])
+        shapes = np.concatenate([q for _, q in found] or [np.zeros(0, np.int64)])
         # p and all its moved points at once (one shape test per shape, not one per move)
         origins = np.concatenate([P] + [P + move[lit] for move in moves])
         copies = 1 + len(moves)
