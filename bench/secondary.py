@@ -7,7 +7,12 @@ uniform) and "view" (origins near the camera, directions N(0, 0.6) around the vi
 25 measured). Timings are medians of blocks of calls, the systems taking turns with short pauses
 (open3d_compare.blocks); the ratio is Open3D's time over pyclray's (> 1: pyclray faster).
 
-    .venv/bin/python -m bench.secondary [--rounds 4 --block 3] [--no-mitsuba]
+Mitsuba is timed apart, warm: its scene of 100,000 sphere shapes, each with its own BSDF, takes
+tens of seconds per render, so it is loaded, rendered once untimed (Dr.Jit traces and compiles its
+kernels in that first call; it is reported as "first call") and then timed over --mitsuba-calls
+renders, which reuse the compiled kernels.
+
+    .venv/bin/python -m bench.secondary [--rounds 4 --block 3] [--no-mitsuba] [--mitsuba-calls 2]
 """
 from __future__ import annotations
 
@@ -21,7 +26,7 @@ import numpy as np
 import pyclray
 
 from . import scale
-from .open3d_compare import blocks
+from .open3d_compare import blocks, once
 
 
 def view_rays(count: int, seed: int = 2):
@@ -55,7 +60,7 @@ def casts(rounds: int, block: int) -> dict:
     return out
 
 
-def shading(rounds: int, block: int, mitsuba: bool) -> dict:
+def shading(rounds: int, block: int, mitsuba_calls: int) -> dict:
     scene = scale.scene(100_000)
     light = pyclray.PointLight((6.0, 14.0, 10.0), (300.0, 300.0, 300.0))
     lit = dataclasses.replace(scene, lights=(light,))
@@ -64,14 +69,43 @@ def shading(rounds: int, block: int, mitsuba: bool) -> dict:
         "pyclray shaded, shadows": lambda: pyclray.render(lit, aovs=("shaded",)),
         "pyclray shaded, no shadows": lambda: pyclray.render(unshadowed, aovs=("shaded",)),
     }
-    if mitsuba:
-        from pyclray.reference.mitsuba import import_mitsuba
-        from pyclray.reference.validation.shaded import diffuse_version, direct_scene_dict
+    name = "shaded 512x512, ground + 100,000 spheres, one point light"
+    out = {name: blocks(systems, rounds, block)}
+    if mitsuba_calls:
+        out[name].update(mitsuba_direct(lit, light, mitsuba_calls))
+    return out
 
-        mi = import_mitsuba("llvm_ad_rgb")
-        mi_scene = mi.load_dict(direct_scene_dict(diffuse_version(lit), light, "llvm_ad_rgb"), optimize=False)
-        systems["mitsuba llvm direct, 1 spp"] = lambda: mi.render(mi_scene, spp=1).numpy()
-    return {"shaded 512x512, ground + 100,000 spheres, one point light": blocks(systems, rounds, block)}
+
+def mitsuba_direct(lit, light, calls: int) -> dict:
+    """Mitsuba llvm_ad_rgb's direct integrator (1 spp) on the scene's diffuse version: the first
+    render (tracing and compiling its kernels) and the median of `calls` warm renders after it."""
+    from pyclray.reference.mitsuba import import_mitsuba
+    from pyclray.reference.validation.shaded import diffuse_version, direct_scene_dict
+
+    mi = import_mitsuba("llvm_ad_rgb")
+    mi_scene = mi.load_dict(direct_scene_dict(diffuse_version(lit), light, "llvm_ad_rgb"), optimize=False)
+    first = once(lambda: mi.render(mi_scene, spp=1).numpy())
+    times = [once(lambda: mi.render(mi_scene, spp=1).numpy()) for _ in range(calls)]
+    return {"mitsuba llvm direct, 1 spp, first call": {"median": first, "q1": first, "q3": first, "n": 1},
+            "mitsuba llvm direct, 1 spp, warm": {"median": float(np.median(times)), "q1": min(times),
+                                                 "q3": max(times), "n": calls}}
+
+
+def ratios(results: dict) -> list[str]:
+    """The issue's ratios: Open3D's time over pyclray's per query, shadows over no shadows, Mitsuba
+    (warm) over pyclray's shadowed render."""
+    lines = []
+    for name, timing in results.items():
+        median = {system: t["median"] for system, t in timing.items()}
+        for query, theirs in (("cast", "open3d cast_rays"), ("occluded", "open3d test_occlusions")):
+            if f"pyclray {query}" in median:
+                lines.append(f"{name}: {query} {median[theirs] / median[f'pyclray {query}']:.2f}x Open3D")
+        if "pyclray shaded, shadows" in median:
+            shadows = median["pyclray shaded, shadows"]
+            lines.append(f"{name}: shadows / no shadows {shadows / median['pyclray shaded, no shadows']:.2f}")
+            if "mitsuba llvm direct, 1 spp, warm" in median:
+                lines.append(f"{name}: Mitsuba warm / pyclray {median['mitsuba llvm direct, 1 spp, warm'] / shadows:.0f}x")
+    return lines
 
 
 def main(argv=None) -> None:
@@ -79,14 +113,17 @@ def main(argv=None) -> None:
     parser.add_argument("--rounds", type=int, default=4)
     parser.add_argument("--block", type=int, default=3)
     parser.add_argument("--no-mitsuba", action="store_true")
+    parser.add_argument("--mitsuba-calls", type=int, default=2, help="warm Mitsuba renders timed (default 2)")
     args = parser.parse_args(argv)
     print("load:", os.getloadavg())
-    results = {**casts(args.rounds, args.block), **shading(args.rounds, args.block, not args.no_mitsuba)}
+    mitsuba_calls = 0 if args.no_mitsuba else max(args.mitsuba_calls, 1)
+    results = {**casts(args.rounds, args.block), **shading(args.rounds, args.block, mitsuba_calls)}
     print("load:", os.getloadavg())
     for name, timing in results.items():
         print(name)
         for system, t in timing.items():
-            print(f"  {system:32s} {t['median']:8.1f} ms  (q1 {t['q1']:.1f}, q3 {t['q3']:.1f}, n {t['n']})")
+            print(f"  {system:38s} {t['median']:8.1f} ms  (q1 {t['q1']:.1f}, q3 {t['q3']:.1f}, n {t['n']})")
+    print("\n".join(ratios(results)))
     print(json.dumps(results))
 
 

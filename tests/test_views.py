@@ -203,3 +203,13 @@ def test_boxes_around_the_anchor_drop_no_shape_seen_from_far_off_it(precision, e
     result = {name: image[name].reshape(-1, *image[name].shape[2:]) for name in ("depth", "normal", "id")}
     assert_agrees_with_oracle(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), result, precision,
                               reference_point=corner)
+
+
+def test_an_animation_frame_that_changes_no_shape_updates_nothing():
+    """A frame whose keys move nothing (an animation holding still) is an update of no shape: no
+    materials compared or written (pack_materials gives a row even for no shape), the images kept."""
+    scene = pyclray.load_scene("scenes/tp02_orbit.toml").with_size(16, 12)
+    before = fresh(scene)
+    ready = prepared.prepared_scene(context_for(None), scene, "fp32")
+    assert ready.update(scene.shapes, [])
+    same(pyclray.render(scene), before)

@@ -79,8 +79,9 @@ def update(prepared, shapes: tuple, changed) -> bool:
             scatter(prepared, kind.frame, where, kind.cls.rebase(kind.world[where], eye, rows, prepared.precision,
                                                              kind.ids[where], kind.primitives[where]))
     # materials (an animated colour or size): the rows that differ
-    materials = shading.pack_materials([shapes[i] for i in indices], prepared.precision)
-    if not (materials == prepared._materials_host[indices]).all():
+    # (none where the frame changed no shape: pack_materials gives one row even for no shape)
+    materials = shading.pack_materials([shapes[i] for i in indices], prepared.precision)[: len(indices)]
+    if len(indices) and not (materials == prepared._materials_host[indices]).all():
         prepared._materials_host[indices] = materials
         cl.enqueue_copy(prepared.ctx.queue, prepared.materials, prepared._materials_host)
     prepared.reach = prepared._reach()

@@ -45,14 +45,16 @@ inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
 {
     BoxRay b;
     b.negative = d < (float3)(0.0f);
-    const float3 s = select((float3)(1.0f), (float3)(-1.0f), b.negative);
+    /* selects written as the vector ?: (the same operation: OpenCL's select is a call into PoCL's
+     * library on its CPU device, which LLVM does not inline there, kernels/lanes.h) */
+    const float3 s = b.negative ? (float3)(-1.0f) : (float3)(1.0f);
     const float3 size = s * d;
     b.near_origin = o + s * margin;
     b.far_origin = o - s * margin;
     b.near_inverse = s / (size + BVH_WIDEN);
     const int3 steep = size > (float3)(BVH_WIDEN);
-    b.far_inverse = select((float3)(0.0f), s / (size - BVH_WIDEN), steep);
-    b.far_add = select((float3)(INFINITY), (float3)(0.0f), steep);
+    b.far_inverse = steep ? s / (size - BVH_WIDEN) : (float3)(0.0f);
+    b.far_add = steep ? (float3)(0.0f) : (float3)(INFINITY);
     return b;
 }
 
@@ -60,11 +62,13 @@ inline float bvh_max(const float a, const float b) { return a > b ? a : b; }
 inline float bvh_min(const float a, const float b) { return a < b ? a : b; }
 
 #ifdef PYCLRAY_CAST
-/* The smallest float not below x (a box test's limit never cuts below the nearest hit). */
+/* The smallest float not below x >= 0 (a box test's limit never cuts below the nearest hit): f
+ * rounded to nearest, or where that is below x, the next float up, one unit in its bits (f >= 0
+ * and finite there: nextafter(f, inf) without the call into PoCL's library) */
 inline float float_above_wide(const double x)
 {
     const float f = (float)x;
-    return (double)f < x ? nextafter(f, (float)INFINITY) : f;
+    return (double)f < x ? as_float(as_int(f) + 1) : f;
 }
 #endif
 
@@ -82,17 +86,33 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
     const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
     /* max and min by comparison: no NaN reaches here (kernels/bvh.h's box frame) */
-    float8 enter = select(enter_x, enter_y, enter_y > enter_x);
-    enter = select(enter, enter_z, enter_z > enter);
-    enter = select(enter, (float8)(0.0f), enter < (float8)(0.0f));
-    float8 leave = select(leave_x, leave_y, leave_y < leave_x);
-    leave = select(leave, leave_z, leave_z < leave);
-    leave = select(leave, (float8)(limit), (float8)(limit) < leave) * BVH_GAMMA3_2;
-    return select((float8)(INFINITY), enter, enter <= leave);
+    float8 enter = enter_y > enter_x ? enter_y : enter_x;
+    enter = enter_z > enter ? enter_z : enter;
+    enter = enter < (float8)(0.0f) ? (float8)(0.0f) : enter;
+    float8 leave = leave_y < leave_x ? leave_y : leave_x;
+    leave = leave_z < leave ? leave_z : leave;
+    leave = ((float8)(limit) < leave ? (float8)(limit) : leave) * BVH_GAMMA3_2;
+    return enter <= leave ? enter : (float8)(INFINITY);
 }
 
+/* the index of the lowest set bit of a non-zero mask (ctz: OpenCL 2.0's, or a call into PoCL's
+ * library: clang's own on PoCL's CPU device, else from clz, which OpenCL 1.2 has) */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define BVH_LOWEST_BIT(mask) __builtin_ctz(mask)
+#else
+#define BVH_LOWEST_BIT(mask) (31 - clz((mask) & -(mask)))
+#endif
+/* cast visits the nearest child first (its limit falls with each hit); occluded stops at any hit */
+#ifdef PYCLRAY_OCCLUDED
+#define BVH_NEAREST_FIRST 0
+#else
+#define BVH_NEAREST_FIRST 1
+#endif
+
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
- * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf. The stack holds
+ * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf, after
+ * PYCLRAY_LEAF_PREFETCH(first, count) (defined by the kernel: its shapes' entries asked for from
+ * memory at once, rather than one miss after the other). The stack holds
  * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
  * go on it farthest first, so that the nearest is visited next. */
 #define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
@@ -108,26 +128,31 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
+                PYCLRAY_LEAF_PREFETCH(first, count)                                     \
                 for (int q = first; q < first + count; ++q) { VISIT(q) }                \
                 continue;                                                               \
             }                                                                           \
-            float entries[8];                                                           \
-            vstore8(wide_entries(&nodes[code], &box, limit), 0, entries);               \
+            union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
+            entries.v = wide_entries(&nodes[code], &box, limit);                        \
             const int bottom = top;                                                     \
-            for (int slot = 0; slot < 8; ++slot) {                                      \
-                const float entry = entries[slot];                                      \
-                if (entry < INFINITY) {                                                 \
-                    /* insert among this node's pushed children, farthest deepest */    \
-                    const int child = nodes[code].child[slot];                          \
-                    int at = top++;                                                     \
-                    while (at > bottom && stack_entry[at - 1] < entry) {                \
-                        stack_entry[at] = stack_entry[at - 1];                          \
-                        stack_child[at] = stack_child[at - 1];                          \
-                        --at;                                                           \
-                    }                                                                   \
-                    stack_entry[at] = entry;                                            \
-                    stack_child[at] = child;                                            \
+            /* the children entered, as the bits of a mask (no branch per empty slot) */  \
+            const int8 entered = (entries.v < (float8)(INFINITY)) & (int8)(1, 2, 4, 8, 16, 32, 64, 128); \
+            const int4 entered4 = entered.lo | entered.hi;                              \
+            const int2 entered2 = entered4.lo | entered4.hi;                            \
+            for (int mask = entered2.x | entered2.y; mask != 0; mask &= mask - 1) {     \
+                const int slot = BVH_LOWEST_BIT(mask);                                  \
+                const float entry = entries.a[slot];                                    \
+                const int child = nodes[code].child[slot];                              \
+                /* insert among this node's pushed children, farthest deepest (any order \
+                 * for an any-hit query) */                                             \
+                int at = top++;                                                         \
+                while (BVH_NEAREST_FIRST && at > bottom && stack_entry[at - 1] < entry) { \
+                    stack_entry[at] = stack_entry[at - 1];                              \
+                    stack_child[at] = stack_child[at - 1];                              \
+                    --at;                                                               \
                 }                                                                       \
+                stack_entry[at] = entry;                                                \
+                stack_child[at] = child;                                                \
             }                                                                           \
         }                                                                               \
     }

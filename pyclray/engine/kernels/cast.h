@@ -11,6 +11,29 @@
 
 #define PYCLRAY_FRAME_OUT
 
+/* fabs and sqrt of doubles, and element i of an array of 3-vectors: on PoCL's CPU device the
+ * compiler's own operations (the library's are calls there, which LLVM does not inline:
+ * kernels/lanes.h's v_sqrt), with the same IEEE results */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define CAST_FABS(x) __builtin_fabs(x)
+#define CAST_SQRT(x) __builtin_sqrt(x)
+#else
+#define CAST_FABS(x) fabs(x)
+#define CAST_SQRT(x) sqrt(x)
+#endif
+/* a hint that the bytes [p, p + size) will be read soon (nothing where the compiler has no prefetch) */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define CAST_PREFETCH(p, size)                                                                   \
+    for (int byte = 0; byte < (size); byte += 64) __builtin_prefetch((__global const char*)(p) + byte);
+#else
+#define CAST_PREFETCH(p, size) {}
+#endif
+inline double3 load_double3(__global const double* p, const int i)
+{
+    p += 3 * (size_t)i;
+    return (double3)(p[0], p[1], p[2]);
+}
+
 typedef struct {
     double3 origin;  /* the ray's origin (where it starts testing this shape), world coordinates */
 } Frame;

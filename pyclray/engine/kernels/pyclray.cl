@@ -461,7 +461,10 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #endif
 
 /* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
- * the largest distance that counts (float64, limits[r * limit_stride]).
+ * the largest distance that counts (float64, limits[i * limit_stride]). Where ordered is 1 the
+ * host has put the rays in a coherent order (neighbouring work-items then walk the same nodes):
+ * work-item i traces the i-th ray of that order, whose results go to element order[i], the ray's
+ * own place (scattered writes: cheaper than scattered reads of the rays); else element i.
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
  * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
@@ -496,6 +499,17 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
             PYCLRAY_CAST_LIMIT                                                      \
         }                                                                           \
     }
+/* a leaf's anchors and its shapes' world entries, asked for together (kernels/bvh.h): the shapes
+ * of a type lie in leaf order in their arrays, so a leaf's entries of its first shape's type follow
+ * that shape's */
+#define PYCLRAY_CAST_PREFETCH_KIND(Type, type)                                      \
+    if (leaf_kind == KIND_##type) { CAST_PREFETCH(&type##_worlds[leaf_k], count * sizeof(Type##World)) }
+#define PYCLRAY_LEAF_PREFETCH(first, count)                                         \
+    {                                                                               \
+        CAST_PREFETCH(&anchors[first], (count) * sizeof(double4))                   \
+        const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
+        PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
+    }
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
         PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
@@ -510,9 +524,9 @@ inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v
  * bit), so that neither a tiny nor a huge finite direction under- or overflows in the length */
 inline double3 unit_direction(const double3 d)
 {
-    const double3 size = select(d, -d, d < (double3)(0.0));
+    const double3 size = d < (double3)(0.0) ? -d : d;
     const double3 scaled = d / (size.x > size.y ? (size.x > size.z ? size.x : size.z) : (size.y > size.z ? size.y : size.z));
-    return scaled / sqrt((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
+    return scaled / CAST_SQRT((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
 }
 
 /* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
@@ -525,7 +539,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 {
     const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
-    const double size = (fabs(F.x) + fabs(F.y)) + fabs(F.z);
+    const double size = (CAST_FABS(F.x) + CAST_FABS(F.y)) + CAST_FABS(F.z);
     const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w - 0x1p-50 * size;
     *s0 = along > 0 ? along : 0;
     const double3 G = F - *s0 * D;
@@ -540,19 +554,19 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
  * origin for every ray where origin_stride is 0), its direction made unit */
 #define PYCLRAY_CAST_RAY                                                            \
     RayPacket ray;                                                                  \
-    ray.world = vload3(r * origin_stride, origins);                                 \
-    ray.dir_exact = unit_direction(vload3(r, directions));                          \
+    ray.world = load_double3(origins, i * origin_stride);                           \
+    ray.dir_exact = unit_direction(load_double3(directions, i));                    \
     ray.dir = v3_round(ray.dir_exact);                                              \
     ray.a = v3_dot(ray.dir, ray.dir);                                               \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
     const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
-    const double t_max = limits[(size_t)r * (size_t)limit_stride];
+    const double t_max = limits[(size_t)i * (size_t)limit_stride];
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \
     const double3 from_anchor = ray.world - scene_anchor.xyz;                       \
     const float3 o = convert_float3(from_anchor);                                   \
-    const float3 size = select(o, -o, o < (float3)(0.0f));                          \
+    const float3 size = o < (float3)(0.0f) ? -o : o;                                \
     const float margin = 0x1p-20f * ((size.x + size.y) + size.z);                   \
     const BoxRay box = box_ray(o, convert_float3(ray.dir_exact), margin);
 
@@ -560,8 +574,8 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
  * or a scene that large (scene_anchor.w != 0), would overflow them; such a ray tests every bounded
  * shape instead, one after the other (exactly as through the BVH, only slower). */
 #define PYCLRAY_CAST_BOUNDED(VISIT)                                                 \
-    if (scene_anchor.w != 0 || !(fabs(from_anchor.x) < 0x1p100 && fabs(from_anchor.y) < 0x1p100 \
-                                  && fabs(from_anchor.z) < 0x1p100)) {              \
+    if (scene_anchor.w != 0 || !(CAST_FABS(from_anchor.x) < 0x1p100 && CAST_FABS(from_anchor.y) < 0x1p100 \
+                                  && CAST_FABS(from_anchor.z) < 0x1p100)) {         \
         int n_bounded = 0;                                                          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_COUNT)                                         \
         for (int q = 0; q < n_bounded; ++q) { VISIT(q) }                            \
@@ -574,9 +588,26 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 
 /* the nearest hit so far (float64 distance), on an exact tie the lowest id */
 #ifdef PYCLRAY_TRACK_ID
+/* The id of the shape of this kind at index k of its type's array (-1 for none): read only for the
+ * winner and on exact ties, not at every nearer hit (a read of the packed entries that missed the
+ * cache: a fifth of the kernel's time on 100,000 spheres). */
+#define PYCLRAY_CAST_ID_OF(Type, type) if (id_kind == KIND_##type) id_value = type##s[id_k].id;
+#define PYCLRAY_CAST_ID(value, kind, k)                                             \
+    {                                                                               \
+        const int id_kind = (kind), id_k = (k);                                     \
+        int id_value = -1;                                                          \
+        PYCLRAY_SHAPES(PYCLRAY_CAST_ID_OF)                                          \
+        value = id_value;                                                           \
+    }
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q)                                        \
-    if ((t) < best || ((t) == best && (t) < INFINITY && (id) < best_id)) {          \
-        best = (t); best_id = (id); best_kind = (kind); best_k = (k); best_q = (q); \
+    {                                                                               \
+        bool take = (t) < best;                                                     \
+        if (!take && (t) == best && (t) < INFINITY) {                               \
+            int best_id;                                                            \
+            PYCLRAY_CAST_ID(best_id, best_kind, best_k)                             \
+            take = (id) < best_id;                                                  \
+        }                                                                           \
+        if (take) { best = (t); best_kind = (kind); best_k = (k); best_q = (q); }   \
     }
 #else
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
@@ -591,19 +622,20 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
 #define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \
-    P(const int, n_rays) P(__global const double*, origins) P(const int, origin_stride) \
+    P(const int, n_rays) P(__global const int*, order) P(const int, ordered)          \
+    P(__global const double*, origins) P(const int, origin_stride)                    \
     P(__global const double*, directions) P(__global const double*, limits)           \
     P(const int, limit_stride) P(const double4, scene_anchor)                         \
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_OUTPUT_ARGS(P)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int r, __global const Camera* camera
+PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int i, const int r, __global const Camera* camera
                                          PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
-    double best = nextafter(t_max, (double)INFINITY);
-    int best_id = -1, best_kind = KIND_NONE, best_k = 0, best_q = -1;
+    double best = t_max < INFINITY ? as_double(as_long(t_max) + 1) : t_max;  /* nextafter up, t_max > 0 */
+    int best_kind = KIND_NONE, best_k = 0, best_q = -1;
     PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
 #ifdef PYCLRAY_HAS_BOUNDED
     {
@@ -634,14 +666,18 @@ PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int r, __global const Camera* cam
     }
 #endif
 #ifdef PYCLRAY_AOV_ID
-    id_out[index] = hit ? best_id : -1;
+    {
+        int best_id;
+        PYCLRAY_CAST_ID(best_id, hit ? best_kind : KIND_NONE, best_k)
+        id_out[index] = best_id;
+    }
 #endif
 }
 
 __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int r = get_global_id(0);
-    if (r < n_rays) cast_ray(r, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int i = get_global_id(0);
+    if (i < n_rays) cast_ray(i, ordered ? order[i] : i, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #else
@@ -653,13 +689,14 @@ __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLA
 
 /* the occluded kernel's arguments after the first (SHAPE as for render) */
 #define PYCLRAY_OCCLUDED_ARGS(P, SHAPE)                                               \
+    P(__global const int*, order) P(const int, ordered)                               \
     P(__global const double*, origins) P(const int, origin_stride)                    \
     P(__global const double*, directions) P(__global const double*, limits)           \
     P(const int, limit_stride) P(const double4, scene_anchor)                         \
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) P(__global char*, occluded_out)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int r, const int n_rays
+PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int i, const int r, const int n_rays
                                              PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
@@ -677,8 +714,8 @@ PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int r, const int n_rays
 
 __kernel void occluded(const int n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int r = get_global_id(0);
-    if (r < n_rays) occluded_ray(r, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int i = get_global_id(0);
+    if (i < n_rays) occluded_ray(i, ordered ? order[i] : i, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #endif
