@@ -1,22 +1,33 @@
-"""A bounding volume hierarchy over shapes' world bounds, built in vectorized numpy.
+"""A bounding volume hierarchy over shapes' world bounds: a binned SAH tree for large scenes
+(pyclray.engine.bvh_sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
 
-Construction: a linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees
-and k-d trees", HPG 2012). The shapes are sorted along a Morton curve of their bounds' centres; the
-binary radix tree of the sorted codes is found for every internal node at once (each node's range
-and split by binary searches over the codes, vectorized over all nodes); subtrees of at most
-LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, so that a node's two
-children are adjacent, and bounded bottom-up.
+The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves of
+at most LEAF_SIZE where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is
+within 6% of a full binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.02-1.06 on
+sphere fields, tessellated spheres, tori, a grid, the Stanford bunny and the armadillo; 2-6% spent
+on purpose for the LBVH's memory, bvh_sah.TRAVERSAL), where the LBVH's is 4-47% above it. Rendered
+(bench/bvh_render.py, CPU time), camera packets go 1.05x (uniform spheres) to 1.3x (clustered
+spheres, meshes) faster through it, single rays 1.07x to 1.26x.
 
-Why an LBVH and not a binned SAH (measured by bench/bvh_build.py, both in vectorized numpy, on
-the benchmark's sphere fields): the LBVH builds 100,000 shapes in 0.07 s of CPU time (1,000,000 in
-0.7 s); a level-synchronous binned SAH (16 bins, one sort and reduceat per level) takes 12 times as
-long (1.8 s and 24 s on the same loaded machine, against 0.15 s and 1.9 s for the LBVH there), for a
-tree whose SAH cost is 25% lower. The targets (0.15 s and 1.5 s) leave no room for the SAH.
+The linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees and k-d
+trees", HPG 2012), below SAH_FROM: the shapes are sorted along a Morton curve of their bounds'
+centres; the binary radix tree of the sorted codes is found for every internal node at once (each
+node's range and split by binary searches over the codes, vectorized over all nodes); subtrees of
+at most LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, and bounded bottom-up.
+
+Why two: numba's import and the load of the compiled builder from its disk cache cost a new process
+about 0.4 s, once, where the LBVH of 16,384 shapes takes about 10 ms: a small scene's first render
+(tp02's cold start) never pays it (numba is not even imported). From SAH_FROM on the better tree
+pays for it over a few views. Build times on the shared 2-core machine (bench/bvh_build.py,
+docs/benchmarks.md; at load average 2): 100,000 shapes in 43-60 ms warm, 0.36-0.52 s cold (the
+LBVH 47-85 ms); 1,000,000 in 0.40-0.62 s warm, 0.72-1.4 s cold (the LBVH 0.62-0.70 s).
 
 Flat layout, ready for a kernel: node k has bounds lo[k], hi[k] (float64 here; the packer rounds
 them outward to the kernel's precision) and two integers: ``first`` and ``count``. count > 0: a
 leaf holding the shapes order[first : first + count]; count == 0: an internal node whose children
-are nodes first and first + 1. Node 0 is the root.
+are nodes first and first + 1, numbered after it. Node 0 is the root. Both builders give their
+nodes exactly the union of their shapes' boxes (float64 min and max); the refit of an animation
+(pyclray.engine.refit) and the wide tree (bvh_wide) read only this layout.
 """
 from __future__ import annotations
 
@@ -42,6 +53,10 @@ NODE = Struct(
 )
 _FLOAT_MAX = float(np.finfo(np.float32).max)
 BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK: the deepest binary tree the kernels traverse
+# The SAH tree's levels at most: a wide level takes at least one binary level, and the wide
+# traversal's stack holds 7 entries a level (bvh_wide.STACK = 256 >= 7 * 36 + 1)
+MAX_SAH_DEPTH = 36
+SAH_FROM = 16_384  # shapes from which build() takes the binned SAH (bvh_sah): see the docstring
 
 
 @dataclass(frozen=True)
@@ -176,14 +191,23 @@ def _radix_tree(keys: np.ndarray):
     return np.minimum(i, j), np.maximum(i, j), gamma
 
 
-def build(bounds: np.ndarray, leaf_size: int | None = None) -> BVH:
+def build(bounds: np.ndarray, leaf_size: int | None = None, method: str | None = None) -> BVH:
     """The BVH of shapes with these world bounds ((N, 2, 3) float64: lo, hi per shape), leaves of
-    at most leaf_size (default LEAF_SIZE) shapes."""
+    at most leaf_size (default LEAF_SIZE) shapes. method: "sah" (the binned SAH of bvh_sah),
+    "lbvh" (the Morton LBVH below), or None: the SAH from SAH_FROM shapes on, else the LBVH."""
     leaf_size = LEAF_SIZE if leaf_size is None else leaf_size
     bounds = np.asarray(bounds, np.float64)
     n = len(bounds)
     if n == 0:
         return empty()
+    if method is None:
+        method = "sah" if n >= SAH_FROM else "lbvh"
+    if method == "sah" and n > 1:
+        from . import bvh_sah  # numba: imported for large scenes only (see bvh_sah)
+
+        return BVH(*bvh_sah.build(bounds, leaf_size, MAX_SAH_DEPTH))
+    if method not in ("sah", "lbvh"):
+        raise ValueError(f"BVH build method: expected 'sah' or 'lbvh', got {method!r}")
     order, keys = morton_order(0.5 * (bounds[:, 0] + bounds[:, 1]))
     lo_sorted, hi_sorted = bounds[order, 0], bounds[order, 1]
     if n <= leaf_size:
