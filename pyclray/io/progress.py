@@ -31,10 +31,13 @@ _steps: list = []  # the step bar of the command running, if any (a stack: comma
 class steps:
     """A bar over the named steps of a long command (e.g. pyclray check: render, Mitsuba, oracle,
     ...): `with steps(5, desc="pyclray check"):` around the work, and `step("oracle")` where each
-    step begins. Outside such a block step() does nothing, so library calls stay silent."""
+    step begins. Outside such a block step() does nothing, so library calls stay silent.
+    ``times`` holds each step's wall-clock seconds (a name met twice adds up)."""
 
     def __init__(self, total: int, *, desc: str):
         self.total, self.desc = total, desc
+        self.times: dict[str, float] = {}
+        self.current: str | None = None
 
     def __enter__(self):
         self.bar = progress(self.total, desc=self.desc, unit="step")
@@ -42,7 +45,17 @@ class steps:
         _steps.append(self)
         return self
 
+    def lap(self, name: str | None) -> None:
+        """The step running ends (its time is kept) and ``name`` begins."""
+        import time
+
+        now = time.perf_counter()
+        if self.current is not None:
+            self.times[self.current] = self.times.get(self.current, 0.0) + now - self.began
+        self.current, self.began = name, now
+
     def __exit__(self, *exc):
+        self.lap(None)
         _steps.remove(self)
         self.bar.close()
         return False
@@ -56,4 +69,5 @@ def step(name: str) -> None:
     if current.started:
         current.bar.update(1)
     current.started = True
+    current.lap(name)
     current.bar.set_postfix_str(name, refresh=True)

@@ -1,4 +1,4 @@
-"""Reading scenes: TOML files (scene-format.md) into a Scene."""
+"""Reading scenes: TOML files (scene-format.md) into a Scene; Mitsuba 3 XML files through mitsuba_xml."""
 from __future__ import annotations
 
 import os
@@ -103,12 +103,17 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
 
 
 def load_scene(path) -> Scene:
-    """Read and validate a scene file; raises SceneError naming the file, table and key."""
+    """Read and validate a scene file (TOML, or Mitsuba 3 XML for a .xml file); raises SceneError
+    naming the file, table and key (an XML file's element and line)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
     except OSError as error:
         raise SceneError(f"cannot read the scene file: {(error.strerror or str(error)).lower()}", file=path) from None
+    if path.suffix.lower() == ".xml":
+        from .mitsuba_xml import load_xml
+
+        return load_xml(raw, source=str(path))
     try:
         # a UTF-8 byte order mark (as some editors write) is not part of the text
         data = tomllib.loads(raw.removeprefix(b"\xef\xbb\xbf").decode("utf-8"))

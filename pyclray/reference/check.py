@@ -8,8 +8,9 @@ The tolerances' derivation and measurements (the error model's docstring has the
   and centres); measured below 2.8 eps (t + L) / cos over 75 random scenes (random spheres and a
   tilted plane, moved 0, 100 and 1000 units off the world origin) in both variants, and pyclray's
   own error against the float64 oracle is below 3.7 eps t / cos, so K = 6 leaves room for both;
-- cameras: Mitsuba's sensor's to_world is a float32 look_at matrix built from target - eye
-  rounded in float32, so its ray directions differ from pyclray's pixel rays by up to
+- cameras: Mitsuba's sensor's to_world was a float32 look_at matrix built from target - eye
+  rounded in float32 (now the float64 look-at rounded once, as Mitsuba's XML parser builds it,
+  which rounds less), so its ray directions differ from pyclray's pixel rays by up to
   alpha = 3 eps (1 + S) (measured 3.3 eps on tp02, where the bound is 6 eps; at most 2.1 eps (1 + S)
   over the random scenes), and its origins, the eye rounded to float32 and moved to the near-clip
   plane, lie within 2 eps max(|eye|, 1) of pyclray's rays (measured 1.6). A direction off by alpha

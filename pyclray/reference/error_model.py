@@ -246,22 +246,26 @@ def at_edges(scene: Scene, origins, directions, hits, reach) -> np.ndarray:
         # another side's hit point tells something only where it hits another shape (a far
         # float32 hit point is too coarse to place on the surface: its own normal would be noise)
         other = (ids != first) if k else np.ones(ids.shape, bool)
-        for index, shape in enumerate(scene.shapes):
-            mine = (ids == index) & np.isfinite(depth) & other
-            if mine.any():
-                points = origins[mine] + depth[mine][:, None] * directions[mine]
-                cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), directions[mine]))
-                grazing = silhouettes(np.zeros(len(cos)), cos, reach[mine] / cos, shape.silhouette_radius())
-                out[mine] |= grazing | (shape.edge_distance(points) <= reach[mine] / np.maximum(cos, SILHOUETTE_COS))
+        looked_at = np.where(np.isfinite(depth) & other, ids, -1).ravel()
+        flat_out, flat_o, flat_d = out.reshape(-1), origins.reshape(-1, 3), directions.reshape(-1, 3)
+        flat_depth, flat_reach = depth.reshape(-1), reach.reshape(-1)
+        for index, mine in oracle.by_shape(looked_at):  # one group per shape hit, not a pass per shape
+            shape = scene.shapes[index]
+            points = flat_o[mine] + flat_depth[mine][:, None] * flat_d[mine]
+            cos = np.abs(np.einsum("ij,ij->i", shape.oracle_normal(points), flat_d[mine]))
+            grazing = silhouettes(np.zeros(len(cos)), cos, flat_reach[mine] / cos, shape.silhouette_radius())
+            flat_out[mine] |= grazing | (shape.edge_distance(points) <= flat_reach[mine] / np.maximum(cos, SILHOUETTE_COS))
     return out
 
 
 # -- a render against the oracle -------------------------------------------------------------------
-def reference(scene: Scene) -> dict:
+def reference(scene: Scene, truth: dict | None = None) -> dict:
     """The float64 images plus what the error model needs: |cos incidence|, the second-nearest
-    distance, the normal's conditioning and the silhouettes."""
+    distance, the normal's conditioning and the silhouettes. truth: the oracle's trace of these
+    pixels with "second", if already at hand (the same geometry)."""
     origins, directions = oracle.camera_rays(scene)
-    ref = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
+    ref = dict(truth) if truth is not None else oracle.trace(scene, origins, directions,
+                                                             aovs=("depth", "normal", "id", "second"))
     cos = oracle.incidence_cosine(scene, directions, ref["id"], ref["normal"])
     ref["cos"] = cos
     # how far the float64 reference's own rounding (2^-53 of the ray's length and of the world

@@ -24,9 +24,13 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
+from typing import NamedTuple
+
 import numpy as np
 
 from ..model.errors import SceneError
+from ..model.lights import PointLight
 from ..model.scene import Scene
 from ..model.shapes.plane import DISK_SCALE as PLANE_DISK_SCALE
 
@@ -99,16 +103,44 @@ def load_dict(mi, description: dict):
     return mi.load_dict(ready, optimize=False)
 
 
-def _mitsuba_values(mi, value, name: str = "shape"):
-    """A shape dict's values for Mitsuba: 4x4 numpy matrices become ScalarTransform4f; a mesh's dict
-    stays a dict (load_dict makes it an mi.Mesh)."""
+class LookAt(NamedTuple):
+    """A sensor's to_world given as a look-at: <lookat origin=... target=... up=...> in XML, and
+    for mi.load_dict the matrix Mitsuba's XML parser makes of it (Transform4f::look_at in float64,
+    rounded once to float32), so that the check's scene and an exported file are the same bit for bit."""
+
+    origin: list
+    target: list
+    up: list
+
+
+def _mitsuba_values(mi, value):
+    """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f;
+    a mesh's dict stays a dict (load_dict makes it an mi.Mesh)."""
     if _is_mesh(value):
         return value
+    if isinstance(value, LookAt):
+        from ..model.mitsuba_xml.properties import look_at
+
+        value = look_at(*(np.array(v, np.float64) for v in value))
     if isinstance(value, np.ndarray) and value.shape == (4, 4):
-        return mi.ScalarTransform4f(value.tolist())
+        # as Mitsuba's XML parser builds a transform: the matrix and its inverse transpose in float64,
+        # each rounded once to float32 (a Transform4f of the matrix alone inverts it in float32)
+        return mi.ScalarTransform4f(mi.ScalarMatrix4f(value.tolist()), mi.ScalarMatrix4f(np.linalg.inv(value).T.tolist()))
     if isinstance(value, dict):
         return {k: _mitsuba_values(mi, v) for k, v in value.items()}
     return value
+
+
+@contextmanager
+def quiet_interrupts(mi):
+    """Mitsuba's render loops answer Ctrl-C by winding down with a WARN line on stderr; pyclray's
+    commands end quietly instead (status 130): Mitsuba logs only errors while it renders."""
+    previous = mi.log_level()
+    mi.set_log_level(mi.LogLevel.Error)
+    try:
+        yield
+    finally:
+        mi.set_log_level(previous)
 
 
 # Mitsuba's pixels are square: a camera from intrinsics maps to its sensor where fx and fy agree
@@ -139,17 +171,19 @@ def sensor_of(scene: Scene) -> dict:
             "to_world": to_world}
 
 
-def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
-    """The Mitsuba scene description: pixel-centre perspective sensor, aov integrator, shapes."""
-    mi = import_mitsuba(variant)
+def mitsuba_dict(scene: Scene, aovs: str = AOV_SPEC, key=shape_key) -> dict:
+    """The Mitsuba scene description ``pyclray check`` builds, as plain values (no Mitsuba needed):
+    a perspective sensor with one unjittered ray through each pixel centre, the aov integrator
+    (``aovs``), and each shape's counterpart (``Shape.mitsuba_shapes``) under the id key(index, part)
+    (default shape_000003, shape_000003_1, ...: how the check maps Mitsuba's shapes back to ids).
+    A to_world is a 4x4 float64 numpy matrix or a LookAt. ``scene_dict`` gives it to Mitsuba,
+    ``pyclray.reference.mitsuba_export`` writes it as XML."""
     image = scene.image
     near, far = clip_range(scene)
     camera = sensor_of(scene)
     look_at = camera.pop("look_at", None)
     if look_at is not None:
-        camera["to_world"] = mi.ScalarTransform4f().look_at(**look_at)
-    else:
-        camera["to_world"] = mi.ScalarTransform4f(camera["to_world"].tolist())
+        camera["to_world"] = LookAt(**look_at)
     out = {
         "type": "scene",
         "integrator": {"type": "aov", "aovs": aovs},
@@ -171,8 +205,22 @@ def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPE
     }
     for index, shape in enumerate(scene.shapes):
         for part, counterpart in enumerate(shape.mitsuba_shapes(scene)):
-            out[shape_key(index, part)] = _mitsuba_values(mi, counterpart, shape_key(index, part))
+            out[key(index, part)] = counterpart
     return out
+
+
+def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
+    """mitsuba_dict with Mitsuba's own values (ScalarTransform4f), ready for mi.load_dict."""
+    return _mitsuba_values(import_mitsuba(variant), mitsuba_dict(scene, aovs))
+
+
+def emitter_dict(light) -> dict:
+    """A pyclray light as a Mitsuba emitter: point (intensity) or directional (irradiance)."""
+    if isinstance(light, PointLight):
+        return {"type": "point", "position": list(light.position),
+                "intensity": {"type": "rgb", "value": list(light.intensity)}}
+    return {"type": "directional", "direction": list(light.direction),
+            "irradiance": {"type": "rgb", "value": list(light.irradiance)}}
 
 
 def load(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC):
@@ -206,11 +254,23 @@ def axis_cosines(scene: Scene) -> np.ndarray:
 def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     """Mitsuba's images in pyclray's conventions: depth (distance from the eye, inf on a miss),
     normal (geo_normal), sh_normal, id (-1 on a miss), primitive (prim_index, -1 on a miss), all
-    (height, width[, 3])."""
-    import_mitsuba(variant)
-    mi_scene, ids = load(scene, variant)
-    image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
+    (height, width[, 3]).
+
+    The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one
+    (the sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does
+    for each sample, as the ray-level check measures): Mitsuba 3.9.1's scalar aov integrator takes
+    time in proportion to the number of shapes per sample (15 s for grid1024 at 512x512, against
+    0.7 s for the same rays cast from here)."""
+    mi = import_mitsuba(variant)
     near, _ = clip_range(scene)
+    if mi.variant().startswith("scalar"):
+        depth, normal, sh_normal, found, primitive = _cast_pixels(mi, scene)
+        hit = found >= 0
+        return {"depth": np.where(hit, depth + near / axis_cosines(scene), np.inf), "normal": normal,
+                "sh_normal": sh_normal, "id": found, "primitive": primitive}
+    mi_scene, ids = load(scene, variant)
+    with quiet_interrupts(mi):
+        image = np.array(mi_scene.integrator().render(mi_scene, mi_scene.sensors()[0]), dtype=np.float64)
     index = np.rint(image[..., 7]).astype(np.int64)
     hit = index > 0
     lookup = np.vectorize(lambda k: ids.get(int(k), -1), otypes=[np.int32])
@@ -224,12 +284,43 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     return out
 
 
+def _cast_pixels(mi, scene: Scene):
+    """(t from the near-clip plane, geo_normal, sh_normal, pyclray id, prim_index; -1 on a miss) of
+    Mitsuba's primary ray of every pixel centre (scalar variants), with a progress bar over the rows."""
+    from ..io.progress import progress
+
+    mi_scene = load_dict(mi, scene_dict(scene, mi.variant()))
+    shapes = list(mi_scene.shapes())  # kept alive: the lookup is by the Python objects' identity
+    lookup = {id(shape): pyclray_id(shape.id()) for shape in shapes}
+    sensor = mi_scene.sensors()[0]
+    width, height = scene.image.width, scene.image.height
+    depth, found, primitive = np.zeros((height, width)), np.full((height, width), -1, np.int32), np.full((height, width), -1, np.int32)
+    normal, sh_normal = np.zeros((height, width, 3)), np.zeros((height, width, 3))
+    half = mi.Point2f(0.5, 0.5)
+    xs, ys = pixel_positions(scene, np.arange(height), np.arange(width))
+    xs, ys = xs.tolist(), ys.tolist()
+    with progress(height, desc=f"Mitsuba {mi.variant()}", unit="row") as bar:
+        for j in range(height):
+            y = ys[j]
+            for i in range(width):
+                ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(xs[i], y), half)
+                si = mi_scene.ray_intersect(ray)
+                if si.is_valid():
+                    depth[j, i], found[j, i], primitive[j, i] = si.t, lookup[id(si.shape)], si.prim_index
+                    normal[j, i], sh_normal[j, i] = tuple(si.n), tuple(si.sh_frame.n)
+            bar.update(1)
+    return depth, normal, sh_normal, found, primitive
+
+
 def beyond_counterparts(scene: Scene, origins, directions) -> np.ndarray:
     """True for rays that would meet a shape where its Mitsuba counterpart does not reach (the
     plane beyond its stand-in disk's edge): there Mitsuba sees nothing (or what lies behind)."""
+    from ..model.shapes.base import Shape
+
     origins = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions))
     mask = np.zeros(np.shape(directions)[:-1], bool)
-    for shape in scene.shapes:
+    # only a counterpart that may end before its shape does (mitsuba_covers is its own) is looked at
+    for shape in (s for s in scene.shapes if type(s).mitsuba_covers is not Shape.mitsuba_covers):
         t = shape.oracle_distance(origins.reshape(-1, 3), np.reshape(directions, (-1, 3))).reshape(mask.shape)
         hit = np.isfinite(t)
         if hit.any():
@@ -240,11 +331,15 @@ def beyond_counterparts(scene: Scene, origins, directions) -> np.ndarray:
 
 # -- ray level: Mitsuba's own primary rays, and its intersection of arbitrary rays --------------
 def pixel_positions(scene: Scene, rows, columns) -> tuple[np.ndarray, np.ndarray]:
-    """The film positions in [0, 1]^2 of pixel centres, as the sensor's ``position_sample``:
-    ((column + 0.5) / width, (row + 0.5) / height); row 0 is the top, as in pyclray's images
-    (checked against the rendered image: these rays give the image's depth to a few ulps)."""
+    """The film positions in [0, 1]^2 of pixel centres, as Mitsuba's sampling integrator computes
+    the sensor's ``position_sample`` (render_sample: fmadd(pixel + 0.5, 1 / size, 0) in float32,
+    1 / size itself a float32): ((column + 0.5) / width, (row + 0.5) / height) rounded as Mitsuba
+    rounds them (pixel + 0.5 times the float32 1 / size is exact in float64, then rounded once);
+    row 0 is the top, as in pyclray's images."""
     width, height = scene.image.width, scene.image.height
-    return (np.asarray(columns) + 0.5) / width, (np.asarray(rows) + 0.5) / height
+    x = (np.asarray(columns) + 0.5) * np.float64(np.float32(1.0) / np.float32(width))
+    y = (np.asarray(rows) + 0.5) * np.float64(np.float32(1.0) / np.float32(height))
+    return x.astype(np.float32).astype(np.float64), y.astype(np.float32).astype(np.float64)
 
 
 def _as_rows(mi, value, count: int) -> np.ndarray:

@@ -1,7 +1,8 @@
 """The float64 numpy reference: the same camera rays and shapes as the kernels, computed in the
 world frame with plain formulas, as the oracle that exactness tests compare against.
 
-It is slow (a numpy pass per shape) and meant for tests, checks and benchmarks.
+Each shape is tested against the rays that cross its box (oracle_bvh: the scene's BVH, traversed
+in numpy for all rays at once); it is meant for tests, checks and benchmarks.
 """
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 
 from ..model.aovs import AOVS
 from ..model.scene import Scene
+from .oracle_bvh import by_shape, nearest_two
 
 
 def image_plane(scene: Scene):
@@ -39,9 +41,27 @@ def camera_rays(scene: Scene):
     return origins, d
 
 
-def trace(scene: Scene, origins, directions, aovs=AOVS) -> dict:
+def trace(scene: Scene, origins, directions, aovs=AOVS, desc: str = "float64 oracle") -> dict:
     """Nearest hit with t > 0 of every ray (unit directions), lowest id on an exact tie; with
-    "second" in aovs also the second-nearest shape's distance, id and |cos incidence|."""
+    "second" in aovs also the second-nearest shape's distance, id and |cos incidence|.
+
+    Each shape is tested only against the rays that cross its box (the scene's BVH over the bounded
+    shapes, traversed for all rays at once; unbounded shapes against every ray): the same shape
+    tests as trace_every_shape, on fewer rays, so the same results bit for bit. A progress bar
+    (``desc``) counts the rays on a terminal."""
+    from ..io.progress import progress
+
+    shape = directions.shape[:-1]
+    O = np.asarray(origins, np.float64).reshape(-1, 3)
+    D = np.asarray(directions, np.float64).reshape(-1, 3)
+    O = np.broadcast_to(O, D.shape) if len(O) == 1 else O
+    with progress(len(D), desc=desc, unit="ray") as bar:
+        best, best_id, second, second_id = nearest_two(scene, O, D, bar.update)
+    return _finish(scene, O, D, shape, best, best_id, second, second_id, aovs)
+
+
+def trace_every_shape(scene: Scene, origins, directions, aovs=AOVS) -> dict:
+    """trace, the plain way: every shape against every ray (the definition trace is tested against)."""
     shape = directions.shape[:-1]
     O = np.asarray(origins, np.float64).reshape(-1, 3)
     D = np.asarray(directions, np.float64).reshape(-1, 3)
@@ -57,26 +77,27 @@ def trace(scene: Scene, origins, directions, aovs=AOVS) -> dict:
         second = np.where(closer, best, np.where(runner_up, t, second))
         best = np.where(closer, t, best)
         best_id = np.where(closer, index, best_id)
+    return _finish(scene, O, D, shape, best, best_id, second, second_id, aovs)
+
+
+def _finish(scene, O, D, shape, best, best_id, second, second_id, aovs) -> dict:
+    """The AOVs asked for from the nearest and second-nearest hits."""
     out = {}
     if "second" in aovs:  # the second-nearest shape: its distance, id and |cos incidence|
         out["second"] = second.reshape(shape)
         out["second_id"] = second_id.reshape(shape)
         cos = np.ones(len(D))
         points = O + np.where(np.isfinite(second), second, 0)[:, None] * D
-        for index, item in enumerate(scene.shapes):
-            mine = second_id == index
-            if mine.any():
-                cos[mine] = np.abs(np.einsum("ij,ij->i", item.oracle_normal(points[mine]), D[mine]))
+        for index, mine in by_shape(second_id):
+            cos[mine] = np.abs(np.einsum("ij,ij->i", scene.shapes[index].oracle_normal(points[mine]), D[mine]))
         out["second_cos"] = cos.reshape(shape)
     if "depth" in aovs:
         out["depth"] = best.reshape(shape)
     if "normal" in aovs:
         normal = np.zeros_like(D)
         points = O + np.where(np.isfinite(best), best, 0)[:, None] * D
-        for index, item in enumerate(scene.shapes):
-            mine = best_id == index
-            if mine.any():
-                normal[mine] = item.oracle_normal(points[mine])
+        for index, mine in by_shape(best_id):
+            normal[mine] = scene.shapes[index].oracle_normal(points[mine])
         out["normal"] = normal.reshape(shape + (3,))
     if "id" in aovs:
         out["id"] = best_id.reshape(shape)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.lights import PointLight, effective_lights
-from .oracle import trace
 
 
 # -- the float64 reference -----------------------------------------------------------------------
@@ -68,7 +67,7 @@ def reference_shading(scene, directions, hits, visibility=None) -> np.ndarray:
     return np.where(hit[..., None], out, np.array(scene.shading.background))
 
 
-def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0):
+def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, blur=0.0, lifts=()):
     """Per light, V (1 lit, 0 shadowed) of each hit point in float64: the nearest hit of the ray from
     p toward the light, beyond skip times the scene's size (the surface at p itself never shadows p,
     and a float64 test of it from p errs by far less), before the light.
@@ -76,35 +75,60 @@ def reference_visibility(scene, points, normals, directions, ids, *, skip=1e-9, 
     blur > 0 (scene units, one number or one per point) also tests rays from points moved by blur
     along six directions, and returns per light a second array: True where the moved rays disagree
     (a shadow boundary). Whether a light is in front (cos > 0) is the lighting normal's
-    (lighting_normals: a smooth mesh's interpolated one); the rays start at p, on the surface."""
+    (lighting_normals: a smooth mesh's interpolated one); the rays start at p, on the surface. lifts (each one number or one per point, scene units): more moved points,
+    p + lift n_s, the origins an engine's shadow rays start from (the kernel's offset along the
+    normal, Mitsuba's spawn_ray): where one of them sees another visibility than p, the engine's
+    own offset decides, which the error model counts as rounding (a shadow boundary too)."""
+    from .oracle_bvh import any_hit, near_pairs
+
     size = max(1.0, float(np.abs(points[ids >= 0]).max(initial=1.0)))
     n_s = facing_normals(normals, directions)
     n_lit = facing_normals(lighting_normals(scene, {"normal": normals, "id": ids, "points": points}), directions)
+    blurred = np.any(blur > 0)
+    # the moves: within the surface's tangent plane along each axis (and slightly off it, to the lit
+    # side) by blur, and along n_s by each lift
+    moves = []
+    if blurred:
+        reach = np.broadcast_to(blur, ids.shape)[..., None]
+        for axis, sign in ((a, s) for a in range(3) for s in (-1.0, 1.0)):
+            step = np.zeros(3)
+            step[axis] = sign
+            moves.append(reach * (step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s + 0.5 * n_s))
+        moves += [np.broadcast_to(lift, ids.shape)[..., None] * n_s for lift in lifts]
+    # how far each pixel's moved points go, rounded up to a power of 2 (one padded tree per level)
+    reach = np.max([np.linalg.norm(m, axis=-1) for m in moves], axis=0) if moves else np.zeros(ids.shape)
+    level = np.ceil(np.log2(np.maximum(reach, 2.0**-1000)))
     out, unsure = [], []
     for light in effective_lights(scene):
-        def visible(origins):
-            L, _, distance = light_terms(light, origins)
-            start = origins + skip * size * L
-            t = trace(scene, start, L, aovs=("depth",))["depth"]
-            return ~(t < distance - skip * size)
-
-        base = visible(points)
-        if np.any(blur > 0):
-            mixed = np.zeros_like(base)
-            reach = np.broadcast_to(blur, base.shape)[..., None]
-            for axis in range(3):
-                for sign in (-1.0, 1.0):
-                    step = np.zeros(3)
-                    step[axis] = sign
-                    # move within the surface's tangent plane (and slightly off it, to the lit side)
-                    moved = step - np.einsum("...k,k->...", n_s, step)[..., None] * n_s
-                    mixed |= visible(points + reach * (moved + 0.5 * n_s)) != base
-        # where the light is behind the surface (cos <= 0) it adds nothing, shadow or not
-        lit = np.einsum("...k,...k", n_lit, light_terms(light, points)[0]) > 0
-        if np.any(blur > 0):
-            unsure.append(mixed & lit & (ids >= 0))
-        out.append((base & lit & (ids >= 0)).astype(np.float64))
-    return (out, unsure) if np.any(blur > 0) else out
+        # only hit points the light is in front of (cos > 0) are traced: elsewhere it adds nothing
+        lit = (ids >= 0) & (np.einsum("...k,...k", n_lit, light_terms(light, points)[0]) > 0)
+        P = points[lit]
+        L0 = light_terms(light, P)[0]
+        # a moved point's ray stays within its move of p's (parallel for a directional light, ending
+        # at the same point light): the shapes within that of p's ray are all it may meet
+        starts, levels = P + skip * size * L0, level[lit]
+        found = []
+        for value in np.unique(levels):
+            mine = np.flatnonzero(levels == value)
+            near_rays, near_shapes = near_pairs(scene, starts[mine], L0[mine], float(2.0**value))
+            found.append((mine[near_rays], near_shapes))
+        rays = np.concatenate([r for r, _ in found] or [np.zeros(0, np.int64)])
+        shapes = np.concatenate([q for _, q in found] or [np.zeros(0, np.int64)])
+        # p and all its moved points at once (one shape test per shape, not one per move)
+        origins = np.concatenate([P] + [P + move[lit] for move in moves])
+        copies = 1 + len(moves)
+        pairs = (np.concatenate([rays + k * len(P) for k in range(copies)]), np.tile(shapes, copies))
+        L, _, distance = light_terms(light, origins)
+        seen = ~any_hit(scene, pairs, origins + skip * size * L, L, distance - skip * size)
+        seen = seen.reshape(copies, len(P))
+        V = np.zeros(ids.shape)
+        V[lit] = seen[0]
+        out.append(V)
+        if blurred:
+            mixed = np.zeros(ids.shape, bool)
+            mixed[lit] = (seen[1:] != seen[0]).any(axis=0)
+            unsure.append(mixed)
+    return (out, unsure) if blurred else out
 
 
 # -- the shading's error bound -----------------------------------------------------------------------

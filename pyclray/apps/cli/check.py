@@ -17,7 +17,7 @@ def add_command(subparsers) -> None:
         "through both) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
-    parser.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
+    parser.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
     parser.add_argument("--variant", choices=VARIANTS, default="scalar_rgb", help="Mitsuba variant (default scalar_rgb)")
     parser.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--rays", type=int, default=DEFAULT_RAYS, metavar="N",
@@ -52,18 +52,18 @@ def run(args) -> int:
     except (ImportError, ValueError) as error:
         raise BadInput(str(error)) from None
 
-    from ...io.progress import step, steps
+    from ...io.progress import seconds, step, steps
     from ...reference.check import (cross_check, format_image_check, format_ray_check, ray_level, save,
                                     tolerance_text)
+    from ...reference.validation.arbitrate import mitsuba_faults
+    from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
 
-    with steps(5, desc="pyclray check"):
+    with steps(9, desc="pyclray check") as timing:
         images = cross_check(scene, args.variant, device=args.device)
-        step("ray level")
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
-        step("shaded")
-        from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
-
-        shaded = cross_check_shaded(scene, args.variant, device=args.device) if scene.shading.shadows else None
+        shaded = None
+        if scene.shading.shadows:
+            shaded = cross_check_shaded(scene, args.variant, device=args.device, truth=images.truth)
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
         f"against Mitsuba {mi.__version__} {args.variant}"
@@ -75,15 +75,33 @@ def run(args) -> int:
     print(format_ray_check(rays))
     print()
     print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
+    print()
+    print(time_table(timing.times, seconds))
     if folder is not None:
         folder.mkdir(exist_ok=True)
         written = save(images, folder, Path(args.scene).stem)
         print()
         print("wrote " + ", ".join(map(str, written)))
     failures = images.failures + rays.failures + (shaded.failures if shaded else [])
+    verdicts = {f"image {name}": v for name, v in images.verdicts.items()}
+    verdicts.update({f"ray-level {name}": v for name, v in rays.verdicts.items()})
+    if shaded:
+        verdicts["shaded"] = shaded.verdict
+    theirs = mitsuba_faults(verdicts)
     print()
     if failures:
-        print("FAILED: " + "; ".join(failures))
+        print("FAILED: " + "; ".join(failures) + (f" ({theirs})" if theirs else ""))
         return 1
-    print("passed: within the tolerance")
+    print("passed: within the tolerance" + (f"; {theirs}" if theirs else ""))
     return 0
+
+
+def time_table(times: dict, seconds) -> str:
+    """Where the time went: each step, and Mitsuba's steps against the rest."""
+    from ...reference.validation.summary import table
+
+    theirs = sum(t for name, t in times.items() if "Mitsuba" in name)
+    rows = [(name, seconds(t)) for name, t in times.items()]
+    rows += [("Mitsuba's steps, in all", seconds(theirs)), ("the others (pyclray, oracle, comparison)",
+                                                            seconds(sum(times.values()) - theirs))]
+    return table("time by step (wall clock)", rows)

@@ -173,7 +173,7 @@ def add_command(commands) -> None:
         "memory stays bounded; a progress bar shows on a terminal.",
         epilog=EXIT_STATUS_HELP,
     )
-    render.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
+    render.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
     render.add_argument("-o", "--output", required=True, metavar="OUT.exr|OUT.npz|OUT.png",
                         help="the file to write; its extension decides the format (.exr, .npz or .png)")
     render.add_argument(

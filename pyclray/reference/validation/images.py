@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import error_model
 from ..error_model import EPSILON, angle_between
+from .arbitrate import decide, verdict_rows, wrong_hits
 from .summary import Summary, disagreement_kinds, table
 
 EPS32 = EPSILON["fp32"]
@@ -50,6 +51,8 @@ class ImageCheck:
     misses: dict
     failures: list = field(default_factory=list)
     images: dict = field(default_factory=dict, repr=False)  # ours, mitsuba, relative error, judged
+    verdicts: dict = field(default_factory=dict)  # AOV -> arbitrate.Verdicts
+    truth: dict = field(default_factory=dict, repr=False)  # the oracle's pixels (the shaded check reuses them)
 
     @property
     def passed(self) -> bool:
@@ -72,6 +75,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     step("float64 oracle")
     origins, directions = oracle.camera_rays(scene)
     truth = oracle.trace(scene, origins, directions, aovs=("depth", "normal", "id", "second"))
+    step("comparison")
     cos = oracle.incidence_cosine(scene, directions, truth["id"], truth["normal"])
     depth_tolerance, normal_tolerance = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
 
@@ -114,8 +118,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     # the origin Mitsuba's float32 vertices move by up to eps |v| per coordinate (1/32 at 1e6, the
     # size of a scanned mesh's triangles), its edge band covers whole triangles and it judges no
     # primitive there; pyclray's does not grow with the distance to the origin
-    truth.update(cos=cos, origins=origins, directions=directions, scene=scene)
-    ours_apart = error_model.judged_pixels(ours, truth, "fp32")
+    ref = {**truth, "cos": cos, "origins": origins, "directions": directions, "scene": scene}
+    ours_apart = error_model.judged_pixels(ours, ref, "fp32")
     oracle_judged = (ours["id"] == truth["id"]) & (ours["id"] >= 0) & ~ours_apart["silhouette"] & ~ours_apart["edge"]
     oracle_primitive = np.full(ours["id"].shape, -1, np.int64)
     for index, shape in enumerate(scene.shapes):
@@ -158,21 +162,29 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
             "pyclray misses, Mitsuba hits": disagreement_kinds(theirs_only, reasons),
         },
         images={"ours": ours, "theirs": theirs, "relative": relative, "judged": judged, "outside": judged & (depth_ratio > 1)},
+        truth=truth,
     )
-    # the verdict
-    if result.depth_ratio.count and result.depth_ratio.max > 1:
-        result.failures.append(f"depth outside the tolerance at {int((judged & (depth_ratio > 1)).sum())} pixels")
-    if result.normal_ratio.count and result.normal_ratio.max > 1:
-        result.failures.append(f"normal outside the tolerance at {int((judged & (angle > normal_tolerance)).sum())} pixels")
-    if primitive_wrong.any():
+    # the verdict: where they disagree, the oracle decides who is wrong (arbitrate.py); only
+    # pyclray's faults fail the check
+    ours_bounds = error_model.pyclray_tolerances(scene, truth, cos, origins, "fp32", scene.camera.eye)
+    ours_wrong = wrong_hits(ours, truth, *ours_bounds)
+    theirs_wrong = wrong_hits(theirs, truth, depth_tolerance, normal_tolerance)
+    explained = silhouette | edge | adjacent | near_tie
+    with np.errstate(invalid="ignore"):
+        result.verdicts = {
+            "depth": decide(judged & (depth_ratio > 1), ours_wrong["depth"], theirs_wrong["depth"]),
+            "normal": decide(judged & (angle > normal_tolerance), ours_wrong["normal"], theirs_wrong["normal"]),
+            "id (hits and misses)": decide(disagree, ours_wrong["id"], theirs_wrong["id"], explained),
+        }
+    for name, verdict in result.verdicts.items():
+        if verdict.pyclray:
+            result.failures.append(f"{name}: pyclray wrong by the float64 oracle at {verdict.pyclray} pixels "
+                                   "where it disagrees with Mitsuba")
+    if primitive_wrong.any():  # (the oracle has no primitive to arbitrate by)
         result.failures.append(f"{int(primitive_wrong.sum())} judged pixels where the primitive (prim_index) differs")
     if oracle_wrong.any():
-        result.failures.append(f"{int(oracle_wrong.sum())} judged pixels where the primitive differs from the float64 oracle's")
-    if result.ids["unexplained"]:
-        result.failures.append(f"{result.ids['unexplained']} unexplained id disagreements")
-    for name, kinds in result.misses.items():
-        if kinds["unexplained"]:
-            result.failures.append(f"{kinds['unexplained']} unexplained pixels where {name}")
+        result.failures.append(f"{int(oracle_wrong.sum())} judged pixels where the primitive differs from the "
+                               "float64 oracle's")
     return result
 
 
@@ -201,5 +213,7 @@ def format_image_check(result: ImageCheck) -> str:
         table(f"normal: angle between the geometric normals, over the {result.normal_angle.count} judged pixels", normal),
         table("id: pixels where neither is beyond a stand-in; disagreements by the first reason that explains them", ids),
         table("misses: one hits, the other does not", misses),
+        table("arbitration: where pyclray and Mitsuba disagree beyond the tolerance, the float64 oracle decides "
+              "(each against its own bound)", verdict_rows(result.verdicts)),
     ]
     return "\n\n".join(parts)

@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import error_model
 from ..error_model import EPSILON, ORIGIN_K, angle_between
+from .arbitrate import decide, verdict_rows, wrong_hits
 from .summary import Summary, disagreement_kinds, table
 
 EPS32 = EPSILON["fp32"]
@@ -32,6 +33,7 @@ class RayCheck:
     normal_ratio: Summary
     ids: dict
     failures: list = field(default_factory=list)
+    verdicts: dict = field(default_factory=dict)  # AOV -> arbitrate.Verdicts
 
     @property
     def passed(self) -> bool:
@@ -53,6 +55,9 @@ def ray_level(
     flat = np.sort(rng.choice(width * height, size=min(n_rays, width * height), replace=False))
     rows, columns = np.divmod(flat, width)
 
+    from ...io.progress import step
+
+    step(f"ray level: Mitsuba {variant}")
     mitsuba.import_mitsuba(variant)
     mi_scene, ids = mitsuba.load(scene if mitsuba_scene is None else mitsuba_scene, variant)
     origins, directions = mitsuba.primary_rays(mi_scene, scene, rows, columns)
@@ -69,6 +74,7 @@ def ray_level(
 
     # the same rays through both
     theirs = mitsuba.intersect(mi_scene, ids, origins, directions)
+    step("ray level: pyclray cast, float64 oracle, comparison")
     ours = cast(scene, origins, directions, precision="fp32", device=device)
     unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     truth = oracle.trace(scene, origins, unit, aovs=("depth", "normal", "id", "second"))
@@ -123,12 +129,20 @@ def ray_level(
         result.failures.append(f"ray level: Mitsuba's camera rays off ours by up to {result.camera_angle.max:.3g} radians")
     if result.camera_origin.max > ORIGIN_K:
         result.failures.append("ray level: Mitsuba's camera ray origins off the eye")
-    if result.depth_ratio.count and result.depth_ratio.max > 1:
-        result.failures.append(f"ray level: depth outside the tolerance on {int((judged & (depth_ratio > 1)).sum())} rays")
-    if result.normal_ratio.count and result.normal_ratio.max > 1:
-        result.failures.append(f"ray level: normal outside the tolerance on {int((judged & (angle > normal_tolerance)).sum())} rays")
-    if kinds["unexplained"]:
-        result.failures.append(f"ray level: {kinds['unexplained']} unexplained id or miss disagreements")
+    # where they disagree, the oracle of the very same rays decides who is wrong (arbitrate.py)
+    ours_wrong = wrong_hits(ours, truth, *error_model.pyclray_tolerances(scene, truth, cos, origins, "fp32",
+                                                                        directions=unit))
+    theirs_wrong = wrong_hits(theirs, truth, depth_tolerance, normal_tolerance)
+    with np.errstate(invalid="ignore"):
+        result.verdicts = {
+            "depth": decide(judged & (depth_ratio > 1), ours_wrong["depth"], theirs_wrong["depth"]),
+            "normal": decide(judged & (angle > normal_tolerance), ours_wrong["normal"], theirs_wrong["normal"]),
+            "id (hits and misses)": decide(disagree, ours_wrong["id"], theirs_wrong["id"], silhouette | edge | near_tie),
+        }
+    for name, verdict in result.verdicts.items():
+        if verdict.pyclray:
+            result.failures.append(f"ray level, {name}: pyclray wrong by the float64 oracle on {verdict.pyclray} rays "
+                                   "where it disagrees with Mitsuba")
     return result
 
 
@@ -151,5 +165,6 @@ def format_ray_check(result: RayCheck) -> str:
         [
             table(f"ray level, cameras: Mitsuba's primary rays against pyclray's pixel rays ({result.rays} pixels)", camera),
             table("ray level, intersections of the very same rays: pyclray.cast against Mitsuba's ray_intersect", hits),
+            table("ray level, arbitration by the float64 oracle of the same rays", verdict_rows(result.verdicts)),
         ]
     )
