@@ -13,6 +13,19 @@ from ..layout import Struct
 from .base import Shape, in_frame, padded_bounds, to_world, distance
 
 
+def axis_angle(axis, angle) -> tuple:
+    """The keys axis (optional, non-zero) and angle (degrees, 0 without an axis), checked: a box's
+    and a mesh's rotation."""
+    if axis is not None:
+        axis = vector3("axis", axis)
+        if norm3(axis) == 0:
+            raise SceneError("expected a non-zero rotation axis, got [0, 0, 0]", key="axis")
+    angle = number("angle", angle)
+    if axis is None and angle != 0:
+        raise SceneError("expected an axis to rotate about (key 'axis') with a non-zero angle", key="angle")
+    return axis, angle
+
+
 def rotation(axis, angle_degrees) -> np.ndarray:
     """world_from_box (columns: the box's axes in world space), Rodrigues' formula in float64;
     the identity, exactly, without an axis or at angle 0."""
@@ -75,14 +88,8 @@ class Box(Shape):
         if not all(s > 0 for s in size):
             raise SceneError(f"expected three numbers > 0, got {list(size)}", key="size")
         object.__setattr__(self, "size", size)
-        if self.axis is not None:
-            axis = vector3("axis", self.axis)
-            if norm3(axis) == 0:
-                raise SceneError("expected a non-zero rotation axis, got [0, 0, 0]", key="axis")
-            object.__setattr__(self, "axis", axis)
-        angle = number("angle", self.angle)
-        if self.axis is None and angle != 0:
-            raise SceneError("expected an axis to rotate about (key 'axis') with a non-zero angle", key="angle")
+        axis, angle = axis_angle(self.axis, self.angle)
+        object.__setattr__(self, "axis", axis)
         object.__setattr__(self, "angle", angle)
 
     @classmethod

@@ -16,9 +16,9 @@ import numpy as np
 from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
 from . import mesh_io
-from .mesh_keys import _ready, faces_of, matrix_of, vertices_of
+from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
-from .box import rotation
+from .box import axis_angle, rotation
 from .mesh_oracle import Hierarchy, barycentrics
 
 FIXED = {"animatable": False}
@@ -103,14 +103,8 @@ class Mesh(Shape):
         if bad:
             raise SceneError(f"expected non-zero scale factors, got {_shown(self.scale)}", key="scale")
         object.__setattr__(self, "scale", scale)
-        if self.axis is not None:
-            axis = vector3("axis", self.axis)
-            if not any(axis):
-                raise SceneError("expected a non-zero rotation axis, got [0, 0, 0]", key="axis")
-            object.__setattr__(self, "axis", axis)
-        angle = number("angle", self.angle)
-        if self.axis is None and angle != 0:
-            raise SceneError("expected an axis to rotate about (key 'axis') with a non-zero angle", key="angle")
+        axis, angle = axis_angle(self.axis, self.angle)
+        object.__setattr__(self, "axis", axis)
         object.__setattr__(self, "angle", angle)
         object.__setattr__(self, "translate", vector3("translate", self.translate))
         if self.matrix is not None:
