@@ -69,9 +69,15 @@ def _shown(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def _real(value) -> bool:
+    """A real number and not a bool; a float (numpy's float64 too) is told first, without the
+    abstract base class's slower check (an animation's frame checks every changed shape's numbers)."""
+    return isinstance(value, float) or (isinstance(value, Real) and not isinstance(value, bool))
+
+
 def number(key: str, value, *, positive: bool = False) -> float:
     """A finite real number (an int is accepted; a bool or a string is not)."""
-    if isinstance(value, bool) or not isinstance(value, Real):
+    if not _real(value):
         raise SceneError(f"expected a number, got {_shown(value)}", key=key)
     try:
         value = float(value)
@@ -90,7 +96,7 @@ def vector3(key: str, value) -> tuple[float, float, float]:
         raise SceneError(f"expected 3 numbers [x, y, z], got {_shown(value)}", key=key)
     out = []
     for component in value:
-        if isinstance(component, bool) or not isinstance(component, Real):
+        if not _real(component):
             raise SceneError(f"expected 3 numbers [x, y, z], got {_shown(value)}", key=key)
         try:
             component = float(component)
