@@ -101,16 +101,22 @@ def _rows(bounds, centre, unit, rows):
 
 
 @numba.njit(cache=True, nogil=True)
+def _add_row(geometry, rows, i):
+    """geometry[0:12] (a box and a (doubled) centroid box) grown by row i."""
+    for a in range(3):
+        c = rows[i, a] + rows[i, a + 3]
+        geometry[a] = min(geometry[a], rows[i, a])
+        geometry[a + 3] = max(geometry[a + 3], rows[i, a + 3])
+        geometry[a + 6] = min(geometry[a + 6], c)
+        geometry[a + 9] = max(geometry[a + 9], c)
+
+
+@numba.njit(cache=True, nogil=True)
 def _root(rows, geometry):
     """The box and the (doubled) centroid box of all rows, into geometry[0:12]."""
     _empty_box(geometry)
     for i in range(rows.shape[0]):
-        for a in range(3):
-            c = rows[i, a] + rows[i, a + 3]
-            geometry[a] = min(geometry[a], rows[i, a])
-            geometry[a + 3] = max(geometry[a + 3], rows[i, a + 3])
-            geometry[a + 6] = min(geometry[a + 6], c)
-            geometry[a + 9] = max(geometry[a + 9], c)
+        _add_row(geometry, rows, i)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -213,13 +219,7 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
                 index[s:e] = index[s:e][order]
             mid = s + m // 2
             for i in range(s, e):
-                side = left if i < mid else right
-                for a in range(3):
-                    c = rows[i, a] + rows[i, a + 3]
-                    side[a] = min(side[a], rows[i, a])
-                    side[a + 3] = max(side[a + 3], rows[i, a + 3])
-                    side[a + 6] = min(side[a + 6], c)
-                    side[a + 9] = max(side[a + 9], c)
+                _add_row(left if i < mid else right, rows, i)
         else:
             # partition in place (bins 0..best_k to the left), each side's centroid box on the way:
             # every row is swapped to the end of the left side and that end moves by one where the
