@@ -2,6 +2,7 @@
 lights in its frame, the tile lists, the acceleration choice and the range check."""
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 
 import numpy as np
@@ -139,8 +140,10 @@ class ViewInputs:
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
         plane = scene.camera.image_plane(width, height)
-        self.anchor = prepared.anchor
-        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - self.anchor))
+        # made for this prepared scene (its anchor, its materials): one rebuilt for the same scene gets
+        # its own (a weak reference: an evicted prepared scene is not kept alive by its views)
+        self.prepared = weakref.ref(prepared)
+        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
@@ -186,6 +189,6 @@ def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
     per_scene = _views.get(scene, dict)
     key = (ctx.device.int_ptr, precision, acceleration)
     inputs = per_scene.get(key)
-    if inputs is None or not np.array_equal(inputs.anchor, prepared.anchor):  # a scene rebuilt: its own anchor
+    if inputs is None or inputs.prepared() is not prepared:
         inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)
     return prepared, inputs
