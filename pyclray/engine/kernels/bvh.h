@@ -167,6 +167,11 @@ typedef struct {
     vec3v near_inverse, far_inverse, far_add;
     intv negative_x, negative_y, negative_z;
     float4 from;
+    /* whether the lanes' direction signs agree on every axis (a camera packet's almost always do),
+     * and then those signs (-1: negative): each node's near and far faces are chosen once for all
+     * lanes (box_entries) */
+    int same_signs;
+    int3 negative;
 } BoxPacket;
 
 inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, intv* negative)
@@ -187,6 +192,9 @@ inline BoxPacket box_packet(const vec3v d, const float4 from)
     box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.negative_x);
     box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.negative_y);
     box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.negative_z);
+    const bool all_x = !ANY(!b.negative_x), all_y = !ANY(!b.negative_y), all_z = !ANY(!b.negative_z);
+    b.same_signs = (all_x || !ANY(b.negative_x)) && (all_y || !ANY(b.negative_y)) && (all_z || !ANY(b.negative_z));
+    b.negative = (int3)(all_x ? -1 : 0, all_y ? -1 : 0, all_z ? -1 : 0);
     return b;
 }
 
@@ -194,7 +202,9 @@ inline BoxPacket box_packet(const vec3v d, const float4 from)
  * meets inf - inf or 0 * inf) */
 inline float3 finite3(const float3 x)
 {
-    return select(select(x, (float3)(-FLT_MAX), x < (float3)(-FLT_MAX)), (float3)(FLT_MAX), x > (float3)(FLT_MAX));
+    /* the vector ?: (OpenCL's select is a call into PoCL's library on its CPU device: see box_ray) */
+    const float3 above = x < (float3)(-FLT_MAX) ? (float3)(-FLT_MAX) : x;
+    return above > (float3)(FLT_MAX) ? (float3)(FLT_MAX) : above;
 }
 
 /* Per lane, the distance at which the ray (widened, from the packet's origin) enters node's box,
@@ -207,9 +217,16 @@ inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const
     const float3 o = b->from.xyz;
     const float m = b->from.w;
     const float3 lo = finite3((node->lo.xyz - m) - o), hi = finite3((node->hi.xyz + m) - o);
-    const realv near_x = b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x), far_x = b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x);
-    const realv near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
-    const realv near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);
+    realv near_x, near_y, near_z, far_x, far_y, far_z;
+    if (b->same_signs) {  /* the faces chosen once for all lanes: no select per lane */
+        const float3 near = b->negative ? hi : lo, far = b->negative ? lo : hi;
+        near_x = SPLAT(near.x), near_y = SPLAT(near.y), near_z = SPLAT(near.z);
+        far_x = SPLAT(far.x), far_y = SPLAT(far.y), far_z = SPLAT(far.z);
+    } else {
+        near_x = b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x), far_x = b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x);
+        near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
+        near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);
+    }
     const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
                               v_max(near_z * b->near_inverse.z, SPLAT(0)));
     const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
