@@ -107,6 +107,22 @@ def test_the_sah_tree_is_within_ten_percent_of_a_full_binned_sah_build(make):
     assert bvh.sah_cost(bvh.build(bounds, method="lbvh")) > 1.1 * reference  # the bound tells them apart
 
 
+@pytest.mark.parametrize("make", [lambda: random_bounds(7, 20000), lambda: torus_bounds(20000)], ids=["clustered spheres", "torus"])
+def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_costs(make):
+    """A scene's SAH tree is built for render's packets (bvh.SCENE_LEAF_SIZE, SCENE_TRAVERSAL: a
+    node's visit costs about four shape tests there): weighed with those costs, it is within 1.1
+    times a full binned SAH build made for the same costs (which the LBVH is not)."""
+    from pyclray.engine.scene_bvh import primitives_bvh
+
+    bounds = make()
+    leaf, cost = bvh.SCENE_LEAF_SIZE, bvh.SCENE_TRAVERSAL
+    tree = primitives_bvh({"sphere": bounds}).tree
+    assert tree.count.max() <= leaf and tree.count.max() > bvh.LEAF_SIZE  # built with the scene's leaves
+    reference = bvh.sah_cost(reference_sah()(bvh.widened(bounds), leaf, traversal=cost), traversal=cost)
+    assert bvh.sah_cost(tree, traversal=cost) <= 1.1 * reference
+    assert bvh.sah_cost(bvh.build(bvh.widened(bounds), leaf, method="lbvh"), traversal=cost) > 1.1 * reference
+
+
 def test_the_reference_build_is_a_valid_tree():
     """The reference the ten percent are measured against is a valid tree over the shapes (every
     shape in one leaf, boxes the exact unions), its leaves no larger than the kernels take."""
