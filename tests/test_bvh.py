@@ -123,6 +123,27 @@ def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_
     assert bvh.sah_cost(bvh.build(bvh.widened(bounds), leaf, method="lbvh"), traversal=cost) > 1.1 * reference
 
 
+@pytest.mark.parametrize("n", [5, 3000, 20000])  # the LBVH and the SAH tree
+def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
+    """The render kernel asks for a leaf's entries before it reads the leaf's refs where the program
+    has one bounded type (kernels/pyclray.cl: PYCLRAY_LEAF_ORDER_SHAPES): that needs refs[q] to be
+    entry q of the type's array, q * 16 + its kind; with two types it is not so."""
+    from pyclray.engine.scene_bvh import primitives_bvh
+
+    bounds = bvh.widened(random_bounds(3, n))
+    refs = primitives_bvh({"sphere": bounds}).refs(("plane", "sphere"))
+    assert np.array_equal(refs, np.arange(n) * 16 + 2)
+    two = primitives_bvh({"sphere": bounds, "box": bounds}).refs(("box", "sphere"))
+    assert not np.array_equal(two >> 4, np.arange(2 * n))
+    from pyclray.engine.programs import Variant
+
+    def defines(types):
+        return Variant("render", types, ("depth",), "fp32", 8, bvh=True).defines()
+
+    assert "#define PYCLRAY_LEAF_ORDER_SHAPES 1" in defines(("plane", "sphere"))
+    assert "#define PYCLRAY_LEAF_ORDER_SHAPES 1" not in defines(("box", "sphere"))
+
+
 def test_the_reference_build_is_a_valid_tree():
     """The reference the ten percent are measured against is a valid tree over the shapes (every
     shape in one leaf, boxes the exact unions), its leaves no larger than the kernels take."""

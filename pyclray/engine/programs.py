@@ -116,6 +116,8 @@ class Variant:
             lines.append("#define PYCLRAY_HAS_BOUNDED 1")
         if self.bvh and self.kind == "render":
             lines.append("#define PYCLRAY_BVH 1")
+            if len(bounded) == 1:  # leaf position q is entry q of that type's array (scene_bvh.SceneBVH.refs)
+                lines.append("#define PYCLRAY_LEAF_ORDER_SHAPES 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")

@@ -508,6 +508,23 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     return ray;
 }
 
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_LEAF_ORDER_SHAPES) && defined(PYCLRAY_INLINE_BUILTINS)
+/* One bounded type: leaf position q is entry q of its array (pyclray/engine/scene_bvh.py: each
+ * type's entries in leaf order), so a leaf's refs and entries are asked for at once, without
+ * reading its refs first (kernels/bvh.h; a dependent read of refs gained half as much). PoCL's CPU
+ * device only: elsewhere OpenCL's prefetch is a call, or nothing. */
+#undef PYCLRAY_PACKET_LEAF_PREFETCH
+#define PYCLRAY_PACKET_PREFETCH_TYPE(Type, type)                                      \
+    for (int byte = 0; byte < leaf_count * (int)sizeof(Type); byte += 64)             \
+        __builtin_prefetch((__global const char*)&type##s[leaf_first] + byte);
+#define PYCLRAY_PACKET_LEAF_PREFETCH(first, count)                                    \
+    {                                                                                 \
+        const int leaf_first = (first), leaf_count = (count);                         \
+        __builtin_prefetch(&refs[leaf_first]);                                        \
+        PYCLRAY_BOUNDED(PYCLRAY_PACKET_PREFETCH_TYPE)                                 \
+    }
+#endif
+
 /* One work-item per packet of PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels: packet column
  * get_global_id(0) and row get_global_id(1), counted from the packet of the window's first pixel (a
  * render of a window of the image starts at row row0 and column col0, and writes its own
