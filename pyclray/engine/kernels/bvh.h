@@ -241,10 +241,20 @@ inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const
 #ifndef PYCLRAY_PACKET_LEAF_PREFETCH
 #define PYCLRAY_PACKET_LEAF_PREFETCH(first, count)
 #endif
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define BVH_PREFETCH(p) __builtin_prefetch(p);
+#else
+#define BVH_PREFETCH(p)
+#endif
 #define PYCLRAY_PACKET_CHILD_PREFETCH(nodes, child)                                     \
     {                                                                                   \
-        const int child_count = as_int(nodes[child].hi.w);                              \
-        if (child_count > 0) { PYCLRAY_PACKET_LEAF_PREFETCH(as_int(nodes[child].lo.w), child_count) } \
+        const int child_count = as_int(nodes[child].hi.w), child_first = as_int(nodes[child].lo.w); \
+        if (child_count > 0) {                                                          \
+            PYCLRAY_PACKET_LEAF_PREFETCH(child_first, child_count)                      \
+        } else {                                                                        \
+            BVH_PREFETCH(&nodes[child_first])                                           \
+            BVH_PREFETCH(&nodes[child_first + 1])                                       \
+        }                                                                               \
     }
 
 /* Visit, nearest child first (by its nearest lane), every leaf whose box some lane of the packet
