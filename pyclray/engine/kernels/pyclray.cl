@@ -350,8 +350,6 @@ typedef int int32w;
 typedef PYCLRAY_CAT(PYCLRAY_REAL_NAME, PYCLRAY_PACKET_W) realw;
 typedef PYCLRAY_CAT(int, PYCLRAY_PACKET_W) int32w;
 #endif
-typedef union { realw v; real s[PYCLRAY_PACKET_W]; } RowReals;
-typedef union { int32w v; int s[PYCLRAY_PACKET_W]; } RowInts;
 
 /* W lanes stored at p (the first lane's element): one move instruction through a vector type of the
  * element's alignment on PoCL's CPU device (see v_sqrt in kernels/lanes.h), else vstoren */
@@ -368,89 +366,95 @@ typedef int32w int32w_unaligned __attribute__((aligned(sizeof(int))));
 #define STORE_ROW_INT32S(v, p) PYCLRAY_CAT(vstore, PYCLRAY_PACKET_W)((v), 0, (p))
 #endif
 
-inline void write_row_reals(const realw v, const long index, const int first, const int end, __global real* out)
+/* interleaved x, y, z of a whole row of W lanes at p */
+inline void store_row_vec3s(const realw x, const realw y, const realw z, __global real* p)
 {
-    if (first == 0 && end == PYCLRAY_PACKET_W) {
-        STORE_ROW_REALS(v, out + index);
-    } else {
-        RowReals row;
-        row.v = v;
-        for (int c = first; c < end; ++c) out[index + c] = row.s[c];
-    }
-}
-
-inline void write_row_ints(const int32w v, const long index, const int first, const int end, __global int* out)
-{
-    if (first == 0 && end == PYCLRAY_PACKET_W) {
-        STORE_ROW_INT32S(v, out + index);
-    } else {
-        RowInts row;
-        row.v = v;
-        for (int c = first; c < end; ++c) out[index + c] = row.s[c];
-    }
-}
-
-/* interleaved x, y, z per element */
-inline void write_row_vec3s(const realw x, const realw y, const realw z, const long index, const int first, const int end,
-                            __global real* out)
-{
-    __global real* p = out + 3 * index;
-#if PYCLRAY_PACKET_W == 8 || PYCLRAY_PACKET_W == 4
-    if (first == 0 && end == PYCLRAY_PACKET_W) {  /* the whole row: vector stores of interleaved lanes */
 #if PYCLRAY_PACKET_W == 8
-        STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1, y.s1, z.s1, x.s2, y.s2), p);
-        STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3, x.s4, y.s4, z.s4, x.s5), p + 8);
-        STORE_ROW_REALS((realw)(y.s5, z.s5, x.s6, y.s6, z.s6, x.s7, y.s7, z.s7), p + 16);
+    STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1, y.s1, z.s1, x.s2, y.s2), p);
+    STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3, x.s4, y.s4, z.s4, x.s5), p + 8);
+    STORE_ROW_REALS((realw)(y.s5, z.s5, x.s6, y.s6, z.s6, x.s7, y.s7, z.s7), p + 16);
+#elif PYCLRAY_PACKET_W == 4
+    STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1), p);
+    STORE_ROW_REALS((realw)(y.s1, z.s1, x.s2, y.s2), p + 4);
+    STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3), p + 8);
+#elif PYCLRAY_PACKET_W == 2
+    STORE_ROW_REALS((realw)(x.s0, y.s0), p);
+    STORE_ROW_REALS((realw)(z.s0, x.s1), p + 2);
+    STORE_ROW_REALS((realw)(y.s1, z.s1), p + 4);
 #else
-        STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1), p);
-        STORE_ROW_REALS((realw)(y.s1, z.s1, x.s2, y.s2), p + 4);
-        STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3), p + 8);
+    p[0] = x;
+    p[1] = y;
+    p[2] = z;
 #endif
-        return;
-    }
-#endif
-    RowReals X, Y, Z;
-    X.v = x;
-    Y.v = y;
-    Z.v = z;
-    for (int c = first; c < end; ++c) {
-        p[3 * c] = X.s[c];
-        p[3 * c + 1] = Y.s[c];
-        p[3 * c + 2] = Z.s[c];
-    }
 }
 
-/* a packet's rows: the whole packet where it is one row, else its two halves */
+/* A whole packet (every lane in the window) with a vector store per row; a packet cut by the border
+ * of the window lane by lane. Row 0 of the packet is its lanes' low half, row 1 the high half. */
 #if PYCLRAY_PACKET_H == 1
-#define PYCLRAY_PACKET_ROWS(WRITE, v, place)                                          \
-    if ((place).row_first == 0 && (place).row_end == 1) { WRITE(v, (place).index) }
+#define PYCLRAY_PACKET_ROWS(STORE, v, place) STORE(v, (place).index)
 #else
-#define PYCLRAY_PACKET_ROWS(WRITE, v, place)                                          \
-    if ((place).row_first == 0) { WRITE((v).lo, (place).index) }                     \
-    if ((place).row_end == 2) { WRITE((v).hi, (place).index + (place).stride) }
+#define PYCLRAY_PACKET_ROWS(STORE, v, place) STORE((v).lo, (place).index) STORE((v).hi, (place).index + (place).stride)
 #endif
+#define PYCLRAY_WHOLE_PACKET(place, first, end) \
+    ((first) == 0 && (end) == PYCLRAY_PACKET_W && (place).row_first == 0 && (place).row_end == PYCLRAY_PACKET_H)
+#define PYCLRAY_STORE_LANE(l, c) \
+    if (packet_lane_written(place, l, first, end)) out[packet_lane_index(place, l)] = v.c;
+#define PYCLRAY_STORE_VEC3_LANE(l, c)                                                 \
+    if (packet_lane_written(place, l, first, end)) {                                  \
+        const long at = 3 * packet_lane_index(place, l);                              \
+        out[at] = v.x.c;                                                              \
+        out[at + 1] = v.y.c;                                                          \
+        out[at + 2] = v.z.c;                                                          \
+    }
 
 inline void write_reals(const realv v, const PacketPlace place, const int first, const int end, __global real* out)
 {
-#define PYCLRAY_ROW(row, at) write_row_reals(row, at, first, end, out);
-    PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
+#if LANES == 1
+    out[place.index] = v;
+#else
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#define PYCLRAY_ROW(row, at) STORE_ROW_REALS(row, out + (at));
+        PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
 #undef PYCLRAY_ROW
+    } else {
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_LANE)
+    }
+#endif
 }
 
 inline void write_ints(const PYCLRAY_INT32V v, const PacketPlace place, const int first, const int end, __global int* out)
 {
-#define PYCLRAY_ROW(row, at) write_row_ints(row, at, first, end, out);
-    PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
+#if LANES == 1
+    out[place.index] = v;
+#else
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#define PYCLRAY_ROW(row, at) STORE_ROW_INT32S(row, out + (at));
+        PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
 #undef PYCLRAY_ROW
+    } else {
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_LANE)
+    }
+#endif
 }
 
+/* interleaved x, y, z per element */
 inline void write_vec3s(const vec3v v, const PacketPlace place, const int first, const int end, __global real* out)
 {
-#if PYCLRAY_PACKET_H == 1
-    if (place.row_first == 0 && place.row_end == 1) write_row_vec3s(v.x, v.y, v.z, place.index, first, end, out);
+#if LANES == 1
+    out[3 * place.index] = v.x;
+    out[3 * place.index + 1] = v.y;
+    out[3 * place.index + 2] = v.z;
 #else
-    if (place.row_first == 0) write_row_vec3s(v.x.lo, v.y.lo, v.z.lo, place.index, first, end, out);
-    if (place.row_end == 2) write_row_vec3s(v.x.hi, v.y.hi, v.z.hi, place.index + place.stride, first, end, out);
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#if PYCLRAY_PACKET_H == 1
+        store_row_vec3s(v.x, v.y, v.z, out + 3 * place.index);
+#else
+        store_row_vec3s(v.x.lo, v.y.lo, v.z.lo, out + 3 * place.index);
+        store_row_vec3s(v.x.hi, v.y.hi, v.z.hi, out + 3 * (place.index + place.stride));
+#endif
+    } else {
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_VEC3_LANE)
+    }
 #endif
 }
 
