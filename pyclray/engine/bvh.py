@@ -328,8 +328,13 @@ def traverse_reference(tree: BVH, origin, direction, t_max=np.inf):
 def widened(bounds: np.ndarray) -> np.ndarray:
     """Shapes' world bounds widened by WIDEN times their size (see WIDEN)."""
     bounds = np.asarray(bounds, np.float64)
-    size = (bounds[:, 1] - bounds[:, 0]).max(axis=1, initial=0.0)[:, None]
-    return np.stack([bounds[:, 0] - WIDEN * size, bounds[:, 1] + WIDEN * size], axis=1)
+    extent = bounds[:, 1] - bounds[:, 0]
+    size = extent.max(axis=1, initial=0.0)[:, None]
+    size *= WIDEN
+    out = np.empty_like(bounds)  # written in place: a million boxes' temporaries cost 0.1 s
+    np.subtract(bounds[:, 0], size, out=out[:, 0])
+    np.add(bounds[:, 1], size, out=out[:, 1])
+    return out
 
 
 def outward32(lo: np.ndarray, hi: np.ndarray):
