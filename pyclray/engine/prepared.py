@@ -67,10 +67,21 @@ class Kind:
     ids: np.ndarray
     primitives: np.ndarray
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
-    frame: cl.Buffer  # the entries in the frame of the last view (the render kernel's shape array)
-    frame_host: np.ndarray  # the frame buffer's memory on a CPU device (its bytes, elsewhere)
+    # a framed scene's (devices with float64): its entries' ids and primitive indices, read by the
+    # render kernel, which frames each entry from its world entry where it tests it
+    ids_buffer: cl.Buffer | None
+    primitives_buffer: cl.Buffer | None
+    # elsewhere: the entries in the frame of the last view (the render kernel's shape array), and
+    # that buffer's memory on a CPU device (its bytes, elsewhere)
+    frame: cl.Buffer | None
+    frame_host: np.ndarray | None
     smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
     smooth_host: np.ndarray | None = None
+
+    @property
+    def framed(self) -> bool:
+        """Whether the render kernel frames its entries where it tests them (no frame buffer)."""
+        return self.frame is None
 
     @property
     def count(self) -> int:
@@ -135,7 +146,12 @@ class PreparedScene:
                     bounds[t] = cls.bounds_of(world)
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
-        # rebase on the device (float64) where it has float64 and the scene is large enough to pay
+        # Devices with float64 frame each shape of most types on the eye where the render kernel tests
+        # it, from its world entry (Variant.framed, Shape.frames_in_render): no per-view copy of those
+        # entries, no pass over them for a new camera.
+        self.framed = has_fp64(ctx.device)
+        # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
+        # has float64 and the scene is large enough to pay, else on the host
         self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
@@ -187,17 +203,26 @@ class PreparedScene:
     def _kind(self, t, world, ids, primitives) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
         cls = REGISTRY[t]
+        world = aligned(world)
+        framed = self.framed and cls.frames_in_render
+        world_buffer = _buffer(self.ctx, world) if self.on_device or framed else None
+        if framed:
+            ids, primitives = aligned(np.ascontiguousarray(ids, np.int32)), aligned(np.ascontiguousarray(primitives, np.int32))
+            return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, ids), _buffer(self.ctx, primitives),
+                        None, None)
         frame = aligned(np.zeros(len(world), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
         frame["id"], frame["primitive"] = ids, primitives
-        world = aligned(world)
-        world_buffer = _buffer(self.ctx, world) if self.on_device else None
-        return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, frame, writable=True), frame)
+        return Kind(t, cls, world, ids, primitives, world_buffer, None, None, _buffer(self.ctx, frame, writable=True), frame)
 
     def nbytes(self) -> int:
         """The bytes this scene holds (host arrays shared with a CPU device counted once)."""
         total = self._materials_host.nbytes
         for kind in self.kinds.values():
-            total += kind.world.nbytes + kind.frame_host.nbytes
+            total += kind.world.nbytes
+            if kind.framed:
+                total += kind.ids.nbytes + kind.primitives.nbytes
+            else:
+                total += kind.frame_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
         if self.bvh.types:
             total += self._nodes_host.nbytes + self._refs_host.nbytes
@@ -237,15 +262,15 @@ class PreparedScene:
         eye = np.asarray(eye, np.float64)
         rows = np.asarray(rows, np.float64)
         key = (eye.tobytes(), rows.tobytes())
+        refit.flush_world(self)  # the world entries animation frames changed (framed types read them)
         if key == self.view_key:
             return
         queue = self.ctx.queue
         if self.on_device:
-            refit.flush_world(self)
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
-            if not kind.count:
+            if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue
             if self.on_device and kind.count >= self.GROUP:
                 kernels[f"rebase_{kind.name}"](queue, *self._groups(kind.count), kind.world_buffer, kind.frame,
