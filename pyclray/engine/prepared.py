@@ -179,7 +179,10 @@ class PreparedScene:
             with np.errstate(over="ignore", invalid="ignore"):
                 self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
             self.nodes = _buffer(ctx, self._nodes_host, writable=True)
-            self._refs_host = aligned(self.bvh.refs(self.types))
+            # one bounded type: leaf position q is entry q of its array, which the kernel knows
+            # (PYCLRAY_ONE_BOUNDED): a placeholder instead of the refs
+            one = len(self.bvh.types) == 1
+            self._refs_host = aligned(np.zeros(1, np.int32) if one else self.bvh.refs(self.types))
             self.refs = _buffer(ctx, self._refs_host)
         with np.errstate(over="ignore", invalid="ignore"):
             self._materials_host = aligned(shading.pack_materials(shapes, precision))

@@ -118,6 +118,8 @@ class Variant:
             lines.append("#define PYCLRAY_REBASE 1")
         if self.framed and self.kind == "render":
             lines.append("#define PYCLRAY_FRAMED 1")
+        if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
+            lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
         # where a render reads each type's shapes (kernels/pyclray.cl): framed where tested, or copied
         lines += [f"#define PYCLRAY_MODE_{t} {'FRAMED' if self.framed and REGISTRY[t].frames_in_render else 'COPIED'}"
                   for t in self.shape_types]

@@ -9,12 +9,15 @@ typedef struct {
     double3 u, v, w; /* the frame's axes in world coordinates (rows of frame_from_world) */
 } Frame;
 
-/* a vector's coordinates along the frame's axes, rounded to the kernel's precision */
+/* a vector's coordinates along the frame's axes, rounded to the kernel's precision: per axis
+ * (u.x x.x + u.y x.y) + u.z x.z (pyclray.model.shapes.base.in_frame), written by the frame's columns,
+ * three vector products and two sums with the same roundings (a framed render frames at each test) */
 inline real3 to_frame(const Frame* frame, const double3 x)
 {
-    return convert_real3((double3)((frame->u.x * x.x + frame->u.y * x.y) + frame->u.z * x.z,
-                                   (frame->v.x * x.x + frame->v.y * x.y) + frame->v.z * x.z,
-                                   (frame->w.x * x.x + frame->w.y * x.y) + frame->w.z * x.z));
+    const double3 c0 = (double3)(frame->u.x, frame->v.x, frame->w.x);
+    const double3 c1 = (double3)(frame->u.y, frame->v.y, frame->w.y);
+    const double3 c2 = (double3)(frame->u.z, frame->v.z, frame->w.z);
+    return convert_real3((c0 * x.x + c1 * x.y) + c2 * x.z);
 }
 
 /* a b = p + e exactly (pyclray.model.exact.two_prod): on PoCL's CPU device with the fused multiply-add

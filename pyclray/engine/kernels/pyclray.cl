@@ -170,7 +170,14 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
+/* a shape at position q of the BVH's leaves, tested against the whole packet: PYCLRAY_REF(q) = index *
+ * 16 + kind, refs[q]; in a render of one bounded type (PYCLRAY_ONE_BOUNDED: its kind), whose array is
+ * in leaf order, q itself (the scene holds no refs) */
+#if defined(PYCLRAY_ONE_BOUNDED) && !defined(PYCLRAY_CAST)
+#define PYCLRAY_REF(q) ((q) * 16 + PYCLRAY_ONE_BOUNDED)
+#else
+#define PYCLRAY_REF(q) refs[q]
+#endif
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
@@ -179,7 +186,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
+        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 

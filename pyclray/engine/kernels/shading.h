@@ -163,7 +163,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
+        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
         PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
         reach = open ? reach : SPLAT(-INFINITY);                                      \
     }
