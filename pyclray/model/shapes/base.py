@@ -106,11 +106,13 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
-    # On devices with float64 a render frames each entry of the type on the eye where it tests it, from
-    # its world entry (its <type>_rebase; kernels/pyclray.cl): the scene holds no per-view copy of the
-    # entries (struct) and a new camera needs no pass over them. False: the per-view pass rebases them
-    # into a copy, read as is (a type whose framing costs more per test than a copy's read).
-    frames_in_render: ClassVar[bool] = True
+    # True: on devices with float64 a render frames each entry of the type on the eye where it tests
+    # it, from its world entry (its <type>_rebase; kernels/pyclray.cl): the scene holds no per-view copy
+    # of the entries (struct) and a new camera needs no pass over them (spheres: a million of them in
+    # 64 bytes each). False: the per-view pass rebases them into a copy, read as is (types whose
+    # shapes are few, or whose framing costs more per test than the copy's read: a plane is framed
+    # once per packet, a box's three slabs or a triangle's three vertices at each test).
+    frames_in_render: ClassVar[bool] = False
     # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None

@@ -77,9 +77,6 @@ class Mesh(Shape):
     # sphere; with the LBVH 26.9, 25.0, 24.6 and 145, 127, 120 ms. A triangle test is cheap next to
     # a node's box test and the stack.
     leaf_size = 7
-    # a triangle framed where tested would frame its three vertices at each test, three times a
-    # sphere's work: its entries keep the per-view pass's copy (Shape.frames_in_render)
-    frames_in_render = False
     smooth_struct = Struct(
         "TriangleNormals",
         (
