@@ -119,6 +119,17 @@ def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
 DEVICE_REBASE_FROM = 1024
 
 
+# Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
+# framed so; smaller ones keep the per-view copy. Measured (process CPU time of 256x256 renders of
+# depth, normal, id over a ground plane and bench/views.py's sphere field, the same camera and a new
+# one each call, PoCL on the 2 shared cores, load 3 to 4): framed against copied, at 100,000 spheres
+# 17.6-18.3 against 14.9-15.6 ms the same camera, 17.6-20.3 against 17.4-18.8 moved (framing computes at
+# each test the 32 bytes the copy holds per sphere); at 300,000 29.3 against 27.0 and 31.5 against
+# 31.9; at 1,000,000 68.8 against 69.8 and 69.5 against 77.5 (the copy's 32 MB no longer fit the
+# caches better than the world entries do), 63.7 bytes a sphere in all against 91.7.
+FRAMED_FROM = 524_288
+
+
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
@@ -146,10 +157,11 @@ class PreparedScene:
                     bounds[t] = cls.bounds_of(world)
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
-        # Devices with float64 frame each shape of most types on the eye where the render kernel tests
-        # it, from its world entry (Variant.framed, Shape.frames_in_render): no per-view copy of those
-        # entries, no pass over them for a new camera.
-        self.framed = has_fp64(ctx.device)
+        # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
+        # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
+        # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
+        framable = sum(len(worlds[t][0]) for t in self.types if REGISTRY[t].frames_in_render)
+        self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
         # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
         # has float64 and the scene is large enough to pay, else on the host
         self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
