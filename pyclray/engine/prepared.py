@@ -35,6 +35,7 @@ from ..model.animation import derivation
 from ..model.shapes.base import entries
 from . import culling, refit, shading
 from .device import has_fp64
+from .indexed import IndexedEntries
 from .programs import Variant, kernels_for
 from .request import render_lock
 from .scene_bvh import SceneBVH, primitives_bvh
@@ -63,7 +64,7 @@ class Kind:
 
     name: str
     cls: type
-    world: np.ndarray
+    stored_world: np.ndarray | None  # None for indexed entries: world packs them when asked (cast)
     ids: np.ndarray
     primitives: np.ndarray
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
@@ -77,6 +78,18 @@ class Kind:
     frame_host: np.ndarray | None
     smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
     smooth_host: np.ndarray | None = None
+    indexed: IndexedEntries | None = None  # a framed scene's triangles: shared vertices and faces
+    shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
+    order: np.ndarray | None = None
+
+    @property
+    def world(self) -> np.ndarray:
+        """The world entries (an indexed type's packed anew at each call: the scene keeps its vertices
+        and faces instead, and only cast asks)."""
+        if self.stored_world is not None:
+            return self.stored_world
+        world = self.cls.pack_world(self.shapes)
+        return world if self.order is None else world[self.order]
 
     @property
     def framed(self) -> bool:
@@ -85,7 +98,7 @@ class Kind:
 
     @property
     def count(self) -> int:
-        return len(self.world)
+        return len(self.ids)
 
 
 ALIGNMENT = 128  # bytes: the kernels load a struct's double4 and float8 members with aligned vector loads
@@ -160,7 +173,7 @@ class PreparedScene:
         # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
         # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
         # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
-        framable = sum(len(worlds[t][0]) for t in self.types if REGISTRY[t].frames_in_render)
+        framable = sum(len(worlds[t][0]) for t in self.types if REGISTRY[t].frames_in_render or REGISTRY[t].indexed)
         self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
         # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
         # has float64 and the scene is large enough to pay, else on the host
@@ -172,7 +185,7 @@ class PreparedScene:
                 order = self.bvh.order[t]
                 world, ids, primitives = world[order], ids[order], primitives[order]
                 smooth = None if smooth is None else smooth[order]
-            self.kinds[t] = self._kind(t, world, ids, primitives)
+            self.kinds[t] = self._kind(t, world, ids, primitives, tuple(by_type[t][0]), self.bvh.order.get(t))
             if smooth is not None:
                 self.kinds[t].smooth_host = aligned(smooth)
                 self.kinds[t].smooth = _buffer(ctx, self.kinds[t].smooth_host)
@@ -215,9 +228,13 @@ class PreparedScene:
         """Become the prepared scene of an animation's frame (see pyclray.engine.refit.update)."""
         return refit.update(self, shapes, changed)
 
-    def _kind(self, t, world, ids, primitives) -> Kind:
+    def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
         cls = REGISTRY[t]
+        if self.framed and cls.indexed:  # shared vertices and faces (engine/indexed.py)
+            indexed = IndexedEntries(self, cls, shapes, np.arange(len(world)) if order is None else order, ids)
+            return Kind(t, cls, None, ids, primitives, None, None, None, None, None, indexed=indexed, shapes=shapes,
+                        order=order)
         world = aligned(world)
         framed = self.framed and cls.frames_in_render
         world_buffer = _buffer(self.ctx, world) if self.on_device or framed else None
@@ -233,11 +250,12 @@ class PreparedScene:
         """The bytes this scene holds (host arrays shared with a CPU device counted once)."""
         total = self._materials_host.nbytes
         for kind in self.kinds.values():
-            total += kind.world.nbytes
-            if kind.framed:
-                total += kind.ids.nbytes + kind.primitives.nbytes
+            if kind.indexed is not None:
+                total += kind.indexed.nbytes()
+            elif kind.framed:
+                total += kind.world.nbytes + kind.ids.nbytes + kind.primitives.nbytes
             else:
-                total += kind.frame_host.nbytes
+                total += kind.world.nbytes + kind.frame_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
         if self.bvh.types:
             total += self._nodes_host.nbytes + self._refs_host.nbytes
@@ -285,6 +303,10 @@ class PreparedScene:
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
+            if kind.indexed is not None:  # the vertices, on the device (framed scenes have float64)
+                kind.indexed.rebase(self, kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision)),
+                                    [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)])
+                continue
             if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue
             if self.on_device and kind.count >= self.GROUP:

@@ -121,8 +121,7 @@ class Variant:
         if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
         # where a render reads each type's shapes (kernels/pyclray.cl): framed where tested, or copied
-        lines += [f"#define PYCLRAY_MODE_{t} {'FRAMED' if self.framed and REGISTRY[t].frames_in_render else 'COPIED'}"
-                  for t in self.shape_types]
+        lines += [f"#define PYCLRAY_MODE_{t} {self._mode(REGISTRY[t])}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
@@ -132,6 +131,13 @@ class Variant:
             lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
                          + " ".join(f"P(__global const {c.smooth_struct.name}*, {c.type}_smooth)" for c in smooth))
         return lines
+
+    def _mode(self, shape) -> str:
+        """Where a render reads a type's shapes (kernels/pyclray.cl): framed where tested from their
+        world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
+        if self.framed and self.kind == "render" and shape.indexed:
+            return "INDEXED"
+        return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.

@@ -30,7 +30,8 @@ def update(prepared, shapes: tuple, changed) -> bool:
     for i in indices:
         if i >= len(shapes) or i >= len(prepared.shapes) or shapes[i].type != prepared.shapes[i].type \
                 or shapes[i].primitive_count() != prepared.shapes[i].primitive_count() \
-                or prepared.kinds[shapes[i].type].smooth is not None:  # its world shading normals: packed anew
+                or prepared.kinds[shapes[i].type].smooth is not None \
+                or prepared.kinds[shapes[i].type].indexed is not None:  # its world shading normals, its vertices: packed anew
             return False
     if prepared._refit is None:
         prepared._refit = RefitState(prepared)

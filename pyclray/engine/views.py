@@ -175,7 +175,10 @@ class ViewInputs:
             args += [prepared.nodes, prepared.refs]
         for kind in prepared.kinds.values():
             # its entries: the world entries, ids and primitive indices (framed) or the frame buffer
-            entries = [kind.world_buffer, kind.ids_buffer, kind.primitives_buffer] if kind.framed else [kind.frame]
+            if kind.indexed is not None:
+                entries = kind.indexed.kernel_args()
+            else:
+                entries = [kind.world_buffer, kind.ids_buffer, kind.primitives_buffer] if kind.framed else [kind.frame]
             if acceleration == "bvh":
                 args += [*entries, np.int32(kind.count)]
             else:

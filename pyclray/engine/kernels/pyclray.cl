@@ -75,6 +75,23 @@
 #endif
 #define PYCLRAY_ID_COPIED(type, k) type##s[k].id
 #define PYCLRAY_PRIMITIVE_COPIED(type, k) type##s[k].primitive
+/* INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
+ * and the per-view pass's vertices (<type>_assemble), its id from its own array, its index in its
+ * shape from its face; the winner's world normal from the float64 vertices (<type>_world_normal) */
+#define PYCLRAY_ENTRIES_INDEXED(P, Type, type)                                        \
+    P(__global const int4*, type##_faces) P(__global const real4*, type##_vertices)   \
+    P(__global const double4*, type##_world_vertices) P(__global const int*, type##_ids)
+#define PYCLRAY_SHAPE_INDEXED(Type, type, k, name)                                    \
+    Type name##_framed;                                                               \
+    type##_assemble(type##_faces[k], type##_vertices, &name##_framed);                \
+    const Type* const name = &name##_framed;
+#define PYCLRAY_ID_INDEXED(type, k) type##_ids[k]
+#define PYCLRAY_PRIMITIVE_INDEXED(type, k) type##_faces[k].w
+/* what a winner needs besides its shape in the frame: an indexed triangle's world normal */
+#define PYCLRAY_WINNER_FRAMED(type, k, name)
+#define PYCLRAY_WINNER_COPIED(type, k, name)
+#define PYCLRAY_WINNER_INDEXED(type, k, name) type##_world_normal(&name##_framed, type##_faces[k], type##_world_vertices);
+#define PYCLRAY_WINNER_OF(type, k, name) PYCLRAY_CAT(PYCLRAY_WINNER_, PYCLRAY_MODE_##type)(type, k, name)
 #define PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_CAT(PYCLRAY_ENTRIES_, PYCLRAY_MODE_##type)(P, Type, type)
 #define PYCLRAY_SHAPE_OF(Type, type, k, name) PYCLRAY_CAT(PYCLRAY_SHAPE_, PYCLRAY_MODE_##type)(Type, type, k, name)
 #define PYCLRAY_ID_OF(type, k) PYCLRAY_CAT(PYCLRAY_ID_, PYCLRAY_MODE_##type)(type, k)
@@ -242,6 +259,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_NORMAL(Type, type)                                                    \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_SHAPE_OF(Type, type, k, winner_shape)                                 \
+        PYCLRAY_WINNER_OF(type, k, winner_shape)                                      \
         PYCLRAY_NORMAL_OF(type, winner_shape)                                         \
         PYCLRAY_MATERIAL_OF(PYCLRAY_ID_OF(type, k), mine, PYCLRAY_FLAT_##type)        \
         PYCLRAY_PRIMITIVE_OF(type)                                                    \

@@ -113,6 +113,16 @@ class Shape:
     # shapes are few, or whose framing costs more per test than the copy's read: a plane is framed
     # once per packet, a box's three slabs or a triangle's three vertices at each test).
     frames_in_render: ClassVar[bool] = False
+    # True: in a framed scene the type's entries are triangles kept as shared vertices and faces
+    # (pack_indexed; pyclray/engine/indexed.py), its kernel file having <type>_assemble and
+    # <type>_world_normal
+    indexed: ClassVar[bool] = False
+
+    @classmethod
+    def pack_indexed(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
+        """An indexed type's (world vertices (V, 4) float64, faces (F, 4) int32: three vertex indices
+        and the primitive index, ~index where the triangle is never hit), faces in pack_world's order."""
+        raise NotImplementedError
     # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None

@@ -245,6 +245,24 @@ class Mesh(Shape):
             out["a"][rows, 3], out["b"][rows, 3], out["c"][rows, 3] = normal[:, 0], normal[:, 1], normal[:, 2]
             start += len(a)
 
+    indexed = True  # a framed scene's meshes: shared vertices and faces (Shape.indexed)
+
+    @classmethod
+    def pack_indexed(cls, meshes):
+        """(world vertices (V, 4), faces (F, 4)) of these meshes: each mesh's world vertices, its faces
+        offset to them, and per face its index in its mesh (~index for a zero-area one: never hit)."""
+        vertices = np.zeros((sum(len(m.vertices) for m in meshes), 4))
+        faces = np.zeros((sum(len(m.faces) for m in meshes), 4), np.int32)
+        start = rows = 0
+        for mesh in meshes:
+            vertices[start:start + len(mesh.vertices), :3] = mesh.world_vertices()
+            mine = faces[rows:rows + len(mesh.faces)]
+            mine[:, :3] = mesh.faces + start
+            index = np.arange(len(mesh.faces), dtype=np.int32)
+            mine[:, 3] = np.where(mesh.face_normals().any(axis=1), index, ~index)
+            start, rows = start + len(mesh.vertices), rows + len(mesh.faces)
+        return vertices, faces
+
     @classmethod
     def pack_smooth(cls, meshes, precision: str):
         """Per triangle its vertex normals (vertex_normals: unit, world) where its mesh is smooth,
