@@ -84,3 +84,22 @@ def test_a_framed_sphere_field_holds_at_most_64_bytes_a_sphere(monkeypatch):
     pyclray.render(scene, aovs=("depth",))
     held = prepared.prepared_scene(context_for(None), scene, "fp32").nbytes()
     assert held / 50_000 <= 64
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_cast_through_a_framed_scene_is_casts_through_a_copied_one(monkeypatch, precision):
+    """cast reads the world entries (an indexed mesh's packed anew from its shapes when cast asks):
+    the same hits from a framed scene as from a copied one, rays from inside the shapes and far off."""
+    need(precision)
+    scene = every_shape((1e5, 0.0, 0.0))
+    rng = np.random.default_rng(5)
+    origins = np.array(scene.camera.eye) + rng.normal(0.0, 3.0, (500, 3))
+    directions = rng.normal(size=(500, 3))
+    results = []
+    for framed in (False, True):
+        monkeypatch.setattr(prepared, "FRAMED_FROM", 0 if framed else 10**12)
+        prepared.clear()
+        results.append(pyclray.cast(scene, origins, directions, precision=precision))
+        assert (prepared.prepared_scene(context_for(None), scene, precision).kinds["mesh"].indexed is not None) == framed
+    same(*results)
+    assert np.isfinite(results[0]["depth"]).sum() > 100  # rays that hit: what this compares
