@@ -13,6 +13,8 @@
  *   PYCLRAY_SHADOWS                     render, with SHADED: shadow rays (without it none are cast)
  *   PYCLRAY_AOV_PRIMITIVE               render: the winner's index within its shape (a batch's primitive)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
+ *   PYCLRAY_FRAMED, PYCLRAY_MODE_<type>  render: where each type's shapes are read (see below)
+ *   PYCLRAY_ONE_BOUNDED                 render: the kind of the only bounded type present (no refs)
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
  *
  * A shape plugs in through two functions of its kernel file, both over a packet of rays:
