@@ -12,7 +12,8 @@ triangle alike."""
 from __future__ import annotations
 
 import numpy as np
-import pyopencl as cl
+
+from .buffers import aligned, device_buffer as _buffer
 
 
 class IndexedEntries:
@@ -20,8 +21,6 @@ class IndexedEntries:
     and its faces in the BVH's leaf order ((F, 4) int32), on the host and the device."""
 
     def __init__(self, prepared, cls, shapes, order, ids):
-        from .prepared import _buffer, aligned
-
         world_vertices, faces = cls.pack_indexed(shapes)
         real = np.float64 if prepared.precision == "fp64" else np.float32
         self.world_vertices = aligned(np.ascontiguousarray(world_vertices, np.float64))

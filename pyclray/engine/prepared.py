@@ -34,6 +34,7 @@ from ..model.shapes import REGISTRY
 from ..model.animation import derivation
 from ..model.shapes.base import entries
 from . import culling, refit, shading
+from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64
 from .indexed import IndexedEntries
 from .programs import Variant, kernels_for
@@ -99,29 +100,6 @@ class Kind:
     @property
     def count(self) -> int:
         return len(self.ids)
-
-
-ALIGNMENT = 128  # bytes: the kernels load a struct's double4 and float8 members with aligned vector loads
-
-
-def aligned(array: np.ndarray) -> np.ndarray:
-    """The array itself if contiguous and aligned to ALIGNMENT bytes, else an aligned copy."""
-    if array.flags.c_contiguous and array.ctypes.data % ALIGNMENT == 0:
-        return array
-    raw = np.empty(array.nbytes + ALIGNMENT, np.uint8)
-    start = -raw.ctypes.data % ALIGNMENT
-    raw[start:start + array.nbytes] = np.ascontiguousarray(array).reshape(-1).view(np.uint8)  # padding too
-    return raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
-
-
-def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
-    """A device buffer of this array: the array's own memory on a CPU device (no copy: the array
-    must be aligned, see aligned(), and live as long as the buffer), a copy elsewhere."""
-    mf = cl.mem_flags
-    access = mf.READ_WRITE if writable else mf.READ_ONLY
-    if ctx.device.type & cl.device_type.CPU:
-        return cl.Buffer(ctx.context, access | mf.USE_HOST_PTR, hostbuf=array)
-    return cl.Buffer(ctx.context, access | mf.COPY_HOST_PTR, hostbuf=array)
 
 
 # Scenes of fewer entries than this rebase on the host: measured per moved view (bench/views.py's

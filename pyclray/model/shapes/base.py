@@ -106,22 +106,18 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
-    # True: on devices with float64 a render frames each entry of the type on the eye where it tests
-    # it, from its world entry (its <type>_rebase; kernels/pyclray.cl): the scene holds no per-view copy
-    # of the entries (struct) and a new camera needs no pass over them (spheres: a million of them in
-    # 64 bytes each). False: the per-view pass rebases them into a copy, read as is (types whose
-    # shapes are few, or whose framing costs more per test than the copy's read: a plane is framed
-    # once per packet, a box's three slabs or a triangle's three vertices at each test).
+    # In a framed scene (engine/prepared.py's FRAMED_FROM) a render frames each entry of a type with
+    # frames_in_render on the eye where it tests it, from its world entry (<type>_rebase): no per-view
+    # copy (struct) of them, no pass over them for a new camera; an indexed type's triangles are kept
+    # as shared vertices and faces (pack_indexed, engine/indexed.py; <type>_assemble and
+    # <type>_world_normal in its kernel file). The others keep the per-view pass's copy.
     frames_in_render: ClassVar[bool] = False
-    # True: in a framed scene the type's entries are triangles kept as shared vertices and faces
-    # (pack_indexed; pyclray/engine/indexed.py), its kernel file having <type>_assemble and
-    # <type>_world_normal
     indexed: ClassVar[bool] = False
 
     @classmethod
     def pack_indexed(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
-        """An indexed type's (world vertices (V, 4) float64, faces (F, 4) int32: three vertex indices
-        and the primitive index, ~index where the triangle is never hit), faces in pack_world's order."""
+        """(world vertices (V, 4) float64, faces (F, 4) int32: vertex indices, primitive index or
+        ~index where never hit), faces in pack_world's order."""
         raise NotImplementedError
     # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'

@@ -246,22 +246,17 @@ class Mesh(Shape):
             start += len(a)
 
     indexed = True  # a framed scene's meshes: shared vertices and faces (Shape.indexed)
-
     @classmethod
     def pack_indexed(cls, meshes):
-        """(world vertices (V, 4), faces (F, 4)) of these meshes: each mesh's world vertices, its faces
-        offset to them, and per face its index in its mesh (~index for a zero-area one: never hit)."""
+        """Each mesh's world vertices; its faces offset to them, with their index (~index if zero-area)."""
         vertices = np.zeros((sum(len(m.vertices) for m in meshes), 4))
-        faces = np.zeros((sum(len(m.faces) for m in meshes), 4), np.int32)
-        start = rows = 0
+        faces, start = [], 0
         for mesh in meshes:
             vertices[start:start + len(mesh.vertices), :3] = mesh.world_vertices()
-            mine = faces[rows:rows + len(mesh.faces)]
-            mine[:, :3] = mesh.faces + start
             index = np.arange(len(mesh.faces), dtype=np.int32)
-            mine[:, 3] = np.where(mesh.face_normals().any(axis=1), index, ~index)
-            start, rows = start + len(mesh.vertices), rows + len(mesh.faces)
-        return vertices, faces
+            faces.append(np.column_stack([mesh.faces + start, np.where(mesh.face_normals().any(axis=1), index, ~index)]))
+            start += len(mesh.vertices)
+        return vertices, np.concatenate(faces).astype(np.int32)
 
     @classmethod
     def pack_smooth(cls, meshes, precision: str):
