@@ -10,7 +10,10 @@ float64, what every ray from the eye shares from error-free sums) on the device;
 stay around the scene's anchor (the kernel takes the eye relative to it); a view with the same
 camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
-So a moved camera uploads the camera only, whatever the number of shapes.
+So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
+with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the render kernel frames each
+where it tests it from its world entry (the same bits), and its meshes are shared vertices and faces
+whose vertices the per-view pass frames (engine/indexed.py).
 
 Caches (bounded, least recently used; ``clear()`` drops them all, with their device buffers):
 prepared scenes per (device, shapes tuple, precision), at most PREPARED_MAX of them and about
