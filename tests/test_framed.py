@@ -105,12 +105,14 @@ def test_cast_through_a_framed_scene_is_casts_through_a_copied_one(monkeypatch, 
     assert np.isfinite(results[0]["depth"]).sum() > 100  # rays that hit: what this compares
 
 
-@pytest.mark.parametrize("check", ["embree_watertight", "zero_area", "far_fp32", "far_fp64"])
+@pytest.mark.parametrize("check", ["embree_watertight", "zero_area", "far_fp32", "far_fp64", "smooth", "smooth_flat"])
 def test_the_mesh_tests_hold_for_framed_meshes(monkeypatch, check):
     """tests/test_mesh.py's watertightness (Embree's sphere and far grid: every ray from inside hits),
-    zero-area triangles (never hit, no NaN) and oracle tests at 3e7 from the origin, run on framed
-    scenes: their meshes' triangles assembled from shared vertices and faces (engine/indexed.py)."""
+    zero-area triangles (never hit, no NaN), oracle tests at 3e7 from the origin, and
+    tests/test_mesh_smooth.py's smooth shading, run on framed scenes: their meshes' triangles
+    assembled from shared vertices and faces, their shading normals per vertex (engine/indexed.py)."""
     import test_mesh
+    import test_mesh_smooth
 
     monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
     prepared.clear()
@@ -118,6 +120,10 @@ def test_the_mesh_tests_hold_for_framed_meshes(monkeypatch, check):
         test_mesh.test_embree_watertight_sphere_and_far_grid()
     elif check == "zero_area":
         test_mesh.test_zero_area_triangles_are_never_hit()
+    elif check == "smooth":  # vertex normals per shared vertex, interpolated as the float64 model says
+        test_mesh_smooth.test_smooth_shading_matches_the_float64_model()
+    elif check == "smooth_flat":
+        test_mesh_smooth.test_geometric_images_and_the_ground_stay_as_flat()
     else:
         test_mesh.test_render_agrees_with_the_oracle_far_from_the_origin(check[4:], 3e7)
     assert any(p.kinds["mesh"].indexed is not None for p in prepared._prepared.values())  # what this tests

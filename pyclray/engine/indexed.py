@@ -32,6 +32,10 @@ class IndexedEntries:
         self.faces_buffer = _buffer(ctx, self.faces)
         self.ids_buffer = _buffer(ctx, self.ids)
         self.vertices = _buffer(ctx, self.vertices_host, writable=True)
+        # smooth shading's vertex normals (Shape.pack_indexed_smooth), if a shape shades with them
+        smooth = cls.pack_indexed_smooth(shapes, prepared.precision)
+        self.smooth_host = None if smooth is None else aligned(smooth)
+        self.smooth = None if smooth is None else _buffer(ctx, self.smooth_host)
 
     def nbytes(self) -> int:
         return self.world_vertices.nbytes + self.faces.nbytes + self.ids.nbytes + self.vertices_host.nbytes

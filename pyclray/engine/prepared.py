@@ -170,7 +170,10 @@ class PreparedScene:
                 world, ids, primitives = world[order], ids[order], primitives[order]
                 smooth = None if smooth is None else smooth[order]
             self.kinds[t] = self._kind(t, world, ids, primitives, tuple(by_type[t][0]), self.bvh.order.get(t))
-            if smooth is not None:
+            indexed = self.kinds[t].indexed
+            if indexed is not None:  # its shading normals per shared vertex
+                self.kinds[t].smooth_host, self.kinds[t].smooth = indexed.smooth_host, indexed.smooth
+            elif smooth is not None:
                 self.kinds[t].smooth_host = aligned(smooth)
                 self.kinds[t].smooth = _buffer(ctx, self.kinds[t].smooth_host)
         # the types lit by their shapes' own normals (smooth meshes): the shaded image's variant

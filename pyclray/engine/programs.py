@@ -129,7 +129,8 @@ class Variant:
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
             lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
-                         + " ".join(f"P(__global const {c.smooth_struct.name}*, {c.type}_smooth)" for c in smooth))
+                         + " ".join(f"P(__global const {'real4' if self._mode(c) == 'INDEXED' else c.smooth_struct.name}*, "
+                                    f"{c.type}_smooth)" for c in smooth))
         return lines
 
     def _mode(self, shape) -> str:

@@ -161,6 +161,17 @@ inline void mesh_world_normal(Triangle* tri, const int4 face, __global const dou
     tri->b.w = (real)(n.y / length);
     tri->c.w = (real)(n.z / length);
 }
+#ifdef PYCLRAY_SMOOTH
+/* an indexed triangle's vertex normals (smooth shading: one per shared vertex, zero for a flat mesh's) */
+inline TriangleNormals mesh_smooth_of(const int4 face, __global const real4* normals)
+{
+    TriangleNormals out;
+    out.a = normals[face.x];
+    out.b = normals[face.y];
+    out.c = normals[face.z];
+    return out;
+}
+#endif
 #endif
 
 /* The unit world normal normalize(cross(b - a, c - a)), computed in float64 on the host. */
@@ -182,8 +193,7 @@ inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* r
 /* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,
  * (1 - u - v) n_a + u n_b + v n_c, normalized; (0, 0, 0) (the geometric normal lights) where the
  * mesh is flat (its normals are 0) or the interpolation is 0 (opposite vertex normals). */
-inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray,
-                                 __global const TriangleNormals* normals)
+inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, const TriangleNormals* normals)
 {
     realv u, v;
     mesh_barycentric(tri, ray, &u, &v);

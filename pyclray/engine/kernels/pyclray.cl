@@ -94,6 +94,11 @@
 #define PYCLRAY_WINNER_COPIED(type, k, name)
 #define PYCLRAY_WINNER_INDEXED(type, k, name) type##_world_normal(&name##_framed, type##_faces[k], type##_world_vertices);
 #define PYCLRAY_WINNER_OF(type, k, name) PYCLRAY_CAT(PYCLRAY_WINNER_, PYCLRAY_MODE_##type)(type, k, name)
+/* a smooth shape's shading normals (kernels/shading.h): its entry's, or an indexed triangle's vertices' */
+#define PYCLRAY_SMOOTH_FRAMED(type, k) type##_smooth[k]
+#define PYCLRAY_SMOOTH_COPIED(type, k) type##_smooth[k]
+#define PYCLRAY_SMOOTH_INDEXED(type, k) type##_smooth_of(type##_faces[k], type##_smooth)
+#define PYCLRAY_SMOOTH_AT(type, k) PYCLRAY_CAT(PYCLRAY_SMOOTH_, PYCLRAY_MODE_##type)(type, k)
 #define PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_CAT(PYCLRAY_ENTRIES_, PYCLRAY_MODE_##type)(P, Type, type)
 #define PYCLRAY_SHAPE_OF(Type, type, k, name) PYCLRAY_CAT(PYCLRAY_SHAPE_, PYCLRAY_MODE_##type)(Type, type, k, name)
 #define PYCLRAY_ID_OF(type, k) PYCLRAY_CAT(PYCLRAY_ID_, PYCLRAY_MODE_##type)(type, k)

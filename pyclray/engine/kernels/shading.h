@@ -50,7 +50,8 @@
     if (kind == KIND_##type)                                                          \
     {                                                                                 \
         PYCLRAY_SHAPE_OF(Type, type, k, smooth_shape)                                 \
-        shading_normal = v3_select(shading_normal, type##_shading_normal(smooth_shape, &ray, &type##_smooth[k]), mine); \
+        const PYCLRAY_CAT(Type, Normals) smooth_normals = PYCLRAY_SMOOTH_AT(type, k);    \
+        shading_normal = v3_select(shading_normal, type##_shading_normal(smooth_shape, &ray, &smooth_normals), mine); \
     }
 #define PYCLRAY_SMOOTH_NORMALS PYCLRAY_SMOOTH_TYPES(PYCLRAY_SMOOTH_OF)
 /* n_l: the normal that lights, facing the viewer: the shading normal where there is one, else n_s */

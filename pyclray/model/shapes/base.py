@@ -119,6 +119,11 @@ class Shape:
         """(world vertices (V, 4) float64, faces (F, 4) int32: vertex indices, primitive index or
         ~index where never hit), faces in pack_world's order."""
         raise NotImplementedError
+
+    @classmethod
+    def pack_indexed_smooth(cls, shapes, precision: str):
+        """An indexed type's (V, 4) vertex shading normals (pack_indexed's vertices), or None."""
+        return None
     # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None

@@ -259,6 +259,16 @@ class Mesh(Shape):
         return vertices, np.concatenate(faces).astype(np.int32)
 
     @classmethod
+    def pack_indexed_smooth(cls, meshes, precision: str):
+        """pack_smooth per shared vertex: the smooth meshes' vertex normals, zeros for the others."""
+        if not any(mesh.smooth for mesh in meshes):
+            return None
+        normals = [mesh.vertex_normals() if mesh.smooth else np.zeros((len(mesh.vertices), 3)) for mesh in meshes]
+        out = np.zeros((sum(len(n) for n in normals), 4), np.float64 if precision == "fp64" else np.float32)
+        out[:, :3] = np.concatenate(normals)
+        return out
+
+    @classmethod
     def pack_smooth(cls, meshes, precision: str):
         """Per triangle its vertex normals (vertex_normals: unit, world) where its mesh is smooth,
         zeros where it is not (the kernel then lights with the geometric normal); None without a
