@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
+from . import mesh_pack
 from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import axis_angle, rotation
@@ -246,27 +247,14 @@ class Mesh(Shape):
             start += len(a)
 
     indexed = True  # a framed scene's meshes: shared vertices and faces (Shape.indexed)
+
     @classmethod
     def pack_indexed(cls, meshes):
-        """Each mesh's world vertices; its faces offset to them, with their index (~index if zero-area)."""
-        vertices = np.zeros((sum(len(m.vertices) for m in meshes), 4))
-        faces, start = [], 0
-        for mesh in meshes:
-            vertices[start:start + len(mesh.vertices), :3] = mesh.world_vertices()
-            index = np.arange(len(mesh.faces), dtype=np.int32)
-            faces.append(np.column_stack([mesh.faces + start, np.where(mesh.face_normals().any(axis=1), index, ~index)]))
-            start += len(mesh.vertices)
-        return vertices, np.concatenate(faces).astype(np.int32)
+        return mesh_pack.indexed(meshes)
 
     @classmethod
     def pack_indexed_smooth(cls, meshes, precision: str):
-        """pack_smooth per shared vertex: the smooth meshes' vertex normals, zeros for the others."""
-        if not any(mesh.smooth for mesh in meshes):
-            return None
-        normals = [mesh.vertex_normals() if mesh.smooth else np.zeros((len(mesh.vertices), 3)) for mesh in meshes]
-        out = np.zeros((sum(len(n) for n in normals), 4), np.float64 if precision == "fp64" else np.float32)
-        out[:, :3] = np.concatenate(normals)
-        return out
+        return mesh_pack.indexed_smooth(meshes, precision)
 
     @classmethod
     def pack_smooth(cls, meshes, precision: str):
