@@ -48,8 +48,8 @@
 
 /* -- where a render reads its shapes -------------------------------------------------------------
  * A render's shapes in the eye's frame (origin the eye, the camera's axes: what the shape tests
- * take) come from one of two places, chosen per type (PYCLRAY_MODE_<type>, from the host:
- * Shape.frames_in_render):
+ * take) come from one of three places, chosen per type (PYCLRAY_MODE_<type>, from the host: in a
+ * framed scene, pyclray.engine.prepared's FRAMED_FROM, Shape.frames_in_render and Shape.indexed):
  * - FRAMED (devices with float64): each shape is framed where it is tested, from its float64 world
  *   entry, by its <type>_rebase (the per-view pass's function, compiled without contraction as
  *   there: the same bits) into a private copy; its id and its index within its shape come from
@@ -77,7 +77,7 @@
 #endif
 #define PYCLRAY_ID_COPIED(type, k) type##s[k].id
 #define PYCLRAY_PRIMITIVE_COPIED(type, k) type##s[k].primitive
-/* INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
+/* - INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
  * and the per-view pass's vertices (<type>_assemble), its id from its own array, its index in its
  * shape from its face; the winner's world normal from the float64 vertices (<type>_world_normal) */
 #define PYCLRAY_ENTRIES_INDEXED(P, Type, type)                                        \
