@@ -125,9 +125,10 @@ def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_
 
 @pytest.mark.parametrize("n", [5, 3000, 20000])  # the LBVH and the SAH tree
 def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
-    """The render kernel asks for a leaf's entries before it reads the leaf's refs where the program
-    has one bounded type (kernels/pyclray.cl: PYCLRAY_LEAF_ORDER_SHAPES): that needs refs[q] to be
-    entry q of the type's array, q * 16 + its kind; with two types it is not so."""
+    """The render kernel reads a leaf's entries without its refs where the program has one bounded
+    type (kernels/pyclray.cl: PYCLRAY_ONE_BOUNDED), and asks for them from memory where the
+    traversal first meets the leaf: that needs refs[q] to be entry q of the type's array, q * 16 +
+    its kind; with two types it is not so."""
     from pyclray.engine.scene_bvh import primitives_bvh
 
     bounds = bvh.widened(random_bounds(3, n))
@@ -140,8 +141,8 @@ def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
     def defines(types):
         return Variant("render", types, ("depth",), "fp32", 8, bvh=True).defines()
 
-    assert "#define PYCLRAY_LEAF_ORDER_SHAPES 1" in defines(("plane", "sphere"))
-    assert "#define PYCLRAY_LEAF_ORDER_SHAPES 1" not in defines(("box", "sphere"))
+    assert "#define PYCLRAY_ONE_BOUNDED KIND_sphere" in defines(("plane", "sphere"))
+    assert not any("PYCLRAY_ONE_BOUNDED" in line for line in defines(("box", "sphere")))
 
 
 def test_the_reference_build_is_a_valid_tree():

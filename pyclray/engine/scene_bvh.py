@@ -44,7 +44,7 @@ class SceneBVH:
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 16 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
         program's shape types). Each type's entries lie in leaf order, so with one bounded type
-        index = q (the render kernel's PYCLRAY_LEAF_ORDER_SHAPES relies on it)."""
+        index = q (the render kernel's PYCLRAY_ONE_BOUNDED relies on it)."""
         kinds = np.array([1 + list(shape_types).index(t) for t in self.types], np.int64)
         refs = self.leaf_index * 16 + kinds[self.leaf_type]
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
