@@ -503,14 +503,17 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
             PYCLRAY_CAST_LIMIT                                                      \
         }                                                                           \
     }
-/* a leaf's anchors and its shapes' world entries, asked for together (kernels/bvh.h): the shapes
- * of a type lie in leaf order in their arrays, so a leaf's entries of its first shape's type follow
- * that shape's */
+/* a child wide node's boxes, or a leaf's anchors and its shapes' world entries, asked for as the
+ * child is pushed (kernels/bvh.h): the shapes of a type lie in leaf order in their arrays, so a
+ * leaf's entries of its first shape's type follow that shape's */
 #define PYCLRAY_CAST_PREFETCH_KIND(Type, type)                                      \
     if (leaf_kind == KIND_##type) { CAST_PREFETCH(&type##_worlds[leaf_k], count * sizeof(Type##World)) }
-#define PYCLRAY_LEAF_PREFETCH(first, count)                                         \
-    {                                                                               \
-        CAST_PREFETCH(&anchors[first], (count) * sizeof(double4))                   \
+#define PYCLRAY_CHILD_PREFETCH(code)                                                \
+    if ((code) >= 0) {                                                              \
+        CAST_PREFETCH(&nodes[code], sizeof(WideNode))                               \
+    } else {                                                                        \
+        const int first = (~(code)) >> 3, count = (~(code)) & 7;                    \
+        CAST_PREFETCH(&anchors[first], count * sizeof(double4))                     \
         const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
     }
