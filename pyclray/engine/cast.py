@@ -40,8 +40,9 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
 
 
 def _cast_rays(origins, directions, tmax):
-    """(origins (M, 3), directions (N, 3), tmax, leading shape): float64 arrays of the rays as given,
-    flattened, checked; M is N, or 1 for one origin shared by every ray. The kernel normalizes the
+    """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
+    given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
+    (lo, hi) where a large batch's compiled scan found them, else None. The kernel normalizes the
     directions (scaled by their largest component first, so that neither a tiny nor a huge finite
     direction under- or overflows in the length). Each check is one pass over the arrays; the row
     of a failure is looked for only then."""
@@ -52,14 +53,21 @@ def _cast_rays(origins, directions, tmax):
         raise PyclrayError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
         )
-    for name, array in (("directions", directions), ("origins", origins)):
-        if not np.isfinite(array).all():
-            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
-            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
-    # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
-    flat = directions.reshape(-1, 3)
-    if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
-        _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
+    extent = None
+    if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, and the origins' box
+        from .cast_order import scan
+
+        fine, lo, hi = scan(origins.reshape(-1, 3), directions.reshape(-1, 3))
+        extent = (lo, hi) if fine else None
+    if extent is None:  # numpy's checks (and where one fails, its row)
+        for name, array in (("directions", directions), ("origins", origins)):
+            if not np.isfinite(array).all():
+                rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
+                _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
+        # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
+        flat = directions.reshape(-1, 3)
+        if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
+            _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
         tmax = np.full(1, np.inf)
     else:
@@ -75,7 +83,7 @@ def _cast_rays(origins, directions, tmax):
         if bad.any():
             raise PyclrayError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
         tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
-    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape
+    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape, extent
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
@@ -162,7 +170,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
-    origins, directions, tmax, shape = _cast_rays(origins, directions, tmax)
+    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax)
     count = len(directions)
     real = REAL[precision]
     shape_types = shape_kinds(scene)[0]
@@ -170,7 +178,10 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
-    lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
+    if extent is not None:
+        lo, hi = extent
+    else:
+        lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
     if not reach <= bound:  # the row, looked for only now
