@@ -4,7 +4,8 @@ of its origin and direction, and a counting sort of the codes, in one pass each 
 per 100,000 rays, as much as the kernel of occluded on the view ray set of bench/secondary.py).
 
 Imported by pyclray.engine.cast only for batches of at least its COHERENT_FROM rays (numba's import
-and its compiled code's load from numba's disk cache cost a first large cast about 0.3 s). Each ray
+and its compiled code's load from numba's disk cache cost a process's first large cast about 0.4 s;
+the first on a machine, which compiles, about 2 s). Each ray
 is traced on its own, so the order changes no bit of any result; only which rays run side by side.
 """
 from __future__ import annotations
