@@ -181,9 +181,48 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
         PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
         reach = open ? reach : SPLAT(-INFINITY);                                      \
     }
+/* A point light's shadow packet, traversed from the light (all its lanes share that origin, so
+ * kernels/bvh.h's box_entries takes each node's faces relative to it once for all lanes): lane i's
+ * box ray runs from the light along -dir_i over [0, limit_i], the segment the shape tests cover
+ * from the lane's own origin (they are still made from there: their exactness does not change).
+ * A point the shape test puts at s along dir_i from the origin o_i lies at limit_i - s from the
+ * light along -dir_i, up to the roundings of the light in the box frame, of o_i and of dir_i limit_i:
+ * a few eps of |light| + |o_i| (limit_i <= their sum) and of the direction's length, which the cone
+ * covers (t BVH_WIDEN >> eps t). The margin is the one of the origin-wise test, taken at the largest
+ * lane, plus that of the light: 2^-20 (|light|_1 + |light from the eye|_1 + max_i (|o_i|_1 + |o_i from
+ * the eye|_1)) + the eye's own (box_origin.w). */
+inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 light, const vec3v dir,
+                                     const vec3v origin_from_eye, const intv open)
+{
+    const real4 u = camera->u, v = camera->v, w = camera->w;
+    const real3 light_eye = (real3)((light.x * u.x + light.y * v.x) + light.z * w.x,
+                                    (light.x * u.y + light.y * v.y) + light.z * w.y,
+                                    (light.x * u.z + light.y * v.z) + light.z * w.z);
+    const float3 from = convert_float3(light_eye + convert_real3(camera->box_origin.xyz));
+    const vec3v o = origin_from_eye;
+    const realv lane = (v_abs(o.x) + v_abs(o.y)) + v_abs(o.z);  /* |o_i from the eye|_1 */
+    const real3 box_o = fabs(convert_real3(camera->box_origin.xyz));
+    /* |o_i|_1 <= |o_i from the eye|_1 + |box origin|_1: one lane_max for both terms */
+    const real lanes = 2 * lane_max(open ? lane : SPLAT(0)) + ((box_o.x + box_o.y) + box_o.z);
+    const float3 from_abs = fabs(from);
+    const real3 light_abs = fabs(light_eye);
+    const real margin = (real)0x1p-20 * ((((real)from_abs.x + from_abs.y) + from_abs.z)
+                                         + ((light_abs.x + light_abs.y) + light_abs.z) + lanes)
+                        + camera->box_origin.w;
+    /* rounded up to float: a margin never shrinks */
+    const float m = (float)margin;
+    return box_packet(v3_scale(world_from_frame(camera, dir), SPLAT(-1)),
+                      (float4)(from, (real)m < margin ? m * (1.0f + 0x1p-23f) : m));
+}
+
 #define PYCLRAY_SHADOW_SHAPES                                                         \
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
-    if (ANY(open)) {                                                                  \
+    if (point && ANY(open)) {                                                         \
+        const BoxPacket from_light = shadow_light_packet(camera, light.position, shadow.dir, \
+                                                         world_from_frame(camera, shadow.origin), open); \
+        realv reach = open ? limit : SPLAT(-INFINITY);                                \
+        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &from_light, reach, PYCLRAY_SHADOW_VISIT) \
+    } else if (ANY(open)) {                                                           \
         ShadowBoxes boxes;                                                            \
         boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
         const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
