@@ -177,9 +177,11 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
-        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
-        PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
-        reach = open ? reach : SPLAT(-INFINITY);                                      \
+        if (ANY(open)) { /* the rest of a leaf once every lane is closed: nothing to test */ \
+            const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;             \
+            PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                \
+            reach = open ? reach : SPLAT(-INFINITY);                                  \
+        }                                                                             \
     }
 /* A point light's shadow packet, traversed from the light (all its lanes share that origin, so
  * kernels/bvh.h's box_entries takes each node's faces relative to it once for all lanes): lane i's
