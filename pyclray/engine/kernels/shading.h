@@ -295,6 +295,7 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
             intv lit = hit && cos_l > 0;                                              \
             if (!ANY(lit)) continue;                                                  \
             PYCLRAY_SHADOW_RAY                                                        \
+            if (!ANY(lit)) continue;  /* all in shadow: nothing to add */            \
             const vec3v add = shade_light(albedo, specular, shininess, n_l, L, D, cos_l, E); \
             const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                      \
             color = v3_add(color, v3_select(zero, add, lit));                         \
