@@ -203,11 +203,13 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
     const float3 from = convert_float3(light_eye + convert_real3(camera->box_origin.xyz));
     const vec3v o = origin_from_eye;
     const realv lane = (v_abs(o.x) + v_abs(o.y)) + v_abs(o.z);  /* |o_i from the eye|_1 */
-    const real3 box_o = fabs(convert_real3(camera->box_origin.xyz));
+    const real3 box_origin = convert_real3(camera->box_origin.xyz);
+    /* |x| as the vector ?: (fabs of a vector is a call into PoCL's library on its CPU device) */
+    const real3 box_o = box_origin < (real3)(0) ? -box_origin : box_origin;
     /* |o_i|_1 <= |o_i from the eye|_1 + |box origin|_1: one lane_max for both terms */
     const real lanes = 2 * lane_max(open ? lane : SPLAT(0)) + ((box_o.x + box_o.y) + box_o.z);
-    const float3 from_abs = fabs(from);
-    const real3 light_abs = fabs(light_eye);
+    const float3 from_abs = from < (float3)(0.0f) ? -from : from;
+    const real3 light_abs = light_eye < (real3)(0) ? -light_eye : light_eye;
     const real margin = (real)0x1p-20 * ((((real)from_abs.x + from_abs.y) + from_abs.z)
                                          + ((light_abs.x + light_abs.y) + light_abs.z) + lanes)
                         + camera->box_origin.w;
