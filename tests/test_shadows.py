@@ -110,3 +110,19 @@ def test_point_light_shadows_through_the_bvh_equal_the_tested_every_shape(case, 
     dark = (tiles == 0).all(axis=-1).mean()
     # shadowed and lit pixels both; below the ground, all dark (the ground hides the light from all)
     assert dark == 1.0 if case == "below" else 0.02 < dark < 0.98
+
+
+@pytest.mark.parametrize("position, intensity", [((0.0, 1.5, -6.0), 20.0), ((3e3, 8e3, 2e3), 8e7)])
+def test_a_light_among_many_spheres_or_far_through_the_bvh(position, intensity):
+    """The light packet's box tests start at the light: inside the field's boxes (entries clamped to
+    0 there) or 1e4 away (its margin grows with |light|), the BVH drops no occluder: equal to the
+    image that tests every shape, with shadows in it."""
+    rng = np.random.default_rng(11)
+    shapes = [ground()]
+    shapes += [ball(rng.uniform([-6, 0.2, -12], [6, 3, 0]), float(rng.uniform(0.1, 0.6))) for _ in range(300)]
+    lights = ({"type": "point", "position": list(position), "intensity": intensity},)
+    scene = lit_scene(shapes, lights, ((0, 4, 6), (0, 1, -5)), size=64)
+    tiles = pyclray.render(scene, aovs=("shaded",), acceleration="tiles")["shaded"]
+    through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh")["shaded"]
+    np.testing.assert_array_equal(tiles, through_bvh)
+    assert 0.05 < (tiles == 0).all(axis=-1).mean() < 0.95
