@@ -164,7 +164,7 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         if entry is not None and entry[0] is scene.shapes and entry[1] == shape_types:
             _cast_prepared.move_to_end(key)
             return entry[2], entry[3], entry[4]
-    prepared = prepared_scene(ctx, scene, precision)
+    prepared = prepared_scene(ctx, scene, precision, instanced=False)  # each mesh its own triangles
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
     # the largest side of the bounded shapes' box (0 without any): the coarsest cells of the rays' order

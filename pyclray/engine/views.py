@@ -172,22 +172,22 @@ class ViewInputs:
             if prepared.bvh.types:
                 args += [prepared.nodes, prepared.refs]
             for kind in prepared.kinds.values():
-                args += [kind.frame, np.int32(kind.count)]
+                args += [kind.frame, *kind.shared, np.int32(kind.count)]
         else:
             for kind in prepared.kinds.values():
                 start, index = self.tiles[kind.name]
-                args += [kind.frame, start, index, (np.int32(kind.count),)]
+                args += [kind.frame, *kind.shared, start, index, (np.int32(kind.count),)]
         return args
 
 
 _views = PerObject(16)
 
 
-def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
+def render_inputs(ctx, scene: Scene, precision: str, acceleration: str, instanced: bool = True):
     """(prepared scene, view inputs) of a render of this scene."""
-    prepared = prepared_scene(ctx, scene, precision)
+    prepared = prepared_scene(ctx, scene, precision, instanced)
     per_scene = _views.get(scene, dict)
-    key = (ctx.device.int_ptr, precision, acceleration)
+    key = (ctx.device.int_ptr, precision, acceleration, instanced)
     inputs = per_scene.get(key)
     if inputs is None or inputs.prepared() is not prepared:
         inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)

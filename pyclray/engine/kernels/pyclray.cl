@@ -52,7 +52,8 @@
 #define PYCLRAY_SHAPE_ARGS(P, Type, type) \
     P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds) P(const int, n_##type##s)
 #else
-#define PYCLRAY_SHAPE_ARGS(P, Type, type) P(__global const Type*, type##s) P(const int, n_##type##s)
+#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
+    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #endif
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
@@ -77,11 +78,13 @@
 #ifdef PYCLRAY_SHADOWS
 /* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    P(__global const Type*, type##s) P(__global const int*, type##_tile_start)        \
+    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P)                    \
+    P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list) P(const int, n_##type##s)
 #else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    P(__global const Type*, type##s) P(__global const int*, type##_tile_start)        \
+    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P)                    \
+    P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list)
 #endif
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
@@ -119,7 +122,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_NEAREST(Type, type)                                                   \
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
         const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
-        const realv s = type##_hit(&type##s[k], &ray);                                \
+        const realv s = PYCLRAY_HIT_##type(&type##s[k], &ray, best);                  \
         PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
     }
 #define PYCLRAY_FIND_NEAREST                                                          \
@@ -129,7 +132,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 /* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
-        const realv s = type##_hit(&type##s[k], &ray);                                \
+        const realv s = PYCLRAY_HIT_##type(&type##s[k], &ray, best);                  \
         PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
     }
 #define PYCLRAY_VISIT(q)                                                              \
@@ -152,7 +155,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 
 #ifdef PYCLRAY_WINNER_NORMAL
-#define PYCLRAY_NORMAL_OF(type) normal = v3_select(normal, type##_normal(&type##s[k], &ray, camera), mine);
+#define PYCLRAY_NORMAL_OF(type) \
+    normal = v3_select(normal, PYCLRAY_NORMAL_##type(&type##s[k], &ray, camera, best, mine), mine);
 #define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #else
 #define PYCLRAY_NORMAL_OF(type)
@@ -160,7 +164,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 /* the winner's index within its shape (a batch's primitive; 0 for a single shape), -1 on a miss */
 #ifdef PYCLRAY_AOV_PRIMITIVE
-#define PYCLRAY_PRIMITIVE_OF(type) primitive = mine ? SPLAT_INT(type##s[k].primitive) : primitive;
+#define PYCLRAY_PRIMITIVE_OF(type) primitive = mine ? PYCLRAY_PRIMITIVE_##type(&type##s[k], &ray, best, mine) : primitive;
 #define PYCLRAY_PRIMITIVE_BEGIN intv primitive = SPLAT_INT(-1);
 #else
 #define PYCLRAY_PRIMITIVE_OF(type)
@@ -172,7 +176,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_BARYCENTRIC_OF(Type, type)                                            \
     if (kind == KIND_##type) {                                                        \
         realv u, v;                                                                   \
-        type##_barycentric(&type##s[k], &ray, &u, &v);                                \
+        PYCLRAY_BARYCENTRIC_##type(&type##s[k], &ray, best, mine, &u, &v);            \
         bary_u = mine ? u : bary_u;                                                   \
         bary_v = mine ? v : bary_v;                                                   \
     }

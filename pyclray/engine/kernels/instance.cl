@@ -1,0 +1,188 @@
+/* Instance (meshes that share their arrays, pyclray/model/shapes/instance.py): two levels.
+ *
+ * The scene's BVH holds each instance as one entry (its world box); its mesh's triangles and BVH are
+ * one copy in object space (instance_triangles, instance_nodes from the instance's root, triangles
+ * from its first, in that tree's leaf order; instance_primitives: each one's index in its mesh),
+ * shared by all its instances (engine/instances.py). A packet enters an instance through its
+ * per-view entry: the eye in object space (float64) and the frame's directions there (the rows of
+ * object_from_frame / k, k a power of two, rounded once). Each triangle it visits is framed on that
+ * object-space eye (its float64 vertices minus the eye, rounded once: the same bits for a vertex
+ * shared by two triangles, as a mesh's world triangles get from the per-view pass) and tested by
+ * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_frame d
+ * / k (exact: k is a power of two), whose length is at most 1, so that kernels/bvh.h's cone is at
+ * least as wide in the object's units as in the world's. The winner's triangle is found again after
+ * the traversal (the same test, limited to the winning distance, gives the same bits): its normal
+ * (the object normal through sign(det A) A^-T, normalized in float64), index and barycentrics. */
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+
+inline double instance_dot(const double4 row, const double3 x) { return (row.x * x.x + row.y * x.y) + row.z * x.z; }
+
+#ifdef PYCLRAY_REBASE
+
+/* an instance in a camera's frame: the same float64 operations, in the same order, as
+ * pyclray.model.shapes.instance.Instances._rebase (a test holds the two to the same bits) */
+inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_OUT Instance* out, const Frame* frame)
+{
+    /* the eye in object space: object_from_world (eye - translate) */
+    const double3 F = frame->origin - world->translate.xyz;
+    const double3 eye = (double3)(instance_dot(world->inverse0, F), instance_dot(world->inverse1, F),
+                                  instance_dot(world->inverse2, F));
+    out->eye = (double4)(eye, 0.0);
+    out->normal0 = world->normal0;
+    out->normal1 = world->normal1;
+    out->normal2 = world->normal2;
+    /* object_from_frame = object_from_world world_from_frame (the frame's axes are its columns), over k */
+    const double k = world->anchor.w;
+    out->m0 = (real4)((real)(instance_dot(world->inverse0, frame->u) / k), (real)(instance_dot(world->inverse0, frame->v) / k),
+                      (real)(instance_dot(world->inverse0, frame->w) / k), (real)k);
+    out->m1 = (real4)((real)(instance_dot(world->inverse1, frame->u) / k), (real)(instance_dot(world->inverse1, frame->v) / k),
+                      (real)(instance_dot(world->inverse1, frame->w) / k), 0);
+    out->m2 = (real4)((real)(instance_dot(world->inverse2, frame->u) / k), (real)(instance_dot(world->inverse2, frame->v) / k),
+                      (real)(instance_dot(world->inverse2, frame->w) / k), 0);
+    /* the eye from the tree's anchor, rounded to float, and a margin over that rounding (as the camera's) */
+    const float3 box = convert_float3(eye - world->anchor.xyz);
+    const double3 size = convert_double3(box < (float3)(0.0f) ? -box : box);
+    out->box = (float4)(box, (float)(0x1p-20 * ((size.x + size.y) + size.z)));
+    out->root = world->root;
+    out->first = world->first;
+}
+
+#else
+
+/* a shadow ray leaving a triangle never meets it again (as a mesh's); shadow rays see instances'
+ * meshes as their own triangles, though (engine/render.py), so this only completes the type */
+#define PYCLRAY_FLAT_instance 1
+
+/* a vertex framed on the object-space eye: the float64 difference rounded once */
+inline real4 instance_vertex(const double4 p, const double3 eye) { return (real4)(convert_real3(p.xyz - eye), (real)p.w); }
+
+/* the packet in object space: from the eye (where its triangles are framed), along object_from_frame d / k */
+inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
+{
+    const vec3v d = ray->dir;
+    const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
+    RayPacket r;
+    r.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    r.dir = v3((SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z,
+               (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z,
+               (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z);
+    r.a = v3_dot(r.dir, r.dir);
+#ifdef PYCLRAY_SHADOWS
+    r.from_eye = 1;
+#endif
+    return r;
+}
+
+/* Per lane the nearest hit s <= limit (along the packet's own directions; an exact tie with limit
+ * counts, so that the caller's lowest-id rule sees it), or MISS; which: its triangle's position in
+ * the tree's leaf order (the lowest on a tie), -1 where none. */
+inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
+                             __global const TriangleWorld* triangles, __global const BvhNode* nodes, intv* which)
+{
+    const real scale = inst->m0.w;
+    const RayPacket object = instance_ray(inst, ray);
+    const BoxPacket box = box_packet(object.dir, inst->box);
+    const double3 eye = inst->eye.xyz;
+    __global const BvhNode* tree = nodes + inst->root;
+    __global const TriangleWorld* own = triangles + inst->first;
+    realv nearest = limit * SPLAT(scale);  /* in the tree's units: exact */
+    intv found = SPLAT_INT(0), leaf = SPLAT_INT(-1);
+#define INSTANCE_VISIT(q)                                                                             \
+    {                                                                                                 \
+        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
+                                    instance_vertex(own[q].c, eye), &object);                         \
+        const intv take = s < nearest || (s == nearest && s < MISS && (!found || SPLAT_INT(q) < leaf)); \
+        if (ANY(take)) {                                                                              \
+            nearest = take ? s : nearest;                                                             \
+            leaf = take ? SPLAT_INT(q) : leaf;                                                        \
+            found = found || take;                                                                    \
+        }                                                                                             \
+    }
+    PYCLRAY_TRAVERSE_PACKET(tree, box, nearest, INSTANCE_VISIT)
+#undef INSTANCE_VISIT
+    *which = leaf;
+    return found ? nearest / SPLAT(scale) : SPLAT(MISS);
+}
+
+inline realv instance_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
+                          __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+{
+    intv which;
+    return instance_search(inst, ray, limit, triangles, nodes, &which);
+}
+
+/* the winning triangle of the lanes this instance won (at distance best), -1 in the others */
+inline intv instance_winner(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
+                            __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+{
+    intv which;
+    instance_search(inst, ray, mine ? best : SPLAT(-INFINITY), triangles, nodes, &which);
+    return mine ? which : SPLAT_INT(-1);
+}
+
+/* each distinct winning triangle q once (the largest first), with the lanes it won */
+#define INSTANCE_EACH_WINNER(which, ...)                                                              \
+    {                                                                                                 \
+        intv pending = which;                                                                         \
+        for (int q = (int)lanes_max_int(pending); q >= 0; q = (int)lanes_max_int(pending)) {          \
+            const intv lanes = pending == SPLAT_INT(q);                                               \
+            __VA_ARGS__                                                                               \
+            pending = lanes ? SPLAT_INT(-1) : pending;                                                \
+        }                                                                                             \
+    }
+
+/* the unit world normal: the object normal through the normal matrix sign(det A) A^-T, in float64 */
+inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
+                             __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+{
+    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
+    vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        const double3 n = (double3)(t->a.w, t->b.w, t->c.w);
+        const double3 w = (double3)(instance_dot(inst->normal0, n), instance_dot(inst->normal1, n), instance_dot(inst->normal2, n));
+        const real3 unit = convert_real3(w / sqrt((w.x * w.x + w.y * w.y) + w.z * w.z));
+        normal = v3_select(normal, v3(SPLAT(unit.x), SPLAT(unit.y), SPLAT(unit.z)), lanes);
+    })
+    return normal;
+}
+
+/* the winning triangle's index in its mesh */
+inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
+                               __global const TriangleWorld* triangles, __global const BvhNode* nodes,
+                               __global const int* primitives)
+{
+    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
+    intv primitive = SPLAT_INT(-1);
+    INSTANCE_EACH_WINNER(which, { primitive = lanes ? SPLAT_INT(primitives[inst->first + q]) : primitive; })
+    return primitive;
+}
+
+/* the winning triangle's barycentrics, from its test in object space (an affine map keeps them) */
+inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
+                                 __global const TriangleWorld* triangles, __global const BvhNode* nodes, realv* u, realv* v)
+{
+    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
+    const RayPacket object = instance_ray(inst, ray);
+    const double3 eye = inst->eye.xyz;
+    *u = SPLAT(0);
+    *v = SPLAT(0);
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        realv tu, tv;
+        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &tu, &tv);
+        *u = lanes ? tu : *u;
+        *v = lanes ? tv : *v;
+    })
+}
+
+/* how kernels/pyclray.cl calls an instance's functions: with the shared arrays and the lanes' best */
+#define PYCLRAY_HIT_instance(shape, ray, limit) instance_hit(shape, ray, limit, instance_triangles, instance_nodes)
+#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+    instance_normal(shape, ray, best, mine, instance_triangles, instance_nodes)
+#define PYCLRAY_PRIMITIVE_instance(shape, ray, best, mine) \
+    instance_primitive(shape, ray, best, mine, instance_triangles, instance_nodes, instance_primitives)
+#define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
+    instance_barycentric(shape, ray, best, mine, instance_triangles, instance_nodes, u, v)
+
+#endif
