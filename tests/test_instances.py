@@ -1,0 +1,161 @@
+"""Mesh instances (model/shapes/instance.py, engine/instances.py, kernels/instance.cl): meshes that
+share their arrays render as one copy of the triangles and one BVH in object space plus a transform
+per instance. Each test says why it can fail: a wrong inverse, normal matrix or box unit shows as
+depth, normal, id or primitive off the float64 oracle (within the one error model), or as images
+that differ from the same meshes flattened (copies of the arrays: no instancing)."""
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.instances import instance_bytes
+from pyclray.engine.prepared import prepared_scene
+from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
+from pyclray.reference import oracle
+
+from oracle_checks import assert_agrees_with_oracle, judge
+
+AOVS = ("depth", "normal", "id", "primitive", "barycentric")
+
+
+def need(precision):
+    if precision == "fp64" and not has_fp64(context_for().device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+def field(offset=0.0, count=4):
+    """A perturbed sphere placed count x count times around offset: rotations, non-uniform scale
+    and mirroring (a negative scale turns the winding, so the normal), on a floor grid."""
+    rng = np.random.default_rng(7)
+    v, f = perturbed_sphere(10, 14, 0.8, 0.25, rng)
+    base = pyclray.Mesh(v, f)
+    shift = np.array([offset, -0.5 * offset, 0.25 * offset])
+    shapes = []
+    for i in range(count):
+        for j in range(count):
+            scale = [(1.0, 1.0, 1.0), (1.3, 0.6, 0.9), (-1.0, 1.0, 1.0), (0.5, 0.5, 0.5)][(i + j) % 4]
+            shapes.append(base.placed(scale=scale, axis=tuple(rng.normal(size=3)), angle=float(rng.uniform(0, 360)),
+                                      translate=tuple(shift + [2.2 * (i - count / 2 + 0.5), 0.8, 2.2 * (j - count / 2 + 0.5)])))
+    v, f = grid(6, 6, 12.0)
+    shapes.append(pyclray.Mesh(v, f, translate=tuple(shift)))
+    camera = pyclray.Camera(tuple(shift + [0.0, 6.0, 9.0]), tuple(shift + [0.0, 0.5, 0.0]))
+    return pyclray.Scene(camera, pyclray.Image(64, 48), tuple(shapes))
+
+
+def flattened(scene):
+    """The same scene with each mesh's arrays copied: nothing shared, no instances."""
+    shapes = tuple(pyclray.Mesh(np.array(s.vertices), np.array(s.faces), scale=s.scale, axis=s.axis, angle=s.angle,
+                                translate=s.translate, name=s.name) for s in scene.shapes)
+    return pyclray.Scene(scene.camera, scene.image, shapes)
+
+
+def test_shared_meshes_are_packed_once():
+    """Sixteen placements of one mesh: one instance entry each, the triangles and the BVH once
+    (the floor, alone, stays triangles), and no shared copy in the flattened scene."""
+    scene = field()
+    prepared = prepared_scene(context_for(), scene, "fp32")
+    kind = prepared.kinds["instance"]
+    mesh = scene.shapes[0]
+    assert kind.count == 16 and len(kind.shared_host[0]) == len(mesh.faces)
+    assert sorted(kind.shared_host[2]) == list(range(len(mesh.faces)))  # each triangle once, by its index
+    assert set(kind.world["root"]) == {0} and set(kind.world["first"]) == {0}
+    assert prepared.kinds["mesh"].count == len(scene.shapes[-1].faces)
+    assert "instance" not in prepared_scene(context_for(), flattened(scene), "fp32").kinds
+
+
+def test_bytes_per_instance():
+    """Each instance costs at most 1 KB of its own (world entry, per-view entry, its share of the
+    top-level tree), whatever its mesh's size; the mesh is paid for once."""
+    scene = field(count=10)
+    cost = instance_bytes(prepared_scene(context_for(), scene, "fp32"))
+    assert cost["instances"] == 100 and cost["bytes_per_instance"] <= 1024
+    assert cost["shared_bytes"] < 200 * len(scene.shapes[0].faces)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("offset", [0.0, 1e6])
+def test_instances_agree_with_the_oracle(precision, offset):
+    """Depth and normal within the error model (the instance's direction rounding, a few eps of
+    the direction, is far inside its K eps (t + L)), ids and primitives right wherever judged,
+    barycentrics as the flattened meshes' within float rounding, near the origin and 1e6 away."""
+    need(precision)
+    scene = field(offset)
+    frame = pyclray.render(scene, aovs=AOVS, precision=precision, acceleration="bvh")
+    origins, directions = oracle.camera_rays(scene)
+    origins, directions = origins.reshape(-1, 3), directions.reshape(-1, 3)
+    result = {k: frame[k].reshape(len(directions), *frame[k].shape[2:]) for k in ("depth", "normal", "id")}
+    truth, _, judged, _, _, _ = judge(scene, origins, directions, result, precision, scene.camera.eye)
+    assert_agrees_with_oracle(scene, origins, directions, result, precision, reference_point=scene.camera.eye)
+    primitive = frame["primitive"].reshape(-1)
+    expected = np.full(len(directions), -1)
+    for index, shape in enumerate(scene.shapes):
+        mine = truth["id"] == index
+        expected[mine] = shape.oracle_hits(origins[mine], directions[mine])[1]
+    assert np.all(primitive[judged] == expected[judged])
+    assert np.all(primitive[frame["id"].reshape(-1) < 0] == -1)
+    assert (frame["id"] < 16).sum() > 0.3 * frame["id"].size  # the instances are most of the image
+    flat = pyclray.render(flattened(scene), aovs=AOVS, precision=precision, acceleration="bvh")
+    same = (flat["primitive"] == frame["primitive"]) & (frame["id"] >= 0)
+    eps = np.finfo(np.float32 if precision == "fp32" else np.float64).eps
+    # (u, v) of the same triangle: the vertices framed in object space instead of world space; the
+    # flattened meshes' world vertices carry float64 rounding of their coordinates' size (offset),
+    # about 2^-53 offset / (a triangle's size, > 0.01 here) in (u, v)
+    tolerance = 1e4 * eps + 100 * 2.0**-53 * offset / 0.01
+    assert np.abs(flat["barycentric"][same] - frame["barycentric"][same]).max() < tolerance
+
+
+@pytest.mark.parametrize("acceleration", ["bvh", "tiles"])
+def test_same_images_as_the_flattened_meshes(acceleration):
+    """Through the top-level BVH or tile lists, the instanced scene's ids and primitives are the
+    flattened scene's but where either answer is right (a ray within rounding of a shared edge or
+    a silhouette: the oracle's judge explains it), depth within the error model."""
+    scene = field()
+    frame = pyclray.render(scene, aovs=AOVS, acceleration=acceleration)
+    flat = pyclray.render(flattened(scene), aovs=AOVS, acceleration=acceleration)
+    origins, directions = oracle.camera_rays(scene)
+    result = {k: frame[k].reshape(-1, *frame[k].shape[2:]) for k in ("depth", "normal", "id")}
+    _, _, judged, _, depth_tolerance, _ = judge(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), result, "fp32",
+                                                scene.camera.eye)
+    assert np.array_equal(frame["id"].reshape(-1)[judged], flat["id"].reshape(-1)[judged])
+    assert np.array_equal(frame["primitive"].reshape(-1)[judged], flat["primitive"].reshape(-1)[judged])
+    error = np.abs(frame["depth"].reshape(-1)[judged].astype(np.float64) - flat["depth"].reshape(-1)[judged])
+    assert (error <= 2 * depth_tolerance[judged]).all()  # each within the tolerance of the truth
+
+
+def test_cast_and_occluded_through_instances():
+    """cast and occluded on an instanced scene (each mesh's own triangles there): the oracle's
+    hits, and a ray stopped short of its hit is not occluded."""
+    scene = field()
+    rng = np.random.default_rng(2)
+    origins = scene.camera.eye + rng.normal(size=(1500, 3)) * 0.5
+    aim = rng.normal(size=(1500, 3)) * 2.0
+    result = pyclray.cast(scene, origins, aim - origins)
+    assert_agrees_with_oracle(scene, origins, aim - origins, result, "fp32")
+    hit = np.isfinite(result["depth"])
+    assert pyclray.occluded(scene, origins, aim - origins)[hit].all()
+    assert not pyclray.occluded(scene, origins[hit], (aim - origins)[hit], tmax=0.5 * result["depth"][hit]).any()
+
+
+def test_host_and_device_rebase_agree():
+    """The per-view entries of instances from the host (Instances._rebase) and from the device
+    (kernels/instance.cl's instance_rebase) are the same bits."""
+    from pyclray.engine.programs import Variant, kernels_for
+    import pyopencl as cl
+
+    ctx = context_for()
+    if not has_fp64(ctx.device):
+        pytest.skip("device lacks cl_khr_fp64")
+    prepared = prepared_scene(ctx, field(1e6), "fp32")
+    kind = prepared.kinds["instance"]
+    eye, rows = np.array([1e6 + 0.3, -5e5 + 6.1, 2.5e5 + 9.7]), pyclray.Camera((0, 6, 9), (0, 0.5, 0)).basis()
+    host = kind.cls.rebase(kind.world, eye, rows, "fp32", kind.ids, kind.primitives)
+    kernels = kernels_for(ctx, Variant("rebase", prepared.types, (), "fp32"))
+    world = cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=kind.world)
+    out = np.zeros_like(host)
+    out_buffer = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=out)
+    frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
+    kernels["rebase_instance"](ctx.queue, (kind.count,), None, world, out_buffer, np.int32(kind.count), *frame)
+    cl.enqueue_copy(ctx.queue, out, out_buffer)
+    out["id"], out["primitive"] = host["id"], host["primitive"]
+    for name in host.dtype.names:  # field by field (the device may leave the struct's padding as it likes)
+        assert out[name].tobytes() == host[name].tobytes(), name
