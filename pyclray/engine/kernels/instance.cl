@@ -10,9 +10,9 @@
  * shared by two triangles, as a mesh's world triangles get from the per-view pass) and tested by
  * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_frame d
  * / k (exact: k is a power of two), whose length is at most 1, so that kernels/bvh.h's cone is at
- * least as wide in the object's units as in the world's. The winner's triangle is found again after
- * the traversal (the same test, limited to the winning distance, gives the same bits): its normal
- * (the object normal through sign(det A) A^-T, normalized in float64), index and barycentrics. */
+ * least as wide in the object's units as in the world's. Each lane's nearest triangle is kept with
+ * its hit (kernels/pyclray.cl's best_sub): the winners' normals (the object normal through
+ * sign(det A) A^-T, normalized in float64), indices and barycentrics come from it. */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
 inline double instance_dot(const double4 row, const double3 x) { return (row.x * x.x + row.y * x.y) + row.z * x.z; }
@@ -104,22 +104,6 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
     return found ? nearest / SPLAT(scale) : SPLAT(MISS);
 }
 
-inline realv instance_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
-                          __global const TriangleWorld* triangles, __global const BvhNode* nodes)
-{
-    intv which;
-    return instance_search(inst, ray, limit, triangles, nodes, &which);
-}
-
-/* the winning triangle of the lanes this instance won (at distance best), -1 in the others */
-inline intv instance_winner(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
-                            __global const TriangleWorld* triangles, __global const BvhNode* nodes)
-{
-    intv which;
-    instance_search(inst, ray, mine ? best : SPLAT(-INFINITY), triangles, nodes, &which);
-    return mine ? which : SPLAT_INT(-1);
-}
-
 /* each distinct winning triangle q once (the largest first), with the lanes it won */
 #define INSTANCE_EACH_WINNER(which, ...)                                                              \
     {                                                                                                 \
@@ -132,10 +116,8 @@ inline intv instance_winner(SHAPE_SPACE const Instance* inst, const RayPacket* r
     }
 
 /* the unit world normal: the object normal through the normal matrix sign(det A) A^-T, in float64 */
-inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
-                             __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which, __global const TriangleWorld* triangles)
 {
-    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
     vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     INSTANCE_EACH_WINNER(which, {
         __global const TriangleWorld* t = triangles + inst->first + q;
@@ -148,21 +130,17 @@ inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const RayPacket* 
 }
 
 /* the winning triangle's index in its mesh */
-inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
-                               __global const TriangleWorld* triangles, __global const BvhNode* nodes,
-                               __global const int* primitives)
+inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const intv which, __global const int* primitives)
 {
-    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
     intv primitive = SPLAT_INT(-1);
     INSTANCE_EACH_WINNER(which, { primitive = lanes ? SPLAT_INT(primitives[inst->first + q]) : primitive; })
     return primitive;
 }
 
 /* the winning triangle's barycentrics, from its test in object space (an affine map keeps them) */
-inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv best, const intv mine,
-                                 __global const TriangleWorld* triangles, __global const BvhNode* nodes, realv* u, realv* v)
+inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const intv which,
+                                 __global const TriangleWorld* triangles, realv* u, realv* v)
 {
-    const intv which = instance_winner(inst, ray, best, mine, triangles, nodes);
     const RayPacket object = instance_ray(inst, ray);
     const double3 eye = inst->eye.xyz;
     *u = SPLAT(0);
@@ -176,13 +154,16 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
     })
 }
 
-/* how kernels/pyclray.cl calls an instance's functions: with the shared arrays and the lanes' best */
-#define PYCLRAY_HIT_instance(shape, ray, limit) instance_hit(shape, ray, limit, instance_triangles, instance_nodes)
+/* how kernels/pyclray.cl calls an instance's functions: with the shared arrays, the lanes' best so
+ * far, and for the winners the triangle each lane's hit was on (best_sub, kept from hit_sub) */
+#define PYCLRAY_SUBPRIMITIVES 1
+#define PYCLRAY_HIT_instance(shape, ray, limit) \
+    instance_search(shape, ray, limit, instance_triangles, instance_nodes, &hit_sub)
 #define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
-    instance_normal(shape, ray, best, mine, instance_triangles, instance_nodes)
+    instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles)
 #define PYCLRAY_PRIMITIVE_instance(shape, ray, best, mine) \
-    instance_primitive(shape, ray, best, mine, instance_triangles, instance_nodes, instance_primitives)
+    instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_primitives)
 #define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
-    instance_barycentric(shape, ray, best, mine, instance_triangles, instance_nodes, u, v)
+    instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, u, v)
 
 #endif

@@ -101,6 +101,16 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
  * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
  * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
+/* A type whose hit also says which of its own primitives each lane hit (mesh instances: the
+ * triangle; its kernel file defines PYCLRAY_SUBPRIMITIVES) writes it to hit_sub; the winner's is
+ * kept in best_sub, for the winners' normals, primitives and barycentrics. */
+#ifdef PYCLRAY_SUBPRIMITIVES
+#define PYCLRAY_SUB_BEGIN intv best_sub = SPLAT_INT(-1), hit_sub = SPLAT_INT(-1);
+#define PYCLRAY_KEEP_SUB(nearer) best_sub = (nearer) ? hit_sub : best_sub;
+#else
+#define PYCLRAY_SUB_BEGIN
+#define PYCLRAY_KEEP_SUB(nearer)
+#endif
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
@@ -110,14 +120,16 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
             best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
+            PYCLRAY_KEEP_SUB(nearer)                                                  \
         }                                                                             \
     }
 #define PYCLRAY_BEST                                                                  \
     realv best = SPLAT(MISS);                                                         \
-    intv best_id = SPLAT_INT(-1), best_key = SPLAT_INT(0);
+    intv best_id = SPLAT_INT(-1), best_key = SPLAT_INT(0);                            \
+    PYCLRAY_SUB_BEGIN
 #else
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k) best = v_min(s, best);
-#define PYCLRAY_BEST realv best = SPLAT(MISS);
+#define PYCLRAY_BEST realv best = SPLAT(MISS); PYCLRAY_SUB_BEGIN
 #endif
 #define PYCLRAY_NEAREST(Type, type)                                                   \
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \

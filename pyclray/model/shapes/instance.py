@@ -112,6 +112,7 @@ class Instances(Shape):
         from ..layout import layout
 
         out = np.zeros(len(shapes), dtype=layout(cls.world, "fp64").dtype)
+        boxes: dict = {}  # each shared mesh's object box once
         for k, mesh in enumerate(shapes):
             m = mesh.transform()
             a = m[:3, :3]
@@ -121,7 +122,10 @@ class Instances(Shape):
                 out[f"inverse{r}"][k, :3] = inverse[r]
                 out[f"normal{r}"][k, :3] = normal[r]
             out["translate"][k, :3] = m[:3, 3]
-            lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+            key = shared_key(mesh)
+            if key not in boxes:
+                boxes[key] = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+            lo, hi = boxes[key]
             out["lo"][k, :3], out["hi"][k, :3] = lo, hi
             out["anchor"][k, :3] = 0.5 * (lo + hi)
             # k: a power of two at least the largest |object_from_world d| of a unit d (the Frobenius
