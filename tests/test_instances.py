@@ -122,18 +122,26 @@ def test_same_images_as_the_flattened_meshes(acceleration):
     assert (error <= 2 * depth_tolerance[judged]).all()  # each within the tolerance of the truth
 
 
-def test_cast_and_occluded_through_instances():
-    """cast and occluded on an instanced scene (each mesh's own triangles there): the oracle's
-    hits, and a ray stopped short of its hit is not occluded."""
-    scene = field()
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("offset", [0.0, 1e6])
+def test_cast_and_occluded_through_instances(precision, offset):
+    """cast and occluded enter the instances too (each ray framed on its own origin in object
+    space): the oracle's hits within the error model, the flattened meshes' ids and occlusion,
+    and a ray stopped short of its hit is not occluded."""
+    need(precision)
+    scene = field(offset)
+    assert "instance" in prepared_scene(context_for(), scene, precision).types
     rng = np.random.default_rng(2)
-    origins = scene.camera.eye + rng.normal(size=(1500, 3)) * 0.5
-    aim = rng.normal(size=(1500, 3)) * 2.0
-    result = pyclray.cast(scene, origins, aim - origins)
-    assert_agrees_with_oracle(scene, origins, aim - origins, result, "fp32")
+    origins = np.array(scene.camera.eye) + rng.normal(size=(1500, 3)) * 0.5
+    aim = np.array(scene.camera.target) + rng.normal(size=(1500, 3)) * 3.0
+    result = pyclray.cast(scene, origins, aim - origins, precision=precision)
+    assert_agrees_with_oracle(scene, origins, aim - origins, result, precision)
+    flat = pyclray.cast(flattened(scene), origins, aim - origins, precision=precision)
+    assert np.array_equal(result["id"], flat["id"])
     hit = np.isfinite(result["depth"])
-    assert pyclray.occluded(scene, origins, aim - origins)[hit].all()
-    assert not pyclray.occluded(scene, origins[hit], (aim - origins)[hit], tmax=0.5 * result["depth"][hit]).any()
+    assert pyclray.occluded(scene, origins, aim - origins, precision=precision)[hit].all()
+    short = 0.5 * result["depth"][hit]
+    assert not pyclray.occluded(scene, origins[hit], (aim - origins)[hit], tmax=short, precision=precision).any()
 
 
 def test_host_and_device_rebase_agree():

@@ -64,7 +64,8 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     shadows = "shaded" in aovs and scene.shading.shadows
-    # mesh instances are traced by camera rays only: shadow rays see each instance's own triangles
+    # shadow rays do not enter mesh instances (their skip-self rule is per entry, an instance's is per
+    # triangle): a render with shadows sees each instance as its own triangles
     instanced = not shadows
     prepared = prepared_scene(ctx, scene, precision, instanced)
     check_renderable_once(scene, precision, prepared)

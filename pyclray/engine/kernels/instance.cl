@@ -17,10 +17,11 @@
 
 inline double instance_dot(const double4 row, const double3 x) { return (row.x * x.x + row.y * x.y) + row.z * x.z; }
 
-#ifdef PYCLRAY_REBASE
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* an instance in a camera's frame: the same float64 operations, in the same order, as
- * pyclray.model.shapes.instance.Instances._rebase (a test holds the two to the same bits) */
+ * pyclray.model.shapes.instance.Instances._rebase (a test holds the two to the same bits); in cast,
+ * on the ray's origin with the world's axes (kernels/cast.h) */
 inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_OUT Instance* out, const Frame* frame)
 {
     /* the eye in object space: object_from_world (eye - translate) */
@@ -32,13 +33,18 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
     out->normal1 = world->normal1;
     out->normal2 = world->normal2;
     /* object_from_frame = object_from_world world_from_frame (the frame's axes are its columns), over k */
+#ifdef PYCLRAY_CAST
+    const double3 u = (double3)(1, 0, 0), v = (double3)(0, 1, 0), w = (double3)(0, 0, 1);
+#else
+    const double3 u = frame->u, v = frame->v, w = frame->w;
+#endif
     const double k = world->anchor.w;
-    out->m0 = (real4)((real)(instance_dot(world->inverse0, frame->u) / k), (real)(instance_dot(world->inverse0, frame->v) / k),
-                      (real)(instance_dot(world->inverse0, frame->w) / k), (real)k);
-    out->m1 = (real4)((real)(instance_dot(world->inverse1, frame->u) / k), (real)(instance_dot(world->inverse1, frame->v) / k),
-                      (real)(instance_dot(world->inverse1, frame->w) / k), 0);
-    out->m2 = (real4)((real)(instance_dot(world->inverse2, frame->u) / k), (real)(instance_dot(world->inverse2, frame->v) / k),
-                      (real)(instance_dot(world->inverse2, frame->w) / k), 0);
+    out->m0 = (real4)((real)(instance_dot(world->inverse0, u) / k), (real)(instance_dot(world->inverse0, v) / k),
+                      (real)(instance_dot(world->inverse0, w) / k), (real)k);
+    out->m1 = (real4)((real)(instance_dot(world->inverse1, u) / k), (real)(instance_dot(world->inverse1, v) / k),
+                      (real)(instance_dot(world->inverse1, w) / k), 0);
+    out->m2 = (real4)((real)(instance_dot(world->inverse2, u) / k), (real)(instance_dot(world->inverse2, v) / k),
+                      (real)(instance_dot(world->inverse2, w) / k), 0);
     /* the eye from the tree's anchor, rounded to float, and a margin over that rounding (as the camera's) */
     const float3 box = convert_float3(eye - world->anchor.xyz);
     const double3 size = convert_double3(box < (float3)(0.0f) ? -box : box);
@@ -47,7 +53,9 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
     out->first = world->first;
 }
 
-#else
+#endif
+
+#ifndef PYCLRAY_REBASE
 
 /* a shadow ray leaving a triangle never meets it again (as a mesh's); shadow rays see instances'
  * meshes as their own triangles, though (engine/render.py), so this only completes the type */
@@ -154,6 +162,27 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
     })
 }
 
+#ifdef PYCLRAY_CAST
+/* cast's and occluded's one ray (LANES 1): its nearest hit in the instance; the winner's triangle is
+ * found again for its normal (the same search gives the same bits) */
+inline real instance_cast_hit(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
+                              __global const BvhNode* nodes)
+{
+    int which;
+    return instance_search(inst, ray, MISS, triangles, nodes, &which);
+}
+
+inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
+                                  __global const BvhNode* nodes)
+{
+    int which;
+    instance_search(inst, ray, MISS, triangles, nodes, &which);
+    return instance_normal(inst, which, triangles);
+}
+#define PYCLRAY_HIT_instance(shape, ray, limit) instance_cast_hit(shape, ray, instance_triangles, instance_nodes)
+#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+    instance_cast_normal(shape, ray, instance_triangles, instance_nodes)
+#else
 /* how kernels/pyclray.cl calls an instance's functions: with the shared arrays, the lanes' best so
  * far, and for the winners the triangle each lane's hit was on (best_sub, kept from hit_sub) */
 #define PYCLRAY_SUBPRIMITIVES 1
@@ -165,5 +194,7 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
     instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_primitives)
 #define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
     instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, u, v)
+
+#endif
 
 #endif

@@ -49,8 +49,9 @@
  * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray.
  * cast adds the float64 world entries, on which it frames each shape it tests (kernels/cast.h). */
 #ifdef PYCLRAY_CAST
-#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
-    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds) P(const int, n_##type##s)
+#define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
+    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds)    \
+    PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type) \
     P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
@@ -502,7 +503,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                      \
         PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
-        const real s = type##_hit(&framed, &moved);                                 \
+        const real s = PYCLRAY_HIT_##type(&framed, &moved, MISS);                   \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
     }
@@ -531,7 +532,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
         PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
-        const real s = type##_hit(&framed, &ray);                                   \
+        const real s = PYCLRAY_HIT_##type(&framed, &ray, MISS);                     \
         const double t = s < MISS ? (double)s * length : INFINITY;                  \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
@@ -635,7 +636,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_NORMAL(Type, type)                                             \
     if (best_kind == KIND_##type) {                                                 \
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        normal = type##_normal(&framed, &ray, camera);                              \
+        normal = PYCLRAY_NORMAL_##type(&framed, &ray, camera, MISS, 1);             \
     }
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */
