@@ -19,7 +19,7 @@ def pack_shared(cls, meshes, world) -> list[np.ndarray]:
     """The shared arrays of these instances (cls.shared's order: object-space triangles in each
     tree's leaf order, the trees' binary nodes around each mesh's anchor, and per triangle its index
     in its mesh), each distinct mesh once; writes each instance's root and first into world."""
-    from ..model.shapes.instance import shared_key
+    from ..model.shapes.mesh_sharing import shared_key
     from ..model.shapes.mesh import Mesh
 
     triangles, nodes, primitives = [], [], []

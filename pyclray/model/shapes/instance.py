@@ -27,31 +27,10 @@ import numpy as np
 from ..layout import Struct
 from .base import Shape, padded_bounds
 from .mesh import Mesh
+from .mesh_sharing import shared_key
 
 # the shared arrays the kernel takes after the instances' array: (name, OpenCL C element type)
 SHARED = (("triangles", "TriangleWorld"), ("nodes", "BvhNode"), ("primitives", "int"))
-
-
-def shared_key(mesh) -> tuple[int, int]:
-    """The identity of a mesh's triangles: meshes of the same arrays share one copy."""
-    return id(mesh.vertices), id(mesh.faces)
-
-
-def split_meshes(meshes, ids) -> dict:
-    """{'mesh': (meshes, ids), 'instance': (meshes, ids)}: the meshes whose vertices and faces
-    arrays another mesh of the scene shares (and which shade flat) become instances; the others
-    stay triangles of the world (one mesh alone costs less without a second level)."""
-    count: dict = {}
-    for mesh in meshes:
-        key = shared_key(mesh)
-        count[key] = count.get(key, 0) + 1
-    out: dict = {}
-    for mesh, i in zip(meshes, ids):
-        kind = "instance" if count[shared_key(mesh)] > 1 and not mesh.smooth else "mesh"
-        out.setdefault(kind, ([], []))
-        out[kind][0].append(mesh)
-        out[kind][1].append(i)
-    return out
 
 
 @dataclass(frozen=True, eq=False)

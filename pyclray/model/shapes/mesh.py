@@ -236,7 +236,7 @@ class Mesh(Shape):
     @classmethod
     def packed_as(cls, shapes, ids) -> dict:
         """Meshes that share their arrays with another are packed as instances (model/shapes/instance.py)."""
-        from .instance import split_meshes
+        from .mesh_sharing import split_meshes
 
         return split_meshes(shapes, ids)
 
