@@ -167,3 +167,52 @@ def test_host_and_device_rebase_agree():
     out["id"], out["primitive"] = host["id"], host["primitive"]
     for name in host.dtype.names:  # field by field (the device may leave the struct's padding as it likes)
         assert out[name].tobytes() == host[name].tobytes(), name
+
+
+def test_export_writes_shapegroup_and_instances_that_read_back_shared(tmp_path):
+    """pyclray export writes the shared bunny once (a shapegroup, one PLY) and an instance per
+    placement; Mitsuba's render of that file has pyclray's depths within twice the error model's
+    Mitsuba bound (its instances apply their float32 transforms) away from silhouettes and edges;
+    pyclray reads the file back with the 25 bunnies sharing one copy (instances again)."""
+    pytest.importorskip("mitsuba")
+    from conftest import SCENES
+    from pyclray.apps import cli
+    from pyclray.reference import error_model, mitsuba
+    from test_export import pixel_hits
+
+    scene = pyclray.load_scene(SCENES / "instanced.toml").with_size(40, 30)
+    path = tmp_path / "field.xml"
+    assert cli.main(["export", str(SCENES / "instanced.toml"), "-o", str(path), "--size", "40x30"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["field.group_bunny0.ply", "field.xml"]
+    text = path.read_text()
+    assert text.count('type="shapegroup"') == 1 and text.count('type="instance"') == 25
+    mi = mitsuba.import_mitsuba("scalar_rgb")
+
+    def hits(mi_scene, scene, origins, directions):  # Mitsuba's distances (its instances name no pyclray id)
+        t = np.full(len(origins), np.inf)
+        for k, (o, d) in enumerate(zip(origins, directions)):
+            si = mi_scene.ray_intersect(mi.Ray3f(mi.Point3f(*o), mi.Vector3f(*d)))
+            t[k] = si.t if si.is_valid() else np.inf
+        return t, None, np.where(np.isfinite(t), 0, -1)
+
+    origins, directions, t, _, found = pixel_hits(mi.load_file(str(path), optimize=False), scene, hits)
+    eye = np.array(scene.camera.eye)
+    points = origins + np.where(found >= 0, t, 0)[:, None] * directions
+    depth = np.where(found >= 0, np.linalg.norm(points - eye, axis=1), np.inf)
+    ours = pyclray.render(scene, aovs=("depth", "id"))
+    _, unit = oracle.camera_rays(scene)
+    unit = unit.reshape(-1, 3)
+    truth = oracle.trace(scene, np.broadcast_to(eye, unit.shape), unit, aovs=("depth", "normal", "id"))
+    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
+    bound, _ = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    mine = ours["depth"].reshape(-1).astype(np.float64)
+    apart = error_model.silhouettes(truth["id"], cos, bound, radius) | error_model.at_edges(
+        scene, np.broadcast_to(eye, unit.shape), unit, [(truth["id"], truth["depth"]), (ours["id"].reshape(-1), mine)],
+        2 * bound * cos)
+    both = ~apart & np.isfinite(depth) & np.isfinite(mine)
+    assert both.sum() > 500
+    assert (np.abs(depth[both] - mine[both]) <= 2 * bound[both]).all()
+    read = pyclray.load_scene(path)
+    prepared = prepared_scene(context_for(), read, "fp32")
+    assert prepared.kinds["instance"].count == 25 and len(prepared.kinds["instance"].shared_host[0]) == 5000
