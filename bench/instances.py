@@ -1,6 +1,7 @@
 """Mesh instances against Mitsuba 3's shapegroup/instance (issue 23's instancing target).
 
     python -m bench.instances [--count 10000] [--triangles 50000] [--size 512] [--rounds 3] [--block 3]
+                              [--no-mitsuba]
 
 One mesh of about --triangles triangles (a perturbed UV sphere) placed --count times on a square
 field (random turns and scales: each instance its own transform), seen from above at an angle,
@@ -12,6 +13,9 @@ each system renders once before its timed block (Mitsuba's JIT compiles its kern
 blocks rotate with a pause at each switch (bench.open3d_compare.blocks). Prints the medians (ms),
 the speed-up, pyclray's bytes per instance (engine/instances.py's instance_bytes) and its first
 render (the scene's build: packing, both levels' BVHs). The machine is shared: compare ratios.
+--no-mitsuba times pyclray alone: Mitsuba 3.9's llvm render of a shapegroup's instances grows faster
+than their number (measured here: 10 s for 1,000 instances, 130 s and 3.2 GB for 3,000; at 10,000
+its first render had not ended after 11 minutes and 18 GB, docs/benchmarks.md).
 """
 from __future__ import annotations
 
@@ -64,7 +68,7 @@ def mitsuba_scene(scene: pyclray.Scene):
     return mi, mi.load_dict(description, optimize=False)
 
 
-def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3):
+def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3, mitsuba=True):
     from pyclray.engine.device import context_for
     from pyclray.engine.instances import instance_bytes
     from pyclray.engine.prepared import prepared_scene
@@ -74,6 +78,12 @@ def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3):
     frame = pyclray.render(scene, aovs=AOVS)
     first = time.perf_counter() - start
     cost = instance_bytes(prepared_scene(context_for(), scene, "fp32"))
+    hit = float(np.mean(frame["id"] >= 0))
+    out = {"scene": f"{count:,} instances of a {len(scene.shapes[0].faces):,}-triangle mesh, {size}x{size}, "
+                    f"{hit:.0%} of the pixels hit", "first_render_s": first, "cost": cost}
+    if not mitsuba:
+        out["timed"] = blocks({"pyclray": lambda: pyclray.render(scene, aovs=AOVS)}, rounds, block)
+        return out
     mi, mi_scene = mitsuba_scene(scene)
 
     def theirs():
@@ -83,11 +93,9 @@ def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3):
     start = time.perf_counter()
     theirs()  # the JIT's first render compiles its kernel
     mitsuba_first = time.perf_counter() - start
-    timed = blocks({"pyclray": lambda: pyclray.render(scene, aovs=AOVS), "mitsuba": theirs}, rounds, block)
-    hit = float(np.mean(frame["id"] >= 0))
-    return {"scene": f"{count:,} instances of a {len(scene.shapes[0].faces):,}-triangle mesh, {size}x{size}, "
-                     f"{hit:.0%} of the pixels hit", "first_render_s": first, "mitsuba_first_render_s": mitsuba_first,
-            "cost": cost, "timed": timed}
+    out["timed"] = blocks({"pyclray": lambda: pyclray.render(scene, aovs=AOVS), "mitsuba": theirs}, rounds, block)
+    out["mitsuba_first_render_s"] = mitsuba_first
+    return out
 
 
 def main(argv=None):
@@ -97,12 +105,20 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--block", type=int, default=3)
+    parser.add_argument("--no-mitsuba", action="store_true", help="time pyclray alone")
     args = parser.parse_args(argv)
-    out = run(args.count, args.triangles, args.size, args.rounds, args.block)
-    ours, theirs = out["timed"]["pyclray"]["median"], out["timed"]["mitsuba"]["median"]
+    out = run(args.count, args.triangles, args.size, args.rounds, args.block, not args.no_mitsuba)
+    ours = out["timed"]["pyclray"]
     print(out["scene"])
-    print(f"render (depth, normal, id)  pyclray {ours:9.1f} ms  mitsuba llvm {theirs:9.1f} ms  speed-up {theirs / ours:5.2f}x")
-    print(f"first render (build)        pyclray {out['first_render_s']:9.2f} s   mitsuba llvm {out['mitsuba_first_render_s']:9.2f} s")
+    if args.no_mitsuba:
+        print(f"render (depth, normal, id)  pyclray {ours['median']:9.1f} ms (quartiles {ours['q1']:.1f}-{ours['q3']:.1f})")
+        print(f"first render (build)        pyclray {out['first_render_s']:9.2f} s")
+    else:
+        theirs = out["timed"]["mitsuba"]["median"]
+        print(f"render (depth, normal, id)  pyclray {ours['median']:9.1f} ms  mitsuba llvm {theirs:9.1f} ms  "
+              f"speed-up {theirs / ours['median']:5.2f}x")
+        print(f"first render (build)        pyclray {out['first_render_s']:9.2f} s   "
+              f"mitsuba llvm {out['mitsuba_first_render_s']:9.2f} s")
     cost = out["cost"]
     print(f"bytes per instance {cost['bytes_per_instance']:.0f} (own {cost['own_bytes_per_instance']}, top-level tree "
           f"{cost['tlas_bytes_per_instance']:.0f}); the shared mesh {cost['shared_bytes'] / 1e6:.1f} MB once")
