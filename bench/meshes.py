@@ -11,7 +11,9 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
 - 100,000 incoherent rays (random origins and directions in the mesh's bounds): pyclray.cast
   (depth, normal, id) against cast_rays;
 - the scene build: pyclray's first render after pyclray.clear_cache() (preparation: packing, the BVH,
-  the per-view pass) and Open3D's add_triangles + first cast (Embree builds lazily).
+  the per-view pass) and Open3D's add_triangles + first cast (Embree builds lazily);
+- memory: the bytes the prepared scene holds per triangle (PreparedScene.nbytes: vertices, faces or
+  triangle entries, ids, the BVH; issue 23's target <= 64), in the build's row.
 Prints a table of medians (ms) and the ratios. The machine is shared: compare ratios.
 """
 from __future__ import annotations
@@ -23,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 import pyclray
+from pyclray.engine.device import context_for
+from pyclray.engine.prepared import prepared_scene
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 
 from .open3d_compare import blocks
@@ -92,12 +96,13 @@ def run(bunny_path=None, rounds=3, block=5):
         start = time.perf_counter()
         pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
         ours_build = time.perf_counter() - start
+        held = prepared_scene(context_for(None), scene, "fp32").nbytes() / len(mesh.faces)
         rays = pinhole_rays(scene)
         start = time.perf_counter()
         o3d_scene = open3d_scene(mesh)
         o3d_scene.cast_rays(rays[:1])
         theirs_build = time.perf_counter() - start
-        rows.append((f"{label} ({len(mesh.faces):,} triangles): first render / build + first cast",
+        rows.append((f"{label} ({len(mesh.faces):,} triangles, {held:.1f} B/triangle): first render / build + first cast",
                      {"pyclray": {"median": ours_build * 1e3}, "open3d": {"median": theirs_build * 1e3}}))
         timed = blocks({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
                         "open3d": lambda: o3d_scene.cast_rays(rays)}, rounds, block)

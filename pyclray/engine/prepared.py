@@ -10,7 +10,10 @@ float64, what every ray from the eye shares from error-free sums) on the device;
 stay around the scene's anchor (the kernel takes the eye relative to it); a view with the same
 camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
-So a moved camera uploads the camera only, whatever the number of shapes.
+So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
+with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the render kernel frames each
+where it tests it from its world entry (the same bits), and its meshes are shared vertices and faces
+whose vertices the per-view pass frames (engine/indexed.py).
 
 Caches (bounded, least recently used; ``clear()`` drops them all, with their device buffers):
 prepared scenes per (device, shapes tuple, precision), at most PREPARED_MAX of them and about
@@ -32,8 +35,11 @@ import pyopencl as cl
 from ..model.scene import MAX_LENGTH, Scene
 from ..model.shapes import KINDS, REGISTRY
 from ..model.animation import derivation
+from ..model.shapes.base import entries
 from . import culling, instances, refit, shading
+from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64
+from .indexed import IndexedEntries
 from .programs import Variant, kernels_for
 from .request import render_lock
 from .scene_bvh import SceneBVH, primitives_bvh
@@ -62,43 +68,43 @@ class Kind:
 
     name: str
     cls: type
-    world: np.ndarray
+    stored_world: np.ndarray | None  # None for indexed entries: world packs them when asked (cast)
     ids: np.ndarray
     primitives: np.ndarray
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
-    frame: cl.Buffer  # the entries in the frame of the last view (the render kernel's shape array)
-    frame_host: np.ndarray  # the frame buffer's memory on a CPU device (its bytes, elsewhere)
+    # a framed scene's (devices with float64): its entries' ids and primitive indices, read by the
+    # render kernel, which frames each entry from its world entry where it tests it
+    ids_buffer: cl.Buffer | None
+    primitives_buffer: cl.Buffer | None
+    # elsewhere: the entries in the frame of the last view (the render kernel's shape array), and
+    # that buffer's memory on a CPU device (its bytes, elsewhere)
+    frame: cl.Buffer | None
+    frame_host: np.ndarray | None
     smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
     smooth_host: np.ndarray | None = None
     shared: tuple = ()  # the arrays its entries share (Shape.shared: mesh instances' triangles and BVHs)
     shared_host: tuple = ()
+    indexed: IndexedEntries | None = None  # a framed scene's triangles: shared vertices and faces
+    shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
+    order: np.ndarray | None = None
+
+    @property
+    def world(self) -> np.ndarray:
+        """The world entries (an indexed type's packed anew at each call: the scene keeps its vertices
+        and faces instead, and only cast asks)."""
+        if self.stored_world is not None:
+            return self.stored_world
+        world = self.cls.pack_world(self.shapes)
+        return world if self.order is None else world[self.order]
+
+    @property
+    def framed(self) -> bool:
+        """Whether the render kernel frames its entries where it tests them (no frame buffer)."""
+        return self.frame is None
 
     @property
     def count(self) -> int:
-        return len(self.world)
-
-
-ALIGNMENT = 128  # bytes: the kernels load a struct's double4 and float8 members with aligned vector loads
-
-
-def aligned(array: np.ndarray) -> np.ndarray:
-    """The array itself if contiguous and aligned to ALIGNMENT bytes, else an aligned copy."""
-    if array.flags.c_contiguous and array.ctypes.data % ALIGNMENT == 0:
-        return array
-    raw = np.empty(array.nbytes + ALIGNMENT, np.uint8)
-    start = -raw.ctypes.data % ALIGNMENT
-    raw[start:start + array.nbytes] = np.ascontiguousarray(array).reshape(-1).view(np.uint8)  # padding too
-    return raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
-
-
-def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
-    """A device buffer of this array: the array's own memory on a CPU device (no copy: the array
-    must be aligned, see aligned(), and live as long as the buffer), a copy elsewhere."""
-    mf = cl.mem_flags
-    access = mf.READ_WRITE if writable else mf.READ_ONLY
-    if ctx.device.type & cl.device_type.CPU:
-        return cl.Buffer(ctx.context, access | mf.USE_HOST_PTR, hostbuf=array)
-    return cl.Buffer(ctx.context, access | mf.COPY_HOST_PTR, hostbuf=array)
+        return len(self.ids)
 
 
 # Scenes of fewer entries than this rebase on the host: measured per moved view (bench/views.py's
@@ -107,6 +113,20 @@ def _buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
 # Below the threshold the difference is a tenth of a millisecond, and such a scene's first render
 # then needs no second program (the rebase's), which would add its build to a cold start.
 DEVICE_REBASE_FROM = 1024
+
+
+# Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
+# framed so; smaller ones keep the per-view copy. Measured (process CPU time of 256x256 renders of
+# depth, normal, id over a ground plane and bench/views.py's sphere field, the same camera and a new
+# one each call, PoCL on the 2 shared cores, load 3 to 4): framed against copied, at 100,000 spheres
+# 17.6-18.3 against 14.9-15.6 ms the same camera, 17.6-20.3 against 17.4-18.8 moved (framing computes at
+# each test the 32 bytes the copy holds per sphere); at 300,000 29.3 against 27.0 and 31.5 against
+# 31.9; at 1,000,000 68.8 against 69.8 and 69.5 against 77.5 (the copy's 32 MB no longer fit the
+# caches better than the world entries do), 63.7 bytes a sphere in all against 91.7. Meshes (kept as
+# shared vertices and faces when framed, engine/indexed.py; 512x512 depth, normal, id, primitive,
+# python -m bench.meshes's): the 80,000-triangle bunny 25.5-27.0 against 24.3-26.0 ms, the
+# 998,000-triangle sphere 93.3-96.4 against 95.1-98.4 ms, 61.2 bytes a triangle against 177.2.
+FRAMED_FROM = 524_288
 
 
 class PreparedScene:
@@ -146,7 +166,13 @@ class PreparedScene:
                     bounds[t] = cls.bounds_of(world)
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
-        # rebase on the device (float64) where it has float64 and the scene is large enough to pay
+        # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
+        # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
+        # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
+        framable = sum(len(worlds[t][0]) for t in self.types if KINDS[t].frames_in_render or KINDS[t].indexed)
+        self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
+        # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
+        # has float64 and the scene is large enough to pay, else on the host
         self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
@@ -155,8 +181,11 @@ class PreparedScene:
                 order = self.bvh.order[t]
                 world, ids, primitives = world[order], ids[order], primitives[order]
                 smooth = None if smooth is None else smooth[order]
-            self.kinds[t] = self._kind(t, world, ids, primitives)
-            if smooth is not None:
+            self.kinds[t] = self._kind(t, world, ids, primitives, tuple(by_type[t][0]), self.bvh.order.get(t))
+            indexed = self.kinds[t].indexed
+            if indexed is not None:  # its shading normals per shared vertex
+                self.kinds[t].smooth_host, self.kinds[t].smooth = indexed.smooth_host, indexed.smooth
+            elif smooth is not None:
                 self.kinds[t].smooth_host = aligned(smooth)
                 self.kinds[t].smooth = _buffer(ctx, self.kinds[t].smooth_host)
             if t in shared:
@@ -177,7 +206,10 @@ class PreparedScene:
             with np.errstate(over="ignore", invalid="ignore"):
                 self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
             self.nodes = _buffer(ctx, self._nodes_host, writable=True)
-            self._refs_host = aligned(self.bvh.refs(self.types))
+            # one bounded type: leaf position q is entry q of its array, which the kernel knows
+            # (PYCLRAY_ONE_BOUNDED): a placeholder instead of the refs
+            one = len(self.bvh.types) == 1
+            self._refs_host = aligned(np.zeros(1, np.int32) if one else self.bvh.refs(self.types))
             self.refs = _buffer(ctx, self._refs_host)
         with np.errstate(over="ignore", invalid="ignore"):
             self._materials_host = aligned(shading.pack_materials(shapes, precision))
@@ -201,20 +233,34 @@ class PreparedScene:
             return False
         return refit.update(self, shapes, changed)
 
-    def _kind(self, t, world, ids, primitives) -> Kind:
+    def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
         cls = KINDS[t]
+        if self.framed and cls.indexed:  # shared vertices and faces (engine/indexed.py)
+            indexed = IndexedEntries(self, cls, shapes, np.arange(len(world)) if order is None else order, ids)
+            return Kind(t, cls, None, ids, primitives, None, None, None, None, None, indexed=indexed, shapes=shapes,
+                        order=order)
+        world = aligned(world)
+        framed = self.framed and cls.frames_in_render
+        world_buffer = _buffer(self.ctx, world) if self.on_device or framed else None
+        if framed:
+            ids, primitives = aligned(np.ascontiguousarray(ids, np.int32)), aligned(np.ascontiguousarray(primitives, np.int32))
+            return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, ids), _buffer(self.ctx, primitives),
+                        None, None)
         frame = aligned(np.zeros(len(world), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
         frame["id"], frame["primitive"] = ids, primitives
-        world = aligned(world)
-        world_buffer = _buffer(self.ctx, world) if self.on_device else None
-        return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, frame, writable=True), frame)
+        return Kind(t, cls, world, ids, primitives, world_buffer, None, None, _buffer(self.ctx, frame, writable=True), frame)
 
     def nbytes(self) -> int:
         """The bytes this scene holds (host arrays shared with a CPU device counted once)."""
         total = self._materials_host.nbytes
         for kind in self.kinds.values():
-            total += kind.world.nbytes + kind.frame_host.nbytes
+            if kind.indexed is not None:
+                total += kind.indexed.nbytes()
+            elif kind.framed:
+                total += kind.world.nbytes + kind.ids.nbytes + kind.primitives.nbytes
+            else:
+                total += kind.world.nbytes + kind.frame_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
             total += sum(a.nbytes for a in kind.shared_host)
         if self.bvh.types:
@@ -255,15 +301,19 @@ class PreparedScene:
         eye = np.asarray(eye, np.float64)
         rows = np.asarray(rows, np.float64)
         key = (eye.tobytes(), rows.tobytes())
+        refit.flush_world(self)  # the world entries animation frames changed (framed types read them)
         if key == self.view_key:
             return
         queue = self.ctx.queue
         if self.on_device:
-            refit.flush_world(self)
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
-            if not kind.count:
+            if kind.indexed is not None:  # the vertices, on the device (framed scenes have float64)
+                kind.indexed.rebase(self, kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision)),
+                                    [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)])
+                continue
+            if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue
             if self.on_device and kind.count >= self.GROUP:
                 kernels[f"rebase_{kind.name}"](queue, *self._groups(kind.count), kind.world_buffer, kind.frame,

@@ -84,6 +84,9 @@ class Variant:
     shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
     smooth: tuple[str, ...] = ()  # with "shaded": the types with a shape lit by its own normals (a smooth mesh)
+    # render: each shape framed on the eye from its float64 world entry where it is tested (devices
+    # with float64), instead of read from the per-view pass's buffers (pyclray.engine.prepared)
+    framed: bool = False
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -114,6 +117,12 @@ class Variant:
             lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.kind == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")
+        if self.framed and self.kind == "render":
+            lines.append("#define PYCLRAY_FRAMED 1")
+        if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
+            lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
+        # where a render reads each type's shapes (kernels/pyclray.cl): framed where tested, or copied
+        lines += [f"#define PYCLRAY_MODE_{t} {self._mode(REGISTRY[t])}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
@@ -121,7 +130,8 @@ class Variant:
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
             lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
-                         + " ".join(f"P(__global const {c.smooth_struct.name}*, {c.type}_smooth)" for c in smooth))
+                         + " ".join(f"P(__global const {'real4' if self._mode(c) == 'INDEXED' else c.smooth_struct.name}*, "
+                                    f"{c.type}_smooth)" for c in smooth))
         return lines
 
     def _shape_calls(self) -> list[str]:
@@ -136,9 +146,16 @@ class Variant:
             if not cls.shared:
                 lines += [f"#define PYCLRAY_HIT_{t}(shape, ray, limit) {t}_hit(shape, ray)",
                           f"#define PYCLRAY_NORMAL_{t}(shape, ray, camera, best, mine) {t}_normal(shape, ray, camera)",
-                          f"#define PYCLRAY_PRIMITIVE_{t}(shape, ray, best, mine) SPLAT_INT((shape)->primitive)",
+                          f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
         return lines
+
+    def _mode(self, shape) -> str:
+        """Where a render reads a type's shapes (kernels/pyclray.cl): framed where tested from their
+        world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
+        if self.framed and self.kind == "render" and shape.indexed:
+            return "INDEXED"
+        return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
@@ -159,12 +176,16 @@ class Variant:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
-        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast else [])
+        framed = self.framed and self.kind == "render"
+        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
         parts += [_read("camera.h"), _read("bvh.h")] + ([_read("cast.h")] if cast else [])
+        if framed:  # each framed type's <type>_rebase (the per-view pass's, to the same bits), then its tests
+            parts += [FRAMING_BEGIN, _read("frame.h"), "#define PYCLRAY_REBASE 1"]
+            parts += [_read(name) for name in _kernel_files([s for s in shapes if s.frames_in_render])] + [FRAMING_END]
         parts += [_read(name) for name in _kernel_files(shapes)]
         if shading:  # materials, lights and shadows: only in the programs that shade
             parts.append(_read("shading.h"))
@@ -177,12 +198,23 @@ class Variant:
         parts = ["\n".join(["/* pyclray program variant */", "#pragma OPENCL EXTENSION cl_khr_fp64 : enable"] + self.defines())]
         structs = _unique([NODE] + [s.struct for s in shapes] + [s.world for s in shapes]
                           + [x for s in shapes for x in s.kernel_structs])
-        parts += [_read("common.h"), c_header(structs, self.precision), _read("rebase.cl")]
+        parts += [_read("common.h"), c_header(structs, self.precision), _read("rebase.cl"), _read("frame.h")]
         parts += [_read(name) for name in _kernel_files(shapes)] + [_read("rebase_kernels.cl")]
         return "\n".join(parts)
 
     def options(self) -> list[str]:
         return list(BUILD_OPTIONS)
+
+
+# A framed render compiles each shape file twice: its <type>_rebase first (PYCLRAY_REBASE selects that
+# part), then its tests. Both, and the rest of the program, without contraction of a * b + c into an
+# fma, as the per-view pass (kernels/rebase.cl): a shape framed where it is tested has the bits the
+# pass gives it. Measured on PoCL: with contraction back on (DEFAULT or ON) after the framing code,
+# the images differ from the pass's in a few pixels (tests/test_views.py: a device without float64).
+FRAMING_BEGIN = """#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+#define PYCLRAY_FRAME_OUT"""
+FRAMING_END = "#undef PYCLRAY_REBASE"
 
 
 def _unique(items) -> list:

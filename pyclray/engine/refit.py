@@ -30,7 +30,8 @@ def update(prepared, shapes: tuple, changed) -> bool:
     for i in indices:
         if i >= len(shapes) or i >= len(prepared.shapes) or shapes[i].type != prepared.shapes[i].type \
                 or shapes[i].primitive_count() != prepared.shapes[i].primitive_count() \
-                or prepared.kinds[shapes[i].type].smooth is not None:  # its world shading normals: packed anew
+                or prepared.kinds[shapes[i].type].smooth is not None \
+                or prepared.kinds[shapes[i].type].indexed is not None:  # its world shading normals, its vertices: packed anew
             return False
     if prepared._refit is None:
         prepared._refit = RefitState(prepared)
@@ -57,7 +58,7 @@ def update(prepared, shapes: tuple, changed) -> bool:
         kind = prepared.kinds[name]
         where, rows = np.concatenate(where), np.concatenate(rows)
         kind.world[where] = rows
-        if prepared.on_device:
+        if prepared.on_device or kind.framed:
             prepared.stale.setdefault(name, set()).update(where.tolist())
     if refitted is not None:
         # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view
@@ -76,6 +77,8 @@ def update(prepared, shapes: tuple, changed) -> bool:
         eye, rows = prepared.view
         for name, (where, _) in rows_by_kind.items():
             kind = prepared.kinds[name]
+            if kind.framed:  # no frame buffer: its world entries are what the kernel reads
+                continue
             where = np.concatenate(where)
             scatter(prepared, kind.frame, where, kind.cls.rebase(kind.world[where], eye, rows, prepared.precision,
                                                              kind.ids[where], kind.primitives[where]))

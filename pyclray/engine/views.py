@@ -6,6 +6,7 @@ import weakref
 from collections import OrderedDict
 
 import numpy as np
+import pyopencl as cl
 
 from ..model.errors import PyclrayError, SceneError
 from ..model.scene import Scene, check_renderable, check_shape_count
@@ -168,15 +169,22 @@ class ViewInputs:
         count, or per type its frame buffer and tile lists (a tuple: the argument of shadow rays
         only, each type's count)."""
         args = []
-        if acceleration == "bvh":
-            if prepared.bvh.types:
-                args += [prepared.nodes, prepared.refs]
-            for kind in prepared.kinds.values():
-                args += [kind.frame, *kind.shared, np.int32(kind.count)]
-        else:
-            for kind in prepared.kinds.values():
+        if prepared.framed:  # the eye's frame (the eye, the camera's axes), float64: each shape is framed on it
+            args += [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (self.eye, *self.rows)]
+        if acceleration == "bvh" and prepared.bvh.types:
+            args += [prepared.nodes, prepared.refs]
+        for kind in prepared.kinds.values():
+            # its entries: the world entries, ids and primitive indices (framed) or the frame buffer
+            if kind.indexed is not None:
+                entries = kind.indexed.kernel_args()
+            else:
+                entries = [kind.world_buffer, kind.ids_buffer, kind.primitives_buffer] if kind.framed else [kind.frame]
+            entries += kind.shared  # the arrays its entries share (mesh instances' triangles and BVHs)
+            if acceleration == "bvh":
+                args += [*entries, np.int32(kind.count)]
+            else:
                 start, index = self.tiles[kind.name]
-                args += [kind.frame, *kind.shared, start, index, (np.int32(kind.count),)]
+                args += [*entries, start, index, (np.int32(kind.count),)]
         return args
 
 

@@ -28,7 +28,8 @@ typedef float4 real4;
 
 #define MISS ((real)INFINITY)
 
-#ifdef PYCLRAY_CAST
-/* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/pyclray.cl) */
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED)
+/* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/pyclray.cl),
+ * and a framed render frames each shape on the eye from its float64 world entry */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif

@@ -190,7 +190,7 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
     instance_search(shape, ray, limit, instance_triangles, instance_nodes, &hit_sub)
 #define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
     instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles)
-#define PYCLRAY_PRIMITIVE_instance(shape, ray, best, mine) \
+#define PYCLRAY_PRIMITIVE_instance(shape, k, best, mine) \
     instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_primitives)
 #define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
     instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, u, v)

@@ -235,8 +235,9 @@ typedef struct {
 } RayPacket;
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
- * private copy framed on the ray's origin (kernels/cast.h) */
-#ifdef PYCLRAY_CAST
+ * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the
+ * eye (kernels/pyclray.cl) */
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED)
 #define SHAPE_SPACE
 #else
 #define SHAPE_SPACE __global

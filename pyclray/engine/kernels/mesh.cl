@@ -148,6 +148,43 @@ inline realv mesh_hit(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
     return mesh_hit_of(tri->a, tri->b, tri->c, ray);
 }
 
+#ifdef PYCLRAY_FRAMED
+/* An indexed triangle (pyclray/engine/indexed.py) in the frame: its face's vertices as the per-view
+ * pass framed them, w 1 (0 for a zero-area triangle, whose face holds ~index: never hit); the world
+ * normal in w is the winner's only (mesh_world_normal). */
+inline void mesh_assemble(const int4 face, __global const real4* vertices, Triangle* out)
+{
+    const real valid = face.w >= 0 ? 1 : 0;
+    out->a = (real4)(vertices[face.x].xyz, valid);
+    out->b = (real4)(vertices[face.y].xyz, valid);
+    out->c = (real4)(vertices[face.z].xyz, valid);
+}
+
+/* The winner's unit world normal in w, from its float64 world vertices: pyclray.model.shapes.Mesh's
+ * face_normals, the same operations in the same order (numpy's cross product, its norm summed x, y,
+ * z), no contraction (a framed program has none): the bits the per-view copy carries. */
+inline void mesh_world_normal(Triangle* tri, const int4 face, __global const double4* world)
+{
+    const double3 a = world[face.x].xyz, e1 = world[face.y].xyz - a, e2 = world[face.z].xyz - a;
+    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    const double length = sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+    tri->a.w = (real)(n.x / length);
+    tri->b.w = (real)(n.y / length);
+    tri->c.w = (real)(n.z / length);
+}
+#ifdef PYCLRAY_SMOOTH
+/* an indexed triangle's vertex normals (smooth shading: one per shared vertex, zero for a flat mesh's) */
+inline TriangleNormals mesh_smooth_of(const int4 face, __global const real4* normals)
+{
+    TriangleNormals out;
+    out.a = normals[face.x];
+    out.b = normals[face.y];
+    out.c = normals[face.z];
+    return out;
+}
+#endif
+#endif
+
 /* The unit world normal normalize(cross(b - a, c - a)), computed in float64 on the host. */
 inline vec3v mesh_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, __global const Camera* camera)
 {
@@ -172,8 +209,7 @@ inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* r
 /* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,
  * (1 - u - v) n_a + u n_b + v n_c, normalized; (0, 0, 0) (the geometric normal lights) where the
  * mesh is flat (its normals are 0) or the interpolation is 0 (opposite vertex normals). */
-inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray,
-                                 __global const TriangleNormals* normals)
+inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, const TriangleNormals* normals)
 {
     realv u, v;
     mesh_barycentric(tri, ray, &u, &v);

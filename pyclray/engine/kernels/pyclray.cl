@@ -13,6 +13,8 @@
  *   PYCLRAY_SHADOWS                     render, with SHADED: shadow rays (without it none are cast)
  *   PYCLRAY_AOV_PRIMITIVE               render: the winner's index within its shape (a batch's primitive)
  *   PYCLRAY_SHAPES(X)                   X(Type, type) for each shape type present
+ *   PYCLRAY_FRAMED, PYCLRAY_MODE_<type>  render: where each type's shapes are read (see below)
+ *   PYCLRAY_ONE_BOUNDED                 render: the kind of the only bounded type present (no refs)
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles.
  *
  * A shape plugs in through two functions of its kernel file, both over a packet of rays:
@@ -48,6 +50,70 @@
 #define PYCLRAY_DECLARE(type, name) , type name
 #define PYCLRAY_PASS(type, name) , name
 
+/* -- where a render reads its shapes -------------------------------------------------------------
+ * A render's shapes in the eye's frame (origin the eye, the camera's axes: what the shape tests
+ * take) come from one of three places, chosen per type (PYCLRAY_MODE_<type>, from the host: in a
+ * framed scene, pyclray.engine.prepared's FRAMED_FROM, Shape.frames_in_render and Shape.indexed):
+ * - FRAMED (devices with float64): each shape is framed where it is tested, from its float64 world
+ *   entry, by its <type>_rebase (the per-view pass's function, compiled without contraction as
+ *   there: the same bits) into a private copy; its id and its index within its shape come from
+ *   their own arrays. The scene holds its world entries only: no copy per view, no pass over them
+ *   when the camera moves (pyclray.engine.prepared).
+ * - COPIED: the per-view pass's buffer of the entries in the frame (type##s), ids included (in a
+ *   framed program, copied to private memory where tested: the shape functions take one space).
+ * PYCLRAY_SHAPE_OF(Type, type, k, name) declares name, a pointer to shape k of its type in the frame;
+ * PYCLRAY_ID_OF(type, k) and PYCLRAY_PRIMITIVE_AT(type, k) are its id and its index in its shape. */
+#define PYCLRAY_ENTRIES_FRAMED(P, Type, type) \
+    P(__global const Type##World*, type##_worlds) P(__global const int*, type##_ids) P(__global const int*, type##_primitives)
+#define PYCLRAY_SHAPE_FRAMED(Type, type, k, name)                                     \
+    Type name##_framed;                                                               \
+    type##_rebase(&type##_worlds[k], &name##_framed, &view_frame);                    \
+    const Type* const name = &name##_framed;
+#define PYCLRAY_ID_FRAMED(type, k) type##_ids[k]
+#define PYCLRAY_PRIMITIVE_FRAMED(type, k) type##_primitives[k]
+#define PYCLRAY_ENTRIES_COPIED(P, Type, type) P(__global const Type*, type##s)
+#ifdef PYCLRAY_FRAMED
+#define PYCLRAY_SHAPE_COPIED(Type, type, k, name)                                     \
+    const Type name##_copy = type##s[k];                                              \
+    const Type* const name = &name##_copy;
+#else
+#define PYCLRAY_SHAPE_COPIED(Type, type, k, name) SHAPE_SPACE const Type* const name = &type##s[k];
+#endif
+#define PYCLRAY_ID_COPIED(type, k) type##s[k].id
+#define PYCLRAY_PRIMITIVE_COPIED(type, k) type##s[k].primitive
+/* - INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
+ * and the per-view pass's vertices (<type>_assemble), its id from its own array, its index in its
+ * shape from its face; the winner's world normal from the float64 vertices (<type>_world_normal) */
+#define PYCLRAY_ENTRIES_INDEXED(P, Type, type)                                        \
+    P(__global const int4*, type##_faces) P(__global const real4*, type##_vertices)   \
+    P(__global const double4*, type##_world_vertices) P(__global const int*, type##_ids)
+#define PYCLRAY_SHAPE_INDEXED(Type, type, k, name)                                    \
+    Type name##_framed;                                                               \
+    type##_assemble(type##_faces[k], type##_vertices, &name##_framed);                \
+    const Type* const name = &name##_framed;
+#define PYCLRAY_ID_INDEXED(type, k) type##_ids[k]
+#define PYCLRAY_PRIMITIVE_INDEXED(type, k) type##_faces[k].w
+/* what a winner needs besides its shape in the frame: an indexed triangle's world normal */
+#define PYCLRAY_WINNER_FRAMED(type, k, name)
+#define PYCLRAY_WINNER_COPIED(type, k, name)
+#define PYCLRAY_WINNER_INDEXED(type, k, name) type##_world_normal(&name##_framed, type##_faces[k], type##_world_vertices);
+#define PYCLRAY_WINNER_OF(type, k, name) PYCLRAY_CAT(PYCLRAY_WINNER_, PYCLRAY_MODE_##type)(type, k, name)
+/* a smooth shape's shading normals (kernels/shading.h): its entry's, or an indexed triangle's vertices' */
+#define PYCLRAY_SMOOTH_FRAMED(type, k) type##_smooth[k]
+#define PYCLRAY_SMOOTH_COPIED(type, k) type##_smooth[k]
+#define PYCLRAY_SMOOTH_INDEXED(type, k) type##_smooth_of(type##_faces[k], type##_smooth)
+#define PYCLRAY_SMOOTH_AT(type, k) PYCLRAY_CAT(PYCLRAY_SMOOTH_, PYCLRAY_MODE_##type)(type, k)
+#define PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_CAT(PYCLRAY_ENTRIES_, PYCLRAY_MODE_##type)(P, Type, type)
+#define PYCLRAY_SHAPE_OF(Type, type, k, name) PYCLRAY_CAT(PYCLRAY_SHAPE_, PYCLRAY_MODE_##type)(Type, type, k, name)
+#define PYCLRAY_ID_OF(type, k) PYCLRAY_CAT(PYCLRAY_ID_, PYCLRAY_MODE_##type)(type, k)
+#define PYCLRAY_PRIMITIVE_AT(type, k) PYCLRAY_CAT(PYCLRAY_PRIMITIVE_, PYCLRAY_MODE_##type)(type, k)
+#ifdef PYCLRAY_FRAMED
+/* the eye's frame, float64: its origin and axes */
+#define PYCLRAY_FRAME_ARGS(P) P(const double4, frame_origin) P(const double4, frame_u) P(const double4, frame_v) P(const double4, frame_w)
+#else
+#define PYCLRAY_FRAME_ARGS(P)
+#endif
+
 #if defined(PYCLRAY_CAST) || defined(PYCLRAY_BVH)
 /* one argument pair per shape type present: the packed array and its length; the bounded types'
  * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray.
@@ -58,7 +124,7 @@
     PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type) \
-    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #endif
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
@@ -83,12 +149,12 @@
 #ifdef PYCLRAY_SHADOWS
 /* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P)                    \
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P)                      \
     P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list) P(const int, n_##type##s)
 #else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    P(__global const Type*, type##s) PYCLRAY_SHARED_ARGS_##type(P)                    \
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P)                      \
     P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list)
 #endif
@@ -119,9 +185,10 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
-        const intv id = SPLAT_INT(shape_id);                                          \
-        const intv nearer = s < best || (s == best && s < MISS && id < best_id);      \
-        if (ANY(nearer)) {                                                            \
+        const intv closer = s < best, tied = s == best && s < MISS;                   \
+        if (ANY(closer || tied)) {  /* the id is read only then */                    \
+            const intv id = SPLAT_INT(shape_id);                                      \
+            const intv nearer = closer || (tied && id < best_id);                     \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
             best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
@@ -139,22 +206,31 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_NEAREST(Type, type)                                                   \
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
         const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
-        const realv s = PYCLRAY_HIT_##type(&type##s[k], &ray, best);                  \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
+        PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
+        const realv s = PYCLRAY_HIT_##type(shape, &ray, best);                        \
+        PYCLRAY_CONSIDER(s, PYCLRAY_ID_OF(type, k), KIND_##type, k)                   \
     }
 #define PYCLRAY_FIND_NEAREST                                                          \
     PYCLRAY_BEST                                                                      \
     PYCLRAY_LINEAR(PYCLRAY_NEAREST)
 
-/* a shape at position q of the BVH's leaves, tested against the whole packet: refs[q] = index * 16 + kind */
+/* a shape at position q of the BVH's leaves, tested against the whole packet: PYCLRAY_REF(q) = index *
+ * 16 + kind, refs[q]; in a render of one bounded type (PYCLRAY_ONE_BOUNDED: its kind), whose array is
+ * in leaf order, q itself (the scene holds no refs) */
+#if defined(PYCLRAY_ONE_BOUNDED) && !defined(PYCLRAY_CAST)
+#define PYCLRAY_REF(q) ((q) * 16 + PYCLRAY_ONE_BOUNDED)
+#else
+#define PYCLRAY_REF(q) refs[q]
+#endif
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
-        const realv s = PYCLRAY_HIT_##type(&type##s[k], &ray, best);                  \
-        PYCLRAY_CONSIDER(s, type##s[k].id, KIND_##type, k)                            \
+        PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
+        const realv s = PYCLRAY_HIT_##type(shape, &ray, best);                        \
+        PYCLRAY_CONSIDER(s, PYCLRAY_ID_OF(type, k), KIND_##type, k)                   \
     }
 #define PYCLRAY_VISIT(q)                                                              \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
+        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
         PYCLRAY_BOUNDED(PYCLRAY_VISIT_KIND)                                           \
     }
 
@@ -172,19 +248,19 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 
 #ifdef PYCLRAY_WINNER_NORMAL
-#define PYCLRAY_NORMAL_OF(type) \
-    normal = v3_select(normal, PYCLRAY_NORMAL_##type(&type##s[k], &ray, camera, best, mine), mine);
+#define PYCLRAY_NORMAL_OF(type, shape) \
+    normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, camera, best, mine), mine);
 #define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #else
-#define PYCLRAY_NORMAL_OF(type)
+#define PYCLRAY_NORMAL_OF(type, shape)
 #define PYCLRAY_NORMAL_BEGIN
 #endif
 /* the winner's index within its shape (a batch's primitive; 0 for a single shape), -1 on a miss */
 #ifdef PYCLRAY_AOV_PRIMITIVE
-#define PYCLRAY_PRIMITIVE_OF(type) primitive = mine ? PYCLRAY_PRIMITIVE_##type(&type##s[k], &ray, best, mine) : primitive;
+#define PYCLRAY_PRIMITIVE_OF(type, shape) primitive = mine ? PYCLRAY_PRIMITIVE_##type(shape, k, best, mine) : primitive;
 #define PYCLRAY_PRIMITIVE_BEGIN intv primitive = SPLAT_INT(-1);
 #else
-#define PYCLRAY_PRIMITIVE_OF(type)
+#define PYCLRAY_PRIMITIVE_OF(type, shape)
 #define PYCLRAY_PRIMITIVE_BEGIN
 #endif
 
@@ -193,7 +269,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_BARYCENTRIC_OF(Type, type)                                            \
     if (kind == KIND_##type) {                                                        \
         realv u, v;                                                                   \
-        PYCLRAY_BARYCENTRIC_##type(&type##s[k], &ray, best, mine, &u, &v);            \
+        PYCLRAY_SHAPE_OF(Type, type, k, bary_shape)                                   \
+        PYCLRAY_BARYCENTRIC_##type(bary_shape, &ray, best, mine, &u, &v);             \
         bary_u = mine ? u : bary_u;                                                   \
         bary_v = mine ? v : bary_v;                                                   \
     }
@@ -209,9 +286,11 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
  * primitive index */
 #define PYCLRAY_NORMAL(Type, type)                                                    \
     if (kind == KIND_##type) {                                                        \
-        PYCLRAY_NORMAL_OF(type)                                                       \
-        PYCLRAY_MATERIAL_OF(type##s[k].id, mine, PYCLRAY_FLAT_##type)                 \
-        PYCLRAY_PRIMITIVE_OF(type)                                                    \
+        PYCLRAY_SHAPE_OF(Type, type, k, winner_shape)                                 \
+        PYCLRAY_WINNER_OF(type, k, winner_shape)                                      \
+        PYCLRAY_NORMAL_OF(type, winner_shape)                                         \
+        PYCLRAY_MATERIAL_OF(PYCLRAY_ID_OF(type, k), mine, PYCLRAY_FLAT_##type)        \
+        PYCLRAY_PRIMITIVE_OF(type, winner_shape)                                      \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
 #define PYCLRAY_WINNERS                                                               \
@@ -448,7 +527,7 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 #define PYCLRAY_RENDER_ARGS(P, SHAPE)                                                 \
     P(const int, col0) P(const int, row0) P(const int, cols) P(const int, rows)       \
     P(const int, tile_shift) P(const int, tiles_x)                                    \
-    PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_RENDER_OUTPUT_ARGS(P)
+    PYCLRAY_FRAME_ARGS(P) PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_RENDER_OUTPUT_ARGS(P)
 
 PYCLRAY_KERNELS_BEGIN
 PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __global const Camera* camera
@@ -461,6 +540,9 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
     /* the lanes in the window (no min or max: PoCL's would be calls, see v_sqrt) */
     const int from = col0 > i0 ? col0 - i0 : 0, to = col0 + cols - i0 < LANES ? col0 + cols - i0 : LANES;
     const RayPacket ray = camera_rays(camera, i0, j);
+#ifdef PYCLRAY_FRAMED
+    const Frame view_frame = {frame_origin.xyz, frame_u.xyz, frame_v.xyz, frame_w.xyz};  /* the eye's */
+#endif
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)

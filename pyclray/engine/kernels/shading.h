@@ -48,7 +48,11 @@
 #define PYCLRAY_SMOOTH_BEGIN vec3v shading_normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #define PYCLRAY_SMOOTH_OF(Type, type)                                                 \
     if (kind == KIND_##type)                                                          \
-        shading_normal = v3_select(shading_normal, type##_shading_normal(&type##s[k], &ray, &type##_smooth[k]), mine);
+    {                                                                                 \
+        PYCLRAY_SHAPE_OF(Type, type, k, smooth_shape)                                 \
+        const PYCLRAY_CAT(Type, Normals) smooth_normals = PYCLRAY_SMOOTH_AT(type, k);    \
+        shading_normal = v3_select(shading_normal, type##_shading_normal(smooth_shape, &ray, &smooth_normals), mine); \
+    }
 #define PYCLRAY_SMOOTH_NORMALS PYCLRAY_SMOOTH_TYPES(PYCLRAY_SMOOTH_OF)
 /* n_l: the normal that lights, facing the viewer: the shading normal where there is one, else n_s */
 #define PYCLRAY_LIGHTING_NORMAL                                                       \
@@ -115,7 +119,8 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
  * the BVH's any-hit packet traversal, which drops a lane once it is closed and ends when all are. */
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
-        const realv s = type##_hit(&type##s[q], &shadow);                             \
+        PYCLRAY_SHAPE_OF(Type, type, q, shape)                                        \
+        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(q * 16 + KIND_##type);        \
         open = open && (self || !(s < limit));                                        \
     }
@@ -152,13 +157,14 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                        \
-        const realv s = type##_hit(&type##s[k], &shadow);                             \
+        PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
+        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(ref);                         \
         open = open && (self || !(s < limit));                                        \
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
-        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                        \
+        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
         PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
         reach = open ? reach : SPLAT(-INFINITY);                                      \
     }

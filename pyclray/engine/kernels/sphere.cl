@@ -69,6 +69,18 @@ inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacke
 /* Nearest root s > 0 per lane, or MISS. */
 inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
+    /* A packet that passes far from the sphere misses it without c (a framed render's costliest
+     * term): where a r^2 - |F x D|^2 < -2^-10 (a r^2 + |F x D|^2 + b^2) in every lane, b^2 - a c,
+     * the same quantity (Lagrange's identity) computed from c within rounding errors of a few eps
+     * (a r^2 + a |F|^2) = a few eps (a r^2 + |F x D|^2 + b^2) (c's chosen form has terms of at most
+     * |F|^2 + r^2, see sphere_terms), is negative too: both forms miss in every lane. */
+    {
+        const vec3v F = FROM_EYE(ray) ? v3_splat(sphere->center) : v3_sub(v3_splat(sphere->center), ray->origin);
+        const realv a_r2 = ray->a * SPLAT(sphere->center.w);
+        const vec3v FxD = v3_cross(F, ray->dir);
+        const realv perp2 = v3_dot(FxD, FxD), b = v3_dot(F, ray->dir);
+        if (!ANY(a_r2 - perp2 >= SPLAT(-0x1p-10) * ((a_r2 + perp2) + b * b))) return SPLAT(MISS);
+    }
     const SphereTerms t = sphere_terms(sphere, ray);
     /* stable roots: q = b + sign(b) sqrt(disc) never cancels; the roots are c/q and q/a
      * (NaN in the lanes with disc < 0, which miss below) */

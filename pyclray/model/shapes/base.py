@@ -106,6 +106,24 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
+    # In a framed scene (engine/prepared.py's FRAMED_FROM) a render frames each entry of a type with
+    # frames_in_render on the eye where it tests it, from its world entry (<type>_rebase): no per-view
+    # copy (struct) of them, no pass over them for a new camera; an indexed type's triangles are kept
+    # as shared vertices and faces (pack_indexed, engine/indexed.py; <type>_assemble and
+    # <type>_world_normal in its kernel file). The others keep the per-view pass's copy.
+    frames_in_render: ClassVar[bool] = False
+    indexed: ClassVar[bool] = False
+
+    @classmethod
+    def pack_indexed(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
+        """(world vertices (V, 4) float64, faces (F, 4) int32: vertex indices, primitive index or
+        ~index where never hit), faces in pack_world's order."""
+        raise NotImplementedError
+
+    @classmethod
+    def pack_indexed_smooth(cls, shapes, precision: str):
+        """An indexed type's (V, 4) vertex shading normals (pack_indexed's vertices), or None."""
+        return None
     # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None

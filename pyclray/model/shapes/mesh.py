@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
+from . import mesh_pack
 from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import axis_angle, rotation
@@ -251,6 +252,16 @@ class Mesh(Shape):
             normal = mesh.face_normals()
             out["a"][rows, 3], out["b"][rows, 3], out["c"][rows, 3] = normal[:, 0], normal[:, 1], normal[:, 2]
             start += len(a)
+
+    indexed = True  # a framed scene's meshes: shared vertices and faces (Shape.indexed)
+
+    @classmethod
+    def pack_indexed(cls, meshes):
+        return mesh_pack.indexed(meshes)
+
+    @classmethod
+    def pack_indexed_smooth(cls, meshes, precision: str):
+        return mesh_pack.indexed_smooth(meshes, precision)
 
     @classmethod
     def pack_smooth(cls, meshes, precision: str):

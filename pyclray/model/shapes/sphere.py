@@ -47,6 +47,7 @@ class Sphere(Shape):
         "A sphere in world coordinates: center.xyz, center.w = radius.",
     )
     kernel_files = ("sphere.cl",)
+    frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

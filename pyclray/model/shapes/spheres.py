@@ -48,6 +48,7 @@ class Spheres(Shape):
     struct = Sphere.struct
     world = Sphere.world
     kernel_files = ("sphere.cl", "spheres.cl")
+    frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
     reads_files = True
 
     def __post_init__(self):

@@ -1,0 +1,27 @@
+"""The prepared scene's host arrays and their device buffers (a CPU device uses the arrays' own memory)."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+ALIGNMENT = 128  # bytes: the kernels load a struct's double4 and float8 members with aligned vector loads
+
+
+def aligned(array: np.ndarray) -> np.ndarray:
+    """The array itself if contiguous and aligned to ALIGNMENT bytes, else an aligned copy."""
+    if array.flags.c_contiguous and array.ctypes.data % ALIGNMENT == 0:
+        return array
+    raw = np.empty(array.nbytes + ALIGNMENT, np.uint8)
+    start = -raw.ctypes.data % ALIGNMENT
+    raw[start:start + array.nbytes] = np.ascontiguousarray(array).reshape(-1).view(np.uint8)  # padding too
+    return raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
+
+
+def device_buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
+    """A device buffer of this array: the array's own memory on a CPU device (no copy: the array
+    must be aligned, see aligned(), and live as long as the buffer), a copy elsewhere."""
+    mf = cl.mem_flags
+    access = mf.READ_WRITE if writable else mf.READ_ONLY
+    if ctx.device.type & cl.device_type.CPU:
+        return cl.Buffer(ctx.context, access | mf.USE_HOST_PTR, hostbuf=array)
+    return cl.Buffer(ctx.context, access | mf.COPY_HOST_PTR, hostbuf=array)

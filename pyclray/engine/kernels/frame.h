@@ -1,0 +1,92 @@
+/* The frame of a view (render) or of the per-view pass (kernels/rebase.cl): its origin, the eye, and
+ * its axes, the camera's; and the float64 helpers that the shapes' <type>_rebase frame a world entry
+ * with (error-free products and sums, as pyclray.model.exact on the host). The host puts it before
+ * the shapes' files with FP_CONTRACT OFF in force: each rounding is the one written, so that a shape
+ * framed here has the same bits as on the host (pyclray.model.shapes.base.in_frame, exact.dot2). */
+
+typedef struct {
+    double3 origin;  /* the eye (render) */
+    double3 u, v, w; /* the frame's axes in world coordinates (rows of frame_from_world) */
+} Frame;
+
+/* a vector's coordinates along the frame's axes, rounded to the kernel's precision: per axis
+ * (u.x x.x + u.y x.y) + u.z x.z (pyclray.model.shapes.base.in_frame), written by the frame's columns,
+ * three vector products and two sums with the same roundings (a framed render frames at each test) */
+inline real3 to_frame(const Frame* frame, const double3 x)
+{
+    const double3 c0 = (double3)(frame->u.x, frame->v.x, frame->w.x);
+    const double3 c1 = (double3)(frame->u.y, frame->v.y, frame->w.y);
+    const double3 c2 = (double3)(frame->u.z, frame->v.z, frame->w.z);
+    return convert_real3((c0 * x.x + c1 * x.y) + c2 * x.z);
+}
+
+/* a b = p + e exactly (pyclray.model.exact.two_prod): on PoCL's CPU device with the fused multiply-add
+ * (clang's own: PoCL's library fma is a call, which LLVM does not inline there), else Dekker's
+ * product with his splitter 2^27 + 1, the host's: the same e either way, exact, for every product
+ * whose parts neither overflow nor underflow (a framed render tests shapes with it at each visit,
+ * where the fused form costs a fifth of Dekker's) */
+inline double2 two_prod(const double a, const double b)
+{
+    const double p = a * b;
+#ifdef PYCLRAY_INLINE_BUILTINS
+    return (double2)(p, __builtin_fma(a, b, -p));
+#else
+    double t = 134217729.0 * a;
+    const double a_hi = t - (t - a), a_lo = a - a_hi;
+    t = 134217729.0 * b;
+    const double b_hi = t - (t - b), b_lo = b - b_hi;
+    return (double2)(p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo);
+#endif
+}
+
+/* a + b = s + e exactly */
+inline double2 two_sum(const double a, const double b)
+{
+    const double s = a + b, z = s - a;
+    return (double2)(s, (a - (s - z)) + (b - z));
+}
+
+/* sum x_k y_k as accurate as in twice float64's precision (pyclray.model.exact.dot2, term by term) */
+#define PYCLRAY_DOT2_BEGIN(x0, y0) double2 acc = two_prod(x0, y0); double p = acc.x, s = acc.y;
+#define PYCLRAY_DOT2_TERM(xk, yk) { const double2 h = two_prod(xk, yk); const double2 q = two_sum(p, h.x); p = q.x; s = s + (q.y + h.y); }
+
+inline double dot2_3(const double3 x, const double3 y)
+{
+    PYCLRAY_DOT2_BEGIN(x.x, y.x)
+    PYCLRAY_DOT2_TERM(x.y, y.y)
+    PYCLRAY_DOT2_TERM(x.z, y.z)
+    return p + s;
+}
+
+inline double dot2_4(const double4 x, const double4 y)
+{
+    PYCLRAY_DOT2_BEGIN(x.x, y.x)
+    PYCLRAY_DOT2_TERM(x.y, y.y)
+    PYCLRAY_DOT2_TERM(x.z, y.z)
+    PYCLRAY_DOT2_TERM(x.w, y.w)
+    return p + s;
+}
+
+/* |F x A|^2 - r^2 as accurate as in twice float64's precision (pyclray.model.exact.cross_norm2_minus):
+ * each component of F x A is an exact sum of four terms (two error-free products); the sum of all
+ * their pairwise products, component by component, and -r^2 goes through dot2, in the host's order */
+inline double cross_norm2_minus(const double3 F, const double3 A, const double r)
+{
+    double terms[3][4];
+    const double Fv[3] = {F.x, F.y, F.z}, Av[3] = {A.x, A.y, A.z};
+    const int I[3] = {1, 2, 0}, J[3] = {2, 0, 1};
+    for (int c = 0; c < 3; ++c) {
+        const double2 t1 = two_prod(Fv[I[c]], Av[J[c]]), t2 = two_prod(Fv[J[c]], Av[I[c]]);
+        terms[c][0] = t1.x;
+        terms[c][1] = t1.y;
+        terms[c][2] = -t2.x;
+        terms[c][3] = -t2.y;
+    }
+    PYCLRAY_DOT2_BEGIN(terms[0][0], terms[0][0])
+    for (int n = 1; n < 48; ++n) {
+        const int c = n / 16, a = (n / 4) % 4, b = n % 4;
+        PYCLRAY_DOT2_TERM(terms[c][a], terms[c][b])
+    }
+    PYCLRAY_DOT2_TERM(r, -r)
+    return p + s;
+}

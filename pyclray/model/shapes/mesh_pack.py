@@ -1,0 +1,28 @@
+"""A framed scene's meshes as shared vertices and faces (Shape.pack_indexed; pyclray/engine/indexed.py)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def indexed(meshes):
+    """(world vertices (V, 4) float64, faces (F, 4) int32): each mesh's world vertices; its faces offset
+    to them, each with its index in its mesh (~index for a zero-area one: never hit)."""
+    vertices = np.zeros((sum(len(m.vertices) for m in meshes), 4))
+    faces, start = [], 0
+    for mesh in meshes:
+        vertices[start:start + len(mesh.vertices), :3] = mesh.world_vertices()
+        index = np.arange(len(mesh.faces), dtype=np.int32)
+        faces.append(np.column_stack([mesh.faces + start, np.where(mesh.face_normals().any(axis=1), index, ~index)]))
+        start += len(mesh.vertices)
+    return vertices, np.concatenate(faces).astype(np.int32)
+
+
+def indexed_smooth(meshes, precision: str):
+    """Mesh.pack_smooth per shared vertex: (V, 4) the smooth meshes' vertex normals, zeros for the
+    others' vertices; None without a smooth mesh."""
+    if not any(mesh.smooth for mesh in meshes):
+        return None
+    normals = [mesh.vertex_normals() if mesh.smooth else np.zeros((len(mesh.vertices), 3)) for mesh in meshes]
+    out = np.zeros((sum(len(n) for n in normals), 4), np.float64 if precision == "fp64" else np.float32)
+    out[:, :3] = np.concatenate(normals)
+    return out
