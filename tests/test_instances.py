@@ -216,3 +216,18 @@ def test_export_writes_shapegroup_and_instances_that_read_back_shared(tmp_path):
     read = pyclray.load_scene(path)
     prepared = prepared_scene(context_for(), read, "fp32")
     assert prepared.kinds["instance"].count == 25 and len(prepared.kinds["instance"].shared_host[0]) == 5000
+
+
+def test_check_passes_on_the_instanced_field(scenes_dir):
+    """pyclray check's images on scenes/instanced.toml (25 instances of the bunny on a plane, one
+    mirrored; 64x48): depth, normal, id and primitives against Mitsuba (each placement its own
+    mi.Mesh) and the float64 oracle, within the error model; the bunnies are instances there."""
+    pytest.importorskip("mitsuba")
+    from pyclray.reference import check
+
+    scene = pyclray.load_scene(scenes_dir / "instanced.toml").with_size(64, 48)
+    assert prepared_scene(context_for(), scene, "fp32").kinds["instance"].count == 25
+    images = check.cross_check(scene, "scalar_rgb")
+    assert images.passed, images.failures
+    assert images.counts["primitives against the float64 oracle"] > 300, images.counts
+    assert images.counts["  of which differ"] == 0
