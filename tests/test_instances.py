@@ -231,3 +231,38 @@ def test_check_passes_on_the_instanced_field(scenes_dir):
     assert images.passed, images.failures
     assert images.counts["primitives against the float64 oracle"] > 300, images.counts
     assert images.counts["  of which differ"] == 0
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_smooth_instances_match_the_float64_shading_model(precision):
+    """Smooth placements of one mesh (turned, non-uniformly scaled, mirrored; one flat among them)
+    are instances, lit by their vertex normals through each placement's normal matrix: the shaded
+    image agrees with the float64 model (tests/test_shading.py's compare_shaded, the error model's
+    tolerance) on every judged pixel, and differs from the flat placements' (a kernel that ignored
+    smooth here would fail)."""
+    need(precision)
+    from pyclray.model.lights import PointLight, Shading
+    from test_shading import compare_shaded
+
+    v, f = perturbed_sphere(12, 16, 1.0, 0.08, np.random.default_rng(7))
+    base = pyclray.Mesh(v, f, smooth=True)
+    placements = [dict(translate=(-2.2, 0, 0)), dict(scale=(1.3, 0.7, 1.0), axis=(1, 2, 0), angle=30.0),
+                  dict(scale=(-1.0, 1.0, 1.0), translate=(2.2, 0, 0)), dict(translate=(0, 2.2, -1), smooth=False)]
+
+    def scene_of(smooth):
+        shapes = (pyclray.Plane((0, 1, 0), 1.3),) + tuple(base.placed(**{"smooth": smooth, **p}) for p in placements)
+        light = PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0))
+        return pyclray.Scene(pyclray.Camera((0.5, 1.5, 7), (0, 0.3, 0)), pyclray.Image(96, 72), shapes,
+                             lights=(light,), shading=Shading(shadows=False))
+
+    scene = scene_of(True)
+    prepared = prepared_scene(context_for(), scene, precision)
+    assert prepared.kinds["instance"].count == 4 and "instance" in prepared.smooth
+    counts = compare_shaded(scene, precision)
+    assert counts["lit"] > 1500, counts
+    flat = pyclray.render(scene_of(False), aovs=("shaded",), precision=precision)["shaded"]
+    smooth_ids = counts["ref"]["id"]
+    on_smooth = (smooth_ids >= 1) & (smooth_ids <= 3)
+    assert (np.abs(counts["frame"]["shaded"] - flat).max(axis=-1)[on_smooth] > 1e-3).mean() > 0.5
+    on_flat = smooth_ids == 4
+    assert on_flat.sum() > 100 and np.array_equal(counts["frame"]["shaded"][on_flat], flat[on_flat])

@@ -17,12 +17,15 @@ LEAF_SIZE = 7
 
 def pack_shared(cls, meshes, world) -> list[np.ndarray]:
     """The shared arrays of these instances (cls.shared's order: object-space triangles in each
-    tree's leaf order, the trees' binary nodes around each mesh's anchor, and per triangle its index
-    in its mesh), each distinct mesh once; writes each instance's root and first into world."""
+    tree's leaf order, the trees' binary nodes around each mesh's anchor, per triangle its index in
+    its mesh, and its unit object-space vertex normals where an instance of its mesh is smooth,
+    else 0: only where some instance is smooth), each distinct mesh once; writes each instance's
+    root and first into world."""
     from ..model.shapes.mesh_sharing import shared_key
     from ..model.shapes.mesh import Mesh
 
-    triangles, nodes, primitives = [], [], []
+    triangles, nodes, primitives, normals = [], [], [], []
+    smooth = {shared_key(mesh) for mesh in meshes if mesh.smooth}
     starts: dict = {}
     root = first = 0
     for k, mesh in enumerate(meshes):
@@ -35,10 +38,18 @@ def pack_shared(cls, meshes, world) -> list[np.ndarray]:
             triangles.append(tri[tree.order])
             nodes.append(pack_nodes(tree, world["anchor"][k, :3]))
             primitives.append(tree.order.astype(np.int32))
+            vertex = np.zeros_like(tri)
+            if key in smooth:  # the placement's are these through its normal matrix (a mesh's vertex_normals)
+                unit = own.vertex_normals()
+                for k_, name in enumerate("abc"):
+                    vertex[name][:, :3] = unit[own.faces[tree.order, k_]]
+            normals.append(vertex)
             root += tree.nodes
             first += len(tri)
         world["root"][k], world["first"][k] = starts[key]
-    return [np.concatenate(triangles), np.concatenate(nodes), np.concatenate(primitives)]
+    # the vertex normals only where some instance is smooth (else one entry: the kernel reads none)
+    normals = np.concatenate(normals) if smooth else normals[0][:1]
+    return [np.concatenate(triangles), np.concatenate(nodes), np.concatenate(primitives), normals]
 
 
 def instance_bytes(prepared) -> dict:

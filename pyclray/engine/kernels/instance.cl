@@ -162,6 +162,46 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
     })
 }
 
+#ifdef PYCLRAY_SMOOTH
+/* Smooth shading: the winning triangle's vertex normals placed (the object's through the normal
+ * matrix, normalized in float64: the placed mesh's vertex normals, Mesh.vertex_normals, up to their
+ * sign, which the lighting's facing rule drops) and interpolated at the hit's barycentrics, as
+ * kernels/mesh.cl's mesh_shading_normal; (0, 0, 0) where the instance is flat. */
+inline real4 instance_vertex_normal(SHAPE_SPACE const Instance* inst, const double4 n)
+{
+    const double3 w = (double3)(instance_dot(inst->normal0, n.xyz), instance_dot(inst->normal1, n.xyz),
+                                instance_dot(inst->normal2, n.xyz));
+    const double length = sqrt((w.x * w.x + w.y * w.y) + w.z * w.z);
+    return length > 0 ? (real4)(convert_real3(w / length), 0) : (real4)(0);
+}
+
+inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const InstanceNormals* flags,
+                                    const intv which, __global const TriangleWorld* triangles,
+                                    __global const TriangleWorld* normals)
+{
+    vec3v out = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    if (!flags->smooth) return out;
+    const RayPacket object = instance_ray(inst, ray);
+    const double3 eye = inst->eye.xyz;
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        __global const TriangleWorld* m = normals + inst->first + q;
+        realv u, v;
+        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &u, &v);
+        const realv w = (SPLAT(1) - u) - v;
+        const real4 na = instance_vertex_normal(inst, m->a), nb = instance_vertex_normal(inst, m->b);
+        const real4 nc = instance_vertex_normal(inst, m->c);
+        const vec3v n = v3((w * na.x + u * nb.x) + v * nc.x, (w * na.y + u * nb.y) + v * nc.y, (w * na.z + u * nb.z) + v * nc.z);
+        const realv length2 = v3_dot(n, n);
+        out = v3_select(out, v3_scale(n, length2 > 0 ? SPLAT(1) / v_sqrt(length2) : SPLAT(0)), lanes);
+    })
+    return out;
+}
+/* kernels/shading.h's call, in its winners' loop (mine: the lanes this instance won) */
+#define instance_shading_normal(shape, ray, flags) \
+    instance_smooth_normal(shape, ray, flags, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_normals)
+#endif
+
 #ifdef PYCLRAY_CAST
 /* cast's and occluded's one ray (LANES 1): its nearest hit in the instance; the winner's triangle is
  * found again for its normal (the same search gives the same bits) */

@@ -30,7 +30,8 @@ from .mesh import Mesh
 from .mesh_sharing import shared_key
 
 # the shared arrays the kernel takes after the instances' array: (name, OpenCL C element type)
-SHARED = (("triangles", "TriangleWorld"), ("nodes", "BvhNode"), ("primitives", "int"))
+SHARED = (("triangles", "TriangleWorld"), ("nodes", "BvhNode"), ("primitives", "int"),
+          ("normals", "TriangleWorld"))  # the last: each triangle's unit object-space vertex normals (smooth)
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +43,9 @@ class Instances(Shape):
     keys = ()
     kernel_files = ("mesh.cl", "instance.cl")
     shared = SHARED
-    kernel_structs = (Mesh.struct, Mesh.world)
+    kernel_structs = (Mesh.struct, Mesh.world, Mesh.smooth_struct)
+    # smooth shading: per instance whether it is smooth (its mesh's vertex normals are shared: SHARED)
+    smooth_struct = Struct("InstanceNormals", (("smooth", "int"),), "Whether an instance shades with its mesh's vertex normals.")
     barycentric = True
     world = Struct(
         "InstanceWorld",
@@ -110,6 +113,17 @@ class Instances(Shape):
             # k: a power of two at least the largest |object_from_world d| of a unit d (the Frobenius
             # norm bounds it), so that the object rays' directions (divided by it, exactly) are at most unit
             out["anchor"][k, 3] = 2.0 ** np.ceil(np.log2(np.linalg.norm(inverse)))
+        return out
+
+    @classmethod
+    def pack_smooth(cls, shapes, precision: str):
+        """1 for each smooth instance, 0 for a flat one; None where none is smooth."""
+        if not any(mesh.smooth for mesh in shapes):
+            return None
+        from ..layout import layout
+
+        out = np.zeros(len(shapes), dtype=layout(cls.smooth_struct, precision).dtype)
+        out["smooth"] = [1 if mesh.smooth else 0 for mesh in shapes]
         return out
 
     @classmethod
