@@ -266,3 +266,27 @@ def test_smooth_instances_match_the_float64_shading_model(precision):
     assert (np.abs(counts["frame"]["shaded"] - flat).max(axis=-1)[on_smooth] > 1e-3).mean() > 0.5
     on_flat = smooth_ids == 4
     assert on_flat.sum() > 100 and np.array_equal(counts["frame"]["shaded"][on_flat], flat[on_flat])
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_shadows_through_instances_match_the_float64_model(precision):
+    """Shadow rays enter instances (each lane from its own point, the winner's own triangle skipped,
+    not its instance): the shaded image with shadows cast by and onto instances agrees with the
+    float64 shading model and visibility (tests/test_shading.py's compare_shaded) on every judged
+    pixel, and with the flattened meshes' wherever both see the same shape."""
+    need(precision)
+    from pyclray.model.lights import PointLight, Shading
+    from test_shading import compare_shaded
+
+    base = field(count=3)
+    light = PointLight(position=(3.0, 8.0, 3.0), intensity=(60.0, 60.0, 60.0))
+    scene = pyclray.Scene(base.camera, base.image, base.shapes, lights=(light,), shading=Shading(shadows=True))
+    assert "instance" in prepared_scene(context_for(), scene, precision).types
+    counts = compare_shaded(scene, precision)
+    assert counts["lit"] > 1000 and counts["shadowed"] > 100, counts
+    flat = flattened(scene)
+    flat = pyclray.Scene(flat.camera, flat.image, flat.shapes, lights=scene.lights, shading=scene.shading)
+    theirs = pyclray.render(flat, aovs=("shaded", "id"), precision=precision)
+    same = counts["frame"]["id"] == theirs["id"]
+    eps = np.finfo(np.float32 if precision == "fp32" else np.float64).eps
+    assert same.mean() > 0.99 and np.abs(counts["frame"]["shaded"] - theirs["shaded"])[same].max() < 1e4 * eps

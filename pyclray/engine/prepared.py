@@ -342,7 +342,7 @@ class PreparedScene:
 def prepared_scene(ctx, scene: Scene, precision: str, instanced: bool = True) -> PreparedScene:
     """The scene's shapes prepared on this device at this precision: kept per shapes tuple (a moved
     camera keeps the scene's tuple), built at the first view (instanced: meshes that share their arrays
-    packed as instances; else each as its own triangles, for a render's shadow rays); a frame of an animation (a tuple that
+    packed as instances, else each as its own triangles); a frame of an animation (a tuple that
     pyclray.model.animation says was made from another by changing a few shapes) updates the prepared
     scene of that other tuple in place (PreparedScene.update) instead."""
     shapes = scene.shapes

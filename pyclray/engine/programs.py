@@ -145,6 +145,9 @@ class Variant:
             lines.append(f"#define PYCLRAY_SHARED_ARGS_{t}(P) {args}")
             if not cls.shared:
                 lines += [f"#define PYCLRAY_HIT_{t}(shape, ray, limit) {t}_hit(shape, ray)",
+                          # a shadow ray (kernels/shading.h): self, the lanes whose winner is this entry
+                          f"#define PYCLRAY_SHADOW_HIT_{t}(shape, ray, limit, self) {t}_hit(shape, ray)",
+                          f"#define PYCLRAY_SELF_{t}(self) (self)",
                           f"#define PYCLRAY_NORMAL_{t}(shape, ray, camera, best, mine) {t}_normal(shape, ray, camera)",
                           f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]

@@ -63,17 +63,14 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     ctx = context_for(device)
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
-    shadows = "shaded" in aovs and scene.shading.shadows
-    # shadow rays do not enter mesh instances (their skip-self rule is per entry, an instance's is per
-    # triangle): a render with shadows sees each instance as its own triangles
-    instanced = not shadows
-    prepared = prepared_scene(ctx, scene, precision, instanced)
+    prepared = prepared_scene(ctx, scene, precision)
     check_renderable_once(scene, precision, prepared)
     acceleration = acceleration_for(scene, acceleration, prepared)
     col0, row0, cols, rows = _window(scene, window)
     check_images_fit(tuple(dict.fromkeys(aovs + asked)), precision, cols, rows)  # a clear error before any allocation
-    _, inputs = render_inputs(ctx, scene, precision, acceleration, instanced)
+    _, inputs = render_inputs(ctx, scene, precision, acceleration)
     lanes = lanes_for(ctx.device, precision)
+    shadows = "shaded" in aovs and scene.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
                       framed=prepared.framed)

@@ -191,11 +191,11 @@ class ViewInputs:
 _views = PerObject(16)
 
 
-def render_inputs(ctx, scene: Scene, precision: str, acceleration: str, instanced: bool = True):
+def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
     """(prepared scene, view inputs) of a render of this scene."""
-    prepared = prepared_scene(ctx, scene, precision, instanced)
+    prepared = prepared_scene(ctx, scene, precision)
     per_scene = _views.get(scene, dict)
-    key = (ctx.device.int_ptr, precision, acceleration, instanced)
+    key = (ctx.device.int_ptr, precision, acceleration)
     inputs = per_scene.get(key)
     if inputs is None or inputs.prepared() is not prepared:
         inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)

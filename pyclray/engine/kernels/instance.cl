@@ -162,6 +162,79 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
     })
 }
 
+#ifdef PYCLRAY_SHADOWS
+/* Shadow packets (kernels/shading.h): each lane from its own point p of the eye's frame, which is
+ * k object_from_frame p / k from the object-space eye: the triangles framed on that eye as for
+ * camera rays, each lane's origin subtracted in the shape test (kernels/mesh.cl, as a mesh's shadow
+ * rays do), and the tree's boxes tested from each lane's origin with a margin over its rounding (as
+ * shading.h's shadow_box_entries). The skip-self rule is per triangle: the lanes whose winner is this
+ * instance skip their winning triangle (skip), not the whole instance. Any hit before limit closes a
+ * lane (and drops it from the traversal); returns 0 there (< limit), MISS elsewhere. */
+typedef struct {
+    BoxPacket box;
+    vec3v origin;
+    realv margin;
+} InstanceShadowBoxes;
+
+inline realv instance_shadow_entries(__global const BvhNode* node, const InstanceShadowBoxes* s, const realv limit)
+{
+    const BoxPacket* b = &s->box;
+    const float4 lo = node->lo, hi = node->hi;
+    const realv m = s->margin;
+    const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
+    const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
+    const realv near_z = (b->negative_z ? SPLAT(hi.z) + m : SPLAT(lo.z) - m) - s->origin.z;
+    const realv far_x = (b->negative_x ? SPLAT(lo.x) - m : SPLAT(hi.x) + m) - s->origin.x;
+    const realv far_y = (b->negative_y ? SPLAT(lo.y) - m : SPLAT(hi.y) + m) - s->origin.y;
+    const realv far_z = (b->negative_z ? SPLAT(lo.z) - m : SPLAT(hi.z) + m) - s->origin.z;
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit, const intv skip,
+                                 __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+{
+    const real scale = inst->m0.w;
+    RayPacket object = instance_ray(inst, ray);
+    const vec3v p = ray->origin;
+    const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
+    /* the lanes' origins from the object-space eye: k (object_from_frame / k) p, k a power of two */
+    object.origin = v3_scale(v3((SPLAT(m0.x) * p.x + SPLAT(m0.y) * p.y) + SPLAT(m0.z) * p.z,
+                                (SPLAT(m1.x) * p.x + SPLAT(m1.y) * p.y) + SPLAT(m1.z) * p.z,
+                                (SPLAT(m2.x) * p.x + SPLAT(m2.y) * p.y) + SPLAT(m2.z) * p.z), SPLAT(scale));
+    object.from_eye = 0;
+    InstanceShadowBoxes boxes;
+    boxes.box = box_packet(object.dir, inst->box);
+    const vec3v o = object.origin;
+    boxes.origin = v3_add(o, v3_splat((real4)(convert_real3(inst->box.xyz), 0)));  /* from the tree's anchor */
+    boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z))
+                   + SPLAT(0x1p-20) * ((v_abs(o.x) + v_abs(o.y)) + v_abs(o.z)) + SPLAT(inst->box.w);
+    const double3 eye = inst->eye.xyz;
+    __global const BvhNode* tree = nodes + inst->root;
+    __global const TriangleWorld* own = triangles + inst->first;
+    const realv bound = limit * SPLAT(scale);  /* in the tree's units */
+    realv reach = bound;
+    intv blocked = SPLAT_INT(0);
+#define INSTANCE_SHADOW_VISIT(q)                                                                      \
+    {                                                                                                 \
+        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
+                                    instance_vertex(own[q].c, eye), &object);                         \
+        const intv hit = s < bound && SPLAT_INT(q) != skip;                                           \
+        blocked = blocked || hit;                                                                     \
+        reach = blocked ? SPLAT(-INFINITY) : reach;                                                   \
+    }
+    PYCLRAY_TRAVERSE_PACKET_WITH(tree, instance_shadow_entries, &boxes, reach, INSTANCE_SHADOW_VISIT)
+#undef INSTANCE_SHADOW_VISIT
+    return blocked ? SPLAT(0) : SPLAT(MISS);
+}
+#define PYCLRAY_SHADOW_HIT_instance(shape, ray, limit, self) \
+    instance_shadow_hit(shape, ray, limit, (self) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_nodes)
+#define PYCLRAY_SELF_instance(self) SPLAT_INT(0)  /* its winning triangle is skipped, not the instance */
+#endif
+
 #ifdef PYCLRAY_SMOOTH
 /* Smooth shading: the winning triangle's vertex normals placed (the object's through the normal
  * matrix, normalized in float64: the placed mesh's vertex normals, Mesh.vertex_normals, up to their
