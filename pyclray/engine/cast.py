@@ -39,8 +39,9 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
 
 
 def _cast_rays(origins, directions, tmax):
-    """(origins (M, 3), directions (N, 3), tmax, leading shape): float64 arrays of the rays as given,
-    flattened, checked; M is N, or 1 for one origin shared by every ray. The kernel normalizes the
+    """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
+    given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
+    (lo, hi) where a large batch's compiled scan found them, else None. The kernel normalizes the
     directions (scaled by their largest component first, so that neither a tiny nor a huge finite
     direction under- or overflows in the length). Each check is one pass over the arrays; the row
     of a failure is looked for only then."""
@@ -51,14 +52,21 @@ def _cast_rays(origins, directions, tmax):
         raise PyclrayError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
         )
-    for name, array in (("directions", directions), ("origins", origins)):
-        if not np.isfinite(array).all():
-            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
-            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
-    # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
-    flat = directions.reshape(-1, 3)
-    if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
-        _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
+    extent = None
+    if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, and the origins' box
+        from .cast_order import scan
+
+        fine, lo, hi = scan(origins.reshape(-1, 3), directions.reshape(-1, 3))
+        extent = (lo, hi) if fine else None
+    if extent is None:  # numpy's checks (and where one fails, its row)
+        for name, array in (("directions", directions), ("origins", origins)):
+            if not np.isfinite(array).all():
+                rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
+                _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
+        # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
+        flat = directions.reshape(-1, 3)
+        if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
+            _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
         tmax = np.full(1, np.inf)
     else:
@@ -74,78 +82,20 @@ def _cast_rays(origins, directions, tmax):
         if bad.any():
             raise PyclrayError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
         tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
-    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape
+    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape, extent
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
-# at least this many: neighbouring work-items then walk the same nodes and shapes, which stay in
-# cache (100,000 random rays into 100,000 spheres: a third of the kernel's time). Each ray is traced
-# on its own, so the order changes no bit.
+# at least this many (pyclray.engine.cast_order): neighbouring work-items then walk the same nodes
+# and shapes, which stay in cache (100,000 random rays into 100,000 spheres: a third of the kernel's
+# time). Each ray is traced on its own, so the order changes no bit.
 COHERENT_FROM = 4096
-
-
-def _morton_tables(bits: tuple[int, ...]) -> list[np.ndarray]:
-    """Per dimension, table[v]: the bits of v (bits[dimension] of them) at their places in a Morton
-    code, the most significant level first; at each level the dimensions that still have a bit, in
-    order, take the next places down."""
-    place, places = sum(bits), [[] for _ in bits]
-    for level in range(max(bits)):
-        for dimension, count in enumerate(bits):
-            if level < count:
-                place -= 1
-                places[dimension].append(place)  # bit count - 1 - level of the dimension's cell
-    tables = []
-    for dimension, count in enumerate(bits):
-        values, table = np.arange(1 << count, dtype=np.uint32), np.zeros(1 << count, np.uint16)
-        for level, at in enumerate(places[dimension]):
-            table |= (((values >> np.uint32(count - 1 - level)) & np.uint32(1)) << np.uint32(at)).astype(np.uint16)
-        tables.append(table)
-    return tables
-
-
-# Origins x, y, z in 8 cells per axis and directions in 4: 15 bits, one pass of numpy's radix sort
-# (as good an order as 30 bits on both ray sets of bench/secondary.py, for half the sort); rays from
-# within one origin cell (a camera's, a shared origin) by their directions alone, in 32 cells.
-_WITH_ORIGINS = _morton_tables((3, 3, 3, 2, 2, 2))
-_DIRECTIONS_ONLY = _morton_tables((5, 5, 5))
 
 
 def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) per axis of (N, 3) points, column by column (numpy reduces an (N, 3) array along its
     first axis ten times slower)."""
     return (np.array([points[:, i].min() for i in range(3)]), np.array([points[:, i].max() for i in range(3)]))
-
-
-def _coherent_order(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                    scene_size: float) -> np.ndarray:
-    """The rays' order along a Morton curve of (origin, direction): the origins in cubic cells of
-    the batch's box, never finer than 1/8 of the scene's size; the directions by d / |d|_1 in
-    [-1, 1]. The 15-bit codes are sorted by numpy's stable radix sort (0.4 ms for 100,000 rays; a
-    comparison sort takes 5). Column by column, in place: each temporary array of 100,000 rays is
-    fresh memory (page faults), and an (N, 3) array's short axis is slow in numpy."""
-    count = len(directions)
-    extent = max(float((hi - lo).max()), scene_size, 1e-300)
-    with_origins = len(origins) > 1 and float((hi - lo).max()) > extent / 8
-    tables = _WITH_ORIGINS if with_origins else _DIRECTIONS_ONLY
-    size = np.abs(directions[:, 0])
-    size += np.abs(directions[:, 1])
-    size += np.abs(directions[:, 2])
-    code, bits = np.zeros(count, np.uint16), np.empty(count, np.uint16)
-    value, cell = np.empty(count), np.empty(count, np.intp)
-    for dimension, table in zip(range(0 if with_origins else 3, 6), tables):
-        axis, cells = dimension % 3, len(table)
-        if dimension < 3:  # (o - lo) / extent * cells
-            np.subtract(origins[:, axis], lo[axis], out=value)
-            value *= cells / extent
-        else:  # (d / |d|_1 + 1) / 2 * cells
-            np.divide(directions[:, axis], size, out=value)
-            value += 1.0
-            value *= 0.5 * cells
-        np.clip(value, 0.0, cells - 1, out=value)
-        cell[...] = value
-        np.take(table, cell, out=bits, mode="clip")  # clip: no index check per element
-        code |= bits
-    return np.argsort(code, kind="stable").astype(np.int32)
 
 
 # -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
@@ -219,7 +169,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
-    origins, directions, tmax, shape = _cast_rays(origins, directions, tmax)
+    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax)
     count = len(directions)
     real = REAL[precision]
     shape_types = prepared_scene(ctx, scene, precision).types  # the packed kinds (mesh instances among them)
@@ -227,7 +177,10 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
-    lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
+    if extent is not None:
+        lo, hi = extent
+    else:
+        lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
     if not reach <= bound:  # the row, looked for only now
@@ -243,11 +196,10 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    if count >= COHERENT_FROM:  # the rays gathered in that order (np.take: four times numpy's indexing)
-        order = _coherent_order(origins, directions, lo, hi, scene_size)
-        directions = np.take(directions, order, axis=0)
-        origins = np.take(origins, order, axis=0) if len(origins) > 1 else origins
-        tmax = np.take(tmax, order) if len(tmax) > 1 else tmax
+    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
+        from .cast_order import coherent_order
+
+        order = coherent_order(origins, directions, lo, hi, scene_size)
     else:
         order = np.zeros(1, np.int32)
     head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if count >= COHERENT_FROM else 0),

@@ -110,9 +110,12 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
 #endif
 
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
- * variable that VISIT may lower): VISIT(q) runs for each shape of each such leaf, after
- * PYCLRAY_LEAF_PREFETCH(first, count) (defined by the kernel: its shapes' entries asked for from
- * memory at once, rather than one miss after the other). The stack holds
+ * variable that VISIT may lower; below 0, as occluded's -inf once it has found a hit, it ends the
+ * search within the leaf too): VISIT(q) runs for each shape of each such leaf. Each child
+ * entered is asked for from memory as it is pushed, PYCLRAY_CHILD_PREFETCH(code) (defined by the
+ * kernel: a wide node's boxes, or a leaf's entries: rather than one miss after the other when
+ * they are reached, the misses of a node's entered children overlap each other and the
+ * nearer children's work). The stack holds
  * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
  * go on it farthest first, so that the nearest is visited next. */
 #define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
@@ -122,14 +125,13 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
         int top = 0;                                                                    \
         stack_child[top] = 0;                                                           \
         stack_entry[top++] = 0.0f;                                                      \
-        while (top > 0) {                                                               \
+        while (top > 0 && !(limit < 0.0f)) {                                            \
             --top;                                                                      \
             if (!(stack_entry[top] <= limit)) continue;                                 \
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
-                PYCLRAY_LEAF_PREFETCH(first, count)                                     \
-                for (int q = first; q < first + count; ++q) { VISIT(q) }                \
+                for (int q = first; q < first + count && !(limit < 0.0f); ++q) { VISIT(q) } \
                 continue;                                                               \
             }                                                                           \
             union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
@@ -153,6 +155,7 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
                 }                                                                       \
                 stack_entry[at] = entry;                                                \
                 stack_child[at] = child;                                                \
+                PYCLRAY_CHILD_PREFETCH(child)                                           \
             }                                                                           \
         }                                                                               \
     }

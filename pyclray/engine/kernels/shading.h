@@ -131,23 +131,36 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
  * the eye from the anchor (the camera's box origin). */
 typedef struct {
     BoxPacket box;
-    vec3v origin;
-    realv margin;
+    /* per lane the origin moved by the margin toward each slab's near and far face (the near face
+     * is hi where the direction is negative): a face minus these is the face widened by the margin,
+     * taken from the origin, in one subtraction per face and lane (as cast's box_ray) */
+    vec3v near_origin, far_origin;
 } ShadowBoxes;
 
+inline void shadow_box_origins(ShadowBoxes* s, const vec3v origin, const realv margin)
+{
+    const BoxPacket* b = &s->box;
+    s->near_origin = v3(b->negative_x ? origin.x - margin : origin.x + margin,
+                        b->negative_y ? origin.y - margin : origin.y + margin,
+                        b->negative_z ? origin.z - margin : origin.z + margin);
+    s->far_origin = v3(b->negative_x ? origin.x + margin : origin.x - margin,
+                       b->negative_y ? origin.y + margin : origin.y - margin,
+                       b->negative_z ? origin.z + margin : origin.z - margin);
+}
+
 /* per lane, where the ray from its own origin enters the node's box before limit, else +inf
- * (kernels/bvh.h's box_entries, with the faces taken relative to the origin and the margin) */
+ * (kernels/bvh.h's box_entries, with the faces taken relative to the origin and the margin; the
+ * origin's rounding by the margin, the faces' differences by the ray's cone, as there) */
 inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
 {
     const BoxPacket* b = &s->box;
     const float4 lo = node->lo, hi = node->hi;
-    const realv m = s->margin;
-    const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
-    const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
-    const realv near_z = (b->negative_z ? SPLAT(hi.z) + m : SPLAT(lo.z) - m) - s->origin.z;
-    const realv far_x = (b->negative_x ? SPLAT(lo.x) - m : SPLAT(hi.x) + m) - s->origin.x;
-    const realv far_y = (b->negative_y ? SPLAT(lo.y) - m : SPLAT(hi.y) + m) - s->origin.y;
-    const realv far_z = (b->negative_z ? SPLAT(lo.z) - m : SPLAT(hi.z) + m) - s->origin.z;
+    const realv near_x = (b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x)) - s->near_origin.x;
+    const realv near_y = (b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y)) - s->near_origin.y;
+    const realv near_z = (b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z)) - s->near_origin.z;
+    const realv far_x = (b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x)) - s->far_origin.x;
+    const realv far_y = (b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y)) - s->far_origin.y;
+    const realv far_z = (b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z)) - s->far_origin.z;
     const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
                               v_max(near_z * b->near_inverse.z, SPLAT(0)));
     const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
@@ -174,10 +187,11 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
         ShadowBoxes boxes;                                                            \
         boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
         const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
-        boxes.origin = v3_add(from_eye, v3_splat((real4)(convert_real3(camera->box_origin.xyz), 0))); \
-        boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z)) \
-                       + SPLAT(0x1p-20) * ((v_abs(from_eye.x) + v_abs(from_eye.y)) + v_abs(from_eye.z)) \
-                       + SPLAT(camera->box_origin.w);                                 \
+        const vec3v origin = v3_add(from_eye, v3_splat((real4)(convert_real3(camera->box_origin.xyz), 0))); \
+        shadow_box_origins(&boxes, origin,                                            \
+                           SPLAT(0x1p-20) * ((v_abs(origin.x) + v_abs(origin.y)) + v_abs(origin.z)) \
+                           + SPLAT(0x1p-20) * ((v_abs(from_eye.x) + v_abs(from_eye.y)) + v_abs(from_eye.z)) \
+                           + SPLAT(camera->box_origin.w));                            \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
         PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
     }
