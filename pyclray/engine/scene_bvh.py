@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.shapes import REGISTRY
+from ..model.shapes import KINDS
 from .bvh import BINARY_STACK, BVH, LEAF_SIZE, WIDEN, build, pack_nodes, widened
 from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
@@ -60,7 +60,7 @@ def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
     type_of = np.concatenate([np.full(len(bounds_by_type[t]), k) for k, t in enumerate(types)] or [np.zeros(0, int)])
     within = np.concatenate([np.arange(len(bounds_by_type[t])) for t in types] or [np.zeros(0, int)])
     # leaves as large as the largest of the types' (Shape.leaf_size: a mesh's triangles), else LEAF_SIZE
-    leaf_size = max([REGISTRY[t].leaf_size or LEAF_SIZE for t in types] or [LEAF_SIZE])
+    leaf_size = max([KINDS[t].leaf_size or LEAF_SIZE for t in types] or [LEAF_SIZE])
     tree = build(widened(bounds), leaf_size)
     leaf_type = type_of[tree.order]
     leaf_index = np.zeros(len(tree.order), np.int64)

@@ -120,9 +120,9 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
         PYCLRAY_SHAPE_OF(Type, type, q, shape)                                        \
-        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(q * 16 + KIND_##type);        \
-        open = open && (self || !(s < limit));                                        \
+        const realv s = PYCLRAY_SHADOW_HIT_##type(shape, &shadow, open ? limit : SPLAT(-INFINITY), self); \
+        open = open && (PYCLRAY_SELF_##type(self) || !(s < limit));                   \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
 /* The shadow packet for box tests, in the BVH's frame (world axes around the scene's anchor): its
@@ -171,9 +171,9 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
-        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(ref);                         \
-        open = open && (self || !(s < limit));                                        \
+        const realv s = PYCLRAY_SHADOW_HIT_##type(shape, &shadow, open ? limit : SPLAT(-INFINITY), self); \
+        open = open && (PYCLRAY_SELF_##type(self) || !(s < limit));                   \
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
