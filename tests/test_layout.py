@@ -6,10 +6,11 @@ import pytest
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.engine.programs import kernel_dir
 from pyclray.model.layout import CAMERA, Struct, c_header, layout
-from pyclray.model.shapes import REGISTRY
+from pyclray.model.shapes import KINDS
 
-# the camera, each type's frame struct and its world struct (float64 fields: the per-view pass's input)
-STRUCTS = list(dict.fromkeys([CAMERA] + [cls.struct for cls in REGISTRY.values()] + [cls.world for cls in REGISTRY.values()]))
+# the camera, each packed kind's frame struct and its world struct (float64 fields: the per-view pass's
+# input; mesh instances' frame struct holds float64 fields too)
+STRUCTS = list(dict.fromkeys([CAMERA] + [cls.struct for cls in KINDS.values()] + [cls.world for cls in KINDS.values()]))
 
 
 def measure_on_device(struct: Struct, precision: str) -> list[int]:
@@ -17,10 +18,11 @@ def measure_on_device(struct: Struct, precision: str) -> list[int]:
     ctx = context_for()
     if precision == "fp64" and not has_fp64(ctx.device):
         pytest.skip("device lacks cl_khr_fp64")
-    if "World" in struct.name and not has_fp64(ctx.device):
+    float64 = any(t.startswith("double") for _, t in struct.fields)
+    if float64 and not has_fp64(ctx.device):
         pytest.skip("device lacks cl_khr_fp64 (world structs are float64: the host rebases instead)")
     prefix = "#define PYCLRAY_FP64 1\n" if precision == "fp64" else ""
-    if "World" in struct.name:
+    if float64:
         prefix = "#pragma OPENCL EXTENSION cl_khr_fp64 : enable\n" + prefix
     common = kernel_dir().joinpath("common.h").read_text()
     writes = [f"out[0] = sizeof({struct.name});"]

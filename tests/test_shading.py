@@ -35,6 +35,8 @@ def reference(scene, precision="fp32"):
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
     blur = 4 * shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPS[precision])
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur)
+    if not scene.shading.shadows:  # no shadow rays: every light reaches every point
+        V, edges = [np.ones_like(v) for v in V], np.zeros_like(edges)
     ref["visibility"], ref["shadow_edge"] = V, np.any(edges, axis=0)
     return ref
 

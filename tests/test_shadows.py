@@ -8,6 +8,8 @@ or acne (a surface shadowing itself) fails it."""
 import numpy as np
 import pytest
 
+import pyclray
+
 from pyclray.reference import shading
 
 from test_shading import ball, compare_shaded, ground, lit_scene
@@ -80,3 +82,47 @@ def test_a_light_below_a_huge_ground_leaves_everything_above_dark(radius):
     facing = np.einsum("...k,...k", shading.facing_normals(ref["normal"], ref["directions"]), L) > 0
     hidden = (ref["id"] >= 1) & facing & (ref["visibility"][0] == 0)
     assert hidden.sum() > 50 and result["lit"] > 1000
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("case", ["ground 1e8", "moved 1e5", "inside", "below"])
+def test_point_light_shadows_through_the_bvh_equal_the_tested_every_shape(case, precision):
+    """Through the BVH a point light's shadow packet is box-tested from the light (kernels/shading.h,
+    shadow_light_packet: one origin for all lanes), its shapes still from each lane's own origin: the
+    box tests must drop no occluder that the shape tests would find, also on huge grounds, far from
+    the origin, from inside a sphere and from below the ground, so the image equals the one that
+    tests every shape bit for bit."""
+    shapes, lights, camera = on_ground_sphere(1e8)
+    shift = (0.0, 0.0, 0.0)
+    if case == "moved 1e5":
+        shapes, lights, camera = on_ground_sphere(1e6)
+        shift = (1e5, 5e4, -1e5)
+    elif case == "inside":
+        shapes = (ball((0.0, 0.0, 0.0), 20.0), ball((0.0, -3.0, -8.0), 2.0))
+        lights = ({"type": "point", "position": [0.0, 6.0, 0.0], "intensity": 400.0},)
+        camera = ((0.0, 2.0, 12.0), (0.0, -6.0, -10.0))
+    elif case == "below":
+        lights = ({"type": "point", "position": [0.5, -2.0, 0.5], "intensity": 30.0},)
+    scene = lit_scene(shapes, lights, camera, size=64, shift=shift)
+    tiles = pyclray.render(scene, aovs=("shaded",), acceleration="tiles", precision=precision)["shaded"]
+    through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh", precision=precision)["shaded"]
+    np.testing.assert_array_equal(tiles, through_bvh)
+    dark = (tiles == 0).all(axis=-1).mean()
+    # shadowed and lit pixels both; below the ground, all dark (the ground hides the light from all)
+    assert dark == 1.0 if case == "below" else 0.02 < dark < 0.98
+
+
+@pytest.mark.parametrize("position, intensity", [((0.0, 1.5, -6.0), 20.0), ((3e3, 8e3, 2e3), 8e7)])
+def test_a_light_among_many_spheres_or_far_through_the_bvh(position, intensity):
+    """The light packet's box tests start at the light: inside the field's boxes (entries clamped to
+    0 there) or 1e4 away (its margin grows with |light|), the BVH drops no occluder: equal to the
+    image that tests every shape, with shadows in it."""
+    rng = np.random.default_rng(11)
+    shapes = [ground()]
+    shapes += [ball(rng.uniform([-6, 0.2, -12], [6, 3, 0]), float(rng.uniform(0.1, 0.6))) for _ in range(300)]
+    lights = ({"type": "point", "position": list(position), "intensity": intensity},)
+    scene = lit_scene(shapes, lights, ((0, 4, 6), (0, 1, -5)), size=64)
+    tiles = pyclray.render(scene, aovs=("shaded",), acceleration="tiles")["shaded"]
+    through_bvh = pyclray.render(scene, aovs=("shaded",), acceleration="bvh")["shaded"]
+    np.testing.assert_array_equal(tiles, through_bvh)
+    assert 0.05 < (tiles == 0).all(axis=-1).mean() < 0.95

@@ -15,7 +15,6 @@ from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
 from .prepared import CACHES, PREPARED_MAX, prepared_scene
-from .views import shape_kinds
 from .programs import Variant, kernel_for
 from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
 
@@ -149,7 +148,7 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
             raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
-                 input_buffer(ctx, np.ascontiguousarray(kind.world)), np.int32(kind.count)]
+                 input_buffer(ctx, np.ascontiguousarray(kind.world)), *kind.shared, np.int32(kind.count)]
     with render_lock:
         _cast_prepared[key] = (scene.shapes, shape_types, args, anchor, size)
         while len(_cast_prepared) > PREPARED_MAX:
@@ -173,7 +172,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax)
     count = len(directions)
     real = REAL[precision]
-    shape_types = shape_kinds(scene)[0]
+    shape_types = prepared_scene(ctx, scene, precision).types  # the packed kinds (mesh instances among them)
     args, anchor, scene_size = cast_inputs(ctx, scene, precision, shape_types)
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)

@@ -33,10 +33,10 @@ import numpy as np
 import pyopencl as cl
 
 from ..model.scene import MAX_LENGTH, Scene
-from ..model.shapes import REGISTRY
+from ..model.shapes import KINDS, REGISTRY
 from ..model.animation import derivation
 from ..model.shapes.base import entries
-from . import culling, refit, shading
+from . import culling, instances, refit, shading
 from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64
 from .indexed import IndexedEntries
@@ -82,6 +82,8 @@ class Kind:
     frame_host: np.ndarray | None
     smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
     smooth_host: np.ndarray | None = None
+    shared: tuple = ()  # the arrays its entries share (Shape.shared: mesh instances' triangles and BVHs)
+    shared_host: tuple = ()
     indexed: IndexedEntries | None = None  # a framed scene's triangles: shared vertices and faces
     shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
     order: np.ndarray | None = None
@@ -130,8 +132,10 @@ FRAMED_FROM = 524_288
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
-    def __init__(self, ctx, shapes: tuple, precision: str):
+    def __init__(self, ctx, shapes: tuple, precision: str, instanced: bool = True):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
+        # meshes sharing their arrays packed as instances (Shape.packed_as; their kernel needs float64)
+        self.instanced = instanced = instanced and has_fp64(ctx.device)
         self.lock = threading.Lock()  # one view at a time uses the frame buffers
         self.view_key = self.view = None  # the camera the frame buffers hold: (eye, rows) bytes, arrays
         by_type: dict = {}
@@ -139,15 +143,23 @@ class PreparedScene:
             by_type.setdefault(shape.type, ([], []))
             by_type[shape.type][0].append(shape)
             by_type[shape.type][1].append(index)
-        self.types = tuple(t for t in REGISTRY if t in by_type)
-        worlds, bounds = {}, {}
+        if instanced:  # a type may pack some of its shapes as another kind (meshes as instances)
+            packed: dict = {}
+            for t, (mine, ids) in by_type.items():
+                for kind, group in REGISTRY[t].packed_as(mine, ids).items():
+                    packed[kind] = group
+            by_type = packed
+        self.types = tuple(t for t in KINDS if t in by_type)
+        worlds, bounds, shared = {}, {}, {}
         self.on_device = False  # see below, once the entries are counted
         for t in self.types:
-            cls = REGISTRY[t]
+            cls = KINDS[t]
             mine, ids = by_type[t]
             world = cls.pack_world(mine)
-            entry_ids, primitives = entries(mine, ids)
+            entry_ids, primitives = cls.entries_of(mine, ids)
             worlds[t] = (world, entry_ids, primitives, cls.pack_smooth(mine, precision))
+            if cls.shared:  # before the entries are reordered: the shared arrays say where each starts
+                shared[t] = instances.pack_shared(cls, mine, world)
             self.on_device = self.on_device or len(world) >= DEVICE_REBASE_FROM
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
@@ -157,7 +169,7 @@ class PreparedScene:
         # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
         # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
         # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
-        framable = sum(len(worlds[t][0]) for t in self.types if REGISTRY[t].frames_in_render or REGISTRY[t].indexed)
+        framable = sum(len(worlds[t][0]) for t in self.types if KINDS[t].frames_in_render or KINDS[t].indexed)
         self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
         # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
         # has float64 and the scene is large enough to pay, else on the host
@@ -176,6 +188,9 @@ class PreparedScene:
             elif smooth is not None:
                 self.kinds[t].smooth_host = aligned(smooth)
                 self.kinds[t].smooth = _buffer(ctx, self.kinds[t].smooth_host)
+            if t in shared:
+                self.kinds[t].shared_host = tuple(aligned(a) for a in shared[t])
+                self.kinds[t].shared = tuple(_buffer(ctx, a) for a in self.kinds[t].shared_host)
         # the types lit by their shapes' own normals (smooth meshes): the shaded image's variant
         self.smooth = tuple(t for t in self.types if self.kinds[t].smooth is not None)
         self.bounded = sum(k.count for k in self.kinds.values() if k.cls.bounded)
@@ -212,12 +227,15 @@ class PreparedScene:
     REFIT_COST_MAX = 1.5
 
     def update(self, shapes: tuple, changed) -> bool:
-        """Become the prepared scene of an animation's frame (see pyclray.engine.refit.update)."""
+        """Become the prepared scene of an animation's frame (see pyclray.engine.refit.update); a
+        scene with shared arrays (mesh instances) is built anew."""
+        if any(kind.cls.shared for kind in self.kinds.values()):
+            return False
         return refit.update(self, shapes, changed)
 
     def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
-        cls = REGISTRY[t]
+        cls = KINDS[t]
         if self.framed and cls.indexed:  # shared vertices and faces (engine/indexed.py)
             indexed = IndexedEntries(self, cls, shapes, np.arange(len(world)) if order is None else order, ids)
             return Kind(t, cls, None, ids, primitives, None, None, None, None, None, indexed=indexed, shapes=shapes,
@@ -244,6 +262,7 @@ class PreparedScene:
             else:
                 total += kind.world.nbytes + kind.frame_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
+            total += sum(a.nbytes for a in kind.shared_host)
         if self.bvh.types:
             total += self._nodes_host.nbytes + self._refs_host.nbytes
         return total
@@ -320,13 +339,14 @@ class PreparedScene:
         return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
 
 
-def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
+def prepared_scene(ctx, scene: Scene, precision: str, instanced: bool = True) -> PreparedScene:
     """The scene's shapes prepared on this device at this precision: kept per shapes tuple (a moved
-    camera keeps the scene's tuple), built at the first view; a frame of an animation (a tuple that
+    camera keeps the scene's tuple), built at the first view (instanced: meshes that share their arrays
+    packed as instances, else each as its own triangles); a frame of an animation (a tuple that
     pyclray.model.animation says was made from another by changing a few shapes) updates the prepared
     scene of that other tuple in place (PreparedScene.update) instead."""
     shapes = scene.shapes
-    key = (ctx.device.int_ptr, id(shapes), precision)
+    key = (ctx.device.int_ptr, id(shapes), precision, instanced)
     with render_lock:
         entry = _prepared.get(key)
         if entry is not None and entry.shapes is shapes:
@@ -337,7 +357,8 @@ def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
         base, changed = derived
         with render_lock:
             candidates = [(k, p) for k, p in _prepared.items()
-                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision]
+                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision
+                          and p.instanced == instanced]
         for old_key, candidate in candidates:
             with candidate.lock:
                 updated = candidate.shapes is not shapes and candidate.update(shapes, changed)
@@ -346,7 +367,7 @@ def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
                 if updated:
                     _prepared[key] = candidate
                     return candidate
-    prepared = PreparedScene(ctx, shapes, precision)
+    prepared = PreparedScene(ctx, shapes, precision, instanced)
     if derived is not None:
         prepared.base, prepared.dirty = derived[0], set(derived[1])
     with render_lock:

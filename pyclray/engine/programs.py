@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..model.errors import BuildError, DeviceError
 from ..model.layout import CAMERA, c_header
-from ..model.shapes import REGISTRY
+from ..model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
 from .bvh import NODE
 from .bvh_wide import WIDE_NODE
 from .device import DeviceContext, is_pocl_cpu
@@ -117,6 +117,7 @@ class Variant:
         lines.append(f"#define PYCLRAY_UNBOUNDED(X) {listed(t for t in self.shape_types if t not in bounded)}")
         if bounded:
             lines.append("#define PYCLRAY_HAS_BOUNDED 1")
+        lines += self._shape_calls()
         if self.bvh and self.kind == "render":
             lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
@@ -143,6 +144,25 @@ class Variant:
             lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
                          + " ".join(f"P(__global const {'real4' if self._mode(c) == 'INDEXED' else c.smooth_struct.name}*, "
                                     f"{c.type}_smooth)" for c in smooth))
+        return lines
+
+    def _shape_calls(self) -> list[str]:
+        """Per type, its shared arrays' arguments (PYCLRAY_SHARED_ARGS_<type>(P): Shape.shared, after
+        its entries' array) and, for the usual types, how the kernel calls its functions (a type with
+        shared arrays defines PYCLRAY_HIT_<type> and the others in its kernel file: mesh instances)."""
+        lines = []
+        for t in self.shape_types:
+            cls = REGISTRY[t]
+            args = " ".join(f"P(__global const {c_type}*, {t}_{name})" for name, c_type in cls.shared)
+            lines.append(f"#define PYCLRAY_SHARED_ARGS_{t}(P) {args}")
+            if not cls.shared:
+                lines += [f"#define PYCLRAY_HIT_{t}(shape, ray, limit) {t}_hit(shape, ray)",
+                          # a shadow ray (kernels/shading.h): self, the lanes whose winner is this entry
+                          f"#define PYCLRAY_SHADOW_HIT_{t}(shape, ray, limit, self) {t}_hit(shape, ray)",
+                          f"#define PYCLRAY_SELF_{t}(self) (self)",
+                          f"#define PYCLRAY_NORMAL_{t}(shape, ray, camera, best, mine) {t}_normal(shape, ray, camera)",
+                          f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
+                          f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
         return lines
 
     def _mode(self, shape) -> str:
@@ -173,6 +193,7 @@ class Variant:
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
         framed = self.framed and self.kind == "render"
         structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
+                          + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
@@ -190,7 +211,8 @@ class Variant:
         """The per-view pass: each type's world struct and frame struct, its <type>_rebase, and the
         kernels of kernels/rebase_kernels.cl. float64 throughout (the device needs cl_khr_fp64)."""
         parts = ["\n".join(["/* pyclray program variant */", "#pragma OPENCL EXTENSION cl_khr_fp64 : enable"] + self.defines())]
-        structs = _unique([NODE] + [s.struct for s in shapes] + [s.world for s in shapes])
+        structs = _unique([NODE] + [s.struct for s in shapes] + [s.world for s in shapes]
+                          + [x for s in shapes for x in s.kernel_structs])
         parts += [_read("common.h"), c_header(structs, self.precision), _read("rebase.cl"), _read("frame.h")]
         parts += [_read(name) for name in _kernel_files(shapes)] + [_read("rebase_kernels.cl")]
         return "\n".join(parts)

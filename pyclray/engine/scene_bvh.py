@@ -7,7 +7,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..model.shapes import REGISTRY
+from ..model.shapes import KINDS
 from .bvh import BINARY_STACK, BVH, LEAF_SIZE, SAH_FROM, SCENE_LEAF_SIZE, SCENE_TRAVERSAL, WIDEN, build, pack_nodes, widened
 from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
@@ -70,7 +70,7 @@ def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
     within = np.concatenate([np.arange(len(bounds_by_type[t])) for t in types] or [np.zeros(0, int)])
     # leaves as large as the largest of the types' (Shape.leaf_size: a mesh's triangles), else LEAF_SIZE;
     # a large scene's SAH tree is built for render's packets (bvh.SCENE_LEAF_SIZE, SCENE_TRAVERSAL)
-    leaf_size = max([REGISTRY[t].leaf_size or LEAF_SIZE for t in types] or [LEAF_SIZE])
+    leaf_size = max([KINDS[t].leaf_size or LEAF_SIZE for t in types] or [LEAF_SIZE])
     if len(bounds) >= SAH_FROM:
         leaf_size = max(leaf_size, SCENE_LEAF_SIZE)
     tree = build(widened(bounds), leaf_size, traversal=SCENE_TRAVERSAL)

@@ -179,6 +179,7 @@ class ViewInputs:
                 entries = kind.indexed.kernel_args()
             else:
                 entries = [kind.world_buffer, kind.ids_buffer, kind.primitives_buffer] if kind.framed else [kind.frame]
+            entries += kind.shared  # the arrays its entries share (mesh instances' triangles and BVHs)
             if acceleration == "bvh":
                 args += [*entries, np.int32(kind.count)]
             else:

@@ -23,6 +23,7 @@ TAGS = {
     "aov": "integrator", "direct": "integrator", "path": "integrator", "twosided": "bsdf", "diffuse": "bsdf",
     "sphere": "shape", "disk": "shape", "rectangle": "shape", "cube": "shape", "cylinder": "shape",
     "obj": "shape", "ply": "shape", "point": "emitter", "directional": "emitter",
+    "shapegroup": "shape", "instance": "shape",
 }
 VECTORS = ("direction",)  # 3-vectors written as <vector>; the others are <point>s
 MESH_ARRAYS = ("vertex_positions", "faces")  # a mesh's arrays: written to its PLY file, not the XML
@@ -62,7 +63,38 @@ def export_dict(scene, mesh_file=lambda key: f"{key}.ply") -> dict:
             part += 1
     for index, light in enumerate(effective_lights(scene)):
         out[f"emitter:{light.name}"] = emitter_dict(light)
-    return out
+    return instanced(scene, out, key, mesh_file)
+
+
+def instanced(scene, out: dict, key, mesh_file) -> dict:
+    """The description with the meshes that share their arrays (as pyclray instances them) written as
+    Mitsuba's shapegroup (one PLY of the object-space vertices, before its first instance) and one
+    instance each (its to_world): Mitsuba's instances share their group's BSDF (its first mesh's
+    colour). The check itself builds each mesh on its own (mitsuba.mitsuba_dict)."""
+    from ..model.shapes.mesh_sharing import shared_key
+
+    groups: dict = {}
+    for index, shape in enumerate(scene.shapes):
+        if shape.type == "mesh" and key(index) in out:
+            groups.setdefault(shared_key(shape), []).append(index)
+    placed = {}
+    for members in (m for m in groups.values() if len(m) > 1):
+        first = scene.shapes[members[0]]
+        name = f"group_{key(members[0])}"
+        mesh = {"type": "ply", "filename": mesh_file(name), "face_normals": True,
+                "vertex_positions": first.vertices, "faces": first.faces, "bsdf": out[key(members[0])]["bsdf"]}
+        for n, index in enumerate(members):
+            placed[key(index)] = ((name, {"type": "shapegroup", "mesh": mesh}) if n == 0 else None,
+                                  {"type": "instance", "shapegroup": {"type": "ref", "id": name},
+                                   "to_world": scene.shapes[index].transform()})
+    result = {}
+    for name, value in out.items():
+        if name in placed:
+            group, value = placed[name]
+            if group is not None:
+                result[group[0]] = group[1]
+        result[name] = value
+    return result
 
 
 def _number(value) -> str:
@@ -93,6 +125,8 @@ def _property(name: str, value, indent: str) -> list[str]:
     if isinstance(value, np.ndarray) and value.shape == (4, 4):
         numbers = " ".join(map(_number, value.ravel()))
         return [f"{indent}<transform name={label}>", f"{indent}    <matrix value=\"{numbers}\"/>", f"{indent}</transform>"]
+    if isinstance(value, dict) and value.get("type") == "ref":  # a shapegroup's, in an instance
+        return [f"{indent}<ref id={quoteattr(value['id'])}/>"]
     if isinstance(value, dict) and value.get("type") == "rgb":
         return [f"{indent}<rgb name={label} value=\"{', '.join(map(_number, value['value']))}\"/>"]
     if isinstance(value, dict):
@@ -160,6 +194,7 @@ def export_files(scene, path) -> dict:
     source = f" from {scene.source}" if scene.source else ""
     files = {path: to_xml(description, f"written by pyclray export{source}").encode("utf-8")}
     for value in description.values():
+        value = value.get("mesh", value) if isinstance(value, dict) and value.get("type") == "shapegroup" else value
         if isinstance(value, dict) and value.get("type") == "ply":
             files[path.with_name(value["filename"])] = ply_bytes(value["vertex_positions"], value["faces"])
     return files

@@ -214,7 +214,7 @@ inline BoxPacket box_packet(const vec3v d, const float4 from)
  * meets inf - inf or 0 * inf) */
 inline float3 finite3(const float3 x)
 {
-    /* the vector ?: (OpenCL's select is a call into PoCL's library on its CPU device: see box_ray) */
+    /* as the vector ?: (select is a call into PoCL's library on its CPU device: see box_ray) */
     const float3 above = x < (float3)(-FLT_MAX) ? (float3)(-FLT_MAX) : x;
     return above > (float3)(FLT_MAX) ? (float3)(FLT_MAX) : above;
 }

@@ -80,9 +80,10 @@ typedef struct {
     realv e0, e1, e2, det, numerator, dz;
 } MeshEdges;
 
-inline MeshEdges mesh_edges(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+/* (the triangle's vertices by value: mesh instances frame theirs in private memory, kernels/instance.cl) */
+inline MeshEdges mesh_edges_of(const real4 a, const real4 b, const real4 c, const RayPacket* ray)
 {
-    vec3v A = v3_splat(tri->a), B = v3_splat(tri->b), C = v3_splat(tri->c), D = ray->dir;
+    vec3v A = v3_splat(a), B = v3_splat(b), C = v3_splat(c), D = ray->dir;
     if (!FROM_EYE(ray)) {  /* camera rays start at the frame's origin: the vertices are relative to it */
         A = v3_sub(A, ray->origin);
         B = v3_sub(B, ray->origin);
@@ -123,18 +124,28 @@ inline MeshEdges mesh_edges(SHAPE_SPACE const Triangle* tri, const RayPacket* ra
     return e;
 }
 
+inline MeshEdges mesh_edges(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+{
+    return mesh_edges_of(tri->a, tri->b, tri->c, ray);
+}
+
 /* Per lane the distance s > 0 along ray->dir, or MISS. Zero-area triangles (a zero world normal)
  * are never hit; no lane divides by 0 (det != 0, and dz, the largest component, is not 0). */
-inline realv mesh_hit(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+inline realv mesh_hit_of(const real4 a, const real4 b, const real4 c, const RayPacket* ray)
 {
-    if (tri->a.w == 0 && tri->b.w == 0 && tri->c.w == 0) return SPLAT(MISS);
-    const MeshEdges e = mesh_edges(tri, ray);
+    if (a.w == 0 && b.w == 0 && c.w == 0) return SPLAT(MISS);
+    const MeshEdges e = mesh_edges_of(a, b, c, ray);
     const intv negative = e.e0 < 0 || e.e1 < 0 || e.e2 < 0;
     const intv positive = e.e0 > 0 || e.e1 > 0 || e.e2 > 0;
     const intv inside = !(negative && positive) && e.det != 0;
     if (!ANY(inside)) return SPLAT(MISS);  /* most tests of a packet miss: no division for them */
     const realv s = e.numerator / (inside ? e.det * e.dz : SPLAT(1));
     return inside && s > 0 ? s : SPLAT(MISS);
+}
+
+inline realv mesh_hit(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+{
+    return mesh_hit_of(tri->a, tri->b, tri->c, ray);
 }
 
 #ifdef PYCLRAY_FRAMED
@@ -181,12 +192,17 @@ inline vec3v mesh_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, 
 }
 
 /* The barycentric coordinates (u, v) of the hit, hit = (1 - u - v) a + u b + v c: e1 / det, e2 / det. */
-inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, realv* u, realv* v)
+inline void mesh_barycentric_of(const real4 a, const real4 b, const real4 c, const RayPacket* ray, realv* u, realv* v)
 {
-    const MeshEdges e = mesh_edges(tri, ray);
+    const MeshEdges e = mesh_edges_of(a, b, c, ray);
     const realv det = e.det != 0 ? e.det : SPLAT(1);
     *u = e.e1 / det;
     *v = e.e2 / det;
+}
+
+inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, realv* u, realv* v)
+{
+    mesh_barycentric_of(tri->a, tri->b, tri->c, ray, u, v);
 }
 
 #ifdef PYCLRAY_SMOOTH

@@ -20,6 +20,10 @@
  * A shape plugs in through two functions of its kernel file, both over a packet of rays:
  *   realv type_hit(shape, ray)             per lane, the nearest s > 0 along ray->dir, or MISS
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
+ * called through PYCLRAY_HIT_<type>, PYCLRAY_NORMAL_<type>, PYCLRAY_PRIMITIVE_<type> and
+ * PYCLRAY_BARYCENTRIC_<type> (pyclray/engine/programs.py writes them for each type; a type with
+ * arrays shared by its entries, PYCLRAY_SHARED_ARGS_<type>, defines its own: mesh instances,
+ * kernels/instance.cl, which also take the lanes' best so far and keep each lane's triangle).
  */
 
 #if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_ID) || defined(PYCLRAY_AOV_SHADED) || defined(PYCLRAY_AOV_PRIMITIVE) \
@@ -115,10 +119,12 @@
  * shapes are reached through the BVH's leaves, the others (planes) are each tested by every ray.
  * cast adds the float64 world entries, on which it frames each shape it tests (kernels/cast.h). */
 #ifdef PYCLRAY_CAST
-#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
-    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds) P(const int, n_##type##s)
+#define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
+    P(__global const Type*, type##s) P(__global const Type##World*, type##_worlds)    \
+    PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #else
-#define PYCLRAY_SHAPE_ARGS(P, Type, type) PYCLRAY_ENTRIES(P, Type, type) P(const int, n_##type##s)
+#define PYCLRAY_SHAPE_ARGS(P, Type, type) \
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P) P(const int, n_##type##s)
 #endif
 #define PYCLRAY_FIRST(type) 0
 #define PYCLRAY_END(type) n_##type##s
@@ -143,11 +149,13 @@
 #ifdef PYCLRAY_SHADOWS
 /* shadow rays go anywhere: they test every shape of the type (n_##type##s of them) */
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    PYCLRAY_ENTRIES(P, Type, type) P(__global const int*, type##_tile_start)          \
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P)                      \
+    P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list) P(const int, n_##type##s)
 #else
 #define PYCLRAY_SHAPE_ARGS(P, Type, type)                                             \
-    PYCLRAY_ENTRIES(P, Type, type) P(__global const int*, type##_tile_start)          \
+    PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_SHARED_ARGS_##type(P)                      \
+    P(__global const int*, type##_tile_start)                                         \
     P(__global const int*, type##_tile_list)
 #endif
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
@@ -164,6 +172,16 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
  * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
  * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
  * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
+/* A type whose hit also says which of its own primitives each lane hit (mesh instances: the
+ * triangle; its kernel file defines PYCLRAY_SUBPRIMITIVES) writes it to hit_sub; the winner's is
+ * kept in best_sub, for the winners' normals, primitives and barycentrics. */
+#ifdef PYCLRAY_SUBPRIMITIVES
+#define PYCLRAY_SUB_BEGIN intv best_sub = SPLAT_INT(-1), hit_sub = SPLAT_INT(-1);
+#define PYCLRAY_KEEP_SUB(nearer) best_sub = (nearer) ? hit_sub : best_sub;
+#else
+#define PYCLRAY_SUB_BEGIN
+#define PYCLRAY_KEEP_SUB(nearer)
+#endif
 #ifdef PYCLRAY_TRACK_ID
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k)                                        \
     {                                                                                 \
@@ -174,20 +192,22 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
             best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
+            PYCLRAY_KEEP_SUB(nearer)                                                  \
         }                                                                             \
     }
 #define PYCLRAY_BEST                                                                  \
     realv best = SPLAT(MISS);                                                         \
-    intv best_id = SPLAT_INT(-1), best_key = SPLAT_INT(0);
+    intv best_id = SPLAT_INT(-1), best_key = SPLAT_INT(0);                            \
+    PYCLRAY_SUB_BEGIN
 #else
 #define PYCLRAY_CONSIDER(s, shape_id, kind, k) best = v_min(s, best);
-#define PYCLRAY_BEST realv best = SPLAT(MISS);
+#define PYCLRAY_BEST realv best = SPLAT(MISS); PYCLRAY_SUB_BEGIN
 #endif
 #define PYCLRAY_NEAREST(Type, type)                                                   \
     for (int q = PYCLRAY_FIRST(type), end = PYCLRAY_END(type); q < end; ++q) {        \
         const int k = PYCLRAY_SHAPE_AT(type, q);                                      \
         PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
-        const realv s = type##_hit(shape, &ray);                                      \
+        const realv s = PYCLRAY_HIT_##type(shape, &ray, best);                        \
         PYCLRAY_CONSIDER(s, PYCLRAY_ID_OF(type, k), KIND_##type, k)                   \
     }
 #define PYCLRAY_FIND_NEAREST                                                          \
@@ -205,7 +225,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_VISIT_KIND(Type, type)                                                \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
-        const realv s = type##_hit(shape, &ray);                                      \
+        const realv s = PYCLRAY_HIT_##type(shape, &ray, best);                        \
         PYCLRAY_CONSIDER(s, PYCLRAY_ID_OF(type, k), KIND_##type, k)                   \
     }
 #define PYCLRAY_VISIT(q)                                                              \
@@ -228,7 +248,8 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 
 #ifdef PYCLRAY_WINNER_NORMAL
-#define PYCLRAY_NORMAL_OF(type, shape) normal = v3_select(normal, type##_normal(shape, &ray, camera), mine);
+#define PYCLRAY_NORMAL_OF(type, shape) \
+    normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, camera, best, mine), mine);
 #define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #else
 #define PYCLRAY_NORMAL_OF(type, shape)
@@ -236,10 +257,10 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #endif
 /* the winner's index within its shape (a batch's primitive; 0 for a single shape), -1 on a miss */
 #ifdef PYCLRAY_AOV_PRIMITIVE
-#define PYCLRAY_PRIMITIVE_OF(type) primitive = mine ? SPLAT_INT(PYCLRAY_PRIMITIVE_AT(type, k)) : primitive;
+#define PYCLRAY_PRIMITIVE_OF(type, shape) primitive = mine ? PYCLRAY_PRIMITIVE_##type(shape, k, best, mine) : primitive;
 #define PYCLRAY_PRIMITIVE_BEGIN intv primitive = SPLAT_INT(-1);
 #else
-#define PYCLRAY_PRIMITIVE_OF(type)
+#define PYCLRAY_PRIMITIVE_OF(type, shape)
 #define PYCLRAY_PRIMITIVE_BEGIN
 #endif
 
@@ -249,7 +270,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     if (kind == KIND_##type) {                                                        \
         realv u, v;                                                                   \
         PYCLRAY_SHAPE_OF(Type, type, k, bary_shape)                                   \
-        type##_barycentric(bary_shape, &ray, &u, &v);                                 \
+        PYCLRAY_BARYCENTRIC_##type(bary_shape, &ray, best, mine, &u, &v);             \
         bary_u = mine ? u : bary_u;                                                   \
         bary_v = mine ? v : bary_v;                                                   \
     }
@@ -269,7 +290,7 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
         PYCLRAY_WINNER_OF(type, k, winner_shape)                                      \
         PYCLRAY_NORMAL_OF(type, winner_shape)                                         \
         PYCLRAY_MATERIAL_OF(PYCLRAY_ID_OF(type, k), mine, PYCLRAY_FLAT_##type)        \
-        PYCLRAY_PRIMITIVE_OF(type)                                                    \
+        PYCLRAY_PRIMITIVE_OF(type, winner_shape)                                      \
     }
 /* the winners' normals (and with shading, their materials) per lane, (0, 0, 0) on a miss */
 #define PYCLRAY_WINNERS                                                               \
@@ -691,7 +712,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                      \
         PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
-        const real s = type##_hit(&framed, &moved);                                 \
+        const real s = PYCLRAY_HIT_##type(&framed, &moved, MISS);                   \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
         PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
@@ -724,7 +745,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
         PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
-        const real s = type##_hit(&framed, &ray);                                   \
+        const real s = PYCLRAY_HIT_##type(&framed, &ray, MISS);                     \
         const double t = s < MISS ? (double)s * length : INFINITY;                  \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
@@ -852,7 +873,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 #define PYCLRAY_CAST_NORMAL(Type, type)                                             \
     if (best_kind == KIND_##type) {                                                 \
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        normal = type##_normal(&framed, &ray, camera);                              \
+        normal = PYCLRAY_NORMAL_##type(&framed, &ray, camera, MISS, 1);             \
     }
 
 /* the cast kernel's arguments after the camera (SHAPE as for render) */

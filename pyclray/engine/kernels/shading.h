@@ -120,9 +120,9 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
 #define PYCLRAY_SHADOW_TEST(Type, type)                                               \
     for (int q = 0; q < n_##type##s && ANY(open); ++q) {                              \
         PYCLRAY_SHAPE_OF(Type, type, q, shape)                                        \
-        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(q * 16 + KIND_##type);        \
-        open = open && (self || !(s < limit));                                        \
+        const realv s = PYCLRAY_SHADOW_HIT_##type(shape, &shadow, open ? limit : SPLAT(-INFINITY), self); \
+        open = open && (PYCLRAY_SELF_##type(self) || !(s < limit));                   \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
 /* The shadow packet for box tests, in the BVH's frame (world axes around the scene's anchor): its
@@ -171,19 +171,62 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
     if (kind == KIND_##type) {                                                        \
         PYCLRAY_SHAPE_OF(Type, type, k, shape)                                        \
-        const realv s = type##_hit(shape, &shadow);                                   \
         const intv self = skip && best_key == SPLAT_INT(ref);                         \
-        open = open && (self || !(s < limit));                                        \
+        const realv s = PYCLRAY_SHADOW_HIT_##type(shape, &shadow, open ? limit : SPLAT(-INFINITY), self); \
+        open = open && (PYCLRAY_SELF_##type(self) || !(s < limit));                   \
     }
 #define PYCLRAY_SHADOW_VISIT(q)                                                       \
     {                                                                                 \
-        const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;                 \
-        PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                    \
-        reach = open ? reach : SPLAT(-INFINITY);                                      \
+        if (ANY(open)) { /* the rest of a leaf once every lane is closed: nothing to test */ \
+            const int ref = PYCLRAY_REF(q), kind = ref & 15, k = ref >> 4;             \
+            PYCLRAY_BOUNDED(PYCLRAY_SHADOW_VISIT_KIND)                                \
+            reach = open ? reach : SPLAT(-INFINITY);                                  \
+        }                                                                             \
     }
+/* A point light's shadow packet, traversed from the light (all its lanes share that origin, so
+ * kernels/bvh.h's box_entries takes each node's faces relative to it once for all lanes): lane i's
+ * box ray runs from the light along -dir_i over [0, limit_i], the segment the shape tests cover
+ * from the lane's own origin (they are still made from there: their exactness does not change).
+ * A point the shape test puts at s along dir_i from the origin o_i lies at limit_i - s from the
+ * light along -dir_i, up to the roundings of the light in the box frame, of o_i and of dir_i limit_i:
+ * a few eps of |light| + |o_i| (limit_i <= their sum) and of the direction's length, which the cone
+ * covers (t BVH_WIDEN >> eps t). The margin is the one of the origin-wise test, taken at the largest
+ * lane, plus that of the light: 2^-20 (|light|_1 + |light from the eye|_1 + max_i (|o_i|_1 + |o_i from
+ * the eye|_1)) + the eye's own (box_origin.w). */
+inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 light, const vec3v dir,
+                                     const vec3v origin_from_eye, const intv open)
+{
+    const real4 u = camera->u, v = camera->v, w = camera->w;
+    const real3 light_eye = (real3)((light.x * u.x + light.y * v.x) + light.z * w.x,
+                                    (light.x * u.y + light.y * v.y) + light.z * w.y,
+                                    (light.x * u.z + light.y * v.z) + light.z * w.z);
+    const float3 from = convert_float3(light_eye + convert_real3(camera->box_origin.xyz));
+    const vec3v o = origin_from_eye;
+    const realv lane = (v_abs(o.x) + v_abs(o.y)) + v_abs(o.z);  /* |o_i from the eye|_1 */
+    const real3 box_origin = convert_real3(camera->box_origin.xyz);
+    /* |x| as the vector ?: (fabs of a vector is a call into PoCL's library on its CPU device) */
+    const real3 box_o = box_origin < (real3)(0) ? -box_origin : box_origin;
+    /* |o_i|_1 <= |o_i from the eye|_1 + |box origin|_1: one lane_max for both terms */
+    const real lanes = 2 * lane_max(open ? lane : SPLAT(0)) + ((box_o.x + box_o.y) + box_o.z);
+    const float3 from_abs = from < (float3)(0.0f) ? -from : from;
+    const real3 light_abs = light_eye < (real3)(0) ? -light_eye : light_eye;
+    const real margin = (real)0x1p-20 * ((((real)from_abs.x + from_abs.y) + from_abs.z)
+                                         + ((light_abs.x + light_abs.y) + light_abs.z) + lanes)
+                        + camera->box_origin.w;
+    /* rounded up to float: a margin never shrinks */
+    const float m = (float)margin;
+    return box_packet(v3_scale(world_from_frame(camera, dir), SPLAT(-1)),
+                      (float4)(from, (real)m < margin ? m * (1.0f + 0x1p-23f) : m));
+}
+
 #define PYCLRAY_SHADOW_SHAPES                                                         \
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
-    if (ANY(open)) {                                                                  \
+    if (point && ANY(open)) {                                                         \
+        const BoxPacket from_light = shadow_light_packet(camera, light.position, shadow.dir, \
+                                                         world_from_frame(camera, shadow.origin), open); \
+        realv reach = open ? limit : SPLAT(-INFINITY);                                \
+        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &from_light, reach, PYCLRAY_SHADOW_VISIT) \
+    } else if (ANY(open)) {                                                           \
         ShadowBoxes boxes;                                                            \
         boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
         const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
@@ -254,6 +297,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
             intv lit = hit && cos_l > 0;                                              \
             if (!ANY(lit)) continue;                                                  \
             PYCLRAY_SHADOW_RAY                                                        \
+            if (!ANY(lit)) continue;  /* all in shadow: nothing to add */            \
             const vec3v add = shade_light(albedo, specular, shininess, n_l, L, D, cos_l, E); \
             const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                      \
             color = v3_add(color, v3_select(zero, add, lit));                         \

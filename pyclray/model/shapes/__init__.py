@@ -7,6 +7,7 @@ from __future__ import annotations
 from .box import Box
 from .cylinder import Cylinder
 from .disk import Disk
+from .instance import Instances
 from .mesh import Mesh
 from .plane import Plane
 from .rectangle import Rectangle
@@ -15,5 +16,8 @@ from .spheres import Spheres
 
 # type name in scene files -> shape class, in the order the kernel visits them
 REGISTRY = {cls.type: cls for cls in (Plane, Sphere, Cylinder, Disk, Rectangle, Box, Spheres, Mesh)}
+# what the prepared scene packs: the scene's types, and the meshes that share their arrays packed as
+# instances (Mesh.packed_as; never a scene type of its own)
+KINDS = {**REGISTRY, Instances.type: Instances}
 
-__all__ = ["REGISTRY", "Box", "Cylinder", "Disk", "Mesh", "Plane", "Rectangle", "Sphere", "Spheres"]
+__all__ = ["KINDS", "REGISTRY", "Box", "Cylinder", "Disk", "Mesh", "Plane", "Rectangle", "Sphere", "Spheres"]

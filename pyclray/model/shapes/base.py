@@ -132,6 +132,23 @@ class Shape:
     # a shape of the type asks for it: pack_smooth) and <type>_shading_normal in its kernel file
     smooth_struct: ClassVar[Struct | None] = None
 
+    # the arrays a type shares among its entries (name, OpenCL C element type), passed to the kernel
+    # after its entries' array (mesh instances: one copy of a mesh's triangles and BVH)
+    shared: ClassVar[tuple] = ()
+    # the structs of other types its kernel file uses (mesh instances: the mesh's triangles)
+    kernel_structs: ClassVar[tuple] = ()
+
+    @classmethod
+    def packed_as(cls, shapes, ids) -> dict:
+        """{kind: (shapes, ids)}: how the prepared scene packs these shapes of this type (a kind of
+        pyclray.model.shapes.KINDS); by default as themselves."""
+        return {cls.type: (shapes, ids)}
+
+    @classmethod
+    def entries_of(cls, shapes, ids) -> tuple[np.ndarray, np.ndarray]:
+        """(id, primitive) per world entry of these shapes (see entries)."""
+        return entries(shapes, ids)
+
     @classmethod
     def pack_smooth(cls, shapes, precision: str):
         """The smooth_struct array of these shapes' entries (in pack_world's order), or None where

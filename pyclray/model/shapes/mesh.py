@@ -235,6 +235,13 @@ class Mesh(Shape):
 
     # -- device ----------------------------------------------------------------------------------
     @classmethod
+    def packed_as(cls, shapes, ids) -> dict:
+        """Meshes that share their arrays with another are packed as instances (model/shapes/instance.py)."""
+        from .mesh_sharing import split_meshes
+
+        return split_meshes(shapes, ids)
+
+    @classmethod
     def _pack_world(cls, out, meshes):
         start = 0
         for mesh in meshes:

@@ -1,0 +1,67 @@
+"""The lower level of two (DESIGN.md item 12): one BVH per shared mesh, in the mesh's own (object)
+space, over one copy of its triangles, shared by all its instances (pyclray/model/shapes/instance.py).
+
+The prepared scene's top-level BVH holds each instance as one entry (its world box, beside the other
+bounded shapes); the instance's entry says where its mesh's tree and triangles start in the shared
+arrays (``root``, ``first``), each tree's indices relative to those starts (kernels/instance.cl
+traverses it with kernels/bvh.h's packet traversal from nodes + root)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .bvh import build, pack_nodes, widened
+
+# leaves of the mesh's own tree: as a mesh's in the scene's tree (Mesh.leaf_size: about a packet's lanes)
+LEAF_SIZE = 7
+
+
+def pack_shared(cls, meshes, world) -> list[np.ndarray]:
+    """The shared arrays of these instances (cls.shared's order: object-space triangles in each
+    tree's leaf order, the trees' binary nodes around each mesh's anchor, per triangle its index in
+    its mesh, and its unit object-space vertex normals where an instance of its mesh is smooth,
+    else 0: only where some instance is smooth), each distinct mesh once; writes each instance's
+    root and first into world."""
+    from ..model.shapes.mesh_sharing import shared_key
+    from ..model.shapes.mesh import Mesh
+
+    triangles, nodes, primitives, normals = [], [], [], []
+    smooth = {shared_key(mesh) for mesh in meshes if mesh.smooth}
+    starts: dict = {}
+    root = first = 0
+    for k, mesh in enumerate(meshes):
+        key = shared_key(mesh)
+        if key not in starts:
+            own = mesh.placed()  # the same arrays in object space (no placement)
+            tri = Mesh.pack_world([own])
+            tree = build(widened(Mesh.bounds_of(tri)), LEAF_SIZE, "sah" if len(tri) > 1 else None)
+            starts[key] = (root, first)
+            triangles.append(tri[tree.order])
+            nodes.append(pack_nodes(tree, world["anchor"][k, :3]))
+            primitives.append(tree.order.astype(np.int32))
+            vertex = np.zeros_like(tri)
+            if key in smooth:  # the placement's are these through its normal matrix (a mesh's vertex_normals)
+                unit = own.vertex_normals()
+                for k_, name in enumerate("abc"):
+                    vertex[name][:, :3] = unit[own.faces[tree.order, k_]]
+            normals.append(vertex)
+            root += tree.nodes
+            first += len(tri)
+        world["root"][k], world["first"][k] = starts[key]
+    # the vertex normals only where some instance is smooth (else one entry: the kernel reads none)
+    normals = np.concatenate(normals) if smooth else normals[0][:1]
+    return [np.concatenate(triangles), np.concatenate(nodes), np.concatenate(primitives), normals]
+
+
+def instance_bytes(prepared) -> dict:
+    """What the instances of a prepared scene cost: bytes per instance of their own (world entry,
+    per-view entry, their share of the top-level tree's nodes and refs) and of the shared arrays."""
+    kind = prepared.kinds.get("instance")
+    if kind is None:
+        return {}
+    count = kind.count
+    tree_nodes = prepared.bvh.tree.nodes
+    entries = len(prepared.bvh.leaf_type) or 1
+    own = kind.world.itemsize + kind.frame_host.itemsize
+    tlas = (tree_nodes * prepared._nodes_host.itemsize + entries * 4) / entries  # the tree and refs per entry
+    return {"instances": count, "own_bytes_per_instance": own, "tlas_bytes_per_instance": tlas,
+            "bytes_per_instance": own + tlas, "shared_bytes": sum(a.nbytes for a in kind.shared_host)}

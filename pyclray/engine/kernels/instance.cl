@@ -1,0 +1,313 @@
+/* Instance (meshes that share their arrays, pyclray/model/shapes/instance.py): two levels.
+ *
+ * The scene's BVH holds each instance as one entry (its world box); its mesh's triangles and BVH are
+ * one copy in object space (instance_triangles, instance_nodes from the instance's root, triangles
+ * from its first, in that tree's leaf order; instance_primitives: each one's index in its mesh),
+ * shared by all its instances (engine/instances.py). A packet enters an instance through its
+ * per-view entry: the eye in object space (float64) and the frame's directions there (the rows of
+ * object_from_frame / k, k a power of two, rounded once). Each triangle it visits is framed on that
+ * object-space eye (its float64 vertices minus the eye, rounded once: the same bits for a vertex
+ * shared by two triangles, as a mesh's world triangles get from the per-view pass) and tested by
+ * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_frame d
+ * / k (exact: k is a power of two), whose length is at most 1, so that kernels/bvh.h's cone is at
+ * least as wide in the object's units as in the world's. Each lane's nearest triangle is kept with
+ * its hit (kernels/pyclray.cl's best_sub): the winners' normals (the object normal through
+ * sign(det A) A^-T, normalized in float64), indices and barycentrics come from it. */
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+
+inline double instance_dot(const double4 row, const double3 x) { return (row.x * x.x + row.y * x.y) + row.z * x.z; }
+
+#if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
+
+/* an instance in a camera's frame: the same float64 operations, in the same order, as
+ * pyclray.model.shapes.instance.Instances._rebase (a test holds the two to the same bits); in cast,
+ * on the ray's origin with the world's axes (kernels/cast.h) */
+inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_OUT Instance* out, const Frame* frame)
+{
+    /* the eye in object space: object_from_world (eye - translate) */
+    const double3 F = frame->origin - world->translate.xyz;
+    const double3 eye = (double3)(instance_dot(world->inverse0, F), instance_dot(world->inverse1, F),
+                                  instance_dot(world->inverse2, F));
+    out->eye = (double4)(eye, 0.0);
+    out->normal0 = world->normal0;
+    out->normal1 = world->normal1;
+    out->normal2 = world->normal2;
+    /* object_from_frame = object_from_world world_from_frame (the frame's axes are its columns), over k */
+#ifdef PYCLRAY_CAST
+    const double3 u = (double3)(1, 0, 0), v = (double3)(0, 1, 0), w = (double3)(0, 0, 1);
+#else
+    const double3 u = frame->u, v = frame->v, w = frame->w;
+#endif
+    const double k = world->anchor.w;
+    out->m0 = (real4)((real)(instance_dot(world->inverse0, u) / k), (real)(instance_dot(world->inverse0, v) / k),
+                      (real)(instance_dot(world->inverse0, w) / k), (real)k);
+    out->m1 = (real4)((real)(instance_dot(world->inverse1, u) / k), (real)(instance_dot(world->inverse1, v) / k),
+                      (real)(instance_dot(world->inverse1, w) / k), 0);
+    out->m2 = (real4)((real)(instance_dot(world->inverse2, u) / k), (real)(instance_dot(world->inverse2, v) / k),
+                      (real)(instance_dot(world->inverse2, w) / k), 0);
+    /* the eye from the tree's anchor, rounded to float, and a margin over that rounding (as the camera's) */
+    const float3 box = convert_float3(eye - world->anchor.xyz);
+    const double3 size = convert_double3(box < (float3)(0.0f) ? -box : box);
+    out->box = (float4)(box, (float)(0x1p-20 * ((size.x + size.y) + size.z)));
+    out->root = world->root;
+    out->first = world->first;
+}
+
+#endif
+
+#ifndef PYCLRAY_REBASE
+
+/* a shadow ray leaving a triangle never meets it again (as a mesh's); shadow rays see instances'
+ * meshes as their own triangles, though (engine/render.py), so this only completes the type */
+#define PYCLRAY_FLAT_instance 1
+
+/* a vertex framed on the object-space eye: the float64 difference rounded once */
+inline real4 instance_vertex(const double4 p, const double3 eye) { return (real4)(convert_real3(p.xyz - eye), (real)p.w); }
+
+/* the packet in object space: from the eye (where its triangles are framed), along object_from_frame d / k */
+inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
+{
+    const vec3v d = ray->dir;
+    const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
+    RayPacket r;
+    r.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    r.dir = v3((SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z,
+               (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z,
+               (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z);
+    r.a = v3_dot(r.dir, r.dir);
+#ifdef PYCLRAY_SHADOWS
+    r.from_eye = 1;
+#endif
+    return r;
+}
+
+/* Per lane the nearest hit s <= limit (along the packet's own directions; an exact tie with limit
+ * counts, so that the caller's lowest-id rule sees it), or MISS; which: its triangle's position in
+ * the tree's leaf order (the lowest on a tie), -1 where none. */
+inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
+                             __global const TriangleWorld* triangles, __global const BvhNode* nodes, intv* which)
+{
+    const real scale = inst->m0.w;
+    const RayPacket object = instance_ray(inst, ray);
+    const BoxPacket box = box_packet(object.dir, inst->box);
+    const double3 eye = inst->eye.xyz;
+    __global const BvhNode* tree = nodes + inst->root;
+    __global const TriangleWorld* own = triangles + inst->first;
+    realv nearest = limit * SPLAT(scale);  /* in the tree's units: exact */
+    intv found = SPLAT_INT(0), leaf = SPLAT_INT(-1);
+#define INSTANCE_VISIT(q)                                                                             \
+    {                                                                                                 \
+        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
+                                    instance_vertex(own[q].c, eye), &object);                         \
+        const intv take = s < nearest || (s == nearest && s < MISS && (!found || SPLAT_INT(q) < leaf)); \
+        if (ANY(take)) {                                                                              \
+            nearest = take ? s : nearest;                                                             \
+            leaf = take ? SPLAT_INT(q) : leaf;                                                        \
+            found = found || take;                                                                    \
+        }                                                                                             \
+    }
+    PYCLRAY_TRAVERSE_PACKET(tree, box, nearest, INSTANCE_VISIT)
+#undef INSTANCE_VISIT
+    *which = leaf;
+    return found ? nearest / SPLAT(scale) : SPLAT(MISS);
+}
+
+/* each distinct winning triangle q once (the largest first), with the lanes it won */
+#define INSTANCE_EACH_WINNER(which, ...)                                                              \
+    {                                                                                                 \
+        intv pending = which;                                                                         \
+        for (int q = (int)lanes_max_int(pending); q >= 0; q = (int)lanes_max_int(pending)) {          \
+            const intv lanes = pending == SPLAT_INT(q);                                               \
+            __VA_ARGS__                                                                               \
+            pending = lanes ? SPLAT_INT(-1) : pending;                                                \
+        }                                                                                             \
+    }
+
+/* the unit world normal: the object normal through the normal matrix sign(det A) A^-T, in float64 */
+inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which, __global const TriangleWorld* triangles)
+{
+    vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        const double3 n = (double3)(t->a.w, t->b.w, t->c.w);
+        const double3 w = (double3)(instance_dot(inst->normal0, n), instance_dot(inst->normal1, n), instance_dot(inst->normal2, n));
+        const real3 unit = convert_real3(w / sqrt((w.x * w.x + w.y * w.y) + w.z * w.z));
+        normal = v3_select(normal, v3(SPLAT(unit.x), SPLAT(unit.y), SPLAT(unit.z)), lanes);
+    })
+    return normal;
+}
+
+/* the winning triangle's index in its mesh */
+inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const intv which, __global const int* primitives)
+{
+    intv primitive = SPLAT_INT(-1);
+    INSTANCE_EACH_WINNER(which, { primitive = lanes ? SPLAT_INT(primitives[inst->first + q]) : primitive; })
+    return primitive;
+}
+
+/* the winning triangle's barycentrics, from its test in object space (an affine map keeps them) */
+inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const intv which,
+                                 __global const TriangleWorld* triangles, realv* u, realv* v)
+{
+    const RayPacket object = instance_ray(inst, ray);
+    const double3 eye = inst->eye.xyz;
+    *u = SPLAT(0);
+    *v = SPLAT(0);
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        realv tu, tv;
+        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &tu, &tv);
+        *u = lanes ? tu : *u;
+        *v = lanes ? tv : *v;
+    })
+}
+
+#ifdef PYCLRAY_SHADOWS
+/* Shadow packets (kernels/shading.h): each lane from its own point p of the eye's frame, which is
+ * k object_from_frame p / k from the object-space eye: the triangles framed on that eye as for
+ * camera rays, each lane's origin subtracted in the shape test (kernels/mesh.cl, as a mesh's shadow
+ * rays do), and the tree's boxes tested from each lane's origin with a margin over its rounding (as
+ * shading.h's shadow_box_entries). The skip-self rule is per triangle: the lanes whose winner is this
+ * instance skip their winning triangle (skip), not the whole instance. Any hit before limit closes a
+ * lane (and drops it from the traversal); returns 0 there (< limit), MISS elsewhere. */
+typedef struct {
+    BoxPacket box;
+    vec3v origin;
+    realv margin;
+} InstanceShadowBoxes;
+
+inline realv instance_shadow_entries(__global const BvhNode* node, const InstanceShadowBoxes* s, const realv limit)
+{
+    const BoxPacket* b = &s->box;
+    const float4 lo = node->lo, hi = node->hi;
+    const realv m = s->margin;
+    const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
+    const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
+    const realv near_z = (b->negative_z ? SPLAT(hi.z) + m : SPLAT(lo.z) - m) - s->origin.z;
+    const realv far_x = (b->negative_x ? SPLAT(lo.x) - m : SPLAT(hi.x) + m) - s->origin.x;
+    const realv far_y = (b->negative_y ? SPLAT(lo.y) - m : SPLAT(hi.y) + m) - s->origin.y;
+    const realv far_z = (b->negative_z ? SPLAT(lo.z) - m : SPLAT(hi.z) + m) - s->origin.z;
+    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
+                              v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
+    return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit, const intv skip,
+                                 __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+{
+    const real scale = inst->m0.w;
+    RayPacket object = instance_ray(inst, ray);
+    const vec3v p = ray->origin;
+    const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
+    /* the lanes' origins from the object-space eye: k (object_from_frame / k) p, k a power of two */
+    object.origin = v3_scale(v3((SPLAT(m0.x) * p.x + SPLAT(m0.y) * p.y) + SPLAT(m0.z) * p.z,
+                                (SPLAT(m1.x) * p.x + SPLAT(m1.y) * p.y) + SPLAT(m1.z) * p.z,
+                                (SPLAT(m2.x) * p.x + SPLAT(m2.y) * p.y) + SPLAT(m2.z) * p.z), SPLAT(scale));
+    object.from_eye = 0;
+    InstanceShadowBoxes boxes;
+    boxes.box = box_packet(object.dir, inst->box);
+    const vec3v o = object.origin;
+    boxes.origin = v3_add(o, v3_splat((real4)(convert_real3(inst->box.xyz), 0)));  /* from the tree's anchor */
+    boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z))
+                   + SPLAT(0x1p-20) * ((v_abs(o.x) + v_abs(o.y)) + v_abs(o.z)) + SPLAT(inst->box.w);
+    const double3 eye = inst->eye.xyz;
+    __global const BvhNode* tree = nodes + inst->root;
+    __global const TriangleWorld* own = triangles + inst->first;
+    const realv bound = limit * SPLAT(scale);  /* in the tree's units */
+    realv reach = bound;
+    intv blocked = SPLAT_INT(0);
+#define INSTANCE_SHADOW_VISIT(q)                                                                      \
+    {                                                                                                 \
+        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
+                                    instance_vertex(own[q].c, eye), &object);                         \
+        const intv hit = s < bound && SPLAT_INT(q) != skip;                                           \
+        blocked = blocked || hit;                                                                     \
+        reach = blocked ? SPLAT(-INFINITY) : reach;                                                   \
+    }
+    PYCLRAY_TRAVERSE_PACKET_WITH(tree, instance_shadow_entries, &boxes, reach, INSTANCE_SHADOW_VISIT)
+#undef INSTANCE_SHADOW_VISIT
+    return blocked ? SPLAT(0) : SPLAT(MISS);
+}
+#define PYCLRAY_SHADOW_HIT_instance(shape, ray, limit, self) \
+    instance_shadow_hit(shape, ray, limit, (self) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_nodes)
+#define PYCLRAY_SELF_instance(self) SPLAT_INT(0)  /* its winning triangle is skipped, not the instance */
+#endif
+
+#ifdef PYCLRAY_SMOOTH
+/* Smooth shading: the winning triangle's vertex normals placed (the object's through the normal
+ * matrix, normalized in float64: the placed mesh's vertex normals, Mesh.vertex_normals, up to their
+ * sign, which the lighting's facing rule drops) and interpolated at the hit's barycentrics, as
+ * kernels/mesh.cl's mesh_shading_normal; (0, 0, 0) where the instance is flat. */
+inline real4 instance_vertex_normal(SHAPE_SPACE const Instance* inst, const double4 n)
+{
+    const double3 w = (double3)(instance_dot(inst->normal0, n.xyz), instance_dot(inst->normal1, n.xyz),
+                                instance_dot(inst->normal2, n.xyz));
+    const double length = sqrt((w.x * w.x + w.y * w.y) + w.z * w.z);
+    return length > 0 ? (real4)(convert_real3(w / length), 0) : (real4)(0);
+}
+
+inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const InstanceNormals* flags,
+                                    const intv which, __global const TriangleWorld* triangles,
+                                    __global const TriangleWorld* normals)
+{
+    vec3v out = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    if (!flags->smooth) return out;
+    const RayPacket object = instance_ray(inst, ray);
+    const double3 eye = inst->eye.xyz;
+    INSTANCE_EACH_WINNER(which, {
+        __global const TriangleWorld* t = triangles + inst->first + q;
+        __global const TriangleWorld* m = normals + inst->first + q;
+        realv u, v;
+        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &u, &v);
+        const realv w = (SPLAT(1) - u) - v;
+        const real4 na = instance_vertex_normal(inst, m->a), nb = instance_vertex_normal(inst, m->b);
+        const real4 nc = instance_vertex_normal(inst, m->c);
+        const vec3v n = v3((w * na.x + u * nb.x) + v * nc.x, (w * na.y + u * nb.y) + v * nc.y, (w * na.z + u * nb.z) + v * nc.z);
+        const realv length2 = v3_dot(n, n);
+        out = v3_select(out, v3_scale(n, length2 > 0 ? SPLAT(1) / v_sqrt(length2) : SPLAT(0)), lanes);
+    })
+    return out;
+}
+/* kernels/shading.h's call, in its winners' loop (mine: the lanes this instance won) */
+#define instance_shading_normal(shape, ray, flags) \
+    instance_smooth_normal(shape, ray, flags, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_normals)
+#endif
+
+#ifdef PYCLRAY_CAST
+/* cast's and occluded's one ray (LANES 1): its nearest hit in the instance; the winner's triangle is
+ * found again for its normal (the same search gives the same bits) */
+inline real instance_cast_hit(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
+                              __global const BvhNode* nodes)
+{
+    int which;
+    return instance_search(inst, ray, MISS, triangles, nodes, &which);
+}
+
+inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
+                                  __global const BvhNode* nodes)
+{
+    int which;
+    instance_search(inst, ray, MISS, triangles, nodes, &which);
+    return instance_normal(inst, which, triangles);
+}
+#define PYCLRAY_HIT_instance(shape, ray, limit) instance_cast_hit(shape, ray, instance_triangles, instance_nodes)
+#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+    instance_cast_normal(shape, ray, instance_triangles, instance_nodes)
+#else
+/* how kernels/pyclray.cl calls an instance's functions: with the shared arrays, the lanes' best so
+ * far, and for the winners the triangle each lane's hit was on (best_sub, kept from hit_sub) */
+#define PYCLRAY_SUBPRIMITIVES 1
+#define PYCLRAY_HIT_instance(shape, ray, limit) \
+    instance_search(shape, ray, limit, instance_triangles, instance_nodes, &hit_sub)
+#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+    instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles)
+#define PYCLRAY_PRIMITIVE_instance(shape, k, best, mine) \
+    instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_primitives)
+#define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
+    instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, u, v)
+
+#endif
+
+#endif
