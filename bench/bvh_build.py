@@ -42,9 +42,10 @@ def _half_area(lo, hi):
     return extent[..., 0] * extent[..., 1] + extent[..., 1] * extent[..., 2] + extent[..., 2] * extent[..., 0]
 
 
-def reference(bounds: np.ndarray, leaf_size: int = bvh.LEAF_SIZE, bins: int = BINS) -> bvh.BVH:
+def reference(bounds: np.ndarray, leaf_size: int = bvh.LEAF_SIZE, bins: int = BINS, traversal: float = 1.0) -> bvh.BVH:
     """The full binned SAH tree over these (N, 2, 3) bounds, built level by level (each level's
-    nodes at once), in bvh.BVH's layout (children numbered level by level)."""
+    nodes at once), in bvh.BVH's layout (children numbered level by level). traversal: a node's
+    visit in shape tests (the scene's trees are built with bvh.SCENE_TRAVERSAL)."""
     bounds = np.asarray(bounds, np.float64)
     n = len(bounds)
     lo_all, hi_all = bounds[:, 0], bounds[:, 1]
@@ -86,7 +87,7 @@ def reference(bounds: np.ndarray, leaf_size: int = bvh.LEAF_SIZE, bins: int = BI
             k = np.argmin(cost, axis=1)
             better = cost[np.arange(m), k] < best_cost
             best_cost[better], best_axis[better], best_k[better] = cost[np.arange(m), k][better], axis, k[better]
-        split_cost = 1.0 + best_cost / np.where(area > 0, area, np.inf)
+        split_cost = traversal + best_cost / np.where(area > 0, area, np.inf)
         leaf = (counts == 1) | ((counts <= leaf_size) & (counts <= split_cost))
         halve = ~leaf & ~np.isfinite(best_cost)  # every centroid alike: the halves as they are
         split = ~leaf

@@ -19,7 +19,7 @@ import pyopencl as cl
 import pytest
 
 import pyclray
-from pyclray.engine import culling, device, programs
+from pyclray.engine import culling, device, programs, render
 from pyclray.reference import error_model, mitsuba, oracle
 
 from . import blocks
@@ -248,7 +248,7 @@ def test_breakdown(benchmark, scenes_dir, part):
     tile = culling.TILE
     whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
     args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]
-    global_size, local_size = (width // lanes, height), (tile // lanes, tile)
+    global_size, local_size = render.launch_size(lanes, 0, 0, width, height, ctx.device.max_work_group_size)
 
     def kernel_only():
         kernel(ctx.queue, global_size, local_size, *args, *buffers)

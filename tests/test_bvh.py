@@ -107,6 +107,44 @@ def test_the_sah_tree_is_within_ten_percent_of_a_full_binned_sah_build(make):
     assert bvh.sah_cost(bvh.build(bounds, method="lbvh")) > 1.1 * reference  # the bound tells them apart
 
 
+@pytest.mark.parametrize("make", [lambda: random_bounds(7, 20000), lambda: torus_bounds(20000)], ids=["clustered spheres", "torus"])
+def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_costs(make):
+    """A scene's SAH tree is built for render's packets (bvh.SCENE_LEAF_SIZE, SCENE_TRAVERSAL: a
+    node's visit costs about four shape tests there): weighed with those costs, it is within 1.1
+    times a full binned SAH build made for the same costs (which the LBVH is not)."""
+    from pyclray.engine.scene_bvh import primitives_bvh
+
+    bounds = make()
+    leaf, cost = bvh.SCENE_LEAF_SIZE, bvh.SCENE_TRAVERSAL
+    tree = primitives_bvh({"sphere": bounds}).tree
+    assert tree.count.max() <= leaf and tree.count.max() > bvh.LEAF_SIZE  # built with the scene's leaves
+    reference = bvh.sah_cost(reference_sah()(bvh.widened(bounds), leaf, traversal=cost), traversal=cost)
+    assert bvh.sah_cost(tree, traversal=cost) <= 1.1 * reference
+    assert bvh.sah_cost(bvh.build(bvh.widened(bounds), leaf, method="lbvh"), traversal=cost) > 1.1 * reference
+
+
+@pytest.mark.parametrize("n", [5, 3000, 20000])  # the LBVH and the SAH tree
+def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
+    """The render kernel reads a leaf's entries without its refs where the program has one bounded
+    type (kernels/pyclray.cl: PYCLRAY_ONE_BOUNDED), and asks for them from memory where the
+    traversal first meets the leaf: that needs refs[q] to be entry q of the type's array, q * 16 +
+    its kind; with two types it is not so."""
+    from pyclray.engine.scene_bvh import primitives_bvh
+
+    bounds = bvh.widened(random_bounds(3, n))
+    refs = primitives_bvh({"sphere": bounds}).refs(("plane", "sphere"))
+    assert np.array_equal(refs, np.arange(n) * 16 + 2)
+    two = primitives_bvh({"sphere": bounds, "box": bounds}).refs(("box", "sphere"))
+    assert not np.array_equal(two >> 4, np.arange(2 * n))
+    from pyclray.engine.programs import Variant
+
+    def defines(types):
+        return Variant("render", types, ("depth",), "fp32", 8, bvh=True).defines()
+
+    assert "#define PYCLRAY_ONE_BOUNDED KIND_sphere" in defines(("plane", "sphere"))
+    assert not any("PYCLRAY_ONE_BOUNDED" in line for line in defines(("box", "sphere")))
+
+
 def test_the_reference_build_is_a_valid_tree():
     """The reference the ten percent are measured against is a valid tree over the shapes (every
     shape in one leaf, boxes the exact unions), its leaves no larger than the kernels take."""

@@ -13,6 +13,7 @@ import pytest
 
 import pyclray
 from pyclray.engine import device, programs
+from pyclray.model.aovs import RENDER_AOVS
 from test_render import assert_matches_oracle, small
 from test_speedups import random_scene, same
 
@@ -65,13 +66,17 @@ def test_scalar_and_vector_widths_match_the_oracle(monkeypatch, scenes_dir, name
     at_width(monkeypatch, lanes, lambda: assert_matches_oracle(scene))
 
 
+@pytest.mark.parametrize("aovs", [ALL, RENDER_AOVS], ids=["depth,normal,id", "every image"])
 @pytest.mark.parametrize("lanes", [1, 4, 8])
-def test_windows_are_the_same_pixels_as_the_whole_image(monkeypatch, lanes):
+def test_windows_are_the_same_pixels_as_the_whole_image(monkeypatch, lanes, aovs):
+    """Packets of 4x2 (8 lanes) and 2x2 (4 lanes) pixels: a window starting on an odd row or column
+    cuts packets on every side, and each image's writer keeps to the window's pixels."""
     scene = random_scene(5, size=(83, 37))
-    whole = at_width(monkeypatch, lanes, lambda: pyclray.render(scene))
-    windows = [(0, 0, 83, 37), (0, 0, 1, 1), (82, 36, 1, 1), (3, 5, 17, 9), (8, 0, 8, 37), (13, 2, 70, 35), (0, 20, 83, 17)]
+    whole = at_width(monkeypatch, lanes, lambda: pyclray.render(scene, aovs))
+    windows = [(0, 0, 83, 37), (0, 0, 1, 1), (82, 36, 1, 1), (3, 5, 17, 9), (8, 0, 8, 37), (13, 2, 70, 35), (0, 20, 83, 17),
+               (1, 1, 81, 35), (5, 7, 2, 1)]
     for col0, row0, cols, rows in windows:
-        part = at_width(monkeypatch, lanes, lambda: pyclray.render(scene, window=(col0, row0, cols, rows)))
+        part = at_width(monkeypatch, lanes, lambda: pyclray.render(scene, aovs, window=(col0, row0, cols, rows)))
         cut = {k: np.ascontiguousarray(v[row0 : row0 + rows, col0 : col0 + cols]) for k, v in whole.items()}
         same(part, cut)
 

@@ -70,6 +70,15 @@ def lanes_for(device: cl.Device, precision: str) -> int:
     return max(w for w in widths if w <= max(int(preferred), 1))
 
 
+def packet_shape(lanes: int) -> tuple[int, int]:
+    """(columns, rows) of pixels a render work-item's packet covers: two rows where the lanes
+    allow (4x2 for 8 lanes, 2x2 for 4), else one. A square packet's rays stay closer together than a
+    row's, so fewer BVH nodes and leaves meet some lane of it (measured, bench.meshes' 512x512 rays:
+    see docs/benchmarks.md); each lane's arithmetic is its pixel's, whatever the packet."""
+    rows = 2 if lanes >= 4 else 1
+    return lanes // rows, rows
+
+
 @dataclass(frozen=True)
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
@@ -99,6 +108,9 @@ class Variant:
 
         bounded = self.bounded_types()
         lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
+        if self.kind == "render":
+            columns, rows = packet_shape(self.lanes)
+            lines += [f"#define PYCLRAY_PACKET_W {columns}", f"#define PYCLRAY_PACKET_H {rows}"]
         lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
         # the types whose kernel file has <type>_barycentric (the barycentric image; 0, 0 for the others)
         lines.append(f"#define PYCLRAY_BARYCENTRIC_TYPES(X) {listed(t for t in self.shape_types if REGISTRY[t].barycentric)}")

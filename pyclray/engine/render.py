@@ -16,7 +16,7 @@ from .labels import with_labels
 from .memory import check_images_fit
 from .prepared import prepared_scene
 from .views import acceleration_for, check_renderable_once, render_inputs
-from .programs import Variant, lanes_for
+from .programs import Variant, lanes_for, packet_shape
 from .request import Frame, check_request, run_kernel
 
 
@@ -88,18 +88,25 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
         "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")]
         + [prepared.kinds[t].smooth for t in smooth],
     }
-    # one packet of `lanes` pixels per work-item, packets aligned to multiples of lanes in the image;
-    # work-groups of one tile (tile / lanes packets by tile rows) where the device allows (the kernel
-    # needs none)
-    packets = -(-(col0 + cols) // lanes) - col0 // lanes
-    group = (tile // lanes, tile)
-    global_size = (-(-packets // group[0]) * group[0], -(-rows // tile) * tile)
-    local_size = group if ctx.device.max_work_group_size >= group[0] * group[1] else None
+    global_size, local_size = launch_size(lanes, col0, row0, cols, rows, ctx.device.max_work_group_size)
     with prepared.lock:  # the frame buffers hold this view until its kernel has run
         prepared.rebase(inputs.eye, inputs.rows)
         images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
     return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip(),
                  view=(scene.camera, scene.image.width, scene.image.height, col0, row0))
+
+
+def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):
+    """(global size, local size or None) of the render kernel over a window: one packet of
+    programs.packet_shape(lanes) pixels per work-item, packets aligned to multiples of that shape in
+    the image (kernels/pyclray.cl: render_packet); work-groups of one tile's packets where the device
+    allows (the kernel needs none)."""
+    width, height = packet_shape(lanes)
+    tile = culling.TILE
+    packets = (-(-(col0 + cols) // width) - col0 // width, -(-(row0 + rows) // height) - row0 // height)
+    group = (tile // width, tile // height)
+    global_size = tuple(-(-n // g) * g for n, g in zip(packets, group))
+    return global_size, (group if max_group >= group[0] * group[1] else None)
 
 
 def with_camera(scene: Scene, camera) -> Scene:

@@ -3,11 +3,12 @@ packers need of it: each bounded type's entries in leaf order, the refs, the anc
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..model.shapes import KINDS
-from .bvh import BINARY_STACK, BVH, LEAF_SIZE, WIDEN, build, pack_nodes, widened
+from .bvh import BINARY_STACK, BVH, LEAF_SIZE, SAH_FROM, SCENE_LEAF_SIZE, SCENE_TRAVERSAL, WIDEN, build, pack_nodes, widened
 from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
 
@@ -18,12 +19,19 @@ class SceneBVH:
     and the primitives' unwidened bounds in leaf order (cast's anchors)."""
 
     tree: BVH
-    wide: WideBVH
     types: tuple[str, ...]  # the bounded types present, in the registry's order
     leaf_type: np.ndarray  # (N,) index into types
     leaf_index: np.ndarray  # (N,) index in its type's (leaf-ordered) array
     order: dict  # type -> int64 array: its entries' positions (in the type's array as given) in leaf order
     bounds: np.ndarray  # (N, 2, 3) in leaf order
+
+    @cached_property
+    def wide(self) -> WideBVH:
+        """The wide tree of cast's single rays, made when a cast first asks (a render needs only the
+        binary tree: 1,000,000 triangles' first render 50 ms sooner)."""
+        if not len(self.bounds):  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
+            return WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
+        return collapse(self.tree)
 
     def nodes(self, origin) -> np.ndarray:
         """The wide nodes with their boxes relative to origin (see pack_wide)."""
@@ -35,7 +43,8 @@ class SceneBVH:
 
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 16 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
-        program's shape types)."""
+        program's shape types). Each type's entries lie in leaf order, so with one bounded type
+        index = q (the render kernel's PYCLRAY_ONE_BOUNDED relies on it)."""
         kinds = np.array([1 + list(shape_types).index(t) for t in self.types], np.int64)
         refs = self.leaf_index * 16 + kinds[self.leaf_type]
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
@@ -59,9 +68,12 @@ def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
     bounds = np.concatenate(bounds) if bounds else np.zeros((0, 2, 3))
     type_of = np.concatenate([np.full(len(bounds_by_type[t]), k) for k, t in enumerate(types)] or [np.zeros(0, int)])
     within = np.concatenate([np.arange(len(bounds_by_type[t])) for t in types] or [np.zeros(0, int)])
-    # leaves as large as the largest of the types' (Shape.leaf_size: a mesh's triangles), else LEAF_SIZE
+    # leaves as large as the largest of the types' (Shape.leaf_size: a mesh's triangles), else LEAF_SIZE;
+    # a large scene's SAH tree is built for render's packets (bvh.SCENE_LEAF_SIZE, SCENE_TRAVERSAL)
     leaf_size = max([KINDS[t].leaf_size or LEAF_SIZE for t in types] or [LEAF_SIZE])
-    tree = build(widened(bounds), leaf_size)
+    if len(bounds) >= SAH_FROM:
+        leaf_size = max(leaf_size, SCENE_LEAF_SIZE)
+    tree = build(widened(bounds), leaf_size, traversal=SCENE_TRAVERSAL)
     leaf_type = type_of[tree.order]
     leaf_index = np.zeros(len(tree.order), np.int64)
     order = {}
@@ -69,13 +81,13 @@ def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
         mine = leaf_type == k
         leaf_index[mine] = np.arange(int(mine.sum()))
         order[t] = within[tree.order[mine]]
-    if len(bounds):
-        wide = collapse(tree)
-    else:  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
-        wide = WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
-    if tree.depth() > BINARY_STACK or 7 * wide.depth + 1 > STACK:
-        raise ValueError(f"the BVH is {wide.depth} wide levels deep, more than the kernel's stack holds")
-    return SceneBVH(tree, wide, types, leaf_type, leaf_index, order, bounds[tree.order])
+    out = SceneBVH(tree, types, leaf_type, leaf_index, order, bounds[tree.order])
+    # the kernels' stacks: a binary level per entry, a wide level (no more levels than the binary
+    # tree's) 7 entries; the wide tree is made here only where the binary depth leaves a doubt
+    depth = tree.depth()
+    if depth > BINARY_STACK or (7 * depth + 1 > STACK and 7 * out.wide.depth + 1 > STACK):
+        raise ValueError(f"the BVH is {depth} binary levels deep, more than the kernels' stacks hold")
+    return out
 
 
 def scene_bvh(shapes, registry) -> SceneBVH:

@@ -373,18 +373,20 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 /* render only: the winner's barycentric (u, v), interleaved per pixel */
 #ifdef PYCLRAY_AOV_BARYCENTRIC
 #define PYCLRAY_BARYCENTRIC_ARG(P) P(__global real*, barycentric_out)
-#define PYCLRAY_STORE_UV_LANE(l, c) \
-    if (bary_first <= l && l < bary_end) {                                            \
-        barycentric_out[2 * (bary_index + l)] = bary_u.c;                             \
-        barycentric_out[2 * (bary_index + l) + 1] = bary_v.c;                         \
+/* lane l of the packet is pixel (l % PYCLRAY_PACKET_W, l / PYCLRAY_PACKET_W) of it (see PacketPlace) */
+#define PYCLRAY_STORE_UV_LANE(l, c)                                                   \
+    if (packet_lane_written(bary_place, l, bary_first, bary_end)) {                   \
+        const long at = packet_lane_index(bary_place, l);                             \
+        barycentric_out[2 * at] = bary_u.c;                                           \
+        barycentric_out[2 * at + 1] = bary_v.c;                                       \
     }
 #if LANES == 1
-#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end) \
-    { barycentric_out[2 * (index)] = bary_u; barycentric_out[2 * (index) + 1] = bary_v; }
+#define PYCLRAY_WRITE_BARYCENTRIC(place, first, end) \
+    { barycentric_out[2 * (place).index] = bary_u; barycentric_out[2 * (place).index + 1] = bary_v; }
 #else
-#define PYCLRAY_WRITE_BARYCENTRIC(index, first, end)                                 \
+#define PYCLRAY_WRITE_BARYCENTRIC(place, first, end)                                 \
     {                                                                                 \
-        const size_t bary_index = (index);                                            \
+        const PacketPlace bary_place = (place);                                       \
         const int bary_first = (first), bary_end = (end);                             \
         PYCLRAY_EACH_LANE(PYCLRAY_STORE_UV_LANE)                                      \
     }
@@ -415,32 +417,120 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 #define PYCLRAY_INT32V PYCLRAY_CAT(int, LANES)
 #endif
 
-/* A packet cut by the border of the image or window writes the lanes first <= l < end one by one. */
-#define PYCLRAY_STORE_LANE(l, c) \
-    if (first <= l && l < end) out[index + l] = v.c;
-#define PYCLRAY_STORE_VEC3_LANE(l, c) \
-    if (first <= l && l < end) { p[3 * l] = v.x.c; p[3 * l + 1] = v.y.c; p[3 * l + 2] = v.z.c; }
+/* -- a packet's pixels in the images ------------------------------------------------------------
+ * A render's packet covers PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels (pyclray/engine/programs.py:
+ * packet_shape): lane l is column l % W, row l / W of it, element index + (l / W) stride + l % W of
+ * the images. A packet cut by the border of the window writes its columns first <= c < end of its
+ * rows row_first <= r < row_end only; a whole row of W lanes with one vector store. */
+#ifndef PYCLRAY_PACKET_W
+#define PYCLRAY_PACKET_W LANES
+#define PYCLRAY_PACKET_H 1
+#endif
+typedef struct {
+    long index;   /* the element of the packet's lane 0 (before the window's first row: < 0 there) */
+    long stride;  /* elements from one row of the images to the next */
+    int row_first, row_end;
+} PacketPlace;
 
-inline void write_reals(const realv v, const size_t index, const int first, const int end, __global real* out)
+inline bool packet_lane_written(const PacketPlace place, const int l, const int first, const int end)
+{
+    const int column = l % PYCLRAY_PACKET_W, row = l / PYCLRAY_PACKET_W;
+    return first <= column && column < end && place.row_first <= row && row < place.row_end;
+}
+inline long packet_lane_index(const PacketPlace place, const int l)
+{
+    return place.index + (l / PYCLRAY_PACKET_W) * place.stride + l % PYCLRAY_PACKET_W;
+}
+
+/* one row of a packet: W lanes (the whole packet where it is one row) */
+#if PYCLRAY_PACKET_W == 1
+typedef real realw;
+typedef int int32w;
+#else
+typedef PYCLRAY_CAT(PYCLRAY_REAL_NAME, PYCLRAY_PACKET_W) realw;
+typedef PYCLRAY_CAT(int, PYCLRAY_PACKET_W) int32w;
+#endif
+
+/* W lanes stored at p (the first lane's element): one move instruction through a vector type of the
+ * element's alignment on PoCL's CPU device (see v_sqrt in kernels/lanes.h), else vstoren */
+#if PYCLRAY_PACKET_W == 1
+#define STORE_ROW_REALS(v, p) (*(p) = (v))
+#define STORE_ROW_INT32S(v, p) (*(p) = (v))
+#elif defined(PYCLRAY_INLINE_BUILTINS)
+typedef realw realw_unaligned __attribute__((aligned(sizeof(real))));
+typedef int32w int32w_unaligned __attribute__((aligned(sizeof(int))));
+#define STORE_ROW_REALS(v, p) (*(__global realw_unaligned*)(p) = (v))
+#define STORE_ROW_INT32S(v, p) (*(__global int32w_unaligned*)(p) = (v))
+#else
+#define STORE_ROW_REALS(v, p) PYCLRAY_CAT(vstore, PYCLRAY_PACKET_W)((v), 0, (p))
+#define STORE_ROW_INT32S(v, p) PYCLRAY_CAT(vstore, PYCLRAY_PACKET_W)((v), 0, (p))
+#endif
+
+/* interleaved x, y, z of a whole row of W lanes at p */
+inline void store_row_vec3s(const realw x, const realw y, const realw z, __global real* p)
+{
+#if PYCLRAY_PACKET_W == 8
+    STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1, y.s1, z.s1, x.s2, y.s2), p);
+    STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3, x.s4, y.s4, z.s4, x.s5), p + 8);
+    STORE_ROW_REALS((realw)(y.s5, z.s5, x.s6, y.s6, z.s6, x.s7, y.s7, z.s7), p + 16);
+#elif PYCLRAY_PACKET_W == 4
+    STORE_ROW_REALS((realw)(x.s0, y.s0, z.s0, x.s1), p);
+    STORE_ROW_REALS((realw)(y.s1, z.s1, x.s2, y.s2), p + 4);
+    STORE_ROW_REALS((realw)(z.s2, x.s3, y.s3, z.s3), p + 8);
+#elif PYCLRAY_PACKET_W == 2
+    STORE_ROW_REALS((realw)(x.s0, y.s0), p);
+    STORE_ROW_REALS((realw)(z.s0, x.s1), p + 2);
+    STORE_ROW_REALS((realw)(y.s1, z.s1), p + 4);
+#else
+    p[0] = x;
+    p[1] = y;
+    p[2] = z;
+#endif
+}
+
+/* A whole packet (every lane in the window) with a vector store per row; a packet cut by the border
+ * of the window lane by lane. Row 0 of the packet is its lanes' low half, row 1 the high half. */
+#if PYCLRAY_PACKET_H == 1
+#define PYCLRAY_PACKET_ROWS(STORE, v, place) STORE(v, (place).index)
+#else
+#define PYCLRAY_PACKET_ROWS(STORE, v, place) STORE((v).lo, (place).index) STORE((v).hi, (place).index + (place).stride)
+#endif
+#define PYCLRAY_WHOLE_PACKET(place, first, end) \
+    ((first) == 0 && (end) == PYCLRAY_PACKET_W && (place).row_first == 0 && (place).row_end == PYCLRAY_PACKET_H)
+#define PYCLRAY_STORE_LANE(l, c) \
+    if (packet_lane_written(place, l, first, end)) out[packet_lane_index(place, l)] = v.c;
+#define PYCLRAY_STORE_VEC3_LANE(l, c)                                                 \
+    if (packet_lane_written(place, l, first, end)) {                                  \
+        const long at = 3 * packet_lane_index(place, l);                              \
+        out[at] = v.x.c;                                                              \
+        out[at + 1] = v.y.c;                                                          \
+        out[at + 2] = v.z.c;                                                          \
+    }
+
+inline void write_reals(const realv v, const PacketPlace place, const int first, const int end, __global real* out)
 {
 #if LANES == 1
-    out[index] = v;
+    out[place.index] = v;
 #else
-    if (first == 0 && end == LANES) {
-        STORE_REALS(v, out + index);
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#define PYCLRAY_ROW(row, at) STORE_ROW_REALS(row, out + (at));
+        PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
+#undef PYCLRAY_ROW
     } else {
         PYCLRAY_EACH_LANE(PYCLRAY_STORE_LANE)
     }
 #endif
 }
 
-inline void write_ints(const PYCLRAY_INT32V v, const size_t index, const int first, const int end, __global int* out)
+inline void write_ints(const PYCLRAY_INT32V v, const PacketPlace place, const int first, const int end, __global int* out)
 {
 #if LANES == 1
-    out[index] = v;
+    out[place.index] = v;
 #else
-    if (first == 0 && end == LANES) {
-        STORE_INT32S(v, out + index);
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#define PYCLRAY_ROW(row, at) STORE_ROW_INT32S(row, out + (at));
+        PYCLRAY_PACKET_ROWS(PYCLRAY_ROW, v, place)
+#undef PYCLRAY_ROW
     } else {
         PYCLRAY_EACH_LANE(PYCLRAY_STORE_LANE)
     }
@@ -448,29 +538,23 @@ inline void write_ints(const PYCLRAY_INT32V v, const size_t index, const int fir
 }
 
 /* interleaved x, y, z per element */
-inline void write_vec3s(const vec3v v, const size_t index, const int first, const int end, __global real* out)
+inline void write_vec3s(const vec3v v, const PacketPlace place, const int first, const int end, __global real* out)
 {
-    __global real* p = out + 3 * index;
 #if LANES == 1
-    p[0] = v.x;
-    p[1] = v.y;
-    p[2] = v.z;
+    out[3 * place.index] = v.x;
+    out[3 * place.index + 1] = v.y;
+    out[3 * place.index + 2] = v.z;
 #else
-#if LANES == 8 || LANES == 4
-    if (first == 0 && end == LANES) {  /* the whole packet: three vector stores of interleaved lanes */
-#if LANES == 8
-        STORE_REALS((realv)(v.x.s0, v.y.s0, v.z.s0, v.x.s1, v.y.s1, v.z.s1, v.x.s2, v.y.s2), p);
-        STORE_REALS((realv)(v.z.s2, v.x.s3, v.y.s3, v.z.s3, v.x.s4, v.y.s4, v.z.s4, v.x.s5), p + 8);
-        STORE_REALS((realv)(v.y.s5, v.z.s5, v.x.s6, v.y.s6, v.z.s6, v.x.s7, v.y.s7, v.z.s7), p + 16);
+    if (PYCLRAY_WHOLE_PACKET(place, first, end)) {
+#if PYCLRAY_PACKET_H == 1
+        store_row_vec3s(v.x, v.y, v.z, out + 3 * place.index);
 #else
-        STORE_REALS((realv)(v.x.s0, v.y.s0, v.z.s0, v.x.s1), p);
-        STORE_REALS((realv)(v.y.s1, v.z.s1, v.x.s2, v.y.s2), p + 4);
-        STORE_REALS((realv)(v.z.s2, v.x.s3, v.y.s3, v.z.s3), p + 8);
+        store_row_vec3s(v.x.lo, v.y.lo, v.z.lo, out + 3 * place.index);
+        store_row_vec3s(v.x.hi, v.y.hi, v.z.hi, out + 3 * (place.index + place.stride));
 #endif
-        return;
+    } else {
+        PYCLRAY_EACH_LANE(PYCLRAY_STORE_VEC3_LANE)
     }
-#endif
-    PYCLRAY_EACH_LANE(PYCLRAY_STORE_VEC3_LANE)
 #endif
 }
 
@@ -494,18 +578,27 @@ inline void write_vec3s(const vec3v v, const size_t index, const int first, cons
 
 #ifndef PYCLRAY_CAST
 
-/* The camera rays of a packet: LANES pixels of row j from column i0 on, in the camera frame. */
-inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j)
+/* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and
+ * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera frame. */
+#if PYCLRAY_PACKET_H == 1
+#define PYCLRAY_LANE_COLUMN LANE_INDEX
+#define PYCLRAY_LANE_ROW SPLAT_INT(0)
+#else
+#define PYCLRAY_LANE_COLUMN (LANE_INDEX % SPLAT_INT(PYCLRAY_PACKET_W))
+#define PYCLRAY_LANE_ROW (LANE_INDEX / SPLAT_INT(PYCLRAY_PACKET_W))
+#endif
+inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j0)
 {
     const int width = camera->width, height = camera->height;
-    const intv i = SPLAT_INT(i0) + LANE_INDEX;
+    const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
     /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
      * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
      * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
      * keeps its relative precision even for a tiny fov or next to the principal point */
     const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
                                             / SPLAT((real)width));
-    const realv sy = SPLAT(camera->tan_y * (((real)(camera->centre_y - 1 - 2 * j) + camera->centre_y_low) / (real)height));
+    const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
+                                            / SPLAT((real)height));
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
@@ -519,10 +612,33 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     return ray;
 }
 
-/* One work-item per packet: LANES pixels of a row, from column i0 = LANES x get_global_id(0) of row
- * j = get_global_id(1) + row0 (a render of a window of the image starts at row row0 and column col0,
- * and writes its own width x rows images). Tiles are 1 << tile_shift pixels square, tiles_x per
- * image row (and the work-groups where the device allows); a packet lies in one tile. */
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_ONE_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
+/* One bounded type (PYCLRAY_ONE_BOUNDED): leaf position q is entry q of its arrays, so a leaf's
+ * entries are asked for at once where the traversal first meets the leaf (kernels/bvh.h): the
+ * entries its tests read, in the frame (COPIED), in the world (FRAMED), or its faces (INDEXED: the
+ * vertices they name follow when read). PoCL's CPU device only: elsewhere OpenCL's prefetch is a
+ * call, or nothing. */
+#define PYCLRAY_PREFETCH_RANGE(p, bytes) \
+    for (int byte = 0; byte < (bytes); byte += 64) __builtin_prefetch((__global const char*)(p) + byte);
+#define PYCLRAY_PREFETCH_COPIED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##s[leaf_first], leaf_count * (int)sizeof(Type))
+#define PYCLRAY_PREFETCH_FRAMED(Type, type) \
+    PYCLRAY_PREFETCH_RANGE(&type##_worlds[leaf_first], leaf_count * (int)sizeof(Type##World))
+#define PYCLRAY_PREFETCH_INDEXED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##_faces[leaf_first], leaf_count * (int)sizeof(int4))
+#define PYCLRAY_PACKET_PREFETCH_TYPE(Type, type) PYCLRAY_CAT(PYCLRAY_PREFETCH_, PYCLRAY_MODE_##type)(Type, type)
+#undef PYCLRAY_PACKET_LEAF_PREFETCH
+#define PYCLRAY_PACKET_LEAF_PREFETCH(first, count)                                    \
+    {                                                                                 \
+        const int leaf_first = (first), leaf_count = (count);                         \
+        PYCLRAY_BOUNDED(PYCLRAY_PACKET_PREFETCH_TYPE)                                 \
+    }
+#endif
+
+/* One work-item per packet of PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels: packet column
+ * get_global_id(0) and row get_global_id(1), counted from the packet of the window's first pixel (a
+ * render of a window of the image starts at row row0 and column col0, and writes its own
+ * cols x rows images; packets start at multiples of their size in the image, so that a window's
+ * pixels are the whole image's, and none straddles two tiles). Tiles are 1 << tile_shift pixels
+ * square, tiles_x per image row (and the work-groups where the device allows). */
 /* the render kernel's arguments after the camera; SHAPE: PYCLRAY_SHAPE_PARAMETERS or _PASSED */
 #define PYCLRAY_RENDER_ARGS(P, SHAPE)                                                 \
     P(const int, col0) P(const int, row0) P(const int, cols) P(const int, rows)       \
@@ -533,13 +649,20 @@ PYCLRAY_KERNELS_BEGIN
 PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __global const Camera* camera
                                               PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    /* packets start at multiples of LANES in the image, so that none straddles two tiles */
-    const int i0 = (col0 / LANES + packet) * LANES, j = row0 + r;
-    if (i0 >= col0 + cols || r >= rows) return;
-    const int tile = (j >> tile_shift) * tiles_x + (i0 >> tile_shift);  /* shifts: no division per packet */
-    /* the lanes in the window (no min or max: PoCL's would be calls, see v_sqrt) */
-    const int from = col0 > i0 ? col0 - i0 : 0, to = col0 + cols - i0 < LANES ? col0 + cols - i0 : LANES;
-    const RayPacket ray = camera_rays(camera, i0, j);
+    const int i0 = (col0 / PYCLRAY_PACKET_W + packet) * PYCLRAY_PACKET_W;
+    const int j0 = (row0 / PYCLRAY_PACKET_H + r) * PYCLRAY_PACKET_H;
+    if (i0 >= col0 + cols || j0 >= row0 + rows) return;
+    const int tile = (j0 >> tile_shift) * tiles_x + (i0 >> tile_shift);  /* shifts: no division per packet */
+    /* the columns and rows in the window (no min or max: PoCL's would be calls, see v_sqrt); lane 0
+     * is element (j0 - row0) cols + (i0 - col0) of the window's images */
+    const int from = col0 > i0 ? col0 - i0 : 0;
+    const int to = col0 + cols - i0 < PYCLRAY_PACKET_W ? col0 + cols - i0 : PYCLRAY_PACKET_W;
+    PacketPlace place;
+    place.index = (long)(j0 - row0) * (long)cols + (long)(i0 - col0);
+    place.stride = cols;
+    place.row_first = row0 > j0 ? row0 - j0 : 0;
+    place.row_end = row0 + rows - j0 < PYCLRAY_PACKET_H ? row0 + rows - j0 : PYCLRAY_PACKET_H;
+    const RayPacket ray = camera_rays(camera, i0, j0);
 #ifdef PYCLRAY_FRAMED
     const Frame view_frame = {frame_origin.xyz, frame_u.xyz, frame_v.xyz, frame_w.xyz};  /* the eye's */
 #endif
@@ -550,8 +673,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
     const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
 #endif
-    /* lane l is pixel i0 + l: element r cols + (i0 - col0) + l of the window's images */
-    PYCLRAY_RENDER_WRITE((size_t)r * (size_t)cols + (size_t)(i0 - col0), from, to)
+    PYCLRAY_RENDER_WRITE(place, from, to)
 }
 
 __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
