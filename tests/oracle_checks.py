@@ -51,3 +51,16 @@ def assert_agrees_with_oracle(scene, origins, directions, result, precision, min
     eps = error_model.EPSILON[precision]
     assert np.allclose(np.linalg.norm(result["normal"][~miss].astype(np.float64), axis=1), 1.0, rtol=0, atol=8 * eps)
     return truth, cos, judged, depth_tolerance
+
+
+def assert_primitives_agree(scene, origins, directions, frame, truth, judged):
+    """The primitive image against the float64 oracle's: on the judged pixels, the index within its
+    shape of the primitive the oracle hits (the triangle of a mesh, the sphere of a batch); -1 on a
+    miss."""
+    primitive = frame["primitive"].reshape(-1)
+    expected = np.full(len(directions), -1)
+    for index, shape in enumerate(scene.shapes):
+        mine = truth["id"] == index
+        expected[mine] = shape.oracle_hits(origins[mine], directions[mine])[1]
+    assert np.all(primitive[judged] == expected[judged])
+    assert np.all(primitive[frame["id"].reshape(-1) < 0] == -1)

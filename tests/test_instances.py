@@ -13,7 +13,7 @@ from pyclray.engine.prepared import prepared_scene
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
 from pyclray.reference import oracle
 
-from oracle_checks import assert_agrees_with_oracle, judge
+from oracle_checks import assert_agrees_with_oracle, assert_primitives_agree, judge
 
 AOVS = ("depth", "normal", "id", "primitive", "barycentric")
 
@@ -86,13 +86,7 @@ def test_instances_agree_with_the_oracle(precision, offset):
     result = {k: frame[k].reshape(len(directions), *frame[k].shape[2:]) for k in ("depth", "normal", "id")}
     truth, _, judged, _, _, _ = judge(scene, origins, directions, result, precision, scene.camera.eye)
     assert_agrees_with_oracle(scene, origins, directions, result, precision, reference_point=scene.camera.eye)
-    primitive = frame["primitive"].reshape(-1)
-    expected = np.full(len(directions), -1)
-    for index, shape in enumerate(scene.shapes):
-        mine = truth["id"] == index
-        expected[mine] = shape.oracle_hits(origins[mine], directions[mine])[1]
-    assert np.all(primitive[judged] == expected[judged])
-    assert np.all(primitive[frame["id"].reshape(-1) < 0] == -1)
+    assert_primitives_agree(scene, origins, directions, frame, truth, judged)
     assert (frame["id"] < 16).sum() > 0.3 * frame["id"].size  # the instances are most of the image
     flat = pyclray.render(flattened(scene), aovs=AOVS, precision=precision, acceleration="bvh")
     same = (flat["primitive"] == frame["primitive"]) & (frame["id"] >= 0)

@@ -10,7 +10,7 @@ from pyclray.engine.device import context_for, has_fp64
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere, torus, uv_sphere
 from pyclray.reference import oracle
 
-from oracle_checks import assert_agrees_with_oracle, judge
+from oracle_checks import assert_agrees_with_oracle, assert_primitives_agree, judge
 
 
 def need(precision):
@@ -108,13 +108,7 @@ def test_render_agrees_with_the_oracle_far_from_the_origin(precision, offset):
     truth, cos, judged, _, _, _ = judge(scene, origins, directions, result, precision, scene.camera.eye)
     assert_agrees_with_oracle(scene, origins, directions, result, precision)
     assert judged.sum() > 0.9 * np.sum(truth["id"] >= 0)
-    primitive = frame["primitive"].reshape(-1)
-    expected = np.full(len(directions), -1)
-    for index, shape in enumerate(scene.shapes):
-        mine = truth["id"] == index
-        expected[mine] = shape.oracle_hits(origins[mine], directions[mine])[1]
-    assert np.all(primitive[judged] == expected[judged])
-    assert np.all(primitive[frame["id"].reshape(-1) < 0] == -1)
+    assert_primitives_agree(scene, origins, directions, frame, truth, judged)
     far = shift + rng.normal(size=(2000, 3)) * 4
     aim = shift + rng.normal(size=(2000, 3)) * 1.0
     assert_agrees_with_oracle(scene, far, aim - far, pyclray.cast(scene, far, aim - far, precision=precision), precision)
