@@ -121,19 +121,6 @@ def reference(bounds: np.ndarray, leaf_size: int = bvh.LEAF_SIZE, bins: int = BI
 
 # -- the primitives ---------------------------------------------------------------------------------
 
-def spheres(count: int, clustered: bool = False, seed: int = 0) -> np.ndarray:
-    """The sphere field of bench/scale.py (uniform in its box), or clustered: half the spheres in
-    eight Gaussian blobs of the box's size / 40, half uniform, radii over two decades."""
-    centres, radii = scale.sphere_field(count, seed)
-    if clustered:
-        rng = np.random.default_rng(seed + 1)
-        blobs = rng.uniform((-scale.SIDE, 0, -scale.SIDE), (scale.SIDE, scale.HEIGHT, scale.SIDE), (8, 3))
-        near = rng.uniform(size=count) < 0.5
-        centres[near] = blobs[rng.integers(0, 8, int(near.sum()))] + rng.normal(scale=scale.SIDE / 40, size=(int(near.sum()), 3))
-        radii = radii * 10 ** rng.uniform(-1, 1, count)
-    return np.stack([centres - radii[:, None], centres + radii[:, None]], axis=1)
-
-
 def triangle_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     corners = vertices[faces]
     return np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
@@ -191,8 +178,8 @@ def cases(quick: bool, meshes=()) -> dict:
     sizes = (100_000,) if quick else (100_000, 1_000_000)
     out = {}
     for n in sizes:
-        out[f"spheres uniform {n:,}"] = lambda n=n: spheres(n)
-        out[f"spheres clustered {n:,}"] = lambda n=n: spheres(n, clustered=True)
+        out[f"spheres uniform {n:,}"] = lambda n=n: scale.sphere_boxes(n)
+        out[f"spheres clustered {n:,}"] = lambda n=n: scale.sphere_boxes(n, clustered=True)
     n = sizes[-1]
     out[f"tessellated sphere {n:,}"] = lambda: tessellated_sphere(n)
     out[f"torus {n:,}"] = lambda: torus(n)
@@ -258,7 +245,7 @@ def quality(quick: bool, meshes=()) -> list[str]:
 
 def first_ever(count: int = 100_000) -> str:
     """A new process's first build with an empty numba cache (numba compiles the builder)."""
-    bounds = bvh.widened(spheres(count))
+    bounds = bvh.widened(scale.sphere_boxes(count))
     with tempfile.TemporaryDirectory() as cache:
         compile_ = cold_seconds(bounds, cache)
         cached = cold_seconds(bounds, cache)

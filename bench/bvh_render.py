@@ -7,7 +7,7 @@ load of a shared machine).
     python -m bench.bvh_build --render [--quick]
 
 Scenes: bench/scale.py's field of N spheres over a ground plane, uniform and clustered
-(bench/bvh_build.spheres), as one pyclray.Spheres batch; per scene, a 512x512 render (depth, normal,
+(bench/scale.sphere_boxes), as one pyclray.Spheres batch; per scene, a 512x512 render (depth, normal,
 id: packets of camera rays through the binary tree) and a cast of 100,000 random rays (from points
 of the field in random directions: single rays through the wide tree). Then bench/meshes.py's two
 meshes (the bunny subdivided to 80,000 triangles, a perturbed sphere of 1,000,000), the render from
@@ -25,7 +25,6 @@ import pyclray
 from pyclray.engine import bvh, scene_bvh, views
 
 from . import scale
-from .bvh_build import spheres
 
 SIZE = 512
 AOVS = ("depth", "normal", "id")
@@ -104,7 +103,7 @@ def main(quick: bool) -> None:
     origins, directions = scale.random_rays(RAYS)
     for n in sizes:
         for clustered in (False, True):
-            compare(f"{'clustered' if clustered else 'uniform'} spheres {n:,}", sphere_scene(spheres(n, clustered=clustered)),
+            compare(f"{'clustered' if clustered else 'uniform'} spheres {n:,}", sphere_scene(scale.sphere_boxes(n, clustered=clustered)),
                     origins, directions)
     rng = np.random.default_rng(2)
     for name, mesh in meshes(None).items():

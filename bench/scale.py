@@ -77,3 +77,16 @@ def open3d_camera_rays(size: int = 512):
     return o3d.t.geometry.RaycastingScene.create_rays_pinhole(
         fov_deg=FOV, center=list(TARGET), eye=list(EYE), up=[0.0, 1.0, 0.0], width_px=size, height_px=size
     )
+
+
+def sphere_boxes(count: int, clustered: bool = False, seed: int = 0) -> np.ndarray:
+    """The boxes of the sphere field above (uniform in its box), or clustered: half the spheres in
+    eight Gaussian blobs of the box's size / 40, half uniform, radii over two decades."""
+    centres, radii = sphere_field(count, seed)
+    if clustered:
+        rng = np.random.default_rng(seed + 1)
+        blobs = rng.uniform((-SIDE, 0, -SIDE), (SIDE, HEIGHT, SIDE), (8, 3))
+        near = rng.uniform(size=count) < 0.5
+        centres[near] = blobs[rng.integers(0, 8, int(near.sum()))] + rng.normal(scale=SIDE / 40, size=(int(near.sum()), 3))
+        radii = radii * 10 ** rng.uniform(-1, 1, count)
+    return np.stack([centres - radii[:, None], centres + radii[:, None]], axis=1)
