@@ -19,7 +19,7 @@ from pyclray.reference import error_model, mitsuba, oracle
 from pyclray.reference.error_model import angle_between
 from pyclray.reference.mitsuba_export import export_dict, scene_xml
 
-from conftest import REPO, SCENES
+from conftest import SCENES
 from test_mitsuba_xml import EXAMPLES, mitsuba_intersect
 
 SIZE = (40, 30)
@@ -32,6 +32,30 @@ def pixel_hits(mi_scene, scene, intersect=mitsuba_intersect):
     rows, columns = (a.ravel() for a in np.meshgrid(np.arange(height), np.arange(width), indexing="ij"))
     origins, directions = mitsuba.primary_rays(mi_scene, scene, rows, columns)
     return (origins, directions, *intersect(mi_scene, scene, origins, directions))
+
+
+def pixel_depths(mi_scene, scene, intersect=mitsuba_intersect):
+    """Mitsuba's distance from the eye at every pixel centre (inf on a miss), its normals and the
+    shape hit (pixel_hits' answers, the depth measured from the eye as pyclray's)."""
+    origins, directions, t, normal, found = pixel_hits(mi_scene, scene, intersect)
+    points = origins + np.where(found >= 0, t, 0)[:, None] * directions
+    return np.where(found >= 0, np.linalg.norm(points - np.array(scene.camera.eye), axis=1), np.inf), normal, found
+
+
+def camera_reference(scene, answers):
+    """The float64 oracle's answers at the scene's pixel centres (truth), the error model's depth and
+    normal bounds for a Mitsuba render of them, and the pixels apart: at a silhouette or an edge,
+    where the oracle's and each of answers' (id, depth) images may rightly differ."""
+    eye = np.array(scene.camera.eye)
+    _, unit = oracle.camera_rays(scene)
+    unit = unit.reshape(-1, 3)
+    truth = oracle.trace(scene, np.broadcast_to(eye, unit.shape), unit, aovs=("depth", "normal", "id"))
+    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
+    bound, normal_bound = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
+    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
+    apart = error_model.silhouettes(truth["id"], cos, bound, radius) | error_model.at_edges(
+        scene, np.broadcast_to(eye, unit.shape), unit, [(truth["id"], truth["depth"]), *answers], 2 * bound * cos)
+    return truth, bound, normal_bound, apart
 
 
 def by_key(keys):
@@ -97,22 +121,9 @@ def test_round_trip_xml_pyclray_xml_renders_the_same_aovs_in_mitsuba(path, tmp_p
     assert cli.main(["export", str(first), "-o", str(again)]) == 0
     mi = mitsuba.import_mitsuba("scalar_rgb")
     eye = np.array(scene.camera.eye)
-    results = []
-    for file in (first, again):
-        origins, directions, t, normal, found = pixel_hits(mi.load_file(str(file), optimize=False), scene)
-        hit = found >= 0
-        points = origins + np.where(hit, t, 0)[:, None] * directions
-        results.append((np.where(hit, np.linalg.norm(points - eye, axis=1), np.inf), normal, found))
-    (depth_a, normal_a, id_a), (depth_b, normal_b, id_b) = results
-    _, unit = oracle.camera_rays(scene)
-    unit = unit.reshape(-1, 3)
-    truth = oracle.trace(scene, np.broadcast_to(eye, unit.shape), unit, aovs=("depth", "normal", "id"))
-    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
-    bound, normal_bound = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
-    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
-    apart = error_model.silhouettes(truth["id"], cos, bound, radius) | error_model.at_edges(
-        scene, np.broadcast_to(eye, unit.shape), unit, [(truth["id"], truth["depth"]), (id_a, depth_a), (id_b, depth_b)],
-        2 * bound * cos)
+    (depth_a, normal_a, id_a), (depth_b, normal_b, id_b) = (
+        pixel_depths(mi.load_file(str(file), optimize=False), scene) for file in (first, again))
+    truth, bound, normal_bound, apart = camera_reference(scene, [(id_a, depth_a), (id_b, depth_b)])
     assert (id_a[~apart] == id_b[~apart]).all(), np.c_[id_a, id_b, truth["id"], np.arange(len(id_a))][~apart & (id_a != id_b)][:8]
     same = ~apart & (id_a >= 0) & (id_a == id_b)
     assert same.sum() > 100

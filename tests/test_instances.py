@@ -171,8 +171,8 @@ def test_export_writes_shapegroup_and_instances_that_read_back_shared(tmp_path):
     pytest.importorskip("mitsuba")
     from conftest import SCENES
     from pyclray.apps import cli
-    from pyclray.reference import error_model, mitsuba
-    from test_export import pixel_hits
+    from pyclray.reference import mitsuba
+    from test_export import camera_reference, pixel_depths
 
     scene = pyclray.load_scene(SCENES / "instanced.toml").with_size(40, 30)
     path = tmp_path / "field.xml"
@@ -189,21 +189,10 @@ def test_export_writes_shapegroup_and_instances_that_read_back_shared(tmp_path):
             t[k] = si.t if si.is_valid() else np.inf
         return t, None, np.where(np.isfinite(t), 0, -1)
 
-    origins, directions, t, _, found = pixel_hits(mi.load_file(str(path), optimize=False), scene, hits)
-    eye = np.array(scene.camera.eye)
-    points = origins + np.where(found >= 0, t, 0)[:, None] * directions
-    depth = np.where(found >= 0, np.linalg.norm(points - eye, axis=1), np.inf)
+    depth, _, _ = pixel_depths(mi.load_file(str(path), optimize=False), scene, hits)
     ours = pyclray.render(scene, aovs=("depth", "id"))
-    _, unit = oracle.camera_rays(scene)
-    unit = unit.reshape(-1, 3)
-    truth = oracle.trace(scene, np.broadcast_to(eye, unit.shape), unit, aovs=("depth", "normal", "id"))
-    cos = oracle.incidence_cosine(scene, unit, truth["id"], truth["normal"])
-    bound, _ = error_model.mitsuba_tolerances(scene, truth["depth"], truth["id"], cos, cameras=True)
-    radius = error_model.curvature_radii(scene)[np.maximum(truth["id"], 0)]
     mine = ours["depth"].reshape(-1).astype(np.float64)
-    apart = error_model.silhouettes(truth["id"], cos, bound, radius) | error_model.at_edges(
-        scene, np.broadcast_to(eye, unit.shape), unit, [(truth["id"], truth["depth"]), (ours["id"].reshape(-1), mine)],
-        2 * bound * cos)
+    _, bound, _, apart = camera_reference(scene, [(ours["id"].reshape(-1), mine)])
     both = ~apart & np.isfinite(depth) & np.isfinite(mine)
     assert both.sum() > 500
     assert (np.abs(depth[both] - mine[both]) <= 2 * bound[both]).all()
