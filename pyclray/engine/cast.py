@@ -123,11 +123,13 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
     large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
     anchor = np.append(anchor, 1.0 if large else 0.0)
     args = []
+    # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
+    worlds = {name: prepared.kinds[name].world for name in shape_types}
     if tree.types:
         anchors = tree.anchors()
         for name in tree.types:  # a type may anchor its entries otherwise (a mesh: on its whole box)
             kind = prepared.kinds[name]
-            own = kind.cls.cast_anchors(kind.world, kind.ids)
+            own = kind.cls.cast_anchors(worlds[name], kind.ids)
             if own is not None:
                 anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
         args += [
@@ -143,12 +145,12 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         else:
             origin = np.zeros(3)
         with np.errstate(over="ignore", invalid="ignore"):
-            packed = kind.cls.rebase(kind.world, origin, identity, precision, kind.ids, kind.primitives)
+            packed = kind.cls.rebase(worlds[name], origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
             raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
-                 input_buffer(ctx, np.ascontiguousarray(kind.world)), *kind.shared, np.int32(kind.count)]
+                 input_buffer(ctx, np.ascontiguousarray(worlds[name])), *kind.shared, np.int32(kind.count)]
     with render_lock:
         _cast_prepared[key] = (scene.shapes, shape_types, args, anchor, size)
         while len(_cast_prepared) > PREPARED_MAX:
