@@ -132,10 +132,8 @@ FRAMED_FROM = 524_288
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
-    def __init__(self, ctx, shapes: tuple, precision: str, instanced: bool = True):
+    def __init__(self, ctx, shapes: tuple, precision: str):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
-        # meshes sharing their arrays packed as instances (Shape.packed_as; their kernel needs float64)
-        self.instanced = instanced = instanced and has_fp64(ctx.device)
         self.lock = threading.Lock()  # one view at a time uses the frame buffers
         self.view_key = self.view = None  # the camera the frame buffers hold: (eye, rows) bytes, arrays
         by_type: dict = {}
@@ -143,7 +141,9 @@ class PreparedScene:
             by_type.setdefault(shape.type, ([], []))
             by_type[shape.type][0].append(shape)
             by_type[shape.type][1].append(index)
-        if instanced:  # a type may pack some of its shapes as another kind (meshes as instances)
+        # a type may pack some of its shapes as another kind (Shape.packed_as: meshes that share their
+        # arrays as instances, whose kernel needs float64; elsewhere each mesh is its own triangles)
+        if has_fp64(ctx.device):
             packed: dict = {}
             for t, (mine, ids) in by_type.items():
                 for kind, group in REGISTRY[t].packed_as(mine, ids).items():
@@ -339,14 +339,13 @@ class PreparedScene:
         return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
 
 
-def prepared_scene(ctx, scene: Scene, precision: str, instanced: bool = True) -> PreparedScene:
+def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
     """The scene's shapes prepared on this device at this precision: kept per shapes tuple (a moved
-    camera keeps the scene's tuple), built at the first view (instanced: meshes that share their arrays
-    packed as instances, else each as its own triangles); a frame of an animation (a tuple that
+    camera keeps the scene's tuple), built at the first view; a frame of an animation (a tuple that
     pyclray.model.animation says was made from another by changing a few shapes) updates the prepared
     scene of that other tuple in place (PreparedScene.update) instead."""
     shapes = scene.shapes
-    key = (ctx.device.int_ptr, id(shapes), precision, instanced)
+    key = (ctx.device.int_ptr, id(shapes), precision)
     with render_lock:
         entry = _prepared.get(key)
         if entry is not None and entry.shapes is shapes:
@@ -357,8 +356,7 @@ def prepared_scene(ctx, scene: Scene, precision: str, instanced: bool = True) ->
         base, changed = derived
         with render_lock:
             candidates = [(k, p) for k, p in _prepared.items()
-                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision
-                          and p.instanced == instanced]
+                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision]
         for old_key, candidate in candidates:
             with candidate.lock:
                 updated = candidate.shapes is not shapes and candidate.update(shapes, changed)
@@ -367,7 +365,7 @@ def prepared_scene(ctx, scene: Scene, precision: str, instanced: bool = True) ->
                 if updated:
                     _prepared[key] = candidate
                     return candidate
-    prepared = PreparedScene(ctx, shapes, precision, instanced)
+    prepared = PreparedScene(ctx, shapes, precision)
     if derived is not None:
         prepared.base, prepared.dirty = derived[0], set(derived[1])
     with render_lock:
