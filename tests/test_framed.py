@@ -5,7 +5,9 @@ shapes' <type>_rebase) compiled as the pass is. Its images must be the per-view 
 whatever the offset, precision, acceleration or view history: the copy's images are held to the
 float64 oracle by the rest of the suite (test_render.py, test_shapes.py, test_views.py), so this
 holds the framed path to the same exactness. FRAMED_FROM is set to 0 (frame every scene) or out of
-reach (copy every scene) to compare the two on small scenes."""
+reach (copy every scene) to compare the two on small scenes. Meshes are indexed (shared vertices and
+faces, engine/indexed.py) on every device with float64, framed scene or not: prepared.INDEXED False
+gives them the per-view copy (devices without float64) to compare with."""
 from __future__ import annotations
 
 import dataclasses
@@ -20,12 +22,15 @@ from pyclray.engine.device import context_for
 from test_views import ALL, every_shape, fresh, moving_spheres, need, same
 
 
-def rendered(monkeypatch, framed: bool, scene, **options):
-    """The scene's render from a freshly prepared scene, framed or copied."""
+def rendered(monkeypatch, framed: bool, scene, indexed: bool | None = None, **options):
+    """The scene's render from a freshly prepared scene, framed or copied (its meshes indexed or
+    copied: as framed unless said)."""
+    indexed = framed if indexed is None else indexed
     monkeypatch.setattr(prepared, "FRAMED_FROM", 0 if framed else 10**12)
+    monkeypatch.setattr(prepared, "INDEXED", indexed)
     image = fresh(scene, **options)
     kinds = prepared.prepared_scene(context_for(None), scene, options.get("precision", "fp32")).kinds
-    assert kinds["spheres"].framed == framed and (kinds["mesh"].indexed is not None) == framed  # what this compares
+    assert kinds["spheres"].framed == framed and (kinds["mesh"].indexed is not None) == indexed  # what this compares
     return image
 
 
@@ -39,6 +44,18 @@ def test_a_framed_render_is_the_copied_render_bit_for_bit(monkeypatch, precision
     scene = every_shape((offset, 0.3 * offset, -offset))
     copied = rendered(monkeypatch, False, scene, aovs=ALL, precision=precision, acceleration=acceleration)
     same(rendered(monkeypatch, True, scene, aovs=ALL, precision=precision, acceleration=acceleration), copied)
+
+
+@pytest.mark.parametrize("acceleration", ["tiles", "bvh"])
+@pytest.mark.parametrize("offset", [0.0, 1e8])
+def test_indexed_meshes_beside_copied_shapes_are_the_copied_render_bit_for_bit(monkeypatch, offset, acceleration):
+    """A scene too small to be framed keeps its spheres' per-view copy, and its meshes are still
+    indexed (a program with INDEXED and without FRAMED: the mesh functions read private triangles,
+    the other shapes their buffers, the winner's normal computed without contraction): the images
+    of the copy, every image, lit with shadows, near the origin and 1e8 away."""
+    scene = every_shape((offset, 0.3 * offset, -offset))
+    copied = rendered(monkeypatch, False, scene, aovs=ALL, acceleration=acceleration)
+    same(rendered(monkeypatch, False, scene, indexed=True, aovs=ALL, acceleration=acceleration), copied)
 
 
 def test_framed_views_after_other_views_are_the_fresh_views(monkeypatch):
@@ -98,6 +115,7 @@ def test_cast_through_a_framed_scene_is_casts_through_a_copied_one(monkeypatch, 
     results = []
     for framed in (False, True):
         monkeypatch.setattr(prepared, "FRAMED_FROM", 0 if framed else 10**12)
+        monkeypatch.setattr(prepared, "INDEXED", framed)
         prepared.clear()
         results.append(pyclray.cast(scene, origins, directions, precision=precision))
         assert (prepared.prepared_scene(context_for(None), scene, precision).kinds["mesh"].indexed is not None) == framed
@@ -105,16 +123,22 @@ def test_cast_through_a_framed_scene_is_casts_through_a_copied_one(monkeypatch, 
     assert np.isfinite(results[0]["depth"]).sum() > 100  # rays that hit: what this compares
 
 
+@pytest.mark.parametrize("path", ["framed", "copied"])
 @pytest.mark.parametrize("check", ["embree_watertight", "zero_area", "far_fp32", "far_fp64", "smooth", "smooth_flat"])
-def test_the_mesh_tests_hold_for_framed_meshes(monkeypatch, check):
+def test_the_mesh_tests_hold_for_framed_and_copied_meshes(monkeypatch, check, path):
     """tests/test_mesh.py's watertightness (Embree's sphere and far grid: every ray from inside hits),
     zero-area triangles (never hit, no NaN), oracle tests at 3e7 from the origin, and
-    tests/test_mesh_smooth.py's smooth shading, run on framed scenes: their meshes' triangles
-    assembled from shared vertices and faces, their shading normals per vertex (engine/indexed.py)."""
+    tests/test_mesh_smooth.py's smooth shading (which run on indexed meshes: their triangles assembled
+    from shared vertices and faces, their shading normals per vertex, engine/indexed.py), run on
+    framed scenes (indexed meshes beside framed shapes) and on the per-view copy of each triangle
+    (prepared.INDEXED False: the path of devices without float64)."""
     import test_mesh
     import test_mesh_smooth
 
-    monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
+    if path == "framed":
+        monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
+    else:
+        monkeypatch.setattr(prepared, "INDEXED", False)
     prepared.clear()
     if check == "embree_watertight":
         test_mesh.test_embree_watertight_sphere_and_far_grid()
@@ -126,5 +150,7 @@ def test_the_mesh_tests_hold_for_framed_meshes(monkeypatch, check):
         test_mesh_smooth.test_geometric_images_and_the_ground_stay_as_flat()
     else:
         test_mesh.test_render_agrees_with_the_oracle_far_from_the_origin(check[4:], 3e7)
-    assert any(p.kinds["mesh"].indexed is not None for p in prepared._prepared.values())  # what this tests
+    kept = [p for p in prepared._prepared.values() if "mesh" in p.kinds]
+    assert kept and all((p.kinds["mesh"].indexed is not None) == (path == "framed") for p in kept)  # what this tests
+    assert path == "copied" or any(p.framed for p in kept)
     prepared.clear()

@@ -1,6 +1,6 @@
-"""A framed scene's triangles as shared vertices and faces (Shape.pack_indexed): the render kernel
-assembles each triangle it tests from its face and the per-view pass's vertices in the eye's frame
-(kernels/pyclray.cl, INDEXED), and computes the winner's world normal from the float64 vertices.
+"""Meshes as shared vertices and faces (Shape.pack_indexed), on every device with float64: the render
+kernel assembles each triangle it tests from its face and the per-view pass's vertices in the eye's
+frame (kernels/pyclray.cl, INDEXED), and computes the winner's world normal from the float64 vertices.
 
 A closed mesh has about half as many vertices as triangles, so per triangle this holds a face (16
 bytes: three vertex indices and its primitive index, ~index for a zero-area triangle), half a
@@ -8,25 +8,47 @@ float64 vertex (32 bytes each) and half a vertex in the frame (16 bytes each in 
 (4 bytes): 44 bytes, against the per-view copy's 64 and the world entry's 96 (and the BVH's nodes
 either way). The per-view pass frames vertices, not triangles: a vertex shared by two triangles is
 one vertex, the same bits in both (watertightness), as in the copy, which rounds each corner of each
-triangle alike."""
+triangle alike. A scene's few vertices are framed on the host (the same float64 operations: no
+rebase program to build for a small scene's first view); many, on the device."""
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
+from ..model.shapes.base import in_frame
 from .buffers import aligned, device_buffer as _buffer
+
+# entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
+# bvh.SAH_FROM); below, numpy's gathers (no numba import in a small scene's cold start)
+COMPILED_FROM = 16_384
+
+
+def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 2, 3) float64: each face's triangle's box, padded as Shape.bounds_of pads its world entry's
+    (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte
+    world entries (a 1,000,000-triangle mesh's pack and bounds took 0.12 s, this 10 ms)."""
+    if len(faces) >= COMPILED_FROM:
+        from .bvh_fast import triangle_bounds  # numba: large scenes only
+
+        out = np.empty((len(faces), 2, 3))
+        triangle_bounds(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int32), out)
+        return out
+    from ..model.shapes.base import padded_bounds
+
+    a, b, c = (vertices[faces[:, k], :3] for k in range(3))
+    return padded_bounds(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c))
 
 
 class IndexedEntries:
     """One type's shared vertices (world, float64 (V, 4); in the frame of the last view, real (V, 4))
     and its faces in the BVH's leaf order ((F, 4) int32), on the host and the device."""
 
-    def __init__(self, prepared, cls, shapes, order, ids):
-        world_vertices, faces = cls.pack_indexed(shapes)
+    def __init__(self, prepared, cls, shapes, vertices, faces, order, ids):
         real = np.float64 if prepared.precision == "fp64" else np.float32
-        self.world_vertices = aligned(np.ascontiguousarray(world_vertices, np.float64))
-        self.faces = aligned(np.ascontiguousarray(faces[order], np.int32))
+        self.world_vertices = aligned(np.ascontiguousarray(vertices, np.float64))
+        self.faces = aligned(np.ascontiguousarray(faces if order is None else faces[order], np.int32))
         self.ids = aligned(np.ascontiguousarray(ids, np.int32))
-        self.vertices_host = aligned(np.zeros((len(world_vertices), 4), real))
+        self.vertices_host = aligned(np.zeros((len(vertices), 4), real))
         ctx = prepared.ctx
         self.world_buffer = _buffer(ctx, self.world_vertices)
         self.faces_buffer = _buffer(ctx, self.faces)
@@ -37,6 +59,12 @@ class IndexedEntries:
         self.smooth_host = None if smooth is None else aligned(smooth)
         self.smooth = None if smooth is None else _buffer(ctx, self.smooth_host)
 
+    @property
+    def primitives(self) -> np.ndarray:
+        """Each face's index in its shape (its face's w, ~index where never hit), in leaf order."""
+        w = self.faces[:, 3]
+        return np.where(w >= 0, w, ~w).astype(np.int32)
+
     def nbytes(self) -> int:
         return self.world_vertices.nbytes + self.faces.nbytes + self.ids.nbytes + self.vertices_host.nbytes
 
@@ -44,8 +72,18 @@ class IndexedEntries:
         """The render kernel's arguments of the type (kernels/pyclray.cl: PYCLRAY_ENTRIES_INDEXED)."""
         return [self.faces_buffer, self.vertices, self.world_buffer, self.ids_buffer]
 
-    def rebase(self, prepared, kernels, frame) -> None:
-        """The per-view pass over the vertices: each in the eye's frame (kernels/rebase_kernels.cl)."""
+    def rebase(self, prepared, eye, rows) -> None:
+        """The per-view pass over the vertices: each in the eye's frame, on the device
+        (kernels/rebase_kernels.cl) where the scene rebases there, else on the host (in_frame: the
+        same float64 operations in the same order, the same bits)."""
         count = len(self.world_vertices)
-        kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
-                                   np.int32(count), *frame)
+        if prepared.on_device:
+            from .programs import Variant, kernels_for
+
+            kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
+            frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
+            kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
+                                       np.int32(count), *frame)
+            return
+        self.vertices_host[:, :3] = in_frame(self.world_vertices[:, :3] - eye, rows)
+        cl.enqueue_copy(prepared.ctx.queue, self.vertices, self.vertices_host)

@@ -12,8 +12,8 @@ camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
 So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
 with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the render kernel frames each
-where it tests it from its world entry (the same bits), and its meshes are shared vertices and faces
-whose vertices the per-view pass frames (engine/indexed.py).
+where it tests it from its world entry (the same bits). Meshes on a device with float64 are shared
+vertices and faces whose vertices the per-view pass frames (INDEXED, engine/indexed.py), in any scene.
 
 Caches (bounded, least recently used; ``clear()`` drops them all, with their device buffers):
 prepared scenes per (device, shapes tuple, precision), at most PREPARED_MAX of them and about
@@ -39,7 +39,7 @@ from ..model.shapes.base import entries
 from . import culling, instances, refit, shading
 from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64
-from .indexed import IndexedEntries
+from .indexed import IndexedEntries, indexed_bounds
 from .programs import Variant, kernels_for
 from .request import render_lock
 from .scene_bvh import SceneBVH, primitives_bvh
@@ -70,7 +70,7 @@ class Kind:
     cls: type
     stored_world: np.ndarray | None  # None for indexed entries: world packs them when asked (cast)
     ids: np.ndarray
-    primitives: np.ndarray
+    stored_primitives: np.ndarray | None  # None for indexed entries: their faces hold them
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
     # a framed scene's (devices with float64): its entries' ids and primitive indices, read by the
     # render kernel, which frames each entry from its world entry where it tests it
@@ -96,6 +96,11 @@ class Kind:
             return self.stored_world
         world = self.cls.pack_world(self.shapes)
         return world if self.order is None else world[self.order]
+
+    @property
+    def primitives(self) -> np.ndarray:
+        """Each entry's index within its shape."""
+        return self.stored_primitives if self.indexed is None else self.indexed.primitives
 
     @property
     def framed(self) -> bool:
@@ -128,6 +133,13 @@ DEVICE_REBASE_FROM = 1024
 # 998,000-triangle sphere 93.3-96.4 against 95.1-98.4 ms, 61.2 bytes a triangle against 177.2.
 FRAMED_FROM = 524_288
 
+# Meshes (Shape.indexed) are kept as shared vertices and faces on every device with float64 (engine/
+# indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
+# world entries and the per-view copy. Measured (python -m bench.meshes, 512x512 primary rays): see
+# docs/benchmarks.md. Tests set it False to compare with the per-view copy (the path of devices
+# without float64, where the winner's normal cannot be computed from float64 vertices).
+INDEXED = True
+
 
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
@@ -150,26 +162,37 @@ class PreparedScene:
                     packed[kind] = group
             by_type = packed
         self.types = tuple(t for t in KINDS if t in by_type)
-        worlds, bounds, shared = {}, {}, {}
+        # Meshes are shared vertices and faces wherever the device has float64 (engine/indexed.py):
+        # their world entries are never packed, their bounds come from the vertices and faces
+        self.indexed = has_fp64(ctx.device) and INDEXED
+        worlds, bounds, shared, counts = {}, {}, {}, {}
         self.on_device = False  # see below, once the entries are counted
         for t in self.types:
             cls = KINDS[t]
             mine, ids = by_type[t]
-            world = cls.pack_world(mine)
             entry_ids, primitives = cls.entries_of(mine, ids)
+            if self.indexed and cls.indexed:
+                vertices, faces = cls.pack_indexed(mine)
+                worlds[t] = ((vertices, faces), entry_ids, primitives, None)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    bounds[t] = indexed_bounds(vertices, faces)
+                counts[t] = len(faces)
+                continue
+            world = cls.pack_world(mine)
             worlds[t] = (world, entry_ids, primitives, cls.pack_smooth(mine, precision))
+            counts[t] = len(world)
             if cls.shared:  # before the entries are reordered: the shared arrays say where each starts
                 shared[t] = instances.pack_shared(cls, mine, world)
-            self.on_device = self.on_device or len(world) >= DEVICE_REBASE_FROM
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
                     bounds[t] = cls.bounds_of(world)
+        self.on_device = any(count >= DEVICE_REBASE_FROM for count in counts.values())
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
         # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
         # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
         # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
-        framable = sum(len(worlds[t][0]) for t in self.types if KINDS[t].frames_in_render or KINDS[t].indexed)
+        framable = sum(counts[t] for t in self.types if KINDS[t].frames_in_render)
         self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
         # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
         # has float64 and the scene is large enough to pay, else on the host
@@ -177,11 +200,13 @@ class PreparedScene:
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
             world, ids, primitives, smooth = worlds[t]
-            if t in self.bvh.order:  # bounded: in leaf order
-                order = self.bvh.order[t]
-                world, ids, primitives = world[order], ids[order], primitives[order]
+            order = self.bvh.order.get(t)  # bounded: in leaf order
+            if order is not None:
+                ids, primitives = ids[order], primitives[order]
+                if not isinstance(world, tuple):
+                    world = world[order]
                 smooth = None if smooth is None else smooth[order]
-            self.kinds[t] = self._kind(t, world, ids, primitives, tuple(by_type[t][0]), self.bvh.order.get(t))
+            self.kinds[t] = self._kind(t, world, ids, primitives, tuple(by_type[t][0]), order)
             indexed = self.kinds[t].indexed
             if indexed is not None:  # its shading normals per shared vertex
                 self.kinds[t].smooth_host, self.kinds[t].smooth = indexed.smooth_host, indexed.smooth
@@ -236,9 +261,9 @@ class PreparedScene:
     def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
         cls = KINDS[t]
-        if self.framed and cls.indexed:  # shared vertices and faces (engine/indexed.py)
-            indexed = IndexedEntries(self, cls, shapes, np.arange(len(world)) if order is None else order, ids)
-            return Kind(t, cls, None, ids, primitives, None, None, None, None, None, indexed=indexed, shapes=shapes,
+        if isinstance(world, tuple):  # shared vertices and faces (engine/indexed.py)
+            indexed = IndexedEntries(self, cls, shapes, *world, order, ids)
+            return Kind(t, cls, None, indexed.ids, None, None, None, None, None, None, indexed=indexed, shapes=shapes,
                         order=order)
         world = aligned(world)
         framed = self.framed and cls.frames_in_render
@@ -309,9 +334,8 @@ class PreparedScene:
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
-            if kind.indexed is not None:  # the vertices, on the device (framed scenes have float64)
-                kind.indexed.rebase(self, kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision)),
-                                    [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)])
+            if kind.indexed is not None:  # the shared vertices
+                kind.indexed.rebase(self, eye, rows)
                 continue
             if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue

@@ -96,6 +96,9 @@ class Variant:
     # render: each shape framed on the eye from its float64 world entry where it is tested (devices
     # with float64), instead of read from the per-view pass's buffers (pyclray.engine.prepared)
     framed: bool = False
+    # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
+    # float64, engine/indexed.py), framed or not
+    indexed: bool = False
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -131,6 +134,8 @@ class Variant:
             lines.append("#define PYCLRAY_REBASE 1")
         if self.framed and self.kind == "render":
             lines.append("#define PYCLRAY_FRAMED 1")
+        if any(self._mode(REGISTRY[t]) == "INDEXED" for t in self.shape_types):
+            lines.append("#define PYCLRAY_INDEXED 1")
         if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
         # where a render reads each type's shapes (kernels/pyclray.cl): framed where tested, or copied
@@ -168,7 +173,7 @@ class Variant:
     def _mode(self, shape) -> str:
         """Where a render reads a type's shapes (kernels/pyclray.cl): framed where tested from their
         world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
-        if self.framed and self.kind == "render" and shape.indexed:
+        if self.indexed and self.kind == "render" and shape.indexed:
             return "INDEXED"
         return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
 

@@ -73,7 +73,7 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     shadows = "shaded" in aovs and scene.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
-                      framed=prepared.framed)
+                      framed=prepared.framed, indexed=prepared.indexed)
     # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
     shape_args = inputs.shape_args(prepared, acceleration)
     shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]

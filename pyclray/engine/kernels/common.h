@@ -28,8 +28,9 @@ typedef float4 real4;
 
 #define MISS ((real)INFINITY)
 
-#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED)
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED) || defined(PYCLRAY_INDEXED)
 /* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/pyclray.cl),
- * and a framed render frames each shape on the eye from its float64 world entry */
+ * a framed render frames each shape on the eye from its float64 world entry, and an indexed mesh's
+ * winner has its world normal from its float64 vertices (kernels/mesh.cl) */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif

@@ -34,6 +34,14 @@ inline void mesh_rebase(__global const TriangleWorld* world, PYCLRAY_FRAME_OUT T
 
 #ifndef PYCLRAY_REBASE
 
+/* where the mesh functions read a triangle: an indexed program's are assembled in private memory
+ * where tested (PYCLRAY_INDEXED: every indexed type of the program is), the others' where SHAPE_SPACE says */
+#ifdef PYCLRAY_INDEXED
+#define MESH_SPACE
+#else
+#define MESH_SPACE SHAPE_SPACE
+#endif
+
 /* a shadow ray leaving a triangle on either side never meets that triangle again (flat); its
  * neighbours are tested as every other shape is */
 #define PYCLRAY_FLAT_mesh 1
@@ -124,7 +132,7 @@ inline MeshEdges mesh_edges_of(const real4 a, const real4 b, const real4 c, cons
     return e;
 }
 
-inline MeshEdges mesh_edges(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+inline MeshEdges mesh_edges(MESH_SPACE const Triangle* tri, const RayPacket* ray)
 {
     return mesh_edges_of(tri->a, tri->b, tri->c, ray);
 }
@@ -143,12 +151,12 @@ inline realv mesh_hit_of(const real4 a, const real4 b, const real4 c, const RayP
     return inside && s > 0 ? s : SPLAT(MISS);
 }
 
-inline realv mesh_hit(SHAPE_SPACE const Triangle* tri, const RayPacket* ray)
+inline realv mesh_hit(MESH_SPACE const Triangle* tri, const RayPacket* ray)
 {
     return mesh_hit_of(tri->a, tri->b, tri->c, ray);
 }
 
-#ifdef PYCLRAY_FRAMED
+#ifdef PYCLRAY_INDEXED
 /* An indexed triangle (pyclray/engine/indexed.py) in the frame: its face's vertices as the per-view
  * pass framed them, w 1 (0 for a zero-area triangle, whose face holds ~index: never hit); the world
  * normal in w is the winner's only (mesh_world_normal). */
@@ -162,9 +170,11 @@ inline void mesh_assemble(const int4 face, __global const real4* vertices, Trian
 
 /* The winner's unit world normal in w, from its float64 world vertices: pyclray.model.shapes.Mesh's
  * face_normals, the same operations in the same order (numpy's cross product, its norm summed x, y,
- * z), no contraction (a framed program has none): the bits the per-view copy carries. */
+ * z), no contraction of a * b + c into an fma (here, whatever the rest of the program does): the bits
+ * the per-view copy carries. */
 inline void mesh_world_normal(Triangle* tri, const int4 face, __global const double4* world)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const double3 a = world[face.x].xyz, e1 = world[face.y].xyz - a, e2 = world[face.z].xyz - a;
     const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
     const double length = sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
@@ -186,7 +196,7 @@ inline TriangleNormals mesh_smooth_of(const int4 face, __global const real4* nor
 #endif
 
 /* The unit world normal normalize(cross(b - a, c - a)), computed in float64 on the host. */
-inline vec3v mesh_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, __global const Camera* camera)
+inline vec3v mesh_normal(MESH_SPACE const Triangle* tri, const RayPacket* ray, __global const Camera* camera)
 {
     return v3(SPLAT(tri->a.w), SPLAT(tri->b.w), SPLAT(tri->c.w));
 }
@@ -200,7 +210,7 @@ inline void mesh_barycentric_of(const real4 a, const real4 b, const real4 c, con
     *v = e.e2 / det;
 }
 
-inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, realv* u, realv* v)
+inline void mesh_barycentric(MESH_SPACE const Triangle* tri, const RayPacket* ray, realv* u, realv* v)
 {
     mesh_barycentric_of(tri->a, tri->b, tri->c, ray, u, v);
 }
@@ -209,7 +219,7 @@ inline void mesh_barycentric(SHAPE_SPACE const Triangle* tri, const RayPacket* r
 /* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,
  * (1 - u - v) n_a + u n_b + v n_c, normalized; (0, 0, 0) (the geometric normal lights) where the
  * mesh is flat (its normals are 0) or the interpolation is 0 (opposite vertex normals). */
-inline vec3v mesh_shading_normal(SHAPE_SPACE const Triangle* tri, const RayPacket* ray, const TriangleNormals* normals)
+inline vec3v mesh_shading_normal(MESH_SPACE const Triangle* tri, const RayPacket* ray, const TriangleNormals* normals)
 {
     realv u, v;
     mesh_barycentric(tri, ray, &u, &v);
