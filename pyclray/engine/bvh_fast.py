@@ -12,6 +12,18 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, inline="always")
+def _least(x, y):
+    """numpy's minimum: a NaN wins"""
+    return x if x < y or x != x else y
+
+
+@numba.njit(cache=True, inline="always")
+def _most(x, y):
+    """numpy's maximum: a NaN wins"""
+    return x if x > y or x != x else y
+
+
 @numba.njit(cache=True, nogil=True)
 def triangle_bounds(vertices, faces, out):
     """out[f] = base.padded_bounds of face f's triangle: the min and max of its three vertices (xyz of
@@ -20,8 +32,7 @@ def triangle_bounds(vertices, faces, out):
         i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
         for a in range(3):
             x, y, z = vertices[i, a], vertices[j, a], vertices[k, a]
-            lo = min(min(x, y), z)
-            hi = max(max(x, y), z)
+            lo, hi = _least(_least(x, y), z), _most(_most(x, y), z)
             pad = 1e-12 * (abs(lo) + abs(hi)) + 1e-300
             out[f, 0, a] = lo - pad
             out[f, 1, a] = hi + pad
@@ -33,8 +44,34 @@ def widen(bounds, widen_by, out):
     for n in range(bounds.shape[0]):
         size = 0.0
         for a in range(3):
-            size = max(size, bounds[n, 1, a] - bounds[n, 0, a])
+            extent = bounds[n, 1, a] - bounds[n, 0, a]
+            if extent > size or extent != extent:  # a NaN wins, as in numpy's max
+                size = extent
         size *= widen_by
         for a in range(3):
             out[n, 0, a] = bounds[n, 0, a] - size
             out[n, 1, a] = bounds[n, 1, a] + size
+
+
+_FLOAT_MAX = float(np.finfo(np.float32).max)
+
+
+@numba.njit(cache=True, nogil=True)
+def pack_binary(lo, hi, first, count, origin, out, bits):
+    """bvh.pack_nodes in one pass: each corner relative to origin in float64, kept within float32's
+    finite range (a NaN stays NaN), rounded outward to float32 (bvh.outward32's bits), and first and
+    count as the bits of w (out: the (M, 8) float32 view of the node array, bits its int32 view).
+    Both roundings are computed and one kept: which one is a coin toss per corner, a branch on it
+    mispredicted half the time."""
+    down, up = np.float32(-np.inf), np.float32(np.inf)
+    for k in range(lo.shape[0]):
+        for a in range(3):
+            x = _least(_most(lo[k, a] - origin[a], -_FLOAT_MAX), _FLOAT_MAX)
+            f = np.float32(x)
+            below = np.nextafter(f, down)
+            out[k, a] = below if f > x else f
+            x = _least(_most(hi[k, a] - origin[a], -_FLOAT_MAX), _FLOAT_MAX)
+            f = np.float32(x)
+            above = np.nextafter(f, up)
+            out[k, 4 + a] = above if f < x else f
+        bits[k, 3], bits[k, 7] = first[k], count[k]

@@ -226,20 +226,23 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
             # row belongs there (no branch on the side: it is a coin toss per row, and mispredicted
             # branches cost 2.5 times as much as the swaps)
             a = best_axis
-            sides[:, 0:3] = _BIG
-            sides[:, 3:6] = -_BIG
+            l0 = l1 = l2 = r0 = r1 = r2 = _BIG  # each side's centroid box, in registers
+            l3 = l4 = l5 = r3 = r4 = r5 = -_BIG
             mid = s
             for i in range(s, e):
+                c0, c1, c2 = rows[i, 0] + rows[i, 3], rows[i, 1] + rows[i, 4], rows[i, 2] + rows[i, 5]
                 is_left = _bin(rows[i, a] + rows[i, a + 3], g[a + 6], scale[a], nb) <= best_k
-                side = 0 if is_left else 1
-                for c in range(3):
-                    centroid = rows[i, c] + rows[i, c + 3]
-                    sides[side, c] = min(sides[side, c], centroid)
-                    sides[side, c + 3] = max(sides[side, c + 3], centroid)
+                # both sides' boxes grown, by the centroid or by nothing (selects, no branch)
+                l0, l1, l2 = min(l0, c0 if is_left else _BIG), min(l1, c1 if is_left else _BIG), min(l2, c2 if is_left else _BIG)
+                l3, l4, l5 = max(l3, c0 if is_left else -_BIG), max(l4, c1 if is_left else -_BIG), max(l5, c2 if is_left else -_BIG)
+                r0, r1, r2 = min(r0, _BIG if is_left else c0), min(r1, _BIG if is_left else c1), min(r2, _BIG if is_left else c2)
+                r3, r4, r5 = max(r3, -_BIG if is_left else c0), max(r4, -_BIG if is_left else c1), max(r5, -_BIG if is_left else c2)
                 for c in range(6):
                     rows[i, c], rows[mid, c] = rows[mid, c], rows[i, c]
                 index[i], index[mid] = index[mid], index[i]
                 mid += 1 if is_left else 0
+            sides[0, 0], sides[0, 1], sides[0, 2], sides[0, 3], sides[0, 4], sides[0, 5] = l0, l1, l2, l3, l4, l5
+            sides[1, 0], sides[1, 1], sides[1, 2], sides[1, 3], sides[1, 4], sides[1, 5] = r0, r1, r2, r3, r4, r5
             left[6:12] = sides[0]
             right[6:12] = sides[1]
             # each side's box: the union of its bins

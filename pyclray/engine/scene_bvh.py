@@ -16,20 +16,26 @@ from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 class SceneBVH:
     """The BVH over a scene's bounded primitives: per leaf position, the primitive's type and its
     index in that type's array (which is in leaf order), each type's permutation into leaf order,
-    and the primitives' unwidened bounds in leaf order (cast's anchors)."""
+    and the primitives' unwidened bounds in leaf order (cast's anchors, an animation's refit)."""
 
     tree: BVH
     types: tuple[str, ...]  # the bounded types present, in the registry's order
     leaf_type: np.ndarray  # (N,) index into types
     leaf_index: np.ndarray  # (N,) index in its type's (leaf-ordered) array
     order: dict  # type -> int64 array: its entries' positions (in the type's array as given) in leaf order
-    bounds: np.ndarray  # (N, 2, 3) in leaf order
+    given_bounds: np.ndarray  # (N, 2, 3) in the order given (the types' arrays one after the other)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(N, 2, 3) the unwidened bounds in leaf order, gathered when first asked (cast, a refit: a
+        render needs none of it, and a million triangles' gather costs 30 ms)."""
+        return self.given_bounds[self.tree.order]
 
     @cached_property
     def wide(self) -> WideBVH:
         """The wide tree of cast's single rays, made when a cast first asks (a render needs only the
         binary tree: 1,000,000 triangles' first render 50 ms sooner)."""
-        if not len(self.bounds):  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
+        if not len(self.given_bounds):  # no bounded shapes: no tree to traverse (the kernels then have no BVH at all)
             return WideBVH(np.full((1, WIDTH), -1, np.int64), np.zeros((1, WIDTH), np.int32), 1)
         return collapse(self.tree)
 
@@ -81,7 +87,7 @@ def primitives_bvh(bounds_by_type: dict) -> SceneBVH:
         mine = leaf_type == k
         leaf_index[mine] = np.arange(int(mine.sum()))
         order[t] = within[tree.order[mine]]
-    out = SceneBVH(tree, types, leaf_type, leaf_index, order, bounds[tree.order])
+    out = SceneBVH(tree, types, leaf_type, leaf_index, order, bounds)
     # the kernels' stacks: a binary level per entry, a wide level (no more levels than the binary
     # tree's) 7 entries; the wide tree is made here only where the binary depth leaves a doubt
     depth = tree.depth()

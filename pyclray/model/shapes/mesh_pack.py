@@ -6,15 +6,23 @@ import numpy as np
 
 def indexed(meshes):
     """(world vertices (V, 4) float64, faces (F, 4) int32): each mesh's world vertices; its faces offset
-    to them, each with its index in its mesh (~index for a zero-area one: never hit)."""
+    to them, each with its index in its mesh (~index for a zero-area one: never hit). Written in place
+    (a million faces' column stack and short-axis reductions cost 40 ms)."""
     vertices = np.zeros((sum(len(m.vertices) for m in meshes), 4))
-    faces, start = [], 0
+    faces = np.empty((sum(len(m.faces) for m in meshes), 4), np.int32)
+    start = first = 0
     for mesh in meshes:
+        count = len(mesh.faces)
         vertices[start:start + len(mesh.vertices), :3] = mesh.world_vertices()
-        index = np.arange(len(mesh.faces), dtype=np.int32)
-        faces.append(np.column_stack([mesh.faces + start, np.where(mesh.face_normals().any(axis=1), index, ~index)]))
+        mine = faces[first:first + count]
+        np.add(mesh.faces, start, out=mine[:, :3], casting="unsafe")
+        normal = mesh.face_normals()
+        hit = (normal[:, 0] != 0) | (normal[:, 1] != 0) | (normal[:, 2] != 0)  # a zero-area triangle's is 0
+        index = np.arange(count, dtype=np.int32)
+        mine[:, 3] = np.where(hit, index, ~index)
         start += len(mesh.vertices)
-    return vertices, np.concatenate(faces).astype(np.int32)
+        first += count
+    return vertices, faces
 
 
 def indexed_smooth(meshes, precision: str):
