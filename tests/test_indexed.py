@@ -1,0 +1,109 @@
+"""Meshes as shared vertices and faces (pyclray.engine.indexed), the path of every device with float64,
+and the compiled passes over a large scene's boxes (pyclray.engine.bvh_fast). What this holds: the
+indexed path's bounds and node boxes are the bits of the numpy code they replace (so the tree and the
+images do not depend on which ran), its host and device vertex passes agree bit for bit, its images
+are the per-view copy's (tests/test_framed.py holds every image of every shape to that), and its
+memory meets issue 23's 64 bytes a triangle."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine import bvh, bvh_fast, indexed, prepared
+from pyclray.engine.device import context_for, has_fp64
+from pyclray.model.shapes.base import padded_bounds
+from pyclray.model.shapes.mesh import Mesh
+from pyclray.model.shapes.mesh_shapes import perturbed_sphere
+
+from test_views import ALL, fresh, same
+
+
+def need_fp64():
+    if not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64: meshes keep the per-view copy there")
+
+
+def sphere_mesh(rings=60, segments=120, offset=(0.0, 0.0, 0.0), seed=3) -> Mesh:
+    vertices, faces = perturbed_sphere(rings, segments, 1.0, 0.05, np.random.default_rng(seed))
+    return Mesh(vertices + np.asarray(offset), faces, name="ball")
+
+
+def test_indexed_bounds_are_the_world_entries_bounds_bit_for_bit():
+    """The bounds from vertices and faces (numpy below COMPILED_FROM, numba above) are
+    Mesh.bounds_of of the 96-byte world entries, which the per-view copy's tree is built over:
+    the same tree either way. A zero-area triangle and a far offset included."""
+    mesh = sphere_mesh(offset=(3e7, -1e5, 2.5))
+    vertices, faces = Mesh.pack_indexed([mesh])
+    faces[5, 1] = faces[5, 0]  # a degenerate face: its bounds still its corners'
+    expected = Mesh.bounds_of(Mesh.pack_world([Mesh(mesh.world_vertices(), faces[:, :3], name="ball")]))
+    assert np.array_equal(indexed.indexed_bounds(vertices, faces[:100]), expected[:100])  # numpy
+    out = np.empty_like(expected)
+    bvh_fast.triangle_bounds(vertices, faces, out)
+    assert len(faces) >= 1000 and np.array_equal(out, expected)
+
+
+def test_the_compiled_widening_and_node_packing_keep_numpys_bits():
+    """bvh.widened and bvh.pack_nodes above SAH_FROM (bvh_fast) against their numpy formulas, on
+    boxes of every scale, beyond float32's range, infinite and NaN (where numpy's NaN wins, theirs
+    does too)."""
+    rng = np.random.default_rng(7)
+    lo = rng.normal(size=(4000, 3)) * 10.0 ** rng.integers(-30, 45, (4000, 3))
+    hi = lo + np.abs(rng.normal(size=(4000, 3))) * 10.0 ** rng.integers(-30, 45, (4000, 3))
+    lo[:3], hi[:3] = [[np.inf] * 3, [-np.inf, 0, 0], [np.nan, 0, 0]], [[np.inf] * 3, [np.inf, 1, 1], [1, 1, 1]]
+    bounds = np.stack([lo, hi], axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = bounds[:, 1] - bounds[:, 0]
+        size = extent.max(axis=1, initial=0.0)[:, None] * bvh.WIDEN
+        expected = np.stack([bounds[:, 0] - size, bounds[:, 1] + size], axis=1)
+        out = np.empty_like(bounds)
+        bvh_fast.widen(bounds, bvh.WIDEN, out)
+    assert np.array_equal(out, expected, equal_nan=True)
+    tree = bvh.BVH(lo, hi, np.arange(4000, dtype=np.int32), np.ones(4000, np.int32), np.arange(4000))
+    origin = np.array([1e5, -3.0, 0.25])
+    packed = bvh.pack_nodes(tree, origin)  # 4000 nodes: compiled only from SAH_FROM on
+    assert tree.nodes < bvh.SAH_FROM
+    words = np.zeros((4000, 8), np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        bvh_fast.pack_binary(lo, hi, tree.first, tree.count, origin, words, words.view(np.int32))
+    assert words.tobytes() == packed.tobytes()
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_the_host_and_device_vertex_passes_agree_bit_for_bit(monkeypatch, precision):
+    """A small scene frames its vertices on the host, a large one on the device (prepared.on_device):
+    the same float64 operations in the same order, the same vertices and images."""
+    need_fp64()
+    scene = pyclray.Scene(pyclray.Camera((1e6 + 0.5, 2.0, 4.0), (1e6, 0.0, 0.0), fov=40.0), pyclray.Image(40, 32),
+                          (sphere_mesh(offset=(1e6, 0.0, 0.0)),))
+    vertices, images = [], []
+    for device in (False, True):
+        monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0 if device else 10**12)
+        images.append(fresh(scene, aovs=ALL, precision=precision))
+        kind = prepared.prepared_scene(context_for(None), scene, precision).kinds["mesh"]
+        assert kind.indexed is not None
+        assert prepared.prepared_scene(context_for(None), scene, precision).on_device == device  # what this compares
+        host = np.empty_like(kind.indexed.vertices_host)
+        import pyopencl as cl
+
+        cl.enqueue_copy(context_for(None).queue, host, kind.indexed.vertices)
+        vertices.append(host)
+    assert np.array_equal(vertices[0], vertices[1])
+    same(*images)
+
+
+def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
+    """Issue 23's memory target for every mesh, not only those of framed scenes: a 28,680-triangle
+    closed mesh (about as many vertices per triangle as a scan, half) on a ground plane, counted as
+    PreparedScene.nbytes counts (vertices in the world and in the frame, faces, ids, BVH nodes,
+    materials; no refs: the plane is unbounded, the mesh the one bounded type). python -m
+    bench.meshes: the 80,000-triangle bunny 56.8 bytes a triangle."""
+    need_fp64()
+    mesh = sphere_mesh(rings=120, segments=240)
+    scene = pyclray.Scene(pyclray.Camera((0.0, 1.0, 4.0), (0.0, 0.0, 0.0)), pyclray.Image(32, 32),
+                          (pyclray.Plane((0.0, 1.0, 0.0), 1.5), mesh))
+    prepared.clear()
+    pyclray.render(scene, aovs=("depth",))
+    held = prepared.prepared_scene(context_for(None), scene, "fp32")
+    assert held.kinds["mesh"].indexed is not None and not held.framed  # indexed without being framed
+    assert held.nbytes() / len(mesh.faces) <= 64
