@@ -93,8 +93,8 @@ def test_the_host_and_device_vertex_passes_agree_bit_for_bit(monkeypatch, precis
 
 
 def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
-    """Issue 23's memory target for every mesh, not only those of framed scenes: a 28,680-triangle
-    closed mesh (about as many vertices per triangle as a scan, half) on a ground plane, counted as
+    """Issue 23's memory target for every mesh, not only those of framed scenes: a
+    closed mesh of 57,120 triangles (half as many vertices, as a scan) on a ground plane, counted as
     PreparedScene.nbytes counts (vertices in the world and in the frame, faces, ids, BVH nodes,
     materials; no refs: the plane is unbounded, the mesh the one bounded type). python -m
     bench.meshes: the 80,000-triangle bunny 56.8 bytes a triangle."""
