@@ -1,9 +1,10 @@
 /* Instance (meshes that share their arrays, pyclray/model/shapes/instance.py): two levels.
  *
  * The scene's BVH holds each instance as one entry (its world box); its mesh's triangles and BVH are
- * one copy in object space (instance_triangles, instance_nodes from the instance's root, triangles
- * from its first, in that tree's leaf order; instance_primitives: each one's index in its mesh),
- * shared by all its instances (engine/instances.py). A packet enters an instance through its
+ * one copy in object space (instance_vertices: the meshes' float64 vertices; instance_faces: each
+ * triangle's three vertices and its index in its mesh, ~index where it has zero area, from the
+ * instance's first, in its tree's leaf order; instance_nodes from the instance's root), shared by all
+ * its instances (engine/instances.py). A packet enters an instance through its
  * per-view entry: the eye in object space (float64) and the frame's directions there (the rows of
  * object_from_frame / k, k a power of two, rounded once). Each triangle it visits is framed on that
  * object-space eye (its float64 vertices minus the eye, rounded once: the same bits for a vertex
@@ -61,8 +62,22 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
  * meshes as their own triangles, though (engine/render.py), so this only completes the type */
 #define PYCLRAY_FLAT_instance 1
 
-/* a vertex framed on the object-space eye: the float64 difference rounded once */
-inline real4 instance_vertex(const double4 p, const double3 eye) { return (real4)(convert_real3(p.xyz - eye), (real)p.w); }
+/* a face's corners framed on the object-space eye: each vertex's float64 difference rounded once; w
+ * 1, or 0 for a zero-area triangle (kernels/mesh.cl then never hits it) */
+#define INSTANCE_CORNERS(vertices, f, eye)                                                            \
+    (real4)(convert_real3(vertices[(f).x].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
+    (real4)(convert_real3(vertices[(f).y].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
+    (real4)(convert_real3(vertices[(f).z].xyz - (eye)), (f).w >= 0 ? 1 : 0)
+
+/* a face's unit object normal normalize(cross(b - a, c - a)) from its float64 vertices: Mesh.face_normals'
+ * operations in their order (numpy's cross product, its norm summed x, y, z), no contraction */
+inline double3 instance_object_normal(__global const double4* vertices, const int4 f)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const double3 a = vertices[f.x].xyz, e1 = vertices[f.y].xyz - a, e2 = vertices[f.z].xyz - a;
+    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    return n / sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+}
 
 /* the packet in object space: from the eye (where its triangles are framed), along object_from_frame d / k */
 inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
@@ -85,20 +100,21 @@ inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket*
  * counts, so that the caller's lowest-id rule sees it), or MISS; which: its triangle's position in
  * the tree's leaf order (the lowest on a tie), -1 where none. */
 inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
-                             __global const TriangleWorld* triangles, __global const BvhNode* nodes, intv* which)
+                             __global const double4* vertices, __global const int4* faces, __global const BvhNode* nodes,
+                             intv* which)
 {
     const real scale = inst->m0.w;
     const RayPacket object = instance_ray(inst, ray);
     const BoxPacket box = box_packet(object.dir, inst->box);
     const double3 eye = inst->eye.xyz;
     __global const BvhNode* tree = nodes + inst->root;
-    __global const TriangleWorld* own = triangles + inst->first;
+    __global const int4* own = faces + inst->first;
     realv nearest = limit * SPLAT(scale);  /* in the tree's units: exact */
     intv found = SPLAT_INT(0), leaf = SPLAT_INT(-1);
 #define INSTANCE_VISIT(q)                                                                             \
     {                                                                                                 \
-        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
-                                    instance_vertex(own[q].c, eye), &object);                         \
+        const int4 f = own[q];                                                                        \
+        const realv s = mesh_hit_of(INSTANCE_CORNERS(vertices, f, eye), &object);                     \
         const intv take = s < nearest || (s == nearest && s < MISS && (!found || SPLAT_INT(q) < leaf)); \
         if (ANY(take)) {                                                                              \
             nearest = take ? s : nearest;                                                             \
@@ -124,12 +140,12 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
     }
 
 /* the unit world normal: the object normal through the normal matrix sign(det A) A^-T, in float64 */
-inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which, __global const TriangleWorld* triangles)
+inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which, __global const double4* vertices,
+                             __global const int4* faces)
 {
     vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     INSTANCE_EACH_WINNER(which, {
-        __global const TriangleWorld* t = triangles + inst->first + q;
-        const double3 n = (double3)(t->a.w, t->b.w, t->c.w);
+        const double3 n = instance_object_normal(vertices, faces[inst->first + q]);
         const double3 w = (double3)(instance_dot(inst->normal0, n), instance_dot(inst->normal1, n), instance_dot(inst->normal2, n));
         const real3 unit = convert_real3(w / sqrt((w.x * w.x + w.y * w.y) + w.z * w.z));
         normal = v3_select(normal, v3(SPLAT(unit.x), SPLAT(unit.y), SPLAT(unit.z)), lanes);
@@ -137,26 +153,26 @@ inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which,
     return normal;
 }
 
-/* the winning triangle's index in its mesh */
-inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const intv which, __global const int* primitives)
+/* the winning triangle's index in its mesh (its face's w: a winner has area, so w >= 0) */
+inline intv instance_primitive(SHAPE_SPACE const Instance* inst, const intv which, __global const int4* faces)
 {
     intv primitive = SPLAT_INT(-1);
-    INSTANCE_EACH_WINNER(which, { primitive = lanes ? SPLAT_INT(primitives[inst->first + q]) : primitive; })
+    INSTANCE_EACH_WINNER(which, { primitive = lanes ? SPLAT_INT(faces[inst->first + q].w) : primitive; })
     return primitive;
 }
 
 /* the winning triangle's barycentrics, from its test in object space (an affine map keeps them) */
 inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const intv which,
-                                 __global const TriangleWorld* triangles, realv* u, realv* v)
+                                 __global const double4* vertices, __global const int4* faces, realv* u, realv* v)
 {
     const RayPacket object = instance_ray(inst, ray);
     const double3 eye = inst->eye.xyz;
     *u = SPLAT(0);
     *v = SPLAT(0);
     INSTANCE_EACH_WINNER(which, {
-        __global const TriangleWorld* t = triangles + inst->first + q;
+        const int4 f = faces[inst->first + q];
         realv tu, tv;
-        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &tu, &tv);
+        mesh_barycentric_of(INSTANCE_CORNERS(vertices, f, eye), &object, &tu, &tv);
         *u = lanes ? tu : *u;
         *v = lanes ? tv : *v;
     })
@@ -195,7 +211,8 @@ inline realv instance_shadow_entries(__global const BvhNode* node, const Instanc
 }
 
 inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit, const intv skip,
-                                 __global const TriangleWorld* triangles, __global const BvhNode* nodes)
+                                 __global const double4* vertices, __global const int4* faces,
+                                 __global const BvhNode* nodes)
 {
     const real scale = inst->m0.w;
     RayPacket object = instance_ray(inst, ray);
@@ -214,14 +231,14 @@ inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPack
                    + SPLAT(0x1p-20) * ((v_abs(o.x) + v_abs(o.y)) + v_abs(o.z)) + SPLAT(inst->box.w);
     const double3 eye = inst->eye.xyz;
     __global const BvhNode* tree = nodes + inst->root;
-    __global const TriangleWorld* own = triangles + inst->first;
+    __global const int4* own = faces + inst->first;
     const realv bound = limit * SPLAT(scale);  /* in the tree's units */
     realv reach = bound;
     intv blocked = SPLAT_INT(0);
 #define INSTANCE_SHADOW_VISIT(q)                                                                      \
     {                                                                                                 \
-        const realv s = mesh_hit_of(instance_vertex(own[q].a, eye), instance_vertex(own[q].b, eye),   \
-                                    instance_vertex(own[q].c, eye), &object);                         \
+        const int4 f = own[q];                                                                        \
+        const realv s = mesh_hit_of(INSTANCE_CORNERS(vertices, f, eye), &object);                     \
         const intv hit = s < bound && SPLAT_INT(q) != skip;                                           \
         blocked = blocked || hit;                                                                     \
         reach = blocked ? SPLAT(-INFINITY) : reach;                                                   \
@@ -231,7 +248,8 @@ inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPack
     return blocked ? SPLAT(0) : SPLAT(MISS);
 }
 #define PYCLRAY_SHADOW_HIT_instance(shape, ray, limit, self) \
-    instance_shadow_hit(shape, ray, limit, (self) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_nodes)
+    instance_shadow_hit(shape, ray, limit, (self) ? best_sub : SPLAT_INT(-1), instance_vertices, instance_faces, \
+                        instance_nodes)
 #define PYCLRAY_SELF_instance(self) SPLAT_INT(0)  /* its winning triangle is skipped, not the instance */
 #endif
 
@@ -249,21 +267,20 @@ inline real4 instance_vertex_normal(SHAPE_SPACE const Instance* inst, const doub
 }
 
 inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const InstanceNormals* flags,
-                                    const intv which, __global const TriangleWorld* triangles,
-                                    __global const TriangleWorld* normals)
+                                    const intv which, __global const double4* vertices, __global const int4* faces,
+                                    __global const double4* normals)
 {
     vec3v out = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     if (!flags->smooth) return out;
     const RayPacket object = instance_ray(inst, ray);
     const double3 eye = inst->eye.xyz;
     INSTANCE_EACH_WINNER(which, {
-        __global const TriangleWorld* t = triangles + inst->first + q;
-        __global const TriangleWorld* m = normals + inst->first + q;
+        const int4 f = faces[inst->first + q];
         realv u, v;
-        mesh_barycentric_of(instance_vertex(t->a, eye), instance_vertex(t->b, eye), instance_vertex(t->c, eye), &object, &u, &v);
+        mesh_barycentric_of(INSTANCE_CORNERS(vertices, f, eye), &object, &u, &v);
         const realv w = (SPLAT(1) - u) - v;
-        const real4 na = instance_vertex_normal(inst, m->a), nb = instance_vertex_normal(inst, m->b);
-        const real4 nc = instance_vertex_normal(inst, m->c);
+        const real4 na = instance_vertex_normal(inst, normals[f.x]), nb = instance_vertex_normal(inst, normals[f.y]);
+        const real4 nc = instance_vertex_normal(inst, normals[f.z]);
         const vec3v n = v3((w * na.x + u * nb.x) + v * nc.x, (w * na.y + u * nb.y) + v * nc.y, (w * na.z + u * nb.z) + v * nc.z);
         const realv length2 = v3_dot(n, n);
         out = v3_select(out, v3_scale(n, length2 > 0 ? SPLAT(1) / v_sqrt(length2) : SPLAT(0)), lanes);
@@ -272,41 +289,43 @@ inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayP
 }
 /* kernels/shading.h's call, in its winners' loop (mine: the lanes this instance won) */
 #define instance_shading_normal(shape, ray, flags) \
-    instance_smooth_normal(shape, ray, flags, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, instance_normals)
+    instance_smooth_normal(shape, ray, flags, (mine) ? best_sub : SPLAT_INT(-1), instance_vertices, instance_faces, \
+                           instance_normals)
 #endif
 
 #ifdef PYCLRAY_CAST
 /* cast's and occluded's one ray (LANES 1): its nearest hit in the instance; the winner's triangle is
  * found again for its normal (the same search gives the same bits) */
-inline real instance_cast_hit(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
-                              __global const BvhNode* nodes)
+inline real instance_cast_hit(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                              __global const int4* faces, __global const BvhNode* nodes)
 {
     int which;
-    return instance_search(inst, ray, MISS, triangles, nodes, &which);
+    return instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
 }
 
-inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __global const TriangleWorld* triangles,
-                                  __global const BvhNode* nodes)
+inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                                  __global const int4* faces, __global const BvhNode* nodes)
 {
     int which;
-    instance_search(inst, ray, MISS, triangles, nodes, &which);
-    return instance_normal(inst, which, triangles);
+    instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
+    return instance_normal(inst, which, vertices, faces);
 }
-#define PYCLRAY_HIT_instance(shape, ray, limit) instance_cast_hit(shape, ray, instance_triangles, instance_nodes)
+#define PYCLRAY_HIT_instance(shape, ray, limit) \
+    instance_cast_hit(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
-    instance_cast_normal(shape, ray, instance_triangles, instance_nodes)
+    instance_cast_normal(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #else
 /* how kernels/pyclray.cl calls an instance's functions: with the shared arrays, the lanes' best so
  * far, and for the winners the triangle each lane's hit was on (best_sub, kept from hit_sub) */
 #define PYCLRAY_SUBPRIMITIVES 1
 #define PYCLRAY_HIT_instance(shape, ray, limit) \
-    instance_search(shape, ray, limit, instance_triangles, instance_nodes, &hit_sub)
+    instance_search(shape, ray, limit, instance_vertices, instance_faces, instance_nodes, &hit_sub)
 #define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
-    instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles)
+    instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_vertices, instance_faces)
 #define PYCLRAY_PRIMITIVE_instance(shape, k, best, mine) \
-    instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_primitives)
+    instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_faces)
 #define PYCLRAY_BARYCENTRIC_instance(shape, ray, best, mine, u, v) \
-    instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_triangles, u, v)
+    instance_barycentric(shape, ray, (mine) ? best_sub : SPLAT_INT(-1), instance_vertices, instance_faces, u, v)
 
 #endif
 

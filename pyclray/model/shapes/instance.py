@@ -30,8 +30,10 @@ from .mesh import Mesh
 from .mesh_sharing import shared_key
 
 # the shared arrays the kernel takes after the instances' array: (name, OpenCL C element type)
-SHARED = (("triangles", "TriangleWorld"), ("nodes", "BvhNode"), ("primitives", "int"),
-          ("normals", "TriangleWorld"))  # the last: each triangle's unit object-space vertex normals (smooth)
+# (each distinct mesh once: its object-space vertices (float64, w 0), its faces in its tree's leaf order
+# (three vertex indices into the vertices and its index in its mesh, ~index where it has zero area), the
+# tree's nodes, and the vertices' unit object-space normals where an instance is smooth: engine/instances.py)
+SHARED = (("vertices", "double4"), ("faces", "int4"), ("nodes", "BvhNode"), ("normals", "double4"))
 
 
 @dataclass(frozen=True, eq=False)
