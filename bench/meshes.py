@@ -11,9 +11,14 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
 - 100,000 incoherent rays (random origins and directions in the mesh's bounds): pyclray.cast
   (depth, normal, id) against cast_rays;
 - the scene build: pyclray's first render after pyclray.clear_cache() (preparation: packing, the BVH,
-  the per-view pass) and Open3D's add_triangles + first cast (Embree builds lazily);
+  the per-view pass, and the render of 512x512 pixels) and Open3D's add_triangles + first cast of one
+  ray (Embree builds lazily), the median of BUILDS of each, alternating;
 - memory: the bytes the prepared scene holds per triangle (PreparedScene.nbytes: vertices, faces or
-  triangle entries, ids, the BVH; issue 23's target <= 64), in the build's row.
+  triangle entries, ids, the BVH; issue 23's target <= 64), in the build's row; and after the
+  table (memory_rows): what a first cast adds per triangle (cast's buffers, built when a cast first
+  asks: engine/cast.py's cast_inputs, and the tree's leaf-order bounds on the host), and a mesh shared
+  by 100 instances (bench.instances' field: the shared vertices, faces and tree per unique triangle,
+  engine/instances.py's instance_bytes).
 Prints a table of medians (ms) and the ratios. The machine is shared: compare ratios.
 """
 from __future__ import annotations
@@ -32,6 +37,7 @@ from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 from .open3d_compare import blocks
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
+BUILDS = 5  # builds timed of each system, alternating: their median
 
 
 def subdivided(vertices, faces, times: int):
@@ -90,20 +96,25 @@ def run(bunny_path=None, rounds=3, block=5):
     rows = []
     for label, mesh in meshes(bunny_path).items():
         scene = camera_for(mesh, 512)
-        # the build: pyclray's first render from cold (its program cached on disk), Open3D's first cast
+        # the build: pyclray's first render from cold (its program cached on disk), Open3D's first cast;
+        # the median of BUILDS of each, alternating (one build is one sample: the shared machine's noise)
         pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
-        pyclray.clear_cache()
-        start = time.perf_counter()
-        pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
-        ours_build = time.perf_counter() - start
-        held = prepared_scene(context_for(None), scene, "fp32").nbytes() / len(mesh.faces)
         rays = pinhole_rays(scene)
-        start = time.perf_counter()
-        o3d_scene = open3d_scene(mesh)
-        o3d_scene.cast_rays(rays[:1])
-        theirs_build = time.perf_counter() - start
+        ours_build, theirs_build = [], []
+        for _ in range(BUILDS):
+            pyclray.clear_cache()
+            start = time.perf_counter()
+            pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"))
+            ours_build.append(time.perf_counter() - start)
+            time.sleep(0.2)
+            start = time.perf_counter()
+            o3d_scene = open3d_scene(mesh)
+            o3d_scene.cast_rays(rays[:1])
+            theirs_build.append(time.perf_counter() - start)
+            time.sleep(0.2)
+        held = prepared_scene(context_for(None), scene, "fp32").nbytes() / len(mesh.faces)
         rows.append((f"{label} ({len(mesh.faces):,} triangles, {held:.1f} B/triangle): first render / build + first cast",
-                     {"pyclray": {"median": ours_build * 1e3}, "open3d": {"median": theirs_build * 1e3}}))
+                     {"pyclray": {"median": np.median(ours_build) * 1e3}, "open3d": {"median": np.median(theirs_build) * 1e3}}))
         timed = blocks({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
                         "open3d": lambda: o3d_scene.cast_rays(rays)}, rounds, block)
         rows.append((f"{label}: primary rays 512x512", timed))
@@ -120,6 +131,45 @@ def run(bunny_path=None, rounds=3, block=5):
     return rows
 
 
+def cast_bytes(scene) -> int:
+    """The bytes a scene's first cast added: cast's device buffers (engine/cast.py's cache) and the
+    leaf-order bounds the prepared scene's tree gathered for it."""
+    from pyclray.engine import cast
+
+    entry = next(v for v in cast._cast_prepared.values() if v[0] is scene.shapes)
+    held = sum(a.size for a in entry[2] if hasattr(a, "size") and not isinstance(a, np.generic))
+    tree = prepared_scene(context_for(None), scene, "fp32").bvh
+    return held + (tree.__dict__["bounds"].nbytes if "bounds" in tree.__dict__ else 0)
+
+
+def memory_rows(bunny_path=None) -> list[str]:
+    """Bytes per triangle: each mesh's prepared scene and what a first cast adds; a shared mesh's."""
+    from pyclray.engine.instances import instance_bytes
+
+    from .instances import field
+
+    rows = []
+    for label, mesh in meshes(bunny_path).items():
+        scene = camera_for(mesh, 64)
+        pyclray.clear_cache()
+        pyclray.render(scene, aovs=("depth",))
+        held = prepared_scene(context_for(None), scene, "fp32").nbytes()
+        rng = np.random.default_rng(1)
+        lo, hi = mesh.box()
+        pyclray.cast(scene, rng.uniform(lo, hi, (1000, 3)), rng.normal(size=(1000, 3)))
+        n = len(mesh.faces)
+        rows.append(f"{label} ({n:,} triangles): render {held / n:.1f} B/triangle; a first cast adds {cast_bytes(scene) / n:.1f}")
+    scene = field(100, 50_000, 64)
+    pyclray.clear_cache()
+    pyclray.render(scene, aovs=("depth",))
+    cost = instance_bytes(prepared_scene(context_for(None), scene, "fp32"))
+    unique = len(scene.shapes[0].faces)
+    rows.append(f"a mesh of {unique:,} triangles shared by {cost['instances']} instances: {cost['shared_bytes'] / unique:.1f} "
+                f"B per unique triangle, {cost['bytes_per_instance']:.0f} B per instance")
+    pyclray.clear_cache()
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bunny", help="the 75,408-triangle bunny00.off of CGAL's demo data")
@@ -129,6 +179,8 @@ def main(argv=None):
     for name, timed in run(args.bunny, args.rounds, args.block):
         ours, theirs = timed["pyclray"]["median"], timed["open3d"]["median"]
         print(f"{name:70s} pyclray {ours:9.1f} ms  open3d {theirs:9.1f} ms  speed-up {theirs / ours:5.2f}x")
+    for row in memory_rows(args.bunny):
+        print(row)
 
 
 if __name__ == "__main__":
