@@ -201,6 +201,25 @@ def test_the_sah_tree_keeps_within_its_depth(max_depth):
     assert bvh.BVH(*bvh_sah.build(bounds, bvh.LEAF_SIZE, 200)).depth() > 14  # the guard was needed
 
 
+@pytest.mark.parametrize("max_depth", [16, 20])
+def test_sampled_splits_keep_within_the_depth(max_depth):
+    """Nodes of at least 2 bvh_sah.SAMPLE primitives choose their split from a sample of their rows:
+    the depth bound is then checked on the real sides after the partition (the sample's counts
+    only estimate them). The same peeling boxes, 20 times as many: sampled nodes at the top."""
+    from pyclray.engine import bvh_sah
+
+    rng = np.random.default_rng(max_depth)
+    n = 20_000
+    assert n >= 4 * bvh_sah.SAMPLE  # the root and its children are sampled
+    x = np.sort(10 ** rng.uniform(-6, 6, n))
+    size = 10 ** rng.uniform(-6, 0, n) * x
+    bounds = np.stack([np.stack([x, -size, -size], 1), np.stack([x + size, size, size], 1)], 1)
+    tree = bvh.BVH(*bvh_sah.build(bounds, bvh.LEAF_SIZE, max_depth))
+    check_structure(tree, bounds)
+    assert tree.depth() <= max_depth
+    assert bvh.BVH(*bvh_sah.build(bounds, bvh.LEAF_SIZE, 200)).depth() > max_depth  # the guard was needed
+
+
 @pytest.mark.parametrize("method", ["lbvh", "sah"])
 def test_equal_centres_give_a_balanced_tree(method):
     """Shapes with one centre share a Morton code; the keys' low bits (their rank) still split
