@@ -37,6 +37,8 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import numba
 import numpy as np
 
+from .bvh_fast import inner_boxes, leaf_boxes, leaf_cut
+
 BINS = 32
 # The SAH's cost of visiting a node, relative to a primitive's test. 1 (bvh.sah_cost's) makes leaves
 # of 1.4 primitives on average, 1.1 to 1.4 nodes a primitive: twice the LBVH's memory (nodes are 32
@@ -306,58 +308,15 @@ def _squeeze(first, count):
     return nodes
 
 
-@numba.njit(cache=True, nogil=True)
-def _leaf_boxes(bounds, index, first, count, lo, hi, p0, p1, ordered):
-    """The float64 boxes of the leaves over leaf positions p0 .. p1 - 1 (whole leaves: a leaf's
-    first position in range), each the exact union of its primitives' bounds. The bounds of the
-    range are first gathered into leaf order in one sequential pass (its loads overlap: a third of
-    the time of gathering leaf by leaf), into ordered (scratch of p1 - p0 rows)."""
-    for p in range(p0, p1):
-        q = index[p]
-        for side in range(2):
-            for a in range(3):
-                ordered[p - p0, side, a] = bounds[q, side, a]
-    for k in range(first.shape[0]):
-        if count[k] > 0 and p0 <= first[k] < p1:
-            for a in range(3):
-                low, high = np.inf, -np.inf
-                for p in range(first[k], first[k] + count[k]):
-                    low = min(low, ordered[p - p0, 0, a])
-                    high = max(high, ordered[p - p0, 1, a])
-                lo[k, a], hi[k, a] = low, high
-
-
-@numba.njit(cache=True, nogil=True)
-def _inner_boxes(first, count, lo, hi):
-    """The internal nodes' boxes, bottom up (children come after their parent): the union of their
-    two children's."""
-    for k in range(first.shape[0] - 1, -1, -1):
-        if count[k] == 0:
-            c = first[k]
-            for a in range(3):
-                lo[k, a] = min(lo[c, a], lo[c + 1, a])
-                hi[k, a] = max(hi[c, a], hi[c + 1, a])
-
-
-@numba.njit(cache=True, nogil=True)
-def _leaf_cut(first, count, p, n):
-    """The first of the n leaf positions at or after p where a leaf starts (n where none does)."""
-    best = n
-    for k in range(first.shape[0]):
-        if count[k] > 0 and p <= first[k] < best:
-            best = first[k]
-    return best
-
-
 def _boxes(bounds, index, first, count, lo, hi, threads: int) -> None:
     """The nodes' float64 boxes: the leaves' in parts of the leaf positions, a part a thread (each
     leaf wholly in one part), then the internal nodes'."""
     n = index.shape[0]
-    cuts = [0] + [int(_leaf_cut(first, count, n * t // threads, n)) for t in range(1, threads)] + [n]
+    cuts = [0] + [int(leaf_cut(first, count, n * t // threads, n)) for t in range(1, threads)] + [n]
 
     def part(t):
         p0, p1 = cuts[t], cuts[t + 1]
-        _leaf_boxes(bounds, index, first, count, lo, hi, p0, p1, np.empty((max(p1 - p0, 1), 2, 3)))
+        leaf_boxes(bounds, index, first, count, lo, hi, p0, p1, np.empty((max(p1 - p0, 1), 2, 3)))
 
     if threads > 1 and n >= SPLIT_ALONE_MIN:
         with ThreadPoolExecutor(threads) as pool:
@@ -365,7 +324,7 @@ def _boxes(bounds, index, first, count, lo, hi, threads: int) -> None:
     else:
         cuts = [0, n]
         part(0)
-    _inner_boxes(first, count, lo, hi)
+    inner_boxes(first, count, lo, hi)
 
 
 def _threads() -> int:

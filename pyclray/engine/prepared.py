@@ -127,17 +127,18 @@ DEVICE_REBASE_FROM = 1024
 # 17.6-18.3 against 14.9-15.6 ms the same camera, 17.6-20.3 against 17.4-18.8 moved (framing computes at
 # each test the 32 bytes the copy holds per sphere); at 300,000 29.3 against 27.0 and 31.5 against
 # 31.9; at 1,000,000 68.8 against 69.8 and 69.5 against 77.5 (the copy's 32 MB no longer fit the
-# caches better than the world entries do), 63.7 bytes a sphere in all against 91.7. Meshes (kept as
-# shared vertices and faces when framed, engine/indexed.py; 512x512 depth, normal, id, primitive,
-# python -m bench.meshes's): the 80,000-triangle bunny 25.5-27.0 against 24.3-26.0 ms, the
-# 998,000-triangle sphere 93.3-96.4 against 95.1-98.4 ms, 61.2 bytes a triangle against 177.2.
+# caches better than the world entries do), 63.7 bytes a sphere in all against 91.7. Meshes do not
+# depend on it (INDEXED below).
 FRAMED_FROM = 524_288
 
 # Meshes (Shape.indexed) are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
-# world entries and the per-view copy. Measured (python -m bench.meshes, 512x512 primary rays): see
-# docs/benchmarks.md. Tests set it False to compare with the per-view copy (the path of devices
-# without float64, where the winner's normal cannot be computed from float64 vertices).
+# world entries and the per-view copy. Measured (512x512 depth, normal, id, primitive, CPU time,
+# docs/benchmarks.md): the 80,000-triangle bunny 3-8% slower than with the copy, 56.8 bytes a triangle
+# against 172.8; (earlier, framed against copied) the 998,000-triangle sphere 93.3-96.4 against
+# 95.1-98.4 ms, 61.2 bytes a triangle against 177.2. Tests set it False to compare with the per-view
+# copy (the path of devices without float64, where the winner's normal cannot be computed from
+# float64 vertices).
 INDEXED = True
 
 
