@@ -173,9 +173,12 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
         for a in range(3):
             extent = g[a + 9] - g[a + 6]
             scale[a] = nb * (1.0 - 1e-6) / extent if extent > 0 else 0.0
-        bin_n[:, :nb] = 0
-        bin_box[:, :nb, 0:3] = _BIG
-        bin_box[:, :nb, 3:6] = -_BIG
+        for a in range(3):  # (loops: numba's slice assignments cost a small node more than its rows)
+            for k in range(nb):
+                bin_n[a, k] = 0
+                for c in range(3):
+                    bin_box[a, k, c] = _BIG
+                    bin_box[a, k, c + 3] = -_BIG
         for i in range(s, e, step):
             x0, y0, z0, x1, y1, z1 = rows[i, 0], rows[i, 1], rows[i, 2], rows[i, 3], rows[i, 4], rows[i, 5]
             for a in range(3):
