@@ -153,14 +153,14 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
     g = np.empty(_GEOMETRY, np.float32)  # the node's (its stack slot is the first child's)
     left = np.empty(_GEOMETRY, np.float32)
     right = np.empty(_GEOMETRY, np.float32)
-    sides = np.empty((2, 6), np.float32)  # the partition's left and right centroid boxes
     stack[0] = start
     stack_geometry[0] = geometry
     top, found = 1, 0
     while top > 0:
         top -= 1
         s, e, node, level, r = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4]
-        g[:] = stack_geometry[top]
+        for c in range(_GEOMETRY):
+            g[c] = stack_geometry[top, c]
         m = e - s
         if m == 1:
             first[node], count[node] = s, 1
@@ -248,10 +248,8 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
                     rows[i, c], rows[mid, c] = rows[mid, c], rows[i, c]
                 index[i], index[mid] = index[mid], index[i]
                 mid += 1 if is_left else 0
-            sides[0, 0], sides[0, 1], sides[0, 2], sides[0, 3], sides[0, 4], sides[0, 5] = l0, l1, l2, l3, l4, l5
-            sides[1, 0], sides[1, 1], sides[1, 2], sides[1, 3], sides[1, 4], sides[1, 5] = r0, r1, r2, r3, r4, r5
-            left[6:12] = sides[0]
-            right[6:12] = sides[1]
+            left[6], left[7], left[8], left[9], left[10], left[11] = l0, l1, l2, l3, l4, l5
+            right[6], right[7], right[8], right[9], right[10], right[11] = r0, r1, r2, r3, r4, r5
             # each side's box: the union of its bins
             for k in range(nb):
                 side = left if k <= best_k else right
@@ -283,12 +281,14 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
             if ce - cs < task_from:
                 tasks[found, 0], tasks[found, 1], tasks[found, 2] = cs, ce, number
                 tasks[found, 3], tasks[found, 4] = level + 1, descendants
-                task_geometry[found] = right if child == 0 else left
+                for c in range(_GEOMETRY):
+                    task_geometry[found, c] = right[c] if child == 0 else left[c]
                 found += 1
             else:
                 stack[top, 0], stack[top, 1], stack[top, 2] = cs, ce, number
                 stack[top, 3], stack[top, 4] = level + 1, descendants
-                stack_geometry[top] = right if child == 0 else left
+                for c in range(_GEOMETRY):
+                    stack_geometry[top, c] = right[c] if child == 0 else left[c]
                 top += 1
     return found
 
