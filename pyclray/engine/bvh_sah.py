@@ -162,8 +162,10 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
         for c in range(_GEOMETRY):
             g[c] = stack_geometry[top, c]
         m = e - s
-        if m == 1:
-            first[node], count[node] = s, 1
+        if m == 1 or (m <= leaf_size and m <= traversal):
+            # a leaf without binning: a split costs traversal plus its children's tests (> 0), which
+            # is more than m tests here (the same leaf as the cost test below makes)
+            first[node], count[node] = s, m
             continue
         area = _half_area(g[0], g[1], g[2], g[3], g[4], g[5])
         nb = min(bins, m)
