@@ -17,6 +17,16 @@ def aligned(array: np.ndarray) -> np.ndarray:
     return raw[start:start + array.nbytes].view(array.dtype).reshape(array.shape)
 
 
+def aligned_empty(shape, dtype) -> np.ndarray:
+    """An uninitialized array aligned to ALIGNMENT bytes (numpy's large arrays start 16 bytes past a
+    page: aligned() would copy each, 5 ms a 16 MB array)."""
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(nbytes + ALIGNMENT, np.uint8)
+    start = -raw.ctypes.data % ALIGNMENT
+    return raw[start:start + nbytes].view(dtype).reshape(shape)
+
+
 def device_buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
     """A device buffer of this array: the array's own memory on a CPU device (no copy: the array
     must be aligned, see aligned(), and live as long as the buffer), a copy elsewhere."""

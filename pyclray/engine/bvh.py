@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.layout import Struct, layout
+from .buffers import aligned_empty
 
 LEAF_SIZE = 4  # shapes per leaf at most: the kernel tests a leaf's shapes one after the other
 # How much a shape's box is widened, relative to its size, and the ray's cone in the kernel,
@@ -357,7 +358,7 @@ def outward32(lo: np.ndarray, hi: np.ndarray):
 def pack_nodes(tree: BVH, origin) -> np.ndarray:
     """The binary nodes as the kernel reads them (NODE), boxes relative to origin (float64, taken
     before rounding outward): render's packets traverse them around the eye."""
-    out = np.zeros(tree.nodes, dtype=layout(NODE, "fp32").dtype)
+    out = aligned_empty(tree.nodes, layout(NODE, "fp32").dtype)  # every word written below; no copy to align it
     assert out.itemsize == 32  # two float4 (pack_binary writes its words)
     origin = np.asarray(origin, np.float64)
     if tree.nodes >= SAH_FROM:  # one compiled pass (bvh_fast: the same bits), numba being imported by then

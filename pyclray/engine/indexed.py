@@ -16,7 +16,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..model.shapes.base import in_frame
-from .buffers import aligned, device_buffer as _buffer
+from .buffers import aligned, aligned_empty, device_buffer as _buffer
 
 # entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
 # bvh.SAH_FROM); below, numpy's gathers (no numba import in a small scene's cold start)
@@ -46,9 +46,15 @@ class IndexedEntries:
     def __init__(self, prepared, cls, shapes, vertices, faces, order, ids):
         real = np.float64 if prepared.precision == "fp64" else np.float32
         self.world_vertices = aligned(np.ascontiguousarray(vertices, np.float64))
-        self.faces = aligned(np.ascontiguousarray(faces if order is None else faces[order], np.int32))
+        # the faces in leaf order, gathered straight into aligned memory (no copy after)
+        self.faces = aligned_empty(faces.shape, np.int32)
+        if order is None:
+            self.faces[:] = faces
+        else:
+            np.take(np.ascontiguousarray(faces, np.int32), order, axis=0, out=self.faces)
         self.ids = aligned(np.ascontiguousarray(ids, np.int32))
-        self.vertices_host = aligned(np.zeros((len(vertices), 4), real))
+        self.vertices_host = aligned_empty((len(vertices), 4), real)
+        self.vertices_host[:] = 0
         ctx = prepared.ctx
         self.world_buffer = _buffer(ctx, self.world_vertices)
         self.faces_buffer = _buffer(ctx, self.faces)
