@@ -134,7 +134,7 @@ FRAMED_FROM = 524_288
 # Meshes (Shape.indexed) are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
 # world entries and the per-view copy. Measured (512x512 depth, normal, id, primitive, CPU time,
-# docs/benchmarks.md): the 80,000-triangle bunny 3-8% slower than with the copy, 56.8 bytes a triangle
+# docs/benchmarks.md): the 80,000-triangle bunny 3-10% slower than with the copy, 56.8 bytes a triangle
 # against 172.8; (earlier, framed against copied) the 998,000-triangle sphere 93.3-96.4 against
 # 95.1-98.4 ms, 61.2 bytes a triangle against 177.2. Tests set it False to compare with the per-view
 # copy (the path of devices without float64, where the winner's normal cannot be computed from
