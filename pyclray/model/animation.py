@@ -14,6 +14,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import math
+import threading
 from dataclasses import dataclass, field
 from numbers import Real
 
@@ -307,6 +308,35 @@ def derived_from(shapes: tuple, base: tuple) -> tuple:
     return shapes
 
 
+# A frame's copy of each animated collection of a scene (shapes, lights), kept from frame to frame
+# with the items the last frame replaced: a frame puts those back and replaces its own, then makes
+# its tuple in one pass (the collection's pointers copied once, O(K) Python work for K changes)
+# where copying the collection to a list, changing it and making a tuple of that walked it three
+# times (1.3 of a frame's 11 ms at 100,000 spheres). Kept for the last few animated scenes.
+_WORKING_MAX = 4
+_working: dict = {}
+_working_lock = threading.Lock()
+
+
+def _frame_tuple(scene, collection: str, replaced: dict[int, object]) -> tuple:
+    """The scene's collection with the items at replaced's indices replaced."""
+    base = getattr(scene, collection)
+    with _working_lock:
+        entry = _working.get((id(scene), collection))
+        if entry is None or entry[0] is not scene:
+            entry = _working[(id(scene), collection)] = (scene, list(base), set())  # holds the scene: see _places
+            while len(_working) > _WORKING_MAX:
+                del _working[next(iter(_working))]
+        _, items, last = entry
+        for index in last - replaced.keys():  # the last frame's, back to the animated scene's
+            items[index] = base[index]
+        for index, item in replaced.items():
+            items[index] = item
+        last.clear()
+        last.update(replaced)
+        return tuple(items)
+
+
 def scene_at(scene, t: float, *, frame: int | None = None):
     """The static scene at time t: every animated key takes its track's value at t; the result has
     no animation. Raises SceneError naming the target, the key and the time if that scene is invalid."""
@@ -319,26 +349,25 @@ def scene_at(scene, t: float, *, frame: int | None = None):
     when = f"at t = {t:g} s" + ("" if frame is None else f" (frame {frame})")
     places = _places(scene)
     changes: dict[tuple, dict] = {}
+    targets: dict[tuple, str] = {}  # place -> its target's name, for messages
     for track in animation.tracks:
-        changes.setdefault(places[track.target][0], {})[track.key] = track.value_at(t, animation.interpolation)
+        place = places[track.target][0]
+        changes.setdefault(place, {})[track.key] = track.value_at(t, animation.interpolation)
+        targets[place] = track.target
     replaced: dict[str, object] = {}
-    items: dict[str, list] = {}  # each collection copied once, however many of its items change
+    items: dict[str, dict] = {}  # per collection: index -> its new item
     for place, values in changes.items():
         collection, index = place
-        target = next(track.target for track in animation.tracks if places[track.target][0] == place)
         try:
             if index is None:
                 replaced[collection] = dataclasses.replace(getattr(scene, collection), **values)
             else:
-                if collection not in items:  # (not setdefault: its default would be built every time)
-                    items[collection] = list(getattr(scene, collection))
-                mine = items[collection]
-                mine[index] = dataclasses.replace(mine[index], **values)
+                items.setdefault(collection, {})[index] = dataclasses.replace(getattr(scene, collection)[index], **values)
         except SceneError as error:
-            raise _frame_error(scene, error, target, values, when) from None
-    replaced.update({collection: tuple(mine) for collection, mine in items.items()})
+            raise _frame_error(scene, error, targets[place], values, when) from None
+    replaced.update({collection: _frame_tuple(scene, collection, mine) for collection, mine in items.items()})
     if "shapes" in replaced:  # before the Scene checks it: only the changed shapes need a look
-        _remember(replaced["shapes"], scene.shapes, tuple(sorted(index for collection, index in changes if collection == "shapes")))
+        _remember(replaced["shapes"], scene.shapes, tuple(sorted(items["shapes"])))
     try:
         return dataclasses.replace(scene, animation=None, **replaced)
     except SceneError as error:  # a scene-wide check (e.g. the fov against the image size)
