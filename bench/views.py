@@ -2,6 +2,7 @@
 
     python -m bench.views               # everything (a few minutes; Open3D part only if installed)
     python -m bench.views --quick       # 100,000 spheres only
+    python -m bench.views --animation   # the animation only
 
 Each figure is a ratio of two systems measured in this process, in blocks (bench/blocks.py's rule:
 each system runs a block of calls on its own, with a pause at each switch, rounds in rotating order,
@@ -170,8 +171,12 @@ def animation(count: int = 100_000, moving: int = 10) -> dict:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="100,000 spheres only")
+    parser.add_argument("--animation", action="store_true", help="the animation only")
     args = parser.parse_args(argv)
     print(f"pyclray views, {SIZE}x{SIZE} {','.join(AOVS)}, on {context_for(None).device.name.strip()}")
+    if args.animation:
+        animation()
+        return
     views(batch_scene(100_000), "100,000 spheres (one Spheres batch)")
     views(scale.scene(100_000, size=SIZE), "100,000 spheres (Sphere objects)")
     if not args.quick:
