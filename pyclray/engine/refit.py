@@ -139,8 +139,9 @@ def scatter(prepared, buffer, index, rows) -> None:
 
 class RefitState:
     """What refitting a prepared scene's BVH needs, computed at its first update: each node's parent,
-    each leaf position's leaf, the entries' widened boxes in leaf order, the built tree's SAH cost,
-    and per type its entries sorted by shape id and their leaf positions."""
+    depth, children and box (as one row), each leaf position's leaf, the entries' widened boxes in
+    leaf order, the built tree's SAH cost, and per type its entries sorted by shape id and their
+    leaf positions."""
 
     def __init__(self, prepared):
         tree, bvh = prepared.bvh.tree, prepared.bvh
@@ -161,24 +162,28 @@ class RefitState:
             self.depth[children] = self.depth[level[0]] + 1
             level = children[tree.count[children] == 0]
         self.widened = widened(bvh.bounds) if len(bvh.bounds) else np.zeros((0, 2, 3))
+        # each node's box as one row (lo, -hi): the union of boxes is then one elementwise minimum
+        # (half the numpy calls per level of a refit); the tree's lo and hi are kept equal to it
+        self.box = np.concatenate([tree.lo, -tree.hi], axis=1)
+        self.children = np.stack([tree.first, tree.first + 1])  # an internal node's two children
         self.built_cost = sah_cost(tree) if tree.nodes else 0.0
         # the SAH cost's sum (sah_cost before the division by the root's area), kept up to date as
         # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
         self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)
-        self.cost_sum = float((self._areas(tree.lo, tree.hi) * self.weight).sum())
+        self.cost_sum = float((self._areas(self.box) * self.weight).sum())
         self.by_id, self.leaf_positions_of, self.found = {}, {}, {}
         for k, t in enumerate(bvh.types):
             self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
 
     @staticmethod
-    def _areas(lo, hi) -> np.ndarray:
-        extent = np.maximum(hi - lo, 0.0)
+    def _areas(box) -> np.ndarray:
+        """Half the surface area of boxes given as rows (lo, -hi)."""
+        extent = np.maximum(-box[:, 3:] - box[:, :3], 0.0)
         return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
 
     def cost(self) -> float:
         """The tree's SAH cost as sah_cost computes it (relative to the root's area)."""
-        tree = self.prepared.bvh.tree
-        root = self._areas(tree.lo[:1], tree.hi[:1])[0]
+        root = self._areas(self.box[:1])[0]
         return self.cost_sum / (root if root > 0 else 1.0)
 
     def positions(self, kind, shape_index: int) -> np.ndarray:
@@ -214,28 +219,28 @@ class RefitState:
         every = np.fromiter(every, np.int64, len(every))
         internal = every[tree.count[every] == 0]
         internal = internal[np.argsort(-self.depth[internal], kind="stable")]  # deepest first
-        levels = np.flatnonzero(np.diff(self.depth[internal])) + 1  # where each shallower level starts
+        levels = [0, *(np.flatnonzero(np.diff(self.depth[internal])) + 1).tolist(), len(internal)]  # each level's start
         entries = (bvh.bounds[positions], self.widened[positions])  # copies (fancy indexing)
-        old_lo, old_hi = tree.lo[every], tree.hi[every]
+        old = self.box[every]
         bvh.bounds[positions] = bounds
         self.widened[positions] = widened(bounds)
         # the leaves' boxes: the union of their entries' widened boxes
         first, count = tree.first[leaves], tree.count[leaves]
         starts = np.cumsum(count) - count
         boxes = self.widened[np.repeat(first - starts, count) + np.arange(int(count.sum()))]
-        tree.lo[leaves], tree.hi[leaves] = np.minimum.reduceat(boxes[:, 0], starts), np.maximum.reduceat(boxes[:, 1], starts)
+        self.box[leaves] = np.minimum.reduceat(np.concatenate([boxes[:, 0], -boxes[:, 1]], axis=1), starts)
         # the internal nodes', a level at a time: the union of their two children's
-        for nodes in np.split(internal, levels):
-            left = tree.first[nodes]
-            tree.lo[nodes] = np.minimum(tree.lo[left], tree.lo[left + 1])
-            tree.hi[nodes] = np.maximum(tree.hi[left], tree.hi[left + 1])
-        new_lo, new_hi = tree.lo[every], tree.hi[every]
-        delta = float((self._areas(new_lo, new_hi) - self._areas(old_lo, old_hi)) @ self.weight[every])
+        for start, end in zip(levels, levels[1:]):
+            nodes = internal[start:end]
+            self.box[nodes] = self.box[self.children[:, nodes]].min(axis=0)
+        new = self.box[every]
+        delta = float((self._areas(new) - self._areas(old)) @ self.weight[every])
         self.cost_sum += delta
         if self.cost() > self.prepared.REFIT_COST_MAX * self.built_cost:
-            tree.lo[every], tree.hi[every] = old_lo, old_hi
+            self.box[every] = old
             bvh.bounds[positions], self.widened[positions] = entries
             self.cost_sum -= delta
             return None
-        changed = (new_lo != old_lo).any(axis=1) | (new_hi != old_hi).any(axis=1)
+        tree.lo[every], tree.hi[every] = new[:, :3], -new[:, 3:]
+        changed = (new != old).any(axis=1)
         return np.sort(every[changed])
