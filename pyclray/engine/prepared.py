@@ -129,6 +129,9 @@ DEVICE_REBASE_FROM = 1024
 FRAMED_FROM = 524_288
 
 
+_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], bool)  # a box's 8: hi where 1
+
+
 class PreparedScene:
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
@@ -273,7 +276,7 @@ class PreparedScene:
         if not self.bvh.types:
             return None
         lo, hi = self.bvh.tree.lo[0], self.bvh.tree.hi[0]
-        corners = np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        corners = np.where(_CORNERS, hi, lo)  # (one call: an animation's frame recomputes it when the root moves)
         with np.errstate(over="ignore", invalid="ignore"):  # inf: the shape by shape check decides
             return corners, float(np.linalg.norm(hi - lo))
 

@@ -60,7 +60,9 @@ def update(prepared, shapes: tuple, changed) -> bool:
             bounds_rows.append(kind.cls.bounds_of(packed[name][1]))
     refitted = None
     if positions:
-        refitted = state.refit(np.concatenate(positions), np.concatenate(bounds_rows))
+        one = len(positions) == 1  # (one bounded type changed: no copies)
+        refitted = state.refit(positions[0] if one else np.concatenate(positions),
+                               bounds_rows[0] if one else np.concatenate(bounds_rows))
         if refitted is None:
             return False
     shared = shares_host_memory(prepared.ctx)
@@ -171,7 +173,7 @@ class RefitState:
         # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
         self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)
         self.cost_sum = float((self._areas(self.box) * self.weight).sum())
-        self.by_id, self.leaf_positions_of, self.found = {}, {}, {}
+        self.by_id, self.leaf_positions_of, self.found, self.plans = {}, {}, {}, {}
         for k, t in enumerate(bvh.types):
             self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
 
@@ -202,15 +204,20 @@ class RefitState:
     def leaf_positions(self, kind, positions: np.ndarray) -> np.ndarray:
         return self.leaf_positions_of[kind.name][positions]
 
-    def refit(self, positions: np.ndarray, bounds: np.ndarray):
-        """New unwidened bounds of the entries at these leaf positions: the boxes of their leaves and
-        of every ancestor recomputed, deepest first (each after its children). Returns the nodes whose
-        boxes changed (sorted), or None (nothing changed) where the refitted tree's SAH cost exceeds
-        REFIT_COST_MAX times the built one's."""
-        tree, bvh = self.prepared.bvh.tree, self.prepared.bvh
+    PLANS_MAX = 16
+
+    def plan(self, positions: np.ndarray):
+        """What a refit above the entries at these leaf positions visits, kept per set of positions
+        (an animation moves the same shapes frame after frame): their leaves, the gather of the
+        leaves' entries and where each leaf's start, and the internal ancestors a level at a time,
+        deepest first, each level's nodes with their children. Every node the refit writes: every."""
+        key = positions.tobytes()
+        plan = self.plans.get(key)
+        if plan is not None:
+            return plan
+        tree = self.prepared.bvh.tree
         leaves = np.unique(self.leaf_of[positions])
-        # every node whose box may change: the leaves and their ancestors, walked up in Python (K
-        # paths of log N nodes that soon meet: fewer steps than a numpy pass per level costs calls)
+        # the leaves and their ancestors, walked up in Python (K paths of log N nodes that soon meet)
         every, parent = set(), self.parent
         for node in leaves.tolist():
             while node >= 0 and node not in every:
@@ -219,20 +226,33 @@ class RefitState:
         every = np.fromiter(every, np.int64, len(every))
         internal = every[tree.count[every] == 0]
         internal = internal[np.argsort(-self.depth[internal], kind="stable")]  # deepest first
-        levels = [0, *(np.flatnonzero(np.diff(self.depth[internal])) + 1).tolist(), len(internal)]  # each level's start
+        cuts = [0, *(np.flatnonzero(np.diff(self.depth[internal])) + 1).tolist(), len(internal)]
+        levels = [(internal[a:b], self.children[:, internal[a:b]]) for a, b in zip(cuts, cuts[1:])]
+        first, count = tree.first[leaves], tree.count[leaves]
+        starts = np.cumsum(count) - count
+        gather = np.repeat(first - starts, count) + np.arange(int(count.sum()))
+        plan = self.plans[key] = (leaves, gather, starts, levels, every)
+        while len(self.plans) > self.PLANS_MAX:
+            del self.plans[next(iter(self.plans))]
+        return plan
+
+    def refit(self, positions: np.ndarray, bounds: np.ndarray):
+        """New unwidened bounds of the entries at these leaf positions: the boxes of their leaves and
+        of every ancestor recomputed, deepest first (each after its children). Returns the nodes whose
+        boxes changed (sorted), or None (nothing changed) where the refitted tree's SAH cost exceeds
+        REFIT_COST_MAX times the built one's."""
+        tree, bvh = self.prepared.bvh.tree, self.prepared.bvh
+        leaves, gather, starts, levels, every = self.plan(positions)
         entries = (bvh.bounds[positions], self.widened[positions])  # copies (fancy indexing)
         old = self.box[every]
         bvh.bounds[positions] = bounds
         self.widened[positions] = widened(bounds)
         # the leaves' boxes: the union of their entries' widened boxes
-        first, count = tree.first[leaves], tree.count[leaves]
-        starts = np.cumsum(count) - count
-        boxes = self.widened[np.repeat(first - starts, count) + np.arange(int(count.sum()))]
+        boxes = self.widened[gather]
         self.box[leaves] = np.minimum.reduceat(np.concatenate([boxes[:, 0], -boxes[:, 1]], axis=1), starts)
         # the internal nodes', a level at a time: the union of their two children's
-        for start, end in zip(levels, levels[1:]):
-            nodes = internal[start:end]
-            self.box[nodes] = self.box[self.children[:, nodes]].min(axis=0)
+        for nodes, children in levels:
+            self.box[nodes] = self.box[children].min(axis=0)
         new = self.box[every]
         delta = float((self._areas(new) - self._areas(old)) @ self.weight[every])
         self.cost_sum += delta
