@@ -149,3 +149,20 @@ def test_frame_shapes_are_the_frames_tuple_as_a_sequence():
     # a tuple made after a lazy frame, and a lazy frame after a tuple, are each their own time's
     assert scene.at(0.25).shapes == tuple(animation.scene_at(scene, 0.25, lazy=True).shapes)
     assert scene.at(t).shapes == eager.shapes
+
+
+
+@pytest.mark.parametrize("orbit", [False, True])
+def test_frames_seen_by_a_still_camera_reuse_the_views_inputs(monkeypatch, orbit):
+    """A frame whose camera, image, lights and shading are the animated scene's objects reuses the
+    last frame's view inputs through the BVH (its camera struct and lights are made from those
+    alone; its images are the fresh frame's: the tests above); a moving camera makes its own."""
+    from pyclray.engine import views
+
+    made, original = [], views.ViewInputs
+    monkeypatch.setattr(views, "ViewInputs", lambda *args: made.append(args[-1]) or original(*args))
+    scene = far_field(0.0, orbit=orbit)
+    prepared.clear()
+    for _ in pyclray.render_animation(scene, aovs=("depth",)):
+        pass
+    assert made == ["bvh"] * (scene.animation.frame_count() if orbit else 1)
