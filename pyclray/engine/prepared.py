@@ -226,7 +226,7 @@ class PreparedScene:
     # rays visit more of them. A frame rebuilds the scene where the refitted tree's SAH cost exceeds
     # the built tree's by this factor. Measured (python -m bench.views, "animation"): 43 frames of 10
     # of 100,000 spheres moving across the field leave the cost at 0.98 of the built tree's; a
-    # rebuild of that scene takes 0.2 to 0.5 s, a frame's update about 0.4 ms (load 3).
+    # rebuild of that scene takes 0.2 to 0.5 s, a frame's update about 0.3 ms (load 3).
     REFIT_COST_MAX = 1.5
 
     def update(self, shapes: tuple, changed) -> bool:

@@ -21,7 +21,7 @@ from .request import input_buffer
 # factor: a refit keeps the tree's topology, so shapes that wander far apart make its boxes
 # overlap and rays visit more of them. Measured (bench/views.py, "animation"): 10 of 100,000
 # spheres moving across the whole field leave the cost at 0.98 of the built tree's; a frame's
-# update (refit included) costs about 0.4 ms where a rebuild of that scene costs 0.2 to 0.5 s.
+# update (refit included) costs about 0.3 ms where a rebuild of that scene costs 0.2 to 0.5 s.
 # (the factor is PreparedScene.REFIT_COST_MAX)
 
 
