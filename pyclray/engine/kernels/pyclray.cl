@@ -684,15 +684,15 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #else
 
 #if LANES != 1
-#error "cast traces one ray per work-item (LANES 1)"
+#error "cast traces one ray at a time (LANES 1)"
 #endif
 
-/* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
- * the largest distance that counts (float64, limits[r * limit_stride]). Where ordered is 1 the
- * host has found a coherent order of the rays (neighbouring work-items then walk the same nodes):
- * work-item i traces ray r = order[i], the i-th of that order, read and written at its own place
- * r (the rays stay where the caller put them: gathering them on the host cost more than the
- * kernel's scattered reads); else ray i.
+/* One ray at a time (CAST_GROUP of them per work-item, below), in world coordinates: origin
+ * (float64), unit direction (float64), and the largest distance that counts (float64,
+ * limits[r * limit_stride]). Where ordered is 1 the host has found a coherent order of the rays
+ * (neighbouring rays then walk the same nodes): place i of the batch traces ray r = order[i], the
+ * i-th of that order, read and written at its own place r (the rays stay where the caller put
+ * them: gathering them on the host cost more than the kernel's scattered reads); else ray i.
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
  * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
