@@ -773,9 +773,9 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 
 /* Each work-item traces CAST_GROUP rays (consecutive places of the order), one after the other. Their
  * setups come first, together: a ray's unit direction and the length of its rounding are a chain of
- * dependent divisions and square roots (about 100 cycles), which for one ray at a time the CPU
- * waits out before the traversal can start (a quarter of occluded's time on view rays, most of
- * which end at their first test); the setups of a group are independent, so their chains overlap.
+ * dependent divisions and square roots, on which, one ray at a time, about a quarter of the perf
+ * samples of occluded on bench/secondary.py's view rays sat (most of those rays end at their first
+ * test, the ground); a group's four-ray vectors take one instruction per division or root (below).
  * The group's first rows are asked for from memory as it starts, and the next group's rows too
  * (origin, direction and limit: each may straddle two cache lines): the rays are read where the
  * caller put them, scattered in the coherent order, and PoCL runs a work-group's items one after
@@ -839,8 +839,7 @@ typedef struct {
 #endif
 
 /* Four rays' directions (their x, y and z components in the lanes of x, y, z), set up at once in
- * vector registers: their divisions and square roots are one vector instruction each, where one
- * ray after the other kept the CPU's divider busy for a quarter of occluded's time on view rays.
+ * vector registers: their divisions and square roots are one vector instruction each (see CAST_GROUP).
  * Per lane D = d / |d| in float64, d scaled first by the power of two 2^-e of its largest
  * component m (m in [2^e, 2^(e+1)); at least 2^-1022, a normal number, for m beyond 2^1023;
  * 2^1023 for a subnormal m, whose exponent bits are 0): exact, and a multiplication where a
