@@ -107,3 +107,20 @@ def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
     held = prepared.prepared_scene(context_for(None), scene, "fp32")
     assert held.kinds["mesh"].indexed is not None and not held.framed  # indexed without being framed
     assert held.nbytes() / len(mesh.faces) <= 64
+
+
+@pytest.mark.parametrize("shared", [True, False])
+@pytest.mark.parametrize("count", [20, 2000])  # the per-view pass on the host; on the device
+def test_a_moved_indexed_mesh_is_refitted_in_place(monkeypatch, shared, count):
+    """An animation that moves a mesh rewrites its shared vertices in place (the world's, and the
+    held view's: the host's in_frame, the device pass's bits) and refits the tree above its faces,
+    on a device whose buffers are the host's arrays and (shared False) on one they are copied to:
+    each frame is its scene prepared from nothing, bit for bit."""
+    need_fp64()
+    from pyclray.engine import refit
+
+    from test_animation_frames import far_field, frames_equal_fresh
+
+    monkeypatch.setattr(refit, "shares_host_memory", lambda ctx: shared)
+    kept = frames_equal_fresh(far_field(1e5, count=count, mesh=True), aovs=("depth", "normal", "id", "primitive"))
+    assert kept.kinds["mesh"].indexed is not None and kept.on_device == (count > 1000)  # what this covers

@@ -43,8 +43,11 @@ class IndexedEntries:
     """One type's shared vertices (world, float64 (V, 4); in the frame of the last view, real (V, 4))
     and its faces in the BVH's leaf order ((F, 4) int32), on the host and the device."""
 
-    def __init__(self, prepared, cls, shapes, vertices, faces, order, ids):
+    def __init__(self, prepared, cls, shapes, vertices, faces, shape_ids, order, ids):
         real = np.float64 if prepared.precision == "fp64" else np.float32
+        # each shape's vertices (by its index in the scene): where they start, how many (an animation's moves)
+        counts = [len(shape.vertices) for shape in shapes]
+        self.vertex_range = dict(zip(shape_ids, zip(np.cumsum([0] + counts[:-1]).tolist(), counts)))
         self.world_vertices = aligned(np.ascontiguousarray(vertices, np.float64))
         # the faces in leaf order, gathered straight into aligned memory (no copy after)
         self.faces = aligned_empty(faces.shape, np.int32)
@@ -93,3 +96,33 @@ class IndexedEntries:
             return
         self.vertices_host[:, :3] = in_frame(self.world_vertices[:, :3] - eye, rows)
         cl.enqueue_copy(prepared.ctx.queue, self.vertices, self.vertices_host)
+
+    # -- an animation's frame (pyclray.engine.refit) ---------------------------------------------
+    def holds(self, index: int, shape) -> bool:
+        """Whether the shape at this scene index can take this one's vertices in place (as many)."""
+        return self.vertex_range[index][1] == len(shape.vertices)
+
+    def moved_bounds(self, index: int, shape, positions) -> tuple[np.ndarray, np.ndarray]:
+        """(its new world vertices (count, 4), the bounds of its faces at these positions of the
+        leaf order): a moved shape's, nothing written yet."""
+        start, count = self.vertex_range[index]
+        world = np.zeros((count, 4))
+        world[:, :3] = shape.world_vertices()
+        local = self.faces[positions].copy()
+        local[:, :3] -= start
+        return world, indexed_bounds(world, local)
+
+    def move(self, prepared, index: int, world: np.ndarray, shared: bool) -> None:
+        """Write a moved shape's world vertices, on the host and the device, and, where the prepared
+        scene holds a view, its vertices in that view's frame (in_frame: the device pass's bits)."""
+        start, count = self.vertex_range[index]
+        self.world_vertices[start:start + count] = world
+        queue = prepared.ctx.queue
+        if not shared:
+            cl.enqueue_copy(queue, self.world_buffer, self.world_vertices[start:start + count], dst_offset=start * 32)
+        if prepared.view is not None:
+            eye, rows = prepared.view
+            self.vertices_host[start:start + count, :3] = in_frame(world[:, :3] - eye, rows)
+            if not shared:
+                cl.enqueue_copy(queue, self.vertices, self.vertices_host[start:start + count],
+                                dst_offset=start * self.vertices_host.itemsize * 4)

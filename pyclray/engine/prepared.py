@@ -177,7 +177,7 @@ class PreparedScene:
             entry_ids, primitives = cls.entries_of(mine, ids)
             if self.indexed and cls.indexed:
                 vertices, faces = cls.pack_indexed(mine)
-                worlds[t] = ((vertices, faces), entry_ids, primitives, None)
+                worlds[t] = ((vertices, faces, tuple(ids)), entry_ids, primitives, None)
                 with np.errstate(over="ignore", invalid="ignore"):
                     bounds[t] = indexed_bounds(vertices, faces)
                 counts[t] = len(faces)

@@ -35,24 +35,34 @@ def update(prepared, shapes: tuple, changed) -> bool:
     if indices and indices[-1] >= min(len(shapes), len(prepared.shapes)):
         return False
     new, old = [shapes[i] for i in indices], [prepared.shapes[i] for i in indices]
-    for shape, before in zip(new, old):
+    for i, shape, before in zip(indices, new, old):
         kind = prepared.kinds.get(shape.type)
         if kind is None or shape.type != before.type or shape.primitive_count() != before.primitive_count() \
-                or kind.smooth is not None or kind.indexed is not None:  # its world shading normals, its vertices: packed anew
+                or kind.smooth is not None:  # its world shading normals: packed anew
+            return False
+        if kind.indexed is not None and not kind.indexed.holds(i, shape):  # shared vertices: as many, in place
             return False
     if prepared._refit is None:
         prepared._refit = RefitState(prepared)
     state = prepared._refit
     # per type: the changed shapes and their entries' positions in its array, packed in one call
     # (pack_world gives each shape's entries in primitive order, as state.positions lists them)
-    by_kind: dict[str, tuple[list, list]] = {}
+    by_kind: dict[str, tuple[list, list, list]] = {}
     for i, shape in zip(indices, new):
-        mine = by_kind.setdefault(shape.type, ([], []))
+        mine = by_kind.setdefault(shape.type, ([], [], []))
         mine[0].append(shape)
         mine[1].append(state.positions(prepared.kinds[shape.type], i))
-    packed, positions, bounds_rows = {}, [], []
-    for name, (mine, where) in by_kind.items():
+        mine[2].append(i)
+    packed, positions, bounds_rows, moved = {}, [], [], []
+    for name, (mine, where, at) in by_kind.items():
         kind = prepared.kinds[name]
+        if kind.indexed is not None:  # shared vertices (engine/indexed.py): each shape's rewritten, its faces' bounds
+            for i, shape, mine_where in zip(at, mine, where):
+                world, bounds = kind.indexed.moved_bounds(i, shape, mine_where)
+                moved.append((kind, i, world))
+                positions.append(state.leaf_positions(kind, mine_where))
+                bounds_rows.append(bounds)
+            continue
         where = np.concatenate(where)
         packed[name] = (where, kind.cls.pack_world(mine))
         if kind.cls.bounded:
@@ -66,6 +76,8 @@ def update(prepared, shapes: tuple, changed) -> bool:
         if refitted is None:
             return False
     shared = shares_host_memory(prepared.ctx)
+    for kind, i, world in moved:  # (brought to the view the frame buffers hold, if any)
+        kind.indexed.move(prepared, i, world, shared)
     # the world entries; on another device, written to it before the next whole pass or render that
     # reads them (flush_world): while the camera stays, a frame writes only the frame buffers
     for name, (where, rows) in packed.items():
