@@ -100,6 +100,26 @@ def test_render_views_takes_scenes_of_other_sizes_and_rejects_other_things():
         pyclray.render(scene, camera="front")
 
 
+def test_render_views_yields_the_frames_before_a_bad_view_then_raises_and_can_stop_early():
+    """render_views enqueues the next view before it returns a frame (engine/render.py): a bad view
+    (here not a camera) must still come after the frames before it, as a loop of render() would
+    give them, and an iterator left after its first frame (a view still in flight) must leave the
+    scene in a state where the next render is the fresh one, bit for bit."""
+    scene = pyclray.load_scene("scenes/tp02.toml").with_size(32, 24)
+    cameras = [pyclray.Camera((3.0, 2.0, 4.0 + k), (0.0, 0.5, 0.0), fov=50.0) for k in range(3)]
+    frames = pyclray.render_views(scene, [cameras[0], cameras[1], "front", cameras[2]], aovs=("depth", "id"))
+    first, second = next(frames), next(frames)
+    same(first, fresh(dataclasses.replace(scene, camera=cameras[0]), aovs=("depth", "id")))
+    same(second, fresh(dataclasses.replace(scene, camera=cameras[1]), aovs=("depth", "id")))
+    with pytest.raises(pyclray.RequestError, match="camera: expected a pyclray.Camera"):
+        next(frames)
+    left = pyclray.render_views(scene, cameras, aovs=("depth", "id"))
+    same(next(left), pyclray.render(scene, aovs=("depth", "id"), camera=cameras[0]))
+    left.close()  # the second view was in flight
+    same(pyclray.render(scene, aovs=("depth", "id"), camera=cameras[2]),
+         fresh(dataclasses.replace(scene, camera=cameras[2]), aovs=("depth", "id")))
+
+
 def test_a_moved_camera_uploads_no_shapes(monkeypatch):
     """After the first view, other cameras neither pack nor upload the shapes: the prepared scene is
     the same object and no shape is packed on the host (Shape.pack_world is never called again)."""

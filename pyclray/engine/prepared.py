@@ -297,14 +297,17 @@ class PreparedScene:
     def rebase(self, eye, rows) -> None:
         """Bring the frame buffers to this camera (eye: float64 (3,); rows: its axes u, v, w in
         world coordinates). Call with self.lock held, and keep it until the kernels that read the
-        buffers have run."""
+        buffers are enqueued (the device's in-order queue runs them before a later view's pass).
+        Returns the uploads of host arrays it enqueued (pyopencl events that hold the arrays): keep
+        them until those kernels have run."""
         eye = np.asarray(eye, np.float64)
         rows = np.asarray(rows, np.float64)
         key = (eye.tobytes(), rows.tobytes())
         refit.flush_world(self)  # the world entries animation frames changed (framed types read them)
         if key == self.view_key:
-            return
+            return []
         queue = self.ctx.queue
+        uploads = []
         if self.on_device:
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
@@ -320,8 +323,9 @@ class PreparedScene:
                                                np.int32(kind.count), *frame)
             else:  # on the host: a few entries (a ground plane) cost less than a launch
                 packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
-                cl.enqueue_copy(queue, kind.frame, packed)
+                uploads.append(cl.enqueue_copy(queue, kind.frame, packed, is_blocking=False))
         self.view_key, self.view = key, (eye, rows)
+        return uploads
 
     GROUP = 256
 
