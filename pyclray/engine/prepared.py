@@ -364,6 +364,9 @@ def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
                           if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision]
         for old_key, candidate in candidates:
             with candidate.lock:
+                # an update writes the host arrays a CPU device reads: no kernel of a view still in
+                # flight (render_views enqueues the next view before returning a frame) may read them
+                candidate.ctx.queue.finish()
                 updated = candidate.shapes is not shapes and candidate.update(shapes, changed)
             with render_lock:
                 _prepared.pop(old_key, None)
