@@ -42,8 +42,8 @@ def _cast_rays(origins, directions, tmax):
     """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
     given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
     (lo, hi) where a large batch's compiled scan found them, else None. The kernel normalizes the
-    directions (scaled by their largest component first, so that neither a tiny nor a huge finite
-    direction under- or overflows in the length). Each check is one pass over the arrays; the row
+    directions (scaled by a power of two near their largest component first, so that neither a tiny
+    nor a huge finite direction under- or overflows in the length). Each check is one pass over the arrays; the row
     of a failure is looked for only then."""
     directions = _ray_array("directions", directions)
     shape = directions.shape[:-1]
@@ -90,6 +90,13 @@ def _cast_rays(origins, directions, tmax):
 # and shapes, which stay in cache (100,000 random rays into 100,000 spheres: a third of the kernel's
 # time). Each ray is traced on its own, so the order changes no bit.
 COHERENT_FROM = 4096
+
+# The rays one work-item traces, one after the other, their setups done together (kernels/pyclray.cl's
+# CAST_GROUP, which this must equal), and the work-items of a work-group: 128 rays, so that the
+# device's threads share a batch evenly (left to PoCL, 12,500 work-items made 5 work-groups for 2
+# threads); the global size is rounded up to whole work-groups, whose items past the rays do nothing
+CAST_GROUP = 8
+CAST_WORK_GROUP = 16
 
 
 def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -208,15 +215,18 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             _ray_buffer(ctx, origins), np.int32(1 if len(origins) > 1 else 0), _ray_buffer(ctx, directions),
             _ray_buffer(ctx, tmax), np.int32(1 if len(tmax) > 1 else 0),
             anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
+    groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
+    sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
     if kind == "occluded":
         variant = Variant("occluded", shape_types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
-        _run_into(ctx, kernel_for(ctx, variant), (count,), [*head, *args], out)
+        _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
         return out.reshape(shape)
     identity = np.eye(3)
     camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", shape_types, aovs, precision)
-    results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], (count,), count, aovs, precision, (count,))
+    results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
+                         local_size=sizes[1])
     results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
 
@@ -231,18 +241,19 @@ def _ray_buffer(ctx, array: np.ndarray):
     return input_buffer(ctx, array)
 
 
-def _run_into(ctx, kernel, global_size, args, out: np.ndarray) -> None:
-    """Run the kernel with out as its last argument and wait: on a CPU device it writes into out's
-    own memory, then a map makes it current (as request.run_kernel does for the images)."""
+def _run_into(ctx, kernel, sizes, args, out: np.ndarray) -> None:
+    """Run the kernel over sizes (global, local) with out as its last argument and wait: on a CPU
+    device it writes into out's own memory, then a map makes it current (as request.run_kernel does
+    for the images)."""
     if ctx.device.type & cl.device_type.CPU:
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out)
-        launch(ctx, kernel, global_size, None, [*args, buffer])
+        launch(ctx, kernel, *sizes, [*args, buffer])
         mapped = cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, out.shape, out.dtype, is_blocking=True)[0]
         mapped.base.release()
         ctx.queue.finish()
     else:
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-        launch(ctx, kernel, global_size, None, [*args, buffer])
+        launch(ctx, kernel, *sizes, [*args, buffer])
         cl.enqueue_copy(ctx.queue, out, buffer)
 
 

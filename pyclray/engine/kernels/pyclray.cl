@@ -684,15 +684,15 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #else
 
 #if LANES != 1
-#error "cast traces one ray per work-item (LANES 1)"
+#error "cast traces one ray at a time (LANES 1)"
 #endif
 
-/* One work-item per ray, in world coordinates: origin (float64), unit direction (float64), and
- * the largest distance that counts (float64, limits[r * limit_stride]). Where ordered is 1 the
- * host has found a coherent order of the rays (neighbouring work-items then walk the same nodes):
- * work-item i traces ray r = order[i], the i-th of that order, read and written at its own place
- * r (the rays stay where the caller put them: gathering them on the host cost more than the
- * kernel's scattered reads); else ray i.
+/* One ray at a time (CAST_GROUP of them per work-item, below), in world coordinates: origin
+ * (float64), unit direction (float64), and the largest distance that counts (float64,
+ * limits[r * limit_stride]). Where ordered is 1 the host has found a coherent order of the rays
+ * (neighbouring rays then walk the same nodes): place i of the batch traces ray r = order[i], the
+ * i-th of that order, read and written at its own place r (the rays stay where the caller put
+ * them: gathering them on the host cost more than the kernel's scattered reads); else ray i.
  *
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
  * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
@@ -717,12 +717,23 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
         PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
     }
+/* The moved ray of the last anchor met is kept (PYCLRAY_CAST_MOVED): the triangles of a mesh share
+ * their mesh's anchor, so that a ray moves once per mesh rather than once per triangle (the same
+ * function of the same anchor: the same bits). An anchor of NaNs is never equal: the first is moved. */
+#define PYCLRAY_CAST_MOVED                                                          \
+    double4 moved_anchor = (double4)(NAN);                                          \
+    double s0 = 0;                                                                  \
+    bool near = false;                                                              \
+    RayPacket moved = ray;
 #define PYCLRAY_CAST_VISIT(q)                                                       \
     {                                                                               \
         const int ref = refs[q], kind = ref & 15, k = ref >> 4;                      \
-        double s0;                                                                  \
-        bool near;                                                                  \
-        const RayPacket moved = moved_ray(&ray, anchors[q], &s0, &near);            \
+        const double4 anchor = anchors[q];                                          \
+        if (!(anchor.x == moved_anchor.x && anchor.y == moved_anchor.y && anchor.z == moved_anchor.z \
+              && anchor.w == moved_anchor.w)) {                                     \
+            moved = moved_ray(&ray, anchor, &s0, &near);                            \
+            moved_anchor = anchor;                                                  \
+        }                                                                           \
         if (near && s0 <= PYCLRAY_CAST_REACH) {                                     \
             PYCLRAY_BOUNDED(PYCLRAY_CAST_VISIT_KIND)                                \
             PYCLRAY_CAST_LIMIT                                                      \
@@ -760,30 +771,25 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)
 #endif
 
-/* The ray CAST_LOOKAHEAD places on in the coherent order, asked for from memory (its origin,
- * direction and limit: each may straddle two cache lines): the rays are read where the caller put
- * them, scattered in that order, and PoCL runs a work-group's items one after the other, which would
- * otherwise wait for each ray's first read (a seventh of cast's time on a mesh). */
-#define CAST_LOOKAHEAD 8
+/* Each work-item traces CAST_GROUP rays (consecutive places of the order), one after the other. Their
+ * setups come first, together: a ray's unit direction and the length of its rounding are a chain of
+ * dependent divisions and square roots, on which, one ray at a time, about a quarter of the perf
+ * samples of occluded on bench/secondary.py's view rays sat (most of those rays end at their first
+ * test, the ground); a group's four-ray vectors take one instruction per division or root (below).
+ * The group's first rows are asked for from memory as it starts, and the next group's rows too
+ * (origin, direction and limit: each may straddle two cache lines): the rays are read where the
+ * caller put them, scattered in the coherent order, and PoCL runs a work-group's items one after
+ * the other, which would otherwise wait for each ray's first read (a seventh of cast's time on a
+ * mesh). Each ray's own computations are unchanged: no bit of any result depends on the grouping. */
+#define CAST_GROUP 8
 #define CAST_PREFETCH_ROW(p) { CAST_PREFETCH(p, 1) CAST_PREFETCH((__global const char*)(p) + 23, 1) }
-#define PYCLRAY_CAST_PREFETCH_RAY                                                   \
-    if (ordered && i + CAST_LOOKAHEAD < n_rays) {                                   \
-        const size_t ahead = (size_t)order[i + CAST_LOOKAHEAD];                     \
+#define PYCLRAY_CAST_PREFETCH_GROUP(start)                                          \
+    for (int ahead_i = (start); ahead_i < (start) + CAST_GROUP && ahead_i < n_rays; ++ahead_i) { \
+        const size_t ahead = (size_t)(ordered ? order[ahead_i] : ahead_i);          \
         CAST_PREFETCH_ROW(&origins[3 * ahead * (size_t)origin_stride])              \
         CAST_PREFETCH_ROW(&directions[3 * ahead])                                   \
         CAST_PREFETCH(&limits[ahead * (size_t)limit_stride], 1)                     \
     }
-
-inline vec3v v3_round(const double3 v) { return v3((real)v.x, (real)v.y, (real)v.z); }
-
-/* d / |d| in float64, d scaled by its largest component first (a power of two would change no
- * bit), so that neither a tiny nor a huge finite direction under- or overflows in the length */
-inline double3 unit_direction(const double3 d)
-{
-    const double3 size = d < (double3)(0.0) ? -d : d;
-    const double3 scaled = d / (size.x > size.y ? (size.x > size.z ? size.x : size.z) : (size.y > size.z ? size.y : size.z));
-    return scaled / CAST_SQRT((scaled.x * scaled.x + scaled.y * scaled.y) + scaled.z * scaled.z);
-}
 
 /* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
  * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
@@ -806,20 +812,103 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     return moved;
 }
 
-/* the setup shared by cast and occluded: ray r (origins and directions: 3 doubles per ray; one
- * origin for every ray where origin_stride is 0), its direction made unit */
+/* A ray's direction as its tests take it: D = d / |d| (float64), its rounding dir, |dir|^2 and |dir| */
+typedef struct {
+    double3 unit;
+    vec3v dir;
+    real a, length;
+} CastDirection;
+
+/* The square root of each lane of a 4-vector: on PoCL's CPU device one vector instruction of the
+ * compiler's own (OpenCL's sqrt is a call there: kernels/lanes.h's v_sqrt), correctly rounded either way */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define CAST_SQRT4(T, F, x) ((T)(F((x).s0), F((x).s1), F((x).s2), F((x).s3)))
+#else
+#define CAST_SQRT4(T, F, x) sqrt(x)
+#endif
+#ifdef PYCLRAY_FP64
+#define CAST_REAL_SQRT4(x) CAST_SQRT4(double4, CAST_SQRT, x)
+#define CAST_TO_REAL4(x) (x)
+#else
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define CAST_REAL_SQRT4(x) CAST_SQRT4(float4, __builtin_sqrtf, x)
+#else
+#define CAST_REAL_SQRT4(x) sqrt(x)
+#endif
+#define CAST_TO_REAL4(x) convert_float4(x)
+#endif
+
+/* Four rays' directions (their x, y and z components in the lanes of x, y, z), set up at once in
+ * vector registers: their divisions and square roots are one vector instruction each (see CAST_GROUP).
+ * Per lane D = d / |d| in float64, d scaled first by the power of two 2^-e of its largest
+ * component m (m in [2^e, 2^(e+1)); at least 2^-1022, a normal number, for m beyond 2^1023;
+ * 2^1023 for a subnormal m, whose exponent bits are 0): exact, and a multiplication where a
+ * division by m cost one more division per ray; the largest scaled component lies in [2^-51, 4),
+ * so neither a tiny nor a huge finite direction under- or overflows in the length. */
+inline void cast_directions4(const double4 x, const double4 y, const double4 z, CastDirection* out)
+{
+    const double4 zero = (double4)(0.0);
+    const double4 size_x = x < zero ? -x : x, size_y = y < zero ? -y : y, size_z = z < zero ? -z : z;
+    const double4 largest_xy = size_x > size_y ? size_x : size_y;
+    const double4 largest = size_z > largest_xy ? size_z : largest_xy;
+    const long4 field = (long4)(2046) - (as_long4(largest) >> 52);  /* the exponent bits of 2^-e: 1023 - e */
+    const double4 scale = as_double4((field < (long4)(1) ? (long4)(1) : field) << 52);
+    const double4 sx = x * scale, sy = y * scale, sz = z * scale;
+    const double4 root = CAST_SQRT4(double4, CAST_SQRT, (sx * sx + sy * sy) + sz * sz);
+    const double4 ux = sx / root, uy = sy / root, uz = sz / root;
+    const real4 dx = CAST_TO_REAL4(ux), dy = CAST_TO_REAL4(uy), dz = CAST_TO_REAL4(uz);
+    const real4 a = (dx * dx + dy * dy) + dz * dz;
+    const real4 length = CAST_REAL_SQRT4(a);  /* |dir|: the shapes' s is along dir, not D */
+#define CAST_DIRECTION_LANE(l, s)                                                   \
+    out[l].unit = (double3)(ux.s, uy.s, uz.s);                                      \
+    out[l].dir = v3(dx.s, dy.s, dz.s);                                              \
+    out[l].a = a.s;                                                                 \
+    out[l].length = length.s;
+    CAST_DIRECTION_LANE(0, s0) CAST_DIRECTION_LANE(1, s1) CAST_DIRECTION_LANE(2, s2) CAST_DIRECTION_LANE(3, s3)
+#undef CAST_DIRECTION_LANE
+}
+
+/* rays[l0 .. l0 + 3]'s directions, set up at once */
+#define CAST_LOAD_DIRECTIONS4(l0)                                                   \
+    {                                                                               \
+        const double3 d0 = load_double3(directions, rays[(l0)]), d1 = load_double3(directions, rays[(l0) + 1]); \
+        const double3 d2 = load_double3(directions, rays[(l0) + 2]), d3 = load_double3(directions, rays[(l0) + 3]); \
+        cast_directions4((double4)(d0.x, d1.x, d2.x, d3.x), (double4)(d0.y, d1.y, d2.y, d3.y), \
+                         (double4)(d0.z, d1.z, d2.z, d3.z), &directions_of[(l0)]);  \
+    }
+
+/* The places i0 .. i0 + CAST_GROUP - 1 of the order (those below n_rays): each one's ray rays[l] and
+ * its direction, set up together (see CAST_GROUP) */
+#define PYCLRAY_CAST_GROUP_SETUP                                                    \
+    const int i0 = group * CAST_GROUP;                                              \
+    const int in_group = n_rays - i0 < CAST_GROUP ? n_rays - i0 : CAST_GROUP;       \
+    int rays[CAST_GROUP];                                                           \
+    CastDirection directions_of[CAST_GROUP];                                        \
+    PYCLRAY_CAST_PREFETCH_GROUP(i0)                                                 \
+    PYCLRAY_CAST_PREFETCH_GROUP(i0 + CAST_GROUP)                                    \
+    /* all CAST_GROUP (8) set up, four at once, the places past the batch's end as its last ray */ \
+    for (int l = 0; l < CAST_GROUP; ++l) {                                          \
+        const int i = l < in_group ? i0 + l : n_rays - 1;                           \
+        rays[l] = ordered ? order[i] : i;                                           \
+    }                                                                               \
+    CAST_LOAD_DIRECTIONS4(0)                                                        \
+    CAST_LOAD_DIRECTIONS4(4)
+
+/* the setup shared by cast and occluded: ray r (origins: 3 doubles per ray; one origin for every
+ * ray where origin_stride is 0) and its direction, set up by its group */
 #define PYCLRAY_CAST_RAY                                                            \
     RayPacket ray;                                                                  \
     ray.world = load_double3(origins, r * origin_stride);                           \
-    ray.dir_exact = unit_direction(load_double3(directions, r));                    \
-    ray.dir = v3_round(ray.dir_exact);                                              \
-    ray.a = v3_dot(ray.dir, ray.dir);                                               \
+    ray.dir_exact = direction->unit;                                                \
+    ray.dir = direction->dir;                                                       \
+    ray.a = direction->a;                                                           \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
-    const real length = v_sqrt(ray.a);  /* |dir|: the shapes' s is along dir, not D */ \
+    const real length = direction->length;                                          \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \
+    PYCLRAY_CAST_MOVED                                                              \
     const double3 from_anchor = ray.world - scene_anchor.xyz;                       \
     const float3 o = convert_float3(from_anchor);                                   \
     const float3 size = o < (float3)(0.0f) ? -o : o;                                \
@@ -885,8 +974,8 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_OUTPUT_ARGS(P)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int i, const int r, __global const Camera* camera
-                                         PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void cast_ray(const int r, const CastDirection* direction, __global const Camera* camera
+                     PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
@@ -930,11 +1019,19 @@ PYCLRAY_WORK_ITEM_FUNCTION void cast_ray(const int i, const int r, __global cons
 #endif
 }
 
+/* one work-item per group of CAST_GROUP places of the order */
+PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, __global const Camera* camera
+                                           PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+{
+    PYCLRAY_CAST_GROUP_SETUP
+    for (int l = 0; l < in_group; ++l)
+        cast_ray(rays[l], &directions_of[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+}
+
 __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int i = get_global_id(0);
-    PYCLRAY_CAST_PREFETCH_RAY
-    if (i < n_rays) cast_ray(i, ordered ? order[i] : i, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int group = get_global_id(0);
+    if (group * CAST_GROUP < n_rays) cast_group(group, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #else
@@ -953,8 +1050,8 @@ __kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLA
     PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) P(__global char*, occluded_out)
 
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int i, const int r, const int n_rays
-                                             PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void occluded_ray(const int r, const CastDirection* direction, const int n_rays
+                         PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_RAY
     bool found = false;
@@ -969,11 +1066,18 @@ PYCLRAY_WORK_ITEM_FUNCTION void occluded_ray(const int i, const int r, const int
     occluded_out[r] = found ? 1 : 0;
 }
 
+PYCLRAY_WORK_ITEM_FUNCTION void occluded_group(const int group, const int n_rays
+                                               PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+{
+    PYCLRAY_CAST_GROUP_SETUP
+    for (int l = 0; l < in_group; ++l)
+        occluded_ray(rays[l], &directions_of[l], n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+}
+
 __kernel void occluded(const int n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    const int i = get_global_id(0);
-    PYCLRAY_CAST_PREFETCH_RAY
-    if (i < n_rays) occluded_ray(i, ordered ? order[i] : i, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int group = get_global_id(0);
+    if (group * CAST_GROUP < n_rays) occluded_group(group, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #endif

@@ -1,0 +1,58 @@
+"""cast and occluded trace CAST_GROUP (8) rays per work-item, their directions set up four at once in
+vector registers, in work-groups of CAST_WORK_GROUP work-items (kernels/pyclray.cl, engine/cast.py).
+Each ray's computations are its own, so these hold the results to bits: of directions at the ends
+of float64's range (the power of two that scales a direction before its length is taken is clamped
+there), and of every place of a group and a work-group, batches ending anywhere."""
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine import cast as cast_module
+
+from test_cast import random_scene
+
+
+def assert_same_bits(one, other):
+    for name in pyclray.AOVS:
+        np.testing.assert_array_equal(one[name], other[name])
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_directions_at_the_ends_of_the_range_give_the_same_bits(precision):
+    """A direction whose largest component lies in [2^1023, max] (its 2^-e would be subnormal: the
+    kernel scales by 2^-1022 instead; unclamped, the scale's bits are 0 and every ray a NaN), and
+    subnormal directions (integers times 2^-1074: exact, the scale 2^1023), give the bits of the
+    same directions of ordinary size: scaling by a power of two is exact."""
+    scene, origins, directions = random_scene(3)
+    ordinary = directions / np.abs(directions).max(axis=-1, keepdims=True) * 1.5  # largest 1.5
+    huge = ordinary * 2.0**1023  # largest 1.5 * 2^1023: the top binade
+    assert np.isfinite(huge).all() and (np.abs(huge).max(axis=-1) >= 2.0**1023).all()
+    assert_same_bits(pyclray.cast(scene, origins, ordinary, precision=precision),
+                     pyclray.cast(scene, origins, huge, precision=precision))
+    whole = np.round(directions * 1000.0)  # integers up to a few thousand: exact as subnormals
+    whole[~whole.any(axis=-1)] = (0.0, 0.0, 1.0)
+    tiny = whole * 2.0**-1074
+    assert (np.abs(tiny).max(axis=-1) < 2.0**-1022).all()
+    assert_same_bits(pyclray.cast(scene, origins, whole, precision=precision),
+                     pyclray.cast(scene, origins, tiny, precision=precision))
+    np.testing.assert_array_equal(pyclray.occluded(scene, origins, whole, precision=precision),
+                                  pyclray.occluded(scene, origins, tiny, precision=precision))
+
+
+def test_batches_ending_anywhere_in_a_group_give_the_same_bits():
+    """The rays of a batch of any length, unordered and in the coherent order (from COHERENT_FROM rays
+    on), are those of a longer batch, bit for bit: the places past a batch's end in its last group
+    and work-group (set up as copies of its last ray) write nothing and change nothing."""
+    scene, origins, directions = random_scene(4)
+    rng = np.random.default_rng(4)
+    count = cast_module.COHERENT_FROM + 300
+    origins = origins[rng.integers(0, len(origins), count)] + rng.normal(size=(count, 3))
+    directions = rng.normal(size=(count, 3))
+    full = pyclray.cast(scene, origins, directions)
+    blocked = pyclray.occluded(scene, origins, directions)
+    group, work_group = cast_module.CAST_GROUP, cast_module.CAST_GROUP * cast_module.CAST_WORK_GROUP
+    coherent = cast_module.COHERENT_FROM
+    for size in (1, group - 1, group + 1, work_group - 1, work_group + 3, coherent - 1, coherent + group + 5):
+        part = pyclray.cast(scene, origins[:size], directions[:size])
+        assert_same_bits(part, {name: full[name][:size] for name in pyclray.AOVS})
+        np.testing.assert_array_equal(pyclray.occluded(scene, origins[:size], directions[:size]), blocked[:size])
