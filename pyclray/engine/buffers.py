@@ -22,6 +22,12 @@ def device_buffer(ctx, array: np.ndarray, writable: bool = False) -> cl.Buffer:
     must be aligned, see aligned(), and live as long as the buffer), a copy elsewhere."""
     mf = cl.mem_flags
     access = mf.READ_WRITE if writable else mf.READ_ONLY
-    if ctx.device.type & cl.device_type.CPU:
+    if shares_host_memory(ctx):
         return cl.Buffer(ctx.context, access | mf.USE_HOST_PTR, hostbuf=array)
     return cl.Buffer(ctx.context, access | mf.COPY_HOST_PTR, hostbuf=array)
+
+
+def shares_host_memory(ctx) -> bool:
+    """Whether device_buffer's buffers are their arrays' own memory (a CPU device): a row written
+    into the array while no command that uses the buffer is queued is what the next kernel reads."""
+    return bool(ctx.device.type & cl.device_type.CPU)

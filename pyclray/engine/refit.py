@@ -1,12 +1,17 @@
 """An animation's frame on a prepared scene (pyclray.engine.prepared): the shapes it changed written
 in place, the BVH refitted above them (or the scene rebuilt where a refit would degrade the tree),
-and while the camera stays, the frame buffers brought to the view entry by entry (no whole pass)."""
+and while the camera stays, the frame buffers brought to the view entry by entry (no whole pass).
+
+A frame where K of N shapes move costs O(K log N) host work and writes O(K log N) rows: on a CPU
+device the host arrays are the buffers' memory (buffers.device_buffer) and are written in place;
+elsewhere the rows go up with one scatter launch per buffer (kernels' scatter_rows)."""
 from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
 
 from . import shading
+from .buffers import shares_host_memory
 from .bvh import outward32, sah_cost, widened
 from .programs import Variant, kernels_for
 from .request import input_buffer
@@ -15,8 +20,8 @@ from .request import input_buffer
 # Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this
 # factor: a refit keeps the tree's topology, so shapes that wander far apart make its boxes
 # overlap and rays visit more of them. Measured (bench/views.py, "animation"): 10 of 100,000
-# spheres moving across the whole field raise the cost by well under 1%; a refit costs about a
-# millisecond where a rebuild of that scene costs half a second.
+# spheres moving across the whole field leave the cost at 0.98 of the built tree's; a frame's
+# update (refit included) costs about 0.3 ms where a rebuild of that scene costs 0.2 to 0.5 s.
 # (the factor is PreparedScene.REFIT_COST_MAX)
 
 
@@ -27,68 +32,83 @@ def update(prepared, shapes: tuple, changed) -> bool:
     O(K log N) host work for K changed shapes. False (and nothing changed) where the changes need a
     new scene: another type or primitive count, or a refit that would degrade the tree."""
     indices = sorted(set(changed) | prepared.dirty)  # shapes changed before and no longer: back to theirs
-    for i in indices:
-        if i >= len(shapes) or i >= len(prepared.shapes) or shapes[i].type != prepared.shapes[i].type \
-                or shapes[i].primitive_count() != prepared.shapes[i].primitive_count() \
-                or prepared.kinds[shapes[i].type].smooth is not None \
-                or prepared.kinds[shapes[i].type].indexed is not None:  # its world shading normals, its vertices: packed anew
+    if indices and indices[-1] >= min(len(shapes), len(prepared.shapes)):
+        return False
+    new, old = [shapes[i] for i in indices], [prepared.shapes[i] for i in indices]
+    for shape, before in zip(new, old):
+        kind = prepared.kinds.get(shape.type)
+        if kind is None or shape.type != before.type or shape.primitive_count() != before.primitive_count() \
+                or kind.smooth is not None or kind.indexed is not None:  # its world shading normals, its vertices: packed anew
             return False
     if prepared._refit is None:
         prepared._refit = RefitState(prepared)
     state = prepared._refit
-    positions, rows_by_kind, bounds_rows = [], {}, []
-    for i in indices:
-        kind = prepared.kinds[shapes[i].type]
-        mine = state.positions(kind, i)
-        rows = kind.cls.pack_world([shapes[i]])
-        rows_by_kind.setdefault(kind.name, ([], []))
-        rows_by_kind[kind.name][0].append(mine)
-        rows_by_kind[kind.name][1].append(rows)
+    # per type: the changed shapes and their entries' positions in its array, packed in one call
+    # (pack_world gives each shape's entries in primitive order, as state.positions lists them)
+    by_kind: dict[str, tuple[list, list]] = {}
+    for i, shape in zip(indices, new):
+        mine = by_kind.setdefault(shape.type, ([], []))
+        mine[0].append(shape)
+        mine[1].append(state.positions(prepared.kinds[shape.type], i))
+    packed, positions, bounds_rows = {}, [], []
+    for name, (mine, where) in by_kind.items():
+        kind = prepared.kinds[name]
+        where = np.concatenate(where)
+        packed[name] = (where, kind.cls.pack_world(mine))
         if kind.cls.bounded:
-            positions.append(state.leaf_positions(kind, mine))
-            bounds_rows.append(kind.cls.bounds_of(rows))
+            positions.append(state.leaf_positions(kind, where))
+            bounds_rows.append(kind.cls.bounds_of(packed[name][1]))
     refitted = None
     if positions:
-        refitted = state.refit(np.concatenate(positions), np.concatenate(bounds_rows))
+        one = len(positions) == 1  # (one bounded type changed: no copies)
+        refitted = state.refit(positions[0] if one else np.concatenate(positions),
+                               bounds_rows[0] if one else np.concatenate(bounds_rows))
         if refitted is None:
             return False
-    # the world entries on the host; the device's are brought up to date before the next whole
-    # pass needs them (flush_world): while the camera stays, a frame writes only the frame buffers
-    for name, (where, rows) in rows_by_kind.items():
+    shared = shares_host_memory(prepared.ctx)
+    # the world entries; on another device, written to it before the next whole pass or render that
+    # reads them (flush_world): while the camera stays, a frame writes only the frame buffers
+    for name, (where, rows) in packed.items():
         kind = prepared.kinds[name]
-        where, rows = np.concatenate(where), np.concatenate(rows)
         kind.world[where] = rows
-        if prepared.on_device or kind.framed:
+        if not shared and (prepared.on_device or kind.framed):
             prepared.stale.setdefault(name, set()).update(where.tolist())
-    if refitted is not None:
+    if refitted is not None and len(refitted):
         # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view
         tree = prepared.bvh.tree
-        nodes = prepared._nodes_host[refitted].copy()
+        nodes = prepared._nodes_host[refitted]
         nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - prepared.anchor,
                                                            tree.hi[refitted] - prepared.anchor)
         prepared._nodes_host[refitted] = nodes
-        if prepared.on_device:
-            scatter(prepared, prepared.nodes, refitted, nodes)
-        else:  # no float64 program to scatter with: the whole array (devices without float64 only)
-            cl.enqueue_copy(prepared.ctx.queue, prepared.nodes, prepared._nodes_host.copy())
+        if not shared:
+            if prepared.on_device:
+                scatter(prepared, prepared.nodes, refitted, nodes)
+            else:  # no float64 program to scatter with: the whole array (devices without float64 only)
+                cl.enqueue_copy(prepared.ctx.queue, prepared.nodes, prepared._nodes_host.copy())
+        if refitted[0] == 0:  # the root's box (refit returns the nodes sorted): the range check's
+            prepared.reach = prepared._reach()
     if prepared.on_device and prepared.view is not None:
-        # the frame buffers hold the last view: bring the changed entries and nodes to it in place
-        # (the same floats as a whole pass: the host's rebase is the device's, bit for bit)
+        # the frame buffers hold the last view: bring the changed entries to it in place (the same
+        # floats as a whole pass: the host's rebase is the device's, bit for bit)
         eye, rows = prepared.view
-        for name, (where, _) in rows_by_kind.items():
+        for name, (where, _) in packed.items():
             kind = prepared.kinds[name]
             if kind.framed:  # no frame buffer: its world entries are what the kernel reads
                 continue
-            where = np.concatenate(where)
-            scatter(prepared, kind.frame, where, kind.cls.rebase(kind.world[where], eye, rows, prepared.precision,
-                                                             kind.ids[where], kind.primitives[where]))
-    # materials (an animated colour or size): the rows that differ
-    # (none where the frame changed no shape: pack_materials gives one row even for no shape)
-    materials = shading.pack_materials([shapes[i] for i in indices], prepared.precision)[: len(indices)]
-    if len(indices) and not (materials == prepared._materials_host[indices]).all():
-        prepared._materials_host[indices] = materials
-        cl.enqueue_copy(prepared.ctx.queue, prepared.materials, prepared._materials_host)
-    prepared.reach = prepared._reach()
+            framed = kind.cls.rebase(kind.world[where], eye, rows, prepared.precision, kind.ids[where], kind.primitives[where])
+            if shared:
+                kind.frame_host[where] = framed
+            else:
+                scatter(prepared, kind.frame, where, framed)
+    # materials (an animated colour or size): the rows of the shapes whose material is another object
+    materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
+    if materials:
+        rows = shading.pack_materials([shape for _, shape in materials], prepared.precision)
+        materials = [i for i, _ in materials]
+        if not (rows == prepared._materials_host[materials]).all():
+            prepared._materials_host[materials] = rows
+            if not shared:
+                cl.enqueue_copy(prepared.ctx.queue, prepared.materials, prepared._materials_host)
     prepared.shapes, prepared.dirty = shapes, set(changed)
     if not (prepared.on_device and prepared.view is not None):
         prepared.view_key = None  # a whole pass at the next view
@@ -96,7 +116,8 @@ def update(prepared, shapes: tuple, changed) -> bool:
 
 
 def flush_world(prepared) -> None:
-    """Write the world entries that animation frames changed to the device."""
+    """Write the world entries that animation frames changed to the device (devices whose buffers
+    are not the host arrays)."""
     for name, where in prepared.stale.items():
         where = np.array(sorted(where), np.int64)
         kind = prepared.kinds[name]
@@ -120,8 +141,9 @@ def scatter(prepared, buffer, index, rows) -> None:
 
 class RefitState:
     """What refitting a prepared scene's BVH needs, computed at its first update: each node's parent,
-    each leaf position's leaf, the entries' widened boxes in leaf order, the built tree's SAH cost,
-    and per type its entries sorted by shape id and their leaf positions."""
+    depth, children and box (as one row), each leaf position's leaf, the entries' widened boxes in
+    leaf order, the built tree's SAH cost, and per type its entries sorted by shape id and their
+    leaf positions."""
 
     def __init__(self, prepared):
         tree, bvh = prepared.bvh.tree, prepared.bvh
@@ -130,35 +152,49 @@ class RefitState:
         internal = np.nonzero(tree.count == 0)[0] if tree.nodes > 1 else np.zeros(0, np.int64)
         self.parent[tree.first[internal]] = internal
         self.parent[tree.first[internal] + 1] = internal
-        self.leaf_of = np.zeros(len(bvh.leaf_type), np.int64)
-        for leaf in np.nonzero(tree.count > 0)[0]:
-            self.leaf_of[tree.first[leaf]: tree.first[leaf] + tree.count[leaf]] = leaf
+        # each leaf position's leaf: the leaves' ranges of positions, in order, cover them all
+        leaves = np.nonzero(tree.count > 0)[0]
+        leaves = leaves[np.argsort(tree.first[leaves], kind="stable")]
+        self.leaf_of = np.repeat(leaves, tree.count[leaves]).astype(np.int64)
+        # each node's depth (the root's 0), from the root down a level at a time
+        self.depth = np.zeros(tree.nodes, np.int64)
+        level = internal[:1] if len(internal) and internal[0] == 0 else np.zeros(0, np.int64)
+        while level.size:
+            children = np.concatenate([tree.first[level], tree.first[level] + 1])
+            self.depth[children] = self.depth[level[0]] + 1
+            level = children[tree.count[children] == 0]
         self.widened = widened(bvh.bounds) if len(bvh.bounds) else np.zeros((0, 2, 3))
+        # each node's box as one row (lo, -hi): the union of boxes is then one elementwise minimum
+        # (half the numpy calls per level of a refit); the tree's lo and hi are kept equal to it
+        self.box = np.concatenate([tree.lo, -tree.hi], axis=1)
+        self.children = np.stack([tree.first, tree.first + 1])  # an internal node's two children
         self.built_cost = sah_cost(tree) if tree.nodes else 0.0
         # the SAH cost's sum (sah_cost before the division by the root's area), kept up to date as
         # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
         self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)
-        self.cost_sum = float((self._areas(np.arange(tree.nodes)) * self.weight).sum())
-        self.by_id, self.leaf_positions_of, self.found = {}, {}, {}
+        self.cost_sum = float((self._areas(self.box) * self.weight).sum())
+        self.by_id, self.leaf_positions_of, self.found, self.plans = {}, {}, {}, {}
         for k, t in enumerate(bvh.types):
             self.leaf_positions_of[t] = np.nonzero(bvh.leaf_type == k)[0]
 
-    def _areas(self, nodes) -> np.ndarray:
-        tree = self.prepared.bvh.tree
-        extent = np.maximum(tree.hi[nodes] - tree.lo[nodes], 0.0)
+    @staticmethod
+    def _areas(box) -> np.ndarray:
+        """Half the surface area of boxes given as rows (lo, -hi)."""
+        extent = np.maximum(-box[:, 3:] - box[:, :3], 0.0)
         return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
 
     def cost(self) -> float:
         """The tree's SAH cost as sah_cost computes it (relative to the root's area)."""
-        root = self._areas(np.zeros(1, np.int64))[0]
+        root = self._areas(self.box[:1])[0]
         return self.cost_sum / (root if root > 0 else 1.0)
 
     def positions(self, kind, shape_index: int) -> np.ndarray:
-        """The positions of a shape's entries in its type's array."""
+        """The positions of a shape's entries in its type's array, by primitive index (pack_world's
+        order of its entries)."""
         found = self.found.get((kind.name, shape_index))
         if found is None:
             if kind.name not in self.by_id:
-                order = np.argsort(kind.ids, kind="stable")
+                order = np.lexsort((kind.primitives, kind.ids))
                 self.by_id[kind.name] = (order, kind.ids[order])
             order, ids = self.by_id[kind.name]
             lo, hi = np.searchsorted(ids, shape_index, "left"), np.searchsorted(ids, shape_index, "right")
@@ -168,37 +204,63 @@ class RefitState:
     def leaf_positions(self, kind, positions: np.ndarray) -> np.ndarray:
         return self.leaf_positions_of[kind.name][positions]
 
+    PLANS_MAX = 16
+
+    def plan(self, positions: np.ndarray):
+        """What a refit above the entries at these leaf positions visits, kept per set of positions
+        (an animation moves the same shapes frame after frame): their leaves, the gather of the
+        leaves' entries and where each leaf's start, and the internal ancestors a level at a time,
+        deepest first, each level's nodes with their children. Every node the refit writes: every."""
+        key = positions.tobytes()
+        plan = self.plans.get(key)
+        if plan is not None:
+            return plan
+        tree = self.prepared.bvh.tree
+        leaves = np.unique(self.leaf_of[positions])
+        # the leaves and their ancestors, walked up in Python (K paths of log N nodes that soon meet)
+        every, parent = set(), self.parent
+        for node in leaves.tolist():
+            while node >= 0 and node not in every:
+                every.add(node)
+                node = parent.item(node)
+        every = np.fromiter(every, np.int64, len(every))
+        internal = every[tree.count[every] == 0]
+        internal = internal[np.argsort(-self.depth[internal], kind="stable")]  # deepest first
+        cuts = [0, *(np.flatnonzero(np.diff(self.depth[internal])) + 1).tolist(), len(internal)]
+        levels = [(internal[a:b], self.children[:, internal[a:b]]) for a, b in zip(cuts, cuts[1:])]
+        first, count = tree.first[leaves], tree.count[leaves]
+        starts = np.cumsum(count) - count
+        gather = np.repeat(first - starts, count) + np.arange(int(count.sum()))
+        plan = self.plans[key] = (leaves, gather, starts, levels, every)
+        while len(self.plans) > self.PLANS_MAX:
+            del self.plans[next(iter(self.plans))]
+        return plan
+
     def refit(self, positions: np.ndarray, bounds: np.ndarray):
         """New unwidened bounds of the entries at these leaf positions: the boxes of their leaves and
-        of every ancestor recomputed (each after its changed descendants). Returns the changed nodes,
-        or None (nothing changed) where the refitted tree's SAH cost exceeds REFIT_COST_MAX times the
-        built one's."""
+        of every ancestor recomputed, deepest first (each after its children). Returns the nodes whose
+        boxes changed (sorted), or None (nothing changed) where the refitted tree's SAH cost exceeds
+        REFIT_COST_MAX times the built one's."""
         tree, bvh = self.prepared.bvh.tree, self.prepared.bvh
-        ancestors = [np.unique(self.leaf_of[positions])]
-        while True:  # every node whose box may change: the leaves, then their ancestors
-            up = np.unique(self.parent[ancestors[-1]])
-            up = up[up >= 0]
-            if not up.size:
-                break
-            ancestors.append(up)
-        every = np.unique(np.concatenate(ancestors))
-        old = (tree.lo[every].copy(), tree.hi[every].copy(), bvh.bounds[positions].copy(), self.widened[positions].copy())
-        before = float((self._areas(every) * self.weight[every]).sum())
+        leaves, gather, starts, levels, every = self.plan(positions)
+        entries = (bvh.bounds[positions], self.widened[positions])  # copies (fancy indexing)
+        old = self.box[every]
         bvh.bounds[positions] = bounds
         self.widened[positions] = widened(bounds)
-        for leaf in ancestors[0]:  # a leaf's box: its entries'
-            first, count = tree.first[leaf], tree.count[leaf]
-            tree.lo[leaf] = self.widened[first:first + count, 0].min(axis=0)
-            tree.hi[leaf] = self.widened[first:first + count, 1].max(axis=0)
-        for nodes in ancestors[1:]:  # a level's parents after the level (a node again after a deeper change)
-            left, right = tree.first[nodes], tree.first[nodes] + 1
-            tree.lo[nodes] = np.minimum(tree.lo[left], tree.lo[right])
-            tree.hi[nodes] = np.maximum(tree.hi[left], tree.hi[right])
-        after = float((self._areas(every) * self.weight[every]).sum())
-        self.cost_sum += after - before
+        # the leaves' boxes: the union of their entries' widened boxes
+        boxes = self.widened[gather]
+        self.box[leaves] = np.minimum.reduceat(np.concatenate([boxes[:, 0], -boxes[:, 1]], axis=1), starts)
+        # the internal nodes', a level at a time: the union of their two children's
+        for nodes, children in levels:
+            self.box[nodes] = self.box[children].min(axis=0)
+        new = self.box[every]
+        delta = float((self._areas(new) - self._areas(old)) @ self.weight[every])
+        self.cost_sum += delta
         if self.cost() > self.prepared.REFIT_COST_MAX * self.built_cost:
-            tree.lo[every], tree.hi[every] = old[0], old[1]
-            bvh.bounds[positions], self.widened[positions] = old[2], old[3]
-            self.cost_sum -= after - before
+            self.box[every] = old
+            bvh.bounds[positions], self.widened[positions] = entries
+            self.cost_sum -= delta
             return None
-        return every
+        tree.lo[every], tree.hi[every] = new[:, :3], -new[:, 3:]
+        changed = (new != old).any(axis=1)
+        return np.sort(every[changed])

@@ -9,7 +9,8 @@ from ..model.aovs import AOVS, RENDER_AOVS, kernel_aovs
 from ..model.camera import Camera
 from ..model.errors import PyclrayError, RequestError, SceneError
 from ..model.loader import as_scene
-from ..model.scene import Scene
+from ..model.animation import scene_at
+from ..model.scene import Scene, checked_time
 from . import culling
 from .device import context_for
 from .labels import with_labels
@@ -179,4 +180,5 @@ def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, fra
         raise SceneError("the scene has no [animation] table", file=scene.source)
     for k in range(animation.frame_count()) if frames is None else frames:
         t = animation.frame_time(k)
-        yield t, render(scene.at(t), aovs=aovs, precision=precision, device=device)
+        # scene.at(t) with its shapes held as the animated scene's and the changes (O(K) work)
+        yield t, render(scene_at(scene, checked_time(t), lazy=True), aovs=aovs, precision=precision, device=device)

@@ -144,6 +144,7 @@ class ViewInputs:
         # made for this prepared scene (its anchor, its materials): one rebuilt for the same scene gets
         # its own (a weak reference: an evicted prepared scene is not kept alive by its views)
         self.prepared = weakref.ref(prepared)
+        self.made_for = (scene.camera, scene.image, scene.lights, scene.shading)  # what they are computed from
         self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
         if acceleration == "tiles":
@@ -189,6 +190,11 @@ class ViewInputs:
 
 
 _views = PerObject(16)
+# the last view inputs made per (device, precision): an animation's frame is a new scene object with
+# the same camera, image, lights and shading (and the prepared scene updated in place), whose inputs
+# through the BVH are those (tile lists depend on the shapes: not reused)
+_last: dict = {}
+CACHES.append(_last)
 
 
 def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
@@ -198,5 +204,10 @@ def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
     key = (ctx.device.int_ptr, precision, acceleration)
     inputs = per_scene.get(key)
     if inputs is None or inputs.prepared() is not prepared:
-        inputs = per_scene[key] = ViewInputs(ctx, scene, prepared, acceleration)
+        last = _last.get(key)
+        if acceleration == "bvh" and last is not None and last.prepared() is prepared and all(
+                a is b for a, b in zip(last.made_for, (scene.camera, scene.image, scene.lights, scene.shading))):
+            inputs = per_scene[key] = last
+        else:
+            inputs = per_scene[key] = _last[key] = ViewInputs(ctx, scene, prepared, acceleration)
     return prepared, inputs

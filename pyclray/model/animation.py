@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from numbers import Real
 
 from .errors import SceneError, _shown, no_unknown_keys, number, text
+from .frames import FrameShapes, _frame_tuple, _remember, derivation, derived_from  # noqa: F401 (derivation, derived_from: used from here)
 
 INTERPOLATIONS = ("linear", "step")
 CAMERA = "camera"  # the camera's target name; the other targets are named by their "name" key
@@ -276,40 +277,11 @@ def _describe(scene, place) -> str:
     return f"{described} ({place[0]} #{place[1]})"
 
 
-# What an animation's static scenes share with the animated one: new shapes tuple -> (the tuple,
-# the animated scene's tuple, the indices of the shapes whose values differ). The engine reads it to
-# update a prepared scene in place (only those shapes, and a refit of its BVH) rather than prepare a
-# frame's scene from nothing; an entry holds both tuples, so their id()s cannot be reused meanwhile.
-_DERIVED_MAX = 8
-_derived: dict = {}
-
-
-def derivation(shapes: tuple):
-    """(base shapes tuple, changed indices) if this tuple was made by scene_at from another, else None."""
-    entry = _derived.get(id(shapes))
-    return entry[1:] if entry is not None and entry[0] is shapes else None
-
-
-def _remember(shapes: tuple, base: tuple, changed: tuple) -> None:
-    _derived[id(shapes)] = (shapes, base, changed)
-    while len(_derived) > _DERIVED_MAX:
-        del _derived[next(iter(_derived))]
-
-
-def derived_from(shapes: tuple, base: tuple) -> tuple:
-    """``shapes``, recorded as ``base`` but for the shapes that are not base's own objects (as an
-    animation's frame is): the scene prepared for ``base`` is then updated in place for it. For a
-    scene file loaded again after an edit (``pyclray view``), whose unchanged shapes are the old
-    objects; a tuple of another length is returned as it is."""
-    shapes = tuple(shapes)
-    if len(shapes) == len(base):
-        _remember(shapes, base, tuple(i for i, (a, b) in enumerate(zip(shapes, base)) if a is not b))
-    return shapes
-
-
-def scene_at(scene, t: float, *, frame: int | None = None):
+def scene_at(scene, t: float, *, frame: int | None = None, lazy: bool = False):
     """The static scene at time t: every animated key takes its track's value at t; the result has
-    no animation. Raises SceneError naming the target, the key and the time if that scene is invalid."""
+    no animation. Raises SceneError naming the target, the key and the time if that scene is invalid.
+    lazy: its shapes a FrameShapes rather than a tuple when shapes are animated (render_animation's
+    frames, which it renders and drops: O(K) work for K animated shapes)."""
     animation = scene.animation
     if animation is None:
         return scene
@@ -319,26 +291,27 @@ def scene_at(scene, t: float, *, frame: int | None = None):
     when = f"at t = {t:g} s" + ("" if frame is None else f" (frame {frame})")
     places = _places(scene)
     changes: dict[tuple, dict] = {}
+    targets: dict[tuple, str] = {}  # place -> its target's name, for messages
     for track in animation.tracks:
-        changes.setdefault(places[track.target][0], {})[track.key] = track.value_at(t, animation.interpolation)
+        place = places[track.target][0]
+        changes.setdefault(place, {})[track.key] = track.value_at(t, animation.interpolation)
+        targets[place] = track.target
     replaced: dict[str, object] = {}
-    items: dict[str, list] = {}  # each collection copied once, however many of its items change
+    items: dict[str, dict] = {}  # per collection: index -> its new item
     for place, values in changes.items():
         collection, index = place
-        target = next(track.target for track in animation.tracks if places[track.target][0] == place)
         try:
             if index is None:
                 replaced[collection] = dataclasses.replace(getattr(scene, collection), **values)
             else:
-                if collection not in items:  # (not setdefault: its default would be built every time)
-                    items[collection] = list(getattr(scene, collection))
-                mine = items[collection]
-                mine[index] = dataclasses.replace(mine[index], **values)
+                items.setdefault(collection, {})[index] = dataclasses.replace(getattr(scene, collection)[index], **values)
         except SceneError as error:
-            raise _frame_error(scene, error, target, values, when) from None
-    replaced.update({collection: tuple(mine) for collection, mine in items.items()})
+            raise _frame_error(scene, error, targets[place], values, when) from None
+    for collection, mine in items.items():
+        replaced[collection] = FrameShapes(scene.shapes, mine) if lazy and collection == "shapes" \
+            else _frame_tuple(scene, collection, mine)
     if "shapes" in replaced:  # before the Scene checks it: only the changed shapes need a look
-        _remember(replaced["shapes"], scene.shapes, tuple(sorted(index for collection, index in changes if collection == "shapes")))
+        _remember(replaced["shapes"], scene.shapes, tuple(sorted(items["shapes"])))
     try:
         return dataclasses.replace(scene, animation=None, **replaced)
     except SceneError as error:  # a scene-wide check (e.g. the fov against the image size)

@@ -10,7 +10,7 @@ from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, derivation, scene_at
+from .animation import Animation, FrameShapes, derivation, scene_at
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
@@ -34,7 +34,8 @@ class Scene:
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
 
     def __post_init__(self):
-        object.__setattr__(self, "shapes", tuple(self.shapes))
+        if not isinstance(self.shapes, FrameShapes):  # (an animation's frame as render_animation renders it)
+            object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
         if not isinstance(self.shading, Shading):
             raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
@@ -64,10 +65,7 @@ class Scene:
         """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
         none. Frame k is at k / fps; past the last key (and the duration) every track holds its
         last value. A negative or non-finite t is a RequestError."""
-        if isinstance(t, bool) or not isinstance(t, Real) or not 0 <= t < math.inf:
-            raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
-                               f"past the last key every track holds its last value), got {t!r}")
-        return scene_at(self, t)
+        return scene_at(self, checked_time(t))
 
     def with_size(self, width: int, height: int) -> "Scene":
         """The scene at another image size. A camera from intrinsics keeps its K and size, so its K
@@ -88,6 +86,14 @@ class Scene:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
         return tuple(t for t in REGISTRY if t in present)
+
+
+def checked_time(t) -> float:
+    """t if it is a time in seconds >= 0 (Scene.at, render_animation's frames), else a RequestError."""
+    if isinstance(t, bool) or not isinstance(t, Real) or not 0 <= t < math.inf:
+        raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
+                           f"past the last key every track holds its last value), got {t!r}")
+    return t
 
 
 # Shapes tuples already checked, the most recent first: a view from another camera
