@@ -100,6 +100,26 @@ def test_render_views_takes_scenes_of_other_sizes_and_rejects_other_things():
         pyclray.render(scene, camera="front")
 
 
+def test_render_views_yields_the_frames_before_a_bad_view_then_raises_and_can_stop_early():
+    """render_views enqueues the next view before it returns a frame (engine/render.py): a bad view
+    (here not a camera) must still come after the frames before it, as a loop of render() would
+    give them, and an iterator left after its first frame (a view still in flight) must leave the
+    scene in a state where the next render is the fresh one, bit for bit."""
+    scene = pyclray.load_scene("scenes/tp02.toml").with_size(32, 24)
+    cameras = [pyclray.Camera((3.0, 2.0, 4.0 + k), (0.0, 0.5, 0.0), fov=50.0) for k in range(3)]
+    frames = pyclray.render_views(scene, [cameras[0], cameras[1], "front", cameras[2]], aovs=("depth", "id"))
+    first, second = next(frames), next(frames)
+    same(first, fresh(dataclasses.replace(scene, camera=cameras[0]), aovs=("depth", "id")))
+    same(second, fresh(dataclasses.replace(scene, camera=cameras[1]), aovs=("depth", "id")))
+    with pytest.raises(pyclray.RequestError, match="camera: expected a pyclray.Camera"):
+        next(frames)
+    left = pyclray.render_views(scene, cameras, aovs=("depth", "id"))
+    same(next(left), pyclray.render(scene, aovs=("depth", "id"), camera=cameras[0]))
+    left.close()  # the second view was in flight
+    same(pyclray.render(scene, aovs=("depth", "id"), camera=cameras[2]),
+         fresh(dataclasses.replace(scene, camera=cameras[2]), aovs=("depth", "id")))
+
+
 def test_a_moved_camera_uploads_no_shapes(monkeypatch):
     """After the first view, other cameras neither pack nor upload the shapes: the prepared scene is
     the same object and no shape is packed on the host (Shape.pack_world is never called again)."""
@@ -213,3 +233,22 @@ def test_an_animation_frame_that_changes_no_shape_updates_nothing():
     ready = prepared.prepared_scene(context_for(None), scene, "fp32")
     assert ready.update(scene.shapes, [])
     same(pyclray.render(scene), before)
+
+
+@pytest.mark.parametrize("rebase", ["device", "host"])
+def test_render_views_of_a_mesh_equal_fresh_renders(monkeypatch, rebase):
+    """render_views enqueues view i+1 (its per-view pass included) while view i's kernel may still
+    run: a mesh's shared vertices, framed on the host for small scenes, must reach the device in the
+    queue's order, not be written under the running kernel (each view equals a fresh render)."""
+    monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0 if rebase == "device" else 10**9)
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 40, endpoint=False), np.linspace(0.2, np.pi - 0.2, 20))
+    vertices = np.stack([np.sin(v) * np.cos(u), np.cos(v) + 1.0, np.sin(v) * np.sin(u)], -1).reshape(-1, 3)
+    faces = [(r * 40 + c, r * 40 + (c + 1) % 40, (r + 1) * 40 + c) for r in range(19) for c in range(40)]
+    mesh = pyclray.Mesh(vertices, np.array(faces))
+    scene = pyclray.Scene(pyclray.Camera((0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=40.0), pyclray.Image(160, 120),
+                          (pyclray.Plane((0.0, 1.0, 0.0), 0.0), mesh))
+    cameras = [pyclray.Camera((4.0 * np.sin(a), 1.5, 4.0 * np.cos(a)), (0.0, 1.0, 0.0), fov=40.0) for a in np.linspace(0, 5, 8)]
+    prepared.clear()
+    views = list(pyclray.render_views(scene, cameras, aovs=("depth", "normal", "id", "primitive")))
+    for camera, view in zip(cameras, views):
+        same(view, fresh(dataclasses.replace(scene, camera=camera), aovs=("depth", "normal", "id", "primitive")))

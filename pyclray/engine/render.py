@@ -18,7 +18,7 @@ from .memory import check_images_fit
 from .prepared import prepared_scene
 from .views import acceleration_for, check_renderable_once, render_inputs
 from .programs import Variant, lanes_for, packet_shape
-from .request import Frame, check_request, run_kernel
+from .request import Frame, check_request, enqueue_kernel
 
 
 def _window(scene: Scene, window) -> tuple[int, int, int, int]:
@@ -58,6 +58,13 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     The scene's shapes are prepared on the device once and kept (pyclray.engine.prepared): a view
     from another camera uploads the camera only, whatever the number of shapes.
     """
+    return _start(scene, aovs, precision, device, window, acceleration, camera)()
+
+
+def _start(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto",
+           camera=None):
+    """render's work up to the kernel's launch (the checks, the per-view pass, the kernel, enqueued on
+    the device's in-order queue): a callable that waits for this view's kernel and returns its Frame."""
     scene = as_scene(scene)
     if camera is not None:
         scene = with_camera(scene, camera)
@@ -90,11 +97,21 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
         + [prepared.kinds[t].smooth for t in smooth],
     }
     global_size, local_size = launch_size(lanes, col0, row0, cols, rows, ctx.device.max_work_group_size)
-    with prepared.lock:  # the frame buffers hold this view until its kernel has run
-        prepared.rebase(inputs.eye, inputs.rows)
-        images = run_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size, extra)
-    return Frame(with_labels(scene, images, asked), precision=precision, device=ctx.device.name.strip(),
-                 view=(scene.camera, scene.image.width, scene.image.height, col0, row0))
+    # the frame buffers hold this view from its pass to its kernel: both enqueued under the lock, on the
+    # device's one in-order queue, which runs another view's pass only after this kernel
+    with prepared.lock:
+        uploads = prepared.rebase(inputs.eye, inputs.rows)
+        pending = enqueue_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), local_size,
+                                 extra)
+    # until it has run: what it reads (a CPU device reads the host arrays themselves, which a
+    # pyclray.clear_cache() between two frames of render_views would otherwise free)
+    pending.keep = (pending.keep, uploads, prepared, inputs, args, extra)
+
+    def frame() -> Frame:
+        return Frame(with_labels(scene, pending.result(), asked), precision=precision, device=ctx.device.name.strip(),
+                     view=(scene.camera, scene.image.width, scene.image.height, col0, row0))
+
+    return frame
 
 
 def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):
@@ -121,14 +138,37 @@ def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", devi
     """Yield the Frame of each camera (a pyclray.Camera, or a Scene whose camera and image size are
     taken) in order: many views of one scene's shapes, prepared on the device once (a data set of
     depth, normal and id maps from hundreds of poses). Each frame is exactly
-    ``render(scene, aovs, precision, device, camera=camera)``."""
+    ``render(scene, aovs, precision, device, camera=camera)``.
+
+    The next view is enqueued before a frame is returned: the host's work for it (checks, camera,
+    the per-view pass's launch) and the return of this one overlap the device's run of this one,
+    and the device goes from one view's kernel to the next without waiting for the host. An error
+    of a view is raised after the frames before it."""
     scene = as_scene(scene)
-    for camera in cameras:
-        view = replace(scene, camera=camera.camera, image=camera.image) if isinstance(camera, Scene) else camera
-        if isinstance(view, Scene):
-            yield render(view, aovs, precision, device, acceleration=acceleration)
-        else:
-            yield render(scene, aovs, precision, device, acceleration=acceleration, camera=view)
+    pending = None
+    try:
+        for camera in cameras:
+            view = replace(scene, camera=camera.camera, image=camera.image) if isinstance(camera, Scene) else camera
+            try:
+                if isinstance(view, Scene):
+                    started = _start(view, aovs, precision, device, acceleration=acceleration)
+                else:
+                    started = _start(scene, aovs, precision, device, acceleration=acceleration, camera=view)
+            except Exception:
+                if pending is not None:  # the frames before it first
+                    frame, pending = pending(), None
+                    yield frame
+                raise
+            if pending is not None:
+                frame, pending = pending(), None
+                yield frame
+            pending = started
+        if pending is not None:
+            frame, pending = pending(), None
+            yield frame
+    finally:
+        if pending is not None:  # left early: the last view's kernel still writes into its arrays
+            pending()
 
 
 def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):

@@ -158,11 +158,36 @@ def _zero_copy(ctx) -> bool:
 
 def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None, extra=None):
     """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
+    return enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size, extra).result()
+
+
+class Pending:
+    """A kernel's run in flight: result() waits for it (for it only: the work enqueued after it on the
+    device's in-order queue may still run) and returns its images, AOV name -> array."""
+
+    def __init__(self, images: dict, done=(), keep=()):
+        self.images = images
+        self.done = list(done)  # the events after which the images are current
+        self.keep = keep  # what must live until then (the output buffers, uploads of host arrays)
+
+    def result(self) -> dict:
+        if self.done:
+            cl.wait_for_events(self.done)
+            self.done, self.keep = [], ()
+        return self.images
+
+
+def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None,
+                   extra=None) -> Pending:
+    """Enqueue the kernel with output buffers for the asked images, new arrays (see Pending)."""
     outputs = {k: TABLE[k].empty((count,), precision) for k in aovs}
+    images = {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
     kernel = kernel_for(ctx, variant)
     if _zero_copy(ctx):
         # a CPU device writes straight into the new arrays (USE_HOST_PTR: PoCL uses them as the
-        # buffers' memory), then a map makes them current as OpenCL requires: no copy of the images
+        # buffers' memory), then a map and an unmap, enqueued behind the kernel, make them current as
+        # OpenCL requires: no copy of the images, and nothing to wait for but the unmaps (a view
+        # enqueued next runs on while its images are returned, engine/render.py: render_views)
         flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
         buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
         launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
@@ -170,15 +195,14 @@ def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_pr
             cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
             for array, buffer in zip(outputs.values(), buffers)
         ]
+        unmaps = [mapped.base.release() for mapped in maps]
+        ctx.queue.flush()  # the device starts on it now
+        return Pending(images, unmaps, (buffers, maps))
+    # other devices: device buffers kept and reused, and a copy of each image
+    with render_lock:
+        buffers = _output_buffers(ctx, count, aovs, precision)
+        launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
+        for array, buffer in zip(outputs.values(), buffers):
+            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
         ctx.queue.finish()
-        for mapped in maps:
-            mapped.base.release()  # unmap
-        ctx.queue.finish()
-    else:  # other devices: device buffers kept and reused, and a copy of each image
-        with render_lock:
-            buffers = _output_buffers(ctx, count, aovs, precision)
-            launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
-            for array, buffer in zip(outputs.values(), buffers):
-                cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
-            ctx.queue.finish()
-    return {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
+    return Pending(images)
