@@ -83,8 +83,8 @@ def packet_shape(lanes: int) -> tuple[int, int]:
 class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, one per
-    # work-item), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
+    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, traced one
+    # at a time, CAST_GROUP of them per work-item: engine/cast.py), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
     # camera's frame: kernels/rebase.cl)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]

@@ -218,7 +218,7 @@ inline vec3v v3_normalize(vec3v v)
 }
 
 /* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
- * cast traces one ray per work-item (LANES 1) from each shape's own anchor (kernels/pyclray.cl) and
+ * cast traces one ray at a time (LANES 1; a work-item traces CAST_GROUP of them) from each shape's own anchor (kernels/pyclray.cl) and
  * keeps the ray as given in float64: its world origin (unbounded shapes, which have no anchor, read
  * it) and its unit direction, of which dir is the rounding. */
 typedef struct {
