@@ -676,9 +676,34 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
     PYCLRAY_RENDER_WRITE(place, from, to)
 }
 
+/* The work-groups in a scattered order: group g of n works on the block of packets at g s mod n, s the
+ * first integer from 5n/8 up that is prime to n (a bijection; consecutive groups land far apart).
+ * Why: PoCL's CPU device hands its threads runs of consecutive work-groups (64 at a time for a
+ * 256x256 image's 256 groups, a quarter of the image); in image order a thread that drew the sky
+ * idled while the other traced the ground, and a render kept 1.5 of the 2 cores busy. Scattered,
+ * each run samples the whole image: 1.8 cores, a same-camera render of 100,000 spheres at 256x256
+ * 15% faster and a view of render_views 12% (medians of alternating runs against image order, quiet machine). Every packet is still traced once, by the same code. */
+inline int scattered_group(const int g, const int n)
+{
+    int s = n - n / 4 - n / 8;
+    for (;; ++s) {
+        int a = s, b = n;  /* Euclid's gcd(s, n) */
+        while (b != 0) {
+            const int t = a % b;
+            a = b;
+            b = t;
+        }
+        if (a == 1) break;
+    }
+    return (int)(((long)g * (long)s) % (long)n);
+}
+
 __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
-    render_packet(get_global_id(0), get_global_id(1), camera PYCLRAY_RENDER_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    const int nx = get_num_groups(0);
+    const int g = scattered_group(get_group_id(1) * nx + get_group_id(0), nx * get_num_groups(1));
+    render_packet((g % nx) * get_local_size(0) + get_local_id(0), (g / nx) * get_local_size(1) + get_local_id(1),
+                  camera PYCLRAY_RENDER_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
 }
 
 #else
