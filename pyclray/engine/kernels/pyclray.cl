@@ -676,13 +676,17 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
     PYCLRAY_RENDER_WRITE(place, from, to)
 }
 
-/* The work-groups in a scattered order: group g of n works on the block of packets at g s mod n, s the
- * first integer from 5n/8 up that is prime to n (a bijection; consecutive groups land far apart).
- * Why: PoCL's CPU device hands its threads runs of consecutive work-groups (64 at a time for a
- * 256x256 image's 256 groups, a quarter of the image); in image order a thread that drew the sky
- * idled while the other traced the ground, and a render kept 1.5 of the 2 cores busy. Scattered,
- * each run samples the whole image: 1.8 cores, a same-camera render of 100,000 spheres at 256x256
- * 15% faster and a view of render_views 12% (medians of alternating runs against image order, quiet machine). Every packet is still traced once, by the same code. */
+/* The work-groups in a scattered order: group g of n works on the block of packets at g s mod n,
+ * s the first integer from 5n/8 up that is prime to n (a bijection; consecutive groups land far
+ * apart). Why: PoCL's CPU device hands its threads runs of consecutive work-groups (64 at a time
+ * for a 256x256 image's 256 groups, a quarter of the image); in image order a thread that drew the
+ * sky idled while the other traced the ground, and a render kept 1.5 of the 2 cores busy.
+ * Scattered, each run samples the whole image: 1.8 cores, a same-camera render of 100,000 spheres
+ * at 256x256 15% faster, a view of render_views 12% (medians of alternating runs against image
+ * order, quiet machine). Every packet is still traced once, by the same code. Not for cast and
+ * occluded: their batches come in ray order, and a thread's consecutive groups reuse what the ones
+ * before brought into its caches (scattered, 100,000 view rays over 16,384 spheres took 11.8 ms
+ * instead of 8.7, occluded 3.2-4.2 instead of 2.3). */
 inline int scattered_group(const int g, const int n)
 {
     int s = n - n / 4 - n / 8;
