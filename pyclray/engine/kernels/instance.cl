@@ -272,13 +272,11 @@ inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayP
 {
     vec3v out = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     if (!flags->smooth) return out;
-    const RayPacket object = instance_ray(inst, ray);
-    const double3 eye = inst->eye.xyz;
+    realv u, v;  /* each lane's, from its winning triangle */
+    instance_barycentric(inst, ray, which, vertices, faces, &u, &v);
+    const realv w = (SPLAT(1) - u) - v;
     INSTANCE_EACH_WINNER(which, {
         const int4 f = faces[inst->first + q];
-        realv u, v;
-        mesh_barycentric_of(INSTANCE_CORNERS(vertices, f, eye), &object, &u, &v);
-        const realv w = (SPLAT(1) - u) - v;
         const real4 na = instance_vertex_normal(inst, normals[f.x]), nb = instance_vertex_normal(inst, normals[f.y]);
         const real4 nc = instance_vertex_normal(inst, normals[f.z]);
         const vec3v n = v3((w * na.x + u * nb.x) + v * nc.x, (w * na.y + u * nb.y) + v * nc.y, (w * na.z + u * nb.z) + v * nc.z);
