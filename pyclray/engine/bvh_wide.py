@@ -81,17 +81,28 @@ def collapse(tree: BVH) -> WideBVH:
     return WideBVH(binary, code.astype(np.int32), len(levels))
 
 
-def pack_wide(tree: BVH, wide: WideBVH, origin) -> np.ndarray:
+def pack_wide(tree: BVH, wide: WideBVH, origin, rows=None) -> np.ndarray:
     """The wide nodes as the kernel reads them (WIDE_NODE), boxes relative to origin (float64,
-    before rounding outward): the eye for render, the scene's anchor for cast."""
-    out = np.zeros(len(wide.binary), dtype=layout(WIDE_NODE, "fp32").dtype)
+    before rounding outward): the scene's anchor (render and cast); rows: only these wide nodes (an
+    animation's refitted ones), default all."""
+    binary, child = (wide.binary, wide.child) if rows is None else (wide.binary[rows], wide.child[rows])
+    out = np.zeros(len(binary), dtype=layout(WIDE_NODE, "fp32").dtype)
     origin = np.asarray(origin, np.float64)
-    b = np.maximum(wide.binary, 0)
+    b = np.maximum(binary, 0)
     lo, hi = outward32(tree.lo[b] - origin, tree.hi[b] - origin)
-    empty = wide.binary < 0
+    empty = binary < 0
     lo[empty], hi[empty] = _FLOAT_MAX, -_FLOAT_MAX
     for axis, name in enumerate("xyz"):
         out[f"lo_{name}"] = lo[..., axis]
         out[f"hi_{name}"] = hi[..., axis]
-    out["child"] = wide.child
+    out["child"] = child
     return out
+
+
+def row_of(wide: WideBVH, count: int) -> np.ndarray:
+    """Per node of the binary tree (of count nodes), the wide node whose slot holds it (-1 for the
+    root, which none holds): the rows an animation's refit of some binary nodes rewrites."""
+    held = wide.binary >= 0
+    rows = np.full(count, -1, np.int64)
+    rows[wide.binary[held]] = np.nonzero(held)[0]  # (the row of each held slot, in the same order)
+    return rows

@@ -65,9 +65,8 @@ def instance_bytes(prepared) -> dict:
     if kind is None:
         return {}
     count = kind.count
-    tree_nodes = prepared.bvh.tree.nodes
     entries = len(prepared.bvh.leaf_type) or 1
     own = kind.world.itemsize + kind.frame_host.itemsize
-    tlas = (tree_nodes * prepared._nodes_host.itemsize + entries * 4) / entries  # the tree and refs per entry
+    tlas = (prepared._wide_host.nbytes + entries * 4) / entries  # the (wide) tree and refs per entry
     return {"instances": count, "own_bytes_per_instance": own, "tlas_bytes_per_instance": tlas,
             "bytes_per_instance": own + tlas, "shared_bytes": sum(a.nbytes for a in kind.shared_host)}

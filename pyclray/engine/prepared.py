@@ -223,7 +223,8 @@ class PreparedScene:
         # the types lit by their shapes' own normals (smooth meshes): the shaded image's variant
         self.smooth = tuple(t for t in self.types if self.kinds[t].smooth is not None)
         self.bounded = sum(k.count for k in self.kinds.values() if k.cls.bounded)
-        self.nodes = self.refs = None
+        self.wide_nodes = self.refs = None
+        self._nodes = self._nodes_host = None  # the binary nodes: made when first asked (see nodes)
         # The BVH's boxes around a fixed anchor, the root box's centre, rounded outward to float once:
         # a view passes the eye relative to the anchor (and a margin over its rounding) instead of
         # re-expressing every box around the eye (kernels/bvh.h: box_entries).
@@ -232,9 +233,10 @@ class PreparedScene:
             with np.errstate(over="ignore", invalid="ignore"):
                 anchor = 0.5 * self.bvh.tree.lo[0] + 0.5 * self.bvh.tree.hi[0]
             self.anchor = anchor if np.isfinite(anchor).all() else np.zeros(3)
+            # render's camera packets traverse the wide tree (kernels/bvh.h: PYCLRAY_TRAVERSE_PACKET_WIDE)
             with np.errstate(over="ignore", invalid="ignore"):
-                self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
-            self.nodes = _buffer(ctx, self._nodes_host, writable=True)
+                self._wide_host = aligned(self.bvh.nodes(self.anchor))
+            self.wide_nodes = _buffer(ctx, self._wide_host, writable=True)
             # one bounded type: leaf position q is entry q of its array, which the kernel knows
             # (PYCLRAY_ONE_BOUNDED): a placeholder instead of the refs
             one = len(self.bvh.types) == 1
@@ -247,6 +249,19 @@ class PreparedScene:
         self._refit = None
         self.materials = _buffer(ctx, self._materials_host)
         self.reach = self._reach()
+
+    @property
+    def nodes(self) -> cl.Buffer | None:
+        """The binary tree's nodes on the device (the same boxes as the wide tree's, around the anchor),
+        made when first asked: only shadow rays traverse it (kernels/shading.h), so a scene that casts
+        none holds the wide tree only (a million spheres: 12.7 bytes a sphere fewer)."""
+        if self._nodes is None and self.bvh.types:
+            with render_lock:
+                if self._nodes is None:
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
+                    self._nodes = _buffer(self.ctx, self._nodes_host, writable=True)
+        return self._nodes
 
     # A refit keeps the tree's topology: shapes that wander far apart make its boxes overlap and
     # rays visit more of them. A frame rebuilds the scene where the refitted tree's SAH cost exceeds
@@ -293,7 +308,8 @@ class PreparedScene:
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
             total += sum(a.nbytes for a in kind.shared_host)
         if self.bvh.types:
-            total += self._nodes_host.nbytes + self._refs_host.nbytes
+            total += self._wide_host.nbytes + self._refs_host.nbytes
+            total += 0 if self._nodes_host is None else self._nodes_host.nbytes
         return total
 
     # -- the range check, once per view in O(1) ---------------------------------------------------

@@ -13,6 +13,7 @@ import pyopencl as cl
 from . import shading
 from .buffers import shares_host_memory
 from .bvh import outward32, sah_cost, widened
+from .bvh_wide import pack_wide, row_of
 from .programs import Variant, kernels_for
 from .request import input_buffer
 
@@ -86,17 +87,26 @@ def update(prepared, shapes: tuple, changed) -> bool:
         if not shared and (prepared.on_device or kind.framed):
             prepared.stale.setdefault(name, set()).update(where.tolist())
     if refitted is not None and len(refitted):
-        # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view
+        # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view;
+        # the wide tree's nodes that hold a refitted node, and the binary tree's if it was made
         tree = prepared.bvh.tree
-        nodes = prepared._nodes_host[refitted]
-        nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - prepared.anchor,
-                                                           tree.hi[refitted] - prepared.anchor)
-        prepared._nodes_host[refitted] = nodes
+        rows = state.wide_row[refitted]
+        rows = np.unique(rows[rows >= 0])
+        wide = pack_wide(tree, prepared.bvh.wide, prepared.anchor, rows)
+        prepared._wide_host[rows] = wide
+        written = [(prepared.wide_nodes, prepared._wide_host, rows, wide)]
+        if prepared._nodes_host is not None:
+            nodes = prepared._nodes_host[refitted]
+            nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - prepared.anchor,
+                                                               tree.hi[refitted] - prepared.anchor)
+            prepared._nodes_host[refitted] = nodes
+            written.append((prepared.nodes, prepared._nodes_host, refitted, nodes))
         if not shared:
-            if prepared.on_device:
-                scatter(prepared, prepared.nodes, refitted, nodes)
-            else:  # no float64 program to scatter with: the whole array (devices without float64 only)
-                cl.enqueue_copy(prepared.ctx.queue, prepared.nodes, prepared._nodes_host.copy())
+            for buffer, host, index, rows_written in written:
+                if prepared.on_device:
+                    scatter(prepared, buffer, index, rows_written)
+                else:  # no float64 program to scatter with: the whole array (devices without float64 only)
+                    cl.enqueue_copy(prepared.ctx.queue, buffer, host.copy())
         if refitted[0] == 0:  # the root's box (refit returns the nodes sorted): the range check's
             prepared.reach = prepared._reach()
     if prepared.on_device and prepared.view is not None:
@@ -181,6 +191,7 @@ class RefitState:
         self.box = np.concatenate([tree.lo, -tree.hi], axis=1)
         self.children = np.stack([tree.first, tree.first + 1])  # an internal node's two children
         self.built_cost = sah_cost(tree) if tree.nodes else 0.0
+        self.wide_row = row_of(bvh.wide, tree.nodes)  # the wide node holding each binary node
         # the SAH cost's sum (sah_cost before the division by the root's area), kept up to date as
         # nodes change: a frame's check costs O(changed nodes), not a pass over the tree
         self.weight = np.where(tree.count > 0, tree.count, 1).astype(np.float64)

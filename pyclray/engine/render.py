@@ -83,7 +83,7 @@ def _start(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
                       framed=prepared.framed, indexed=prepared.indexed)
     # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
-    shape_args = inputs.shape_args(prepared, acceleration)
+    shape_args = inputs.shape_args(prepared, acceleration, shadows)
     shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]
     tile = culling.TILE
     tiles_x = -(-scene.image.width // tile)

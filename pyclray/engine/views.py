@@ -165,15 +165,15 @@ class ViewInputs:
             "eye_low": np.array((*(self.eye - eye_high.astype(np.float64)), 0), real),
         }
 
-    def shape_args(self, prepared: PreparedScene, acceleration: str) -> list:
-        """The kernel's shape arguments: the BVH (nodes, refs) and per type its frame buffer and
-        count, or per type its frame buffer and tile lists (a tuple: the argument of shadow rays
-        only, each type's count)."""
+    def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> list:
+        """The kernel's shape arguments: the BVH (the wide nodes, with shadows the binary ones too,
+        refs) and per type its frame buffer and count, or per type its frame buffer and tile lists
+        (a tuple: the argument of shadow rays only, each type's count)."""
         args = []
         if prepared.framed:  # the eye's frame (the eye, the camera's axes), float64: each shape is framed on it
             args += [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (self.eye, *self.rows)]
         if acceleration == "bvh" and prepared.bvh.types:
-            args += [prepared.nodes, prepared.refs]
+            args += [prepared.wide_nodes, *([prepared.nodes] if shadows else []), prepared.refs]
         for kind in prepared.kinds.values():
             # its entries: the world entries, ids and primitive indices (framed) or the frame buffer
             if kind.indexed is not None:

@@ -135,9 +135,12 @@
 /* the wide BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding
  * radius (w) */
 #define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, nodes) P(__global const int*, refs) P(__global const double4*, anchors)
+#elif defined(PYCLRAY_SHADOWS)
+/* the wide BVH (camera packets traverse it: kernels/bvh.h's PYCLRAY_TRAVERSE_PACKET_WIDE), and the
+ * binary one of the same boxes for shadow rays (kernels/shading.h) */
+#define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, wide_nodes) P(__global const BvhNode*, nodes) P(__global const int*, refs)
 #else
-/* the binary BVH (packets traverse it) */
-#define PYCLRAY_BVH_ARGS(P) P(__global const BvhNode*, nodes) P(__global const int*, refs)
+#define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, wide_nodes) P(__global const int*, refs)
 #endif
 #else
 #define PYCLRAY_BVH_ARGS(P)
@@ -671,7 +674,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __g
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
     /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
     const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
-    PYCLRAY_TRAVERSE_PACKET(nodes, box, best, PYCLRAY_VISIT)
+    PYCLRAY_TRAVERSE_PACKET_WIDE(wide_nodes, box, best, PYCLRAY_VISIT)
 #endif
     PYCLRAY_RENDER_WRITE(place, from, to)
 }
