@@ -90,12 +90,11 @@ def _start(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     args = [inputs.camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
             np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
     # the arguments before each image's buffer, in the kernel's order (kernels/pyclray.cl)
-    lighting = inputs.lighting
-    extra = {
-        "position": [lighting["eye_high"], lighting["eye_low"]],
-        "shaded": [lighting[k] for k in ("materials", "lights", "n_lights", "ambient", "background")]
-        + [prepared.kinds[t].smooth for t in smooth],
-    }
+    extra = {}
+    if "position" in aovs:
+        extra["position"] = inputs.eye_parts()
+    if "shaded" in aovs:
+        extra["shaded"] = inputs.lighting(prepared) + [prepared.kinds[t].smooth for t in smooth]
     global_size, local_size = launch_size(lanes, col0, row0, cols, rows, ctx.device.max_work_group_size)
     # the frame buffers hold this view from its pass to its kernel: both enqueued under the lock, on the
     # device's one in-order queue, which runs another view's pass only after this kernel

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import weakref
 from collections import OrderedDict
+from types import SimpleNamespace
 
 import numpy as np
 import pyopencl as cl
@@ -151,19 +152,31 @@ class ViewInputs:
             for kind in prepared.kinds.values():
                 start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
-        lights = shading.pack_lights(scene, precision)
-        real = REAL[precision]
-        eye_high = self.eye.astype(real)
-        self.lighting = {
-            "materials": prepared.materials,
-            "lights": input_buffer(ctx, lights),
-            "n_lights": np.int32(len(lights)),
-            "ambient": np.array((*scene.shading.ambient, 0), real),
-            "background": np.array((*scene.shading.background, 0), real),
-            # the eye as a sum of two reals, for the position image (kernels/pyclray.cl)
-            "eye_high": np.array((*eye_high, 0), real),
-            "eye_low": np.array((*(self.eye - eye_high.astype(np.float64)), 0), real),
-        }
+        # what the lights are packed from, when asked (not the scene: the last inputs, kept by _last,
+        # must not keep a dropped scene's shapes alive)
+        self._made = (ctx, scene.camera, scene.lights, scene.shading, precision)
+        self._lighting = self._eye_parts = None
+
+    def eye_parts(self) -> list:
+        """The eye as a sum of two reals, for the position image (kernels/pyclray.cl): made when a
+        view first asks for that image."""
+        if self._eye_parts is None:
+            real = REAL[self._made[-1]]
+            eye_high = self.eye.astype(real)
+            self._eye_parts = [np.array((*eye_high, 0), real), np.array((*(self.eye - eye_high.astype(np.float64)), 0), real)]
+        return self._eye_parts
+
+    def lighting(self, prepared: PreparedScene) -> list:
+        """The shaded image's arguments (kernels/shading.h): materials, the lights in the camera's
+        frame, their count, ambient and background; made when a view first asks for that image (a
+        view of depth, normal and id packs no lights: render_views' host work per view)."""
+        if self._lighting is None:
+            ctx, camera, lights, shades, precision = self._made
+            packed = shading.pack_lights(SimpleNamespace(camera=camera, lights=lights), precision)
+            real = REAL[precision]
+            self._lighting = [prepared.materials, input_buffer(ctx, packed), np.int32(len(packed)),
+                              np.array((*shades.ambient, 0), real), np.array((*shades.background, 0), real)]
+        return self._lighting
 
     def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> list:
         """The kernel's shape arguments: the BVH (the wide nodes, with shadows the binary ones too,
