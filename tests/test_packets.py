@@ -106,3 +106,32 @@ def test_the_lane_width_follows_the_device_and_the_environment(monkeypatch):
         monkeypatch.setenv("PYCLRAY_LANES", width)
         with pytest.raises(pyclray.DeviceError, match=f"PYCLRAY_LANES: expected one of .* for {precision}"):
             programs.lanes_for(ctx.device, precision)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("offset", [0.0, 1e5])
+def test_the_wide_trees_packet_test_drops_no_hit(precision, offset):
+    """Render's packets traverse the wide BVH with a loose test of a node's 8 children against all
+    lanes at once (interval arithmetic, kernels/bvh.h: wide_packet_entries) and a lane-by-lane test
+    of each child popped: every hit is still found. Through the BVH the images are those of the tile
+    lists (each tile's shapes tested one after the other, no tree), bit for bit, from cameras looking
+    along each axis (packets with lanes of both signs on an axis, or flat along it: the interval test
+    leaves such an axis out) and obliquely, near the origin and 1e5 away."""
+    need(precision)
+    rng = np.random.default_rng(7)
+    shift = offset * np.array([1.0, -0.5, 0.75])
+    centres = rng.uniform(-6, 6, (3000, 3)) + shift
+    radii = rng.uniform(0.02, 0.4, 3000)
+    shapes = (pyclray.Plane((0.0, 1.0, 0.0), -float(shift[1]) + 7.0), pyclray.Spheres(centres, radii))
+    target = tuple(shift)
+    cameras = [pyclray.Camera(tuple(shift + [0.0, 0.0, 20.0]), target, fov=60.0),
+               pyclray.Camera(tuple(shift + [0.0, 20.0, 0.0]), target, up=(0.0, 0.0, -1.0), fov=60.0),
+               pyclray.Camera(tuple(shift + [-20.0, 0.0, 0.0]), target, fov=60.0),
+               pyclray.Camera(tuple(shift + [13.0, 7.0, -11.0]), target, fov=40.0)]
+    for camera in cameras:
+        # 62 columns: a packet (4 wide) straddles the centre, its lanes of both signs along the
+        # camera's x; 47 rows: the centre row's lanes run flat along its y (and so along world axes)
+        scene = pyclray.Scene(camera, pyclray.Image(62, 47), shapes)
+        through_tree = pyclray.render(scene, ALL, precision, acceleration="bvh")
+        assert (through_tree["id"] >= 1).sum() > 500  # the spheres fill much of the image
+        same(through_tree, pyclray.render(scene, ALL, precision, acceleration="tiles"))
