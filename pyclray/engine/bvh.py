@@ -58,13 +58,15 @@ BINARY_STACK = 64  # kernels/bvh.h: BVH_BINARY_STACK: the deepest binary tree th
 # traversal's stack holds 7 entries a level (bvh_wide.STACK = 256 >= 7 * 36 + 1)
 MAX_SAH_DEPTH = 36
 SAH_FROM = 16_384  # shapes from which build() takes the binned SAH (bvh_sah): see the docstring
-# The scene's SAH tree is built for render's packets (kernels/bvh.h): a packet's visit of a node (two
-# box tests of all its lanes, their reductions, a branch the predictor often misses) costs about as
-# much as four of its shape tests, and a leaf is tested shape after shape against the whole packet,
-# so leaves up to 7 (the most the wide tree's leaf code holds) with a node's cost of 4 shape tests.
-# Measured (CPU time of 512x512 primary rays, one process, variants alternating): against leaves of
-# 4 (7 for meshes) at the builder's cost of 2, 100,000 spheres -12%, the 80,000-triangle bunny -8%,
-# 1,000,000 triangles -5%; a cost of 6 or 10 changes little more. Half the nodes, too.
+# The scene's SAH tree is built for render's packets (kernels/bvh.h; measured when they traversed the
+# binary tree): a packet's visit of a node (two box tests of all its lanes, their reductions, a branch
+# the predictor often misses) costs about as much as four of its shape tests, and a leaf is tested
+# shape after shape against the whole packet, so leaves up to 7 (the most the wide tree's leaf code
+# holds) with a node's cost of 4 shape tests. Measured (CPU time of 512x512 primary rays, one process,
+# variants alternating): against leaves of 4 (7 for meshes) at the builder's cost of 2, 100,000
+# spheres -12%, the 80,000-triangle bunny -8%, 1,000,000 triangles -5%; a cost of 6 or 10 changes
+# little more. Half the nodes, too. Through the wide tree (render_views at 100,000 spheres, one PoCL
+# thread): a cost of 2 (leaves of 2.75 on average, not 5.04) +16% CPU time, 8 the same.
 SCENE_LEAF_SIZE = 7
 SCENE_TRAVERSAL = 4.0
 
@@ -357,7 +359,7 @@ def outward32(lo: np.ndarray, hi: np.ndarray):
 
 def pack_nodes(tree: BVH, origin) -> np.ndarray:
     """The binary nodes as the kernel reads them (NODE), boxes relative to origin (float64, taken
-    before rounding outward): render's packets traverse them around the eye."""
+    before rounding outward): shadow rays' packets traverse them around the scene's anchor."""
     out = aligned_empty(tree.nodes, layout(NODE, "fp32").dtype)  # every word written below; no copy to align it
     assert out.itemsize == 32  # two float4 (pack_binary writes its words)
     origin = np.asarray(origin, np.float64)
