@@ -34,3 +34,30 @@ def indexed_smooth(meshes, precision: str):
     out = np.zeros((sum(len(n) for n in normals), 4), np.float64 if precision == "fp64" else np.float32)
     out[:, :3] = np.concatenate(normals)
     return out
+
+
+def cast_blocks(world, ids, entries, starts):
+    """Mesh.pack_cast_blocks: per block (entries[starts[i]:starts[i + 1]], triangles of one mesh) at
+    a 64-byte boundary, 1 + 9 count float64: a header (count, the mesh's id: two int32), then the
+    rows a.x, a.y, a.z, b.x, ..., c.z of its count triangles (kernels/mesh.cl's cast blocks); zero-area
+    triangles (a zero world normal) are left out, as the kernel would never hit them. Returns
+    (blocks, places: each block's start in 64-byte units), the blocks padded by eight doubles (the
+    kernel reads whole 8-wide rows)."""
+    entries = np.asarray(entries, np.int64)
+    starts = np.asarray(starts, np.int64)
+    block_of = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    hit = (world["a"][entries, 3] != 0) | (world["b"][entries, 3] != 0) | (world["c"][entries, 3] != 0)
+    kept, block_of = entries[hit], block_of[hit]
+    count = np.bincount(block_of, minlength=len(starts) - 1)
+    first = np.concatenate([[0], np.cumsum(count)])
+    size = -(-(1 + 9 * count) // 8)  # in units of 8 doubles (64 bytes)
+    places = np.concatenate([[0], np.cumsum(size)])
+    out = np.zeros(8 * int(places[-1]) + 8)
+    words = out.view(np.int32)  # the header's two ints: the first double's (little-endian) halves
+    words[16 * places[:-1]] = count
+    words[16 * places[:-1] + 1] = ids[entries[starts[:-1]]]
+    lane = np.arange(len(kept)) - first[block_of]
+    base = 8 * places[block_of] + 1 + lane
+    for row, (name, axis) in enumerate((n, a) for n in "abc" for a in range(3)):
+        out[base + row * count[block_of]] = world[name][kept, axis]
+    return out, places[:-1]
