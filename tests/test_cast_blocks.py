@@ -76,8 +76,9 @@ def test_blocks_give_the_bits_of_one_triangle_at_a_time(precision, monkeypatch):
 
 def test_the_blocks_hold_the_leaves_triangles():
     """Each leaf's refs, read back through the wide tree's renumbered codes: the blocks of a leaf
-    hold its triangles of each mesh, in the leaf's order, less the zero-area ones, with their
-    mesh's id; the other types' entries keep their refs."""
+    hold its triangles of each mesh (their corners, through the block's vertices, each stored
+    once), in the leaf's order, less the zero-area ones, with their mesh's id; the other types'
+    entries keep their refs."""
     scene = mixed_scene()
     ctx = context_for()
     prepared = prepared_scene(ctx, scene, "fp32")
@@ -102,9 +103,12 @@ def test_the_blocks_hold_the_leaves_triangles():
                 expected.setdefault(int(ids[r]), []).append(r)
         found = {}
         for place in got[(got & 15) == kind_mesh] >> 4:
-            n, mesh_id = words[16 * place], words[16 * place + 1]
-            rows = data[8 * place + 1: 8 * place + 1 + 9 * n].reshape(9, n)
-            found[int(mesh_id)] = rows
+            head, mesh_id = words[16 * place], words[16 * place + 1]
+            n, unique = head & 255, head >> 8
+            vertices = data[8 * place + 1: 8 * place + 1 + 3 * unique].reshape(3, unique).T
+            corners = data.view(np.uint8)[8 * (8 * place + 1 + 3 * unique):][: 3 * n].reshape(3, n).T
+            assert len(np.unique(vertices, axis=0)) == unique  # each vertex once
+            found[int(mesh_id)] = vertices[corners].reshape(n, 9).T
         assert set(found) >= set(expected)
         for mesh_id, entries in expected.items():
             corners = np.stack([world[v][entries, :3] for v in "abc"], 1).reshape(len(entries), 9)

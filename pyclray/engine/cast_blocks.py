@@ -74,7 +74,8 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
         entries = bvh.leaf_index[positions]
         starts = np.concatenate([[0], np.cumsum(lengths)])
         kind = kinds[name]
-        data, places = kind.cls.pack_cast_blocks(worlds[name], np.asarray(kind.ids), entries, starts)
+        vertices, corners = _corners(kind, worlds[name])
+        data, places = kind.cls.pack_cast_blocks(vertices, corners, np.asarray(kind.ids), entries, starts)
         if len(places) and places[-1] >= MAX_PLACE:
             raise PyclrayError(f"the scene's {name}es are too many for cast's blocks ({len(entries):,} entries)")
         new_refs[runs] = places * 16 + 1 + list(shape_types).index(name)
@@ -91,3 +92,16 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
     j = leaf_at[(~child[leaf_code].astype(np.int64)) >> 3]
     child[leaf_code] = ~(new_first[j] * 8 + new_count[j])
     return (new_refs if len(new_refs) else np.zeros(1, np.int64)).astype(np.int32), anchors, blocks
+
+
+def _corners(kind, world) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V, 3+) float64, corners (F, 3)): the type's entries (in leaf order) as vertex
+    indices, -1 where never hit: an indexed type's shared vertices and faces (engine/indexed.py), else
+    each entry's own three corners from its world entry (a zero world normal: never hit)."""
+    if kind.indexed is not None:
+        faces = kind.indexed.faces
+        return kind.indexed.world_vertices, np.where(faces[:, 3:] >= 0, faces[:, :3], -1)
+    vertices = np.stack([world[name][:, :3] for name in ("a", "b", "c")], 1).reshape(-1, 3)
+    corners = np.arange(len(vertices)).reshape(-1, 3)
+    flat = (world["a"][:, 3] == 0) & (world["b"][:, 3] == 0) & (world["c"][:, 3] == 0)
+    return vertices, np.where(flat[:, None], -1, corners)

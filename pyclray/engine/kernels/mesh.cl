@@ -200,36 +200,23 @@ inline TriangleNormals mesh_smooth_of(const int4 face, __global const real4* nor
  *
  * cast meets a leaf's triangles of one mesh as one block (pyclray/engine/cast_blocks.py groups them,
  * pyclray/model/shapes/mesh_pack.py's cast_blocks packs them): at a 64-byte boundary of the blocks
- * array (the type's world argument in cast), 1 + 9 count doubles, the first the header (count and
- * the mesh's id as two ints), then per coordinate row (a.x, a.y, a.z, b.x, ..., c.z) the count
- * triangles' float64 world values, one after the other: the block is read in whole cache lines, its
- * rows in 8-wide loads (lanes past count read the next rows or the padding and are dropped). Each
- * lane is the triangle's test of kernels/mesh.cl as cast runs it on a framed copy: its vertices minus
- * the ray's moved origin in float64, rounded once (the same bits for a vertex shared with a triangle
- * of another block), then the watertight test with its exact fallback, the same operations in the
- * same order (no contraction: kernels/lanes.h), so every lane's s has the bits of the triangle's own
- * test. A ref of the type is the block's place in 64-byte units; a winner's key is that place times 8
- * plus its lane. Zero-area triangles are left out of the blocks (never hit). */
+ * array (the type's world argument in cast), float64s: the header (two ints: count | unique << 8,
+ * the mesh's id), the block's unique vertices (float64 world coordinates, rows x, y, z of unique
+ * each: a vertex its triangles share is stored once), then the corners (rows a, b, c of count bytes:
+ * each triangle's vertices among those). 44 bytes a triangle on a closed mesh (a leaf of 5 triangles
+ * has about 7 vertices), read in 3 to 4 cache lines. Each lane is the triangle's test of
+ * kernels/mesh.cl as cast runs it on a framed copy: its vertices minus the ray's moved origin in
+ * float64, rounded once (the same bits for a vertex shared with a triangle of another block), then
+ * the watertight test with its exact fallback, the same operations in the same order (no
+ * contraction: kernels/lanes.h), so every lane's s has the bits of the triangle's own test. A ref of
+ * the type is the block's place in 64-byte units; a winner's key is that place times 8 plus its
+ * lane. Zero-area triangles are left out of the blocks (never hit). */
 #ifdef PYCLRAY_FP64
 typedef double8 blockv;
 typedef long8 blockmask;
-#define MESH_BLOCK_REAL(x) (x)
 #else
 typedef float8 blockv;
 typedef int8 blockmask;
-/* two halves: PoCL's code generator rejects an 8-wide double to float conversion */
-#ifdef PYCLRAY_INLINE_BUILTINS
-#define MESH_BLOCK_REAL(x) ((float8)(__builtin_convertvector((x).lo, float4), __builtin_convertvector((x).hi, float4)))
-#else
-#define MESH_BLOCK_REAL(x) ((float8)(convert_float4((x).lo), convert_float4((x).hi)))
-#endif
-#endif
-/* eight doubles from p, 8-byte aligned: one unaligned vector load on PoCL's CPU device, else vload8 */
-#ifdef PYCLRAY_INLINE_BUILTINS
-typedef double double8_unaligned __attribute__((ext_vector_type(8), aligned(8)));
-#define MESH_BLOCK_LOAD(p) (*(__global const double8_unaligned*)(p))
-#else
-#define MESH_BLOCK_LOAD(p) vload8(0, p)
 #endif
 
 typedef union {
@@ -256,8 +243,9 @@ inline int mesh_block_bits(const blockmask m)
  * lanes hit, as bits, in *hits. */
 inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray, int* hits)
 {
-    const int count = as_int2(block[0]).x;
+    const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
     __global const double* rows = block + 1;
+    __global const uchar* corner = (__global const uchar*)(rows + 3 * unique);
     const real3 d = (real3)(ray->dir.x, ray->dir.y, ray->dir.z);
     /* the axes permuted as mesh_edges_of does: the largest |component| of the direction becomes z */
     const real ax = v_abs(d.x), ay = v_abs(d.y), az = v_abs(d.z);
@@ -269,12 +257,20 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     const double3 o = ray->world;
     const double ox = z_is_x ? o.y : (z_is_y ? o.z : o.x), oy = z_is_x ? o.z : (z_is_y ? o.x : o.y);
     const double oz = z_is_x ? o.x : (z_is_y ? o.y : o.z);
-    /* each vertex minus the origin in float64, rounded once (mesh_rebase) */
-#define MESH_BLOCK_ROW(r, origin) MESH_BLOCK_REAL(MESH_BLOCK_LOAD(rows + (r) * count) - (double8)(origin))
-    const blockv Ax = MESH_BLOCK_ROW(kx, ox), Ay = MESH_BLOCK_ROW(ky, oy), Az = MESH_BLOCK_ROW(kz, oz);
-    const blockv Bx = MESH_BLOCK_ROW(3 + kx, ox), By = MESH_BLOCK_ROW(3 + ky, oy), Bz = MESH_BLOCK_ROW(3 + kz, oz);
-    const blockv Cx = MESH_BLOCK_ROW(6 + kx, ox), Cy = MESH_BLOCK_ROW(6 + ky, oy), Cz = MESH_BLOCK_ROW(6 + kz, oz);
-#undef MESH_BLOCK_ROW
+    __global const double* X = rows + kx * unique;
+    __global const double* Y = rows + ky * unique;
+    __global const double* Z = rows + kz * unique;
+    /* each corner: its vertex minus the origin in float64, rounded once (mesh_rebase); lanes past
+     * count stay 0 (dropped) */
+    MeshBlockLanes Ax_, Ay_, Az_, Bx_, By_, Bz_, Cx_, Cy_, Cz_;
+    Ax_.v = Ay_.v = Az_.v = Bx_.v = By_.v = Bz_.v = Cx_.v = Cy_.v = Cz_.v = (blockv)(0);
+    for (int l = 0; l < count; ++l) {
+        const int a = corner[l], b = corner[count + l], c = corner[2 * count + l];
+        Ax_.s[l] = (real)(X[a] - ox); Ay_.s[l] = (real)(Y[a] - oy); Az_.s[l] = (real)(Z[a] - oz);
+        Bx_.s[l] = (real)(X[b] - ox); By_.s[l] = (real)(Y[b] - oy); Bz_.s[l] = (real)(Z[b] - oz);
+        Cx_.s[l] = (real)(X[c] - ox); Cy_.s[l] = (real)(Y[c] - oy); Cz_.s[l] = (real)(Z[c] - oz);
+    }
+    const blockv Ax = Ax_.v, Ay = Ay_.v, Az = Az_.v, Bx = Bx_.v, By = By_.v, Bz = Bz_.v, Cx = Cx_.v, Cy = Cy_.v, Cz = Cz_.v;
     const blockv Dx = (blockv)(dx), Dy = (blockv)(dy), Dz = (blockv)(dz);
     /* the homogeneous shear and the edge functions (mesh_edges_of) */
     const blockv ax_ = Ax * Dz - Az * Dx, ay_ = Ay * Dz - Az * Dy;
@@ -287,12 +283,12 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
 #ifdef PYCLRAY_MESH_EXACT
     const int zero = mesh_block_bits(e0 == (blockv)(0) || e1 == (blockv)(0) || e2 == (blockv)(0)) & lanes;
     if (zero) {  /* those lanes' edge functions exactly signed, in double */
-        MeshBlockLanes Ax_, Ay_, Bx_, By_, Cx_, Cy_, E0, E1, E2;
-        Ax_.v = ax_; Ay_.v = ay_; Bx_.v = bx_; By_.v = by_; Cx_.v = cx_; Cy_.v = cy_;
+        MeshBlockLanes Sax, Say, Sbx, Sby, Scx, Scy, E0, E1, E2;
+        Sax.v = ax_; Say.v = ay_; Sbx.v = bx_; Sby.v = by_; Scx.v = cx_; Scy.v = cy_;
         E0.v = e0; E1.v = e1; E2.v = e2;
         for (int mask = zero; mask != 0; mask &= mask - 1) {
             const int l = BVH_LOWEST_BIT(mask);
-            mesh_exact_lane(Ax_.s[l], Ay_.s[l], Bx_.s[l], By_.s[l], Cx_.s[l], Cy_.s[l], &E0.s[l], &E1.s[l], &E2.s[l]);
+            mesh_exact_lane(Sax.s[l], Say.s[l], Sbx.s[l], Sby.s[l], Scx.s[l], Scy.s[l], &E0.s[l], &E1.s[l], &E2.s[l]);
         }
         e0 = E0.v;
         e1 = E1.v;
@@ -316,13 +312,14 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
 inline vec3v mesh_block_normal(__global const double* block, const int lane)
 {
 #pragma OPENCL FP_CONTRACT OFF
-    const int count = as_int2(block[0]).x;
-    __global const double* at = block + 1 + lane;
-#define MESH_BLOCK_VERTEX(v) (double3)(at[(3 * (v)) * count], at[(3 * (v) + 1) * count], at[(3 * (v) + 2) * count])
+    const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
+    __global const double* rows = block + 1;
+    __global const uchar* corner = (__global const uchar*)(rows + 3 * unique) + lane;
+#define MESH_BLOCK_VERTEX(v) (double3)(rows[corner[(v) * count]], rows[unique + corner[(v) * count]], rows[2 * unique + corner[(v) * count]])
     const double3 a = MESH_BLOCK_VERTEX(0), e1 = MESH_BLOCK_VERTEX(1) - a, e2 = MESH_BLOCK_VERTEX(2) - a;
 #undef MESH_BLOCK_VERTEX
     const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    const double length = sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+    const double length = CAST_SQRT((n.x * n.x + n.y * n.y) + n.z * n.z);
     return v3((real)(n.x / length), (real)(n.y / length), (real)(n.z / length));
 }
 
@@ -344,8 +341,8 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
 #define PYCLRAY_CAST_ID_BLOCKS(type, key) as_int2(MESH_BLOCKS(type)[8 * (size_t)((key) >> 3)]).y
 #define PYCLRAY_CAST_NORMAL_BLOCKS(Type, type) \
     normal = mesh_block_normal(MESH_BLOCKS(type) + 8 * (size_t)(best_k >> 3), best_k & 7);
-/* a leaf's blocks as it is pushed: at most 7 triangles a leaf, 1 + 9 * 7 doubles, 512 bytes */
-#define PYCLRAY_CAST_PREFETCH_BLOCKS(Type, type) CAST_PREFETCH(MESH_BLOCKS(type) + 8 * (size_t)leaf_k, 512)
+/* a leaf's block as it is pushed: 4 cache lines (5 triangles and 7 vertices take 3.4 on average) */
+#define PYCLRAY_CAST_PREFETCH_BLOCKS(Type, type) CAST_PREFETCH(MESH_BLOCKS(type) + 8 * (size_t)leaf_k, 256)
 #endif
 
 /* The unit world normal normalize(cross(b - a, c - a)), computed in float64 on the host. */

@@ -137,10 +137,10 @@ class Shape:
     cast_blocks: ClassVar[bool] = False
 
     @classmethod
-    def pack_cast_blocks(cls, world, ids, entries, starts) -> tuple[np.ndarray, np.ndarray]:
+    def pack_cast_blocks(cls, vertices, corners, ids, entries, starts) -> tuple[np.ndarray, np.ndarray]:
         """(blocks float64, places int64): the blocks of a cast_blocks type, block i of the world
         entries entries[starts[i]:starts[i + 1]] (all of one shape: ids), each at places[i] (in
-        64-byte units) of the returned array."""
+        64-byte units) of the returned array; the entries' corners index vertices (-1: never hit)."""
         raise NotImplementedError
 
     # the arrays a type shares among its entries (name, OpenCL C element type), passed to the kernel

@@ -292,8 +292,8 @@ class Mesh(Shape):
     cast_blocks = True  # cast tests a leaf's triangles of one mesh at once (kernels/mesh.cl)
 
     @classmethod
-    def pack_cast_blocks(cls, world, ids, entries, starts):
-        return mesh_pack.cast_blocks(world, ids, entries, starts)
+    def pack_cast_blocks(cls, vertices, corners, ids, entries, starts):
+        return mesh_pack.cast_blocks(vertices, corners, ids, entries, starts)
 
     @classmethod
     def bounds_of(cls, world):
