@@ -15,6 +15,7 @@ from ..model.errors import PyclrayError
 
 # a ref holds its index shifted by 4 bits in an int: a block's place (64-byte units) below 2^27
 MAX_PLACE = 2**27
+LANES = 8  # a block's entries at most: kernels/mesh.cl tests them in 8 lanes
 
 
 def leaves(tree) -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +54,10 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
     leaf_sorted, key_sorted = leaf_of[perm], key[perm]
     change = np.ones(n, bool)
     change[1:] = (leaf_sorted[1:] != leaf_sorted[:-1]) | (key_sorted[1:] != key_sorted[:-1])
+    # a block holds at most LANES entries (a leaf holds at most 7 today: the wide tree's leaf code)
+    group_start = np.flatnonzero(change)
+    rank = np.arange(n) - np.repeat(group_start, np.diff(np.append(group_start, n)))
+    change |= (rank > 0) & (rank % LANES == 0)
     run_start = np.flatnonzero(change)
     run_end = np.append(run_start[1:], n)
     head = perm[run_start]  # each run's first position
