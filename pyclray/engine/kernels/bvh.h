@@ -111,14 +111,17 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
 
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
  * variable that VISIT may lower; below 0, as occluded's -inf once it has found a hit, it ends the
- * search within the leaf too): VISIT(q) runs for each shape of each such leaf. Each child
+ * search within the leaf too): VISIT(q) runs for each shape of each such leaf that LEAF_MASK(first,
+ * count) keeps (bit i for position first + i: the kernel's pre-test of all the leaf's shapes at
+ * once, whose mask's set bits are then visited in order, rather than a branch per shape on its own
+ * test that goes either way at random). Each child
  * entered is asked for from memory as it is pushed, PYCLRAY_CHILD_PREFETCH(code) (defined by the
  * kernel: a wide node's boxes, or a leaf's entries: rather than one miss after the other when
  * they are reached, the misses of a node's entered children overlap each other and the
  * nearer children's work). The stack holds
  * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
  * go on it farthest first, so that the nearest is visited next. */
-#define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
+#define PYCLRAY_TRAVERSE(nodes, box, limit, LEAF_MASK, VISIT)                           \
     {                                                                                   \
         int stack_child[BVH_STACK];                                                     \
         float stack_entry[BVH_STACK];                                                   \
@@ -131,7 +134,11 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
-                for (int q = first; q < first + count && !(limit < 0.0f); ++q) { VISIT(q) } \
+                for (int leaf_mask = LEAF_MASK(first, count); leaf_mask != 0 && !(limit < 0.0f); \
+                     leaf_mask &= leaf_mask - 1) {                                      \
+                    const int q = first + BVH_LOWEST_BIT(leaf_mask);                    \
+                    VISIT(q)                                                            \
+                }                                                                       \
                 continue;                                                               \
             }                                                                           \
             union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
