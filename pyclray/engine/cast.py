@@ -140,10 +140,12 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
             own = kind.cls.cast_anchors(worlds[name], kind.ids)
             if own is not None:
                 anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
+        nodes = tree.nodes(anchor[:3])
         args += [
-            input_buffer(ctx, tree.nodes(anchor[:3])),
+            input_buffer(ctx, nodes),
             input_buffer(ctx, tree.refs(shape_types)),
             input_buffer(ctx, np.ascontiguousarray(anchors)),
+            _root_box(nodes),
         ]
     identity = np.eye(3)
     for name in shape_types:
@@ -164,6 +166,16 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         while len(_cast_prepared) > PREPARED_MAX:
             _cast_prepared.popitem(last=False)
     return args, anchor, size
+
+
+def _root_box(nodes: np.ndarray):
+    """The box of the wide root's children (float8: lo xyz, hi xyz, 0, 0, around the scene's anchor),
+    which a ray tests before the tree (kernels/pyclray.cl: PYCLRAY_CAST_BOUNDED). An empty slot has
+    lo > hi: the minima and maxima pass over it (all empty: lo > hi, a box no ray enters)."""
+    root = nodes[0]
+    lo = [root[f"lo_{axis}"].min() for axis in "xyz"]
+    hi = [root[f"hi_{axis}"].max() for axis in "xyz"]
+    return np.array(lo + hi + [0.0, 0.0], np.float32).view(cl.cltypes.float8)[0]
 
 
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):

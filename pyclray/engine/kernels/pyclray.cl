@@ -132,9 +132,10 @@
 #define PYCLRAY_LINEAR(X) PYCLRAY_UNBOUNDED(X)
 #ifdef PYCLRAY_HAS_BOUNDED
 #ifdef PYCLRAY_CAST
-/* the wide BVH, and per leaf position its shape's anchor in world coordinates (xyz) and bounding
- * radius (w) */
-#define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, nodes) P(__global const int*, refs) P(__global const double4*, anchors)
+/* the wide BVH, per leaf position its shape's anchor in world coordinates (xyz) and bounding
+ * radius (w), and the box of the root's children (lo xyz, hi xyz; PYCLRAY_CAST_BOUNDED) */
+#define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, nodes) P(__global const int*, refs) P(__global const double4*, anchors) \
+    P(const float8, root_box)
 #else
 /* the binary BVH (packets traverse it) */
 #define PYCLRAY_BVH_ARGS(P) P(__global const BvhNode*, nodes) P(__global const int*, refs)
@@ -989,7 +990,7 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
         int n_bounded = 0;                                                          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_COUNT)                                         \
         for (int q = 0; q < n_bounded; ++q) { VISIT(q) }                            \
-    } else {                                                                        \
+    } else if (box_entered(root_box, &box, limit)) {                                \
         PYCLRAY_TRAVERSE(nodes, box, limit, PYCLRAY_CAST_LEAF_MASK, VISIT)          \
     }
 #define PYCLRAY_CAST_COUNT(Type, type) n_bounded += n_##type##s;
