@@ -16,7 +16,8 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
 - memory: the bytes the prepared scene holds per triangle (PreparedScene.nbytes: vertices, faces or
   triangle entries, ids, the BVH; issue 23's target <= 64), in the build's row; and after the
   table (memory_rows): what a first cast adds per triangle (cast's buffers, built when a cast first
-  asks: engine/cast.py's cast_inputs, and the tree's leaf-order bounds on the host), and a mesh shared
+  asks: engine/cast.py's cast_inputs, a mesh's in blocks (engine/cast_blocks.py), and the tree's
+  leaf-order bounds on the host where a cast gathered them), and a mesh shared
   by 100 instances (bench.instances' field: the shared vertices, faces and tree per unique triangle,
   engine/instances.py's instance_bytes).
 Prints a table of medians (ms) and the ratios. The machine is shared: compare ratios.

@@ -10,7 +10,7 @@ import pyopencl as cl
 from ..model.aovs import AOVS
 from ..model.camera import ImagePlane
 from ..model.errors import DeviceError, PyclrayError, RequestError
-from ..model.layout import PRECISIONS
+from ..model.layout import PRECISIONS, layout
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
@@ -133,24 +133,35 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
     args = []
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
+    blocks = {}
     if tree.types:
-        anchors = tree.anchors()
-        for name in tree.types:  # a type may anchor its entries otherwise (a mesh: on its whole box)
-            kind = prepared.kinds[name]
-            own = kind.cls.cast_anchors(worlds[name], kind.ids)
-            if own is not None:
-                anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
         nodes = tree.nodes(anchor[:3])
-        args += [
-            input_buffer(ctx, nodes),
-            input_buffer(ctx, tree.refs(shape_types)),
-            input_buffer(ctx, np.ascontiguousarray(anchors)),
-            _root_box(nodes),
-        ]
+        if any(prepared.kinds[name].cls.cast_blocks for name in tree.types):  # a leaf's triangles of a mesh at once
+            from .cast_blocks import regroup
+
+            refs, anchors, per_type = regroup(tree, shape_types, prepared.kinds, worlds, nodes)
+            blocks = {name: v for name, v in per_type.items() if prepared.kinds[name].cls.cast_blocks}
+            entry_anchors = {name: v for name, v in per_type.items() if name not in blocks}
+        else:
+            anchors, refs = tree.anchors(), tree.refs(shape_types)
+            for name in tree.types:  # a type may anchor its entries otherwise
+                kind = prepared.kinds[name]
+                own = kind.cls.cast_anchors(worlds[name], kind.ids)
+                if own is not None:
+                    anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
+        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, np.ascontiguousarray(anchors)),
+                 _root_box(nodes)]
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
-        if kind.cls.bounded:
+        if name in blocks:  # its blocks in place of its world entries, and no packed entries (kernels/mesh.cl)
+            data, count = blocks[name]
+            args += [input_buffer(ctx, np.zeros(1, layout(kind.cls.struct, precision).dtype)), input_buffer(ctx, data),
+                     *kind.shared, np.int32(count)]
+            continue
+        if kind.cls.bounded and blocks:
+            origin = entry_anchors[name][:, :3]
+        elif kind.cls.bounded:
             origin = anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name), :3]
         else:
             origin = np.zeros(3)

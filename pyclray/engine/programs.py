@@ -128,6 +128,9 @@ class Variant:
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind in ("cast", "occluded"):
             lines.append("#define PYCLRAY_CAST 1")
+            # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
+            lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
+                      for t in self.shape_types]
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.kind == "rebase":

@@ -55,11 +55,13 @@ class SceneBVH:
         refs = self.leaf_index * 16 + kinds[self.leaf_type]
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
 
-    def anchors(self) -> np.ndarray:
+    def anchors(self, positions=None) -> np.ndarray:
         """(N, 4) float64 per leaf position: the centre A of the primitive's box (its packing frame
         in cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
-        shape test's rounding (no hit the test reports lies nearer than (A - O).D - R)."""
-        lo, hi = self.bounds[:, 0], self.bounds[:, 1]
+        shape test's rounding (no hit the test reports lies nearer than (A - O).D - R). Of the
+        given positions only, where given (their bounds gathered without keeping them)."""
+        bounds = self.bounds if positions is None else self.given_bounds[self.tree.order[positions]]
+        lo, hi = bounds[:, 0], bounds[:, 1]
         out = np.empty((max(len(lo), 1), 4))
         out[: len(lo), :3] = 0.5 * (lo + hi)
         out[: len(lo), 3] = 0.5 * np.linalg.norm(hi - lo, axis=1) * (1 + WIDEN)

@@ -744,8 +744,14 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
         const Frame frame = {(from)};                                               \
         type##_rebase(&type##_worlds[k], &framed, &frame);                          \
     }
+/* A type's entries are tested one by one (PYCLRAY_CAST_MODE_<type> ENTRY), or in blocks of a leaf's
+ * entries that its kernel file tests at once (BLOCKS: a mesh's triangles, kernels/mesh.cl); the
+ * mode also says where the winner's id and normal come from, and what a leaf's prefetch asks for */
+#define PYCLRAY_CAST_MODE(what, type) PYCLRAY_CAT(what, PYCLRAY_CAST_MODE_##type)
 #define PYCLRAY_CAST_VISIT_KIND(Type, type)                                         \
-    if (kind == KIND_##type) {                                                      \
+    if (kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_TEST_, type)(Type, type) }
+#define PYCLRAY_CAST_TEST_ENTRY(Type, type)                                         \
+    {                                                                               \
         PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
         const real s = PYCLRAY_HIT_##type(&framed, &moved, MISS);                   \
         const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
@@ -778,7 +784,8 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
  * child is pushed (kernels/bvh.h): the shapes of a type lie in leaf order in their arrays, so a
  * leaf's entries of its first shape's type follow that shape's */
 #define PYCLRAY_CAST_PREFETCH_KIND(Type, type)                                      \
-    if (leaf_kind == KIND_##type) { CAST_PREFETCH(&type##_worlds[leaf_k], count * sizeof(Type##World)) }
+    if (leaf_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_PREFETCH_, type)(Type, type) }
+#define PYCLRAY_CAST_PREFETCH_ENTRY(Type, type) CAST_PREFETCH(&type##_worlds[leaf_k], count * sizeof(Type##World))
 #define PYCLRAY_CHILD_PREFETCH(code)                                                \
     if ((code) >= 0) {                                                              \
         CAST_PREFETCH(&nodes[code], sizeof(WideNode))                               \
@@ -1003,7 +1010,9 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
 /* The id of the shape of this kind at index k of its type's array (-1 for none): read only for the
  * winner and on exact ties, not at every nearer hit (a read of the packed entries that missed the
  * cache: a fifth of the kernel's time on 100,000 spheres). */
-#define PYCLRAY_CAST_ID_OF(Type, type) if (id_kind == KIND_##type) id_value = type##s[id_k].id;
+#define PYCLRAY_CAST_ID_OF(Type, type) \
+    if (id_kind == KIND_##type) id_value = PYCLRAY_CAST_MODE(PYCLRAY_CAST_ID_, type)(type, id_k);
+#define PYCLRAY_CAST_ID_ENTRY(type, k) type##s[k].id
 #define PYCLRAY_CAST_ID(value, kind, k)                                             \
     {                                                                               \
         const int id_kind = (kind), id_k = (k);                                     \
@@ -1027,7 +1036,9 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
 #define PYCLRAY_CAST_REACH best  /* no hit of the shape precedes s0 */
 #define PYCLRAY_CAST_NORMAL(Type, type)                                             \
-    if (best_kind == KIND_##type) {                                                 \
+    if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_NORMAL_, type)(Type, type) }
+#define PYCLRAY_CAST_NORMAL_ENTRY(Type, type)                                       \
+    {                                                                               \
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
         normal = PYCLRAY_NORMAL_##type(&framed, &ray, camera, MISS, 1);             \
     }

@@ -132,6 +132,17 @@ class Shape:
     # a shape of the type asks for it: pack_smooth) and <type>_shading_normal in its kernel file
     smooth_struct: ClassVar[Struct | None] = None
 
+    # cast: True for a type whose kernel file tests a leaf's entries of one shape at once
+    # (PYCLRAY_CAST_TEST_BLOCKS and the rest of that mode, kernels/pyclray.cl); cast_blocks packs them
+    cast_blocks: ClassVar[bool] = False
+
+    @classmethod
+    def pack_cast_blocks(cls, vertices, corners, ids, entries, starts) -> tuple[np.ndarray, np.ndarray]:
+        """(blocks float64, places int64): the blocks of a cast_blocks type, block i of the world
+        entries entries[starts[i]:starts[i + 1]] (all of one shape: ids), each at places[i] (in
+        64-byte units) of the returned array; the entries' corners index vertices (-1: never hit)."""
+        raise NotImplementedError
+
     # the arrays a type shares among its entries (name, OpenCL C element type), passed to the kernel
     # after its entries' array (mesh instances: one copy of a mesh's triangles and BVH)
     shared: ClassVar[tuple] = ()

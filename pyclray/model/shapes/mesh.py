@@ -289,6 +289,12 @@ class Mesh(Shape):
             out[name][:, :3] = in_frame(world[name][:, :3] - origin, rotation_rows)
             out[name][:, 3] = world[name][:, 3]
 
+    cast_blocks = True  # cast tests a leaf's triangles of one mesh at once (kernels/mesh.cl)
+
+    @classmethod
+    def pack_cast_blocks(cls, vertices, corners, ids, entries, starts):
+        return mesh_pack.cast_blocks(vertices, corners, ids, entries, starts)
+
     @classmethod
     def bounds_of(cls, world):
         a, b, c = (world[k][:, :3] for k in ("a", "b", "c"))
