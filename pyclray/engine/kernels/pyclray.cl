@@ -875,10 +875,14 @@ inline bool cast_may_pass(const double4 anchor, const double4 scene_anchor, cons
 /* The shapes of a leaf (positions first .. first + count - 1) the ray may meet, as a mask (bit i:
  * position first + i; kernels/bvh.h's LEAF_MASK), each by cast_may_pass: on the view rays of
  * bench/secondary.py into 16,384 spheres, a ray that enters the field looks at 14 shapes in 2.6
- * leaves and tests 3.5 of them; a branch per shape on its own pre-test went either way at random. */
+ * leaves and tests 3.5 of them; a branch per shape on its own pre-test went either way at random.
+ * A leaf of one ref (a mesh's block of triangles, kernels/mesh.cl, whose anchor is the whole mesh's)
+ * is visited as it is: moved_ray's own test of that anchor is all a pre-test would do (on a mesh's
+ * blocks it cost 7% of cast's time). */
 inline int cast_leaf_mask(__global const double4* anchors, const int first, const int count, const double4 scene_anchor,
                           const float3 o, const float3 d)
 {
+    if (count == 1) return 1;
     int mask = 0;
     for (int i = 0; i < count; ++i) mask |= cast_may_pass(anchors[first + i], scene_anchor, o, d) ? 1 << i : 0;
     return mask;
