@@ -20,7 +20,8 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
   leaf-order bounds on the host where a cast gathered them), and a mesh shared
   by 100 instances (bench.instances' field: the shared vertices, faces and tree per unique triangle,
   engine/instances.py's instance_bytes).
-Prints a table of medians (ms) and the ratios. The machine is shared: compare ratios.
+Prints a table of medians (ms) and the ratios, for primary rays also of each call's process CPU time
+(with_cpu). The machine is shared: compare ratios.
 """
 from __future__ import annotations
 
@@ -91,6 +92,24 @@ def pinhole_rays(scene):
     return o3d.core.Tensor(np.concatenate([origins, directions], -1).reshape(-1, 6).astype(np.float32))
 
 
+def with_cpu(systems: dict):
+    """The systems' calls, each also recording its process CPU time (all the threads of both:
+    PoCL's and Embree's), and the lists they record into. Another process's load slows a call's
+    wall time but adds little to its CPU time, so on this shared machine the CPU ratio moves less
+    between runs; it counts the work, not the cores' overlap (and any spinning of a thread pool
+    waiting for the next call, Embree's TBB workers included)."""
+    cpu = {name: [] for name in systems}
+
+    def recorded(name, function):
+        def call():
+            start = time.process_time()
+            function()
+            cpu[name].append(time.process_time() - start)
+        return call
+
+    return {name: recorded(name, function) for name, function in systems.items()}, cpu
+
+
 def run(bunny_path=None, rounds=3, block=5):
     import open3d as o3d
 
@@ -116,8 +135,11 @@ def run(bunny_path=None, rounds=3, block=5):
         held = prepared_scene(context_for(None), scene, "fp32").nbytes() / len(mesh.faces)
         rows.append((f"{label} ({len(mesh.faces):,} triangles, {held:.1f} B/triangle): first render / build + first cast",
                      {"pyclray": {"median": np.median(ours_build) * 1e3}, "open3d": {"median": np.median(theirs_build) * 1e3}}))
-        timed = blocks({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
-                        "open3d": lambda: o3d_scene.cast_rays(rays)}, rounds, block)
+        systems, cpu = with_cpu({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
+                                 "open3d": lambda: o3d_scene.cast_rays(rays)})
+        timed = blocks(systems, rounds, block)
+        for name in timed:
+            timed[name]["cpu"] = float(np.median(cpu[name])) * 1e3
         rows.append((f"{label}: primary rays 512x512", timed))
         rng = np.random.default_rng(1)
         lo, hi = mesh.box()
@@ -180,6 +202,9 @@ def main(argv=None):
     for name, timed in run(args.bunny, args.rounds, args.block):
         ours, theirs = timed["pyclray"]["median"], timed["open3d"]["median"]
         print(f"{name:70s} pyclray {ours:9.1f} ms  open3d {theirs:9.1f} ms  speed-up {theirs / ours:5.2f}x")
+        if "cpu" in timed["pyclray"]:  # primary rays: the CPU time per call too (with_cpu)
+            ours, theirs = timed["pyclray"]["cpu"], timed["open3d"]["cpu"]
+            print(f"{'':70s} CPU     {ours:9.1f} ms  open3d {theirs:9.1f} ms  CPU ratio {theirs / ours:5.2f}x")
     for row in memory_rows(args.bunny):
         print(row)
 

@@ -76,7 +76,9 @@ class Mesh(Shape):
     # a 512x512 render of depth, normal, id, primitive), leaves of at most 4, 6, 7: with the binned SAH
     # (bvh_sah) 24.0, 24.2, 24.1 ms on the 75,408-triangle bunny, 117, 107, 107 ms on a 998,000-triangle
     # sphere; with the LBVH 26.9, 25.0, 24.6 and 145, 127, 120 ms. A triangle test is cheap next to
-    # a node's box test and the stack.
+    # a node's box test and the stack. (A tree of SAH_FROM shapes or more takes at least
+    # engine/bvh.py's SCENE_LEAF_SIZE, 7: there leaves of 4 cost the bunny 1.06x and the million
+    # triangles 1.11x the CPU time, bench.mesh_leaves, which sets both.)
     leaf_size = 7
     smooth_struct = Struct(
         "TriangleNormals",
