@@ -41,7 +41,8 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
 def _cast_rays(origins, directions, tmax):
     """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
     given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
-    (lo, hi) where a large batch's compiled scan found them, else None. The kernel normalizes the
+    (lo, hi) and the rays' direction codes where a large batch's compiled scan found them
+    (cast_order.scan_codes), else None. The kernel normalizes the
     directions (scaled by a power of two near their largest component first, so that neither a tiny
     nor a huge finite direction under- or overflows in the length). Each check is one pass over the arrays; the row
     of a failure is looked for only then."""
@@ -53,11 +54,11 @@ def _cast_rays(origins, directions, tmax):
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
         )
     extent = None
-    if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, and the origins' box
-        from .cast_order import scan
+    if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, the origins' box, the codes
+        from .cast_order import scan_codes
 
-        fine, lo, hi = scan(origins.reshape(-1, 3), directions.reshape(-1, 3))
-        extent = (lo, hi) if fine else None
+        fine, lo, hi, codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3))
+        extent = (lo, hi, codes) if fine else None
     if extent is None:  # numpy's checks (and where one fails, its row)
         for name, array in (("directions", directions), ("origins", origins)):
             if not np.isfinite(array).all():
@@ -148,7 +149,8 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
                 own = kind.cls.cast_anchors(worlds[name], kind.ids)
                 if own is not None:
                     anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
-        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, np.ascontiguousarray(anchors))]
+        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, np.ascontiguousarray(anchors)),
+                 _root_box(nodes)]
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
@@ -177,6 +179,16 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
     return args, anchor, size
 
 
+def _root_box(nodes: np.ndarray):
+    """The box of the wide root's children (float8: lo xyz, hi xyz, 0, 0, around the scene's anchor),
+    which a ray tests before the tree (kernels/pyclray.cl: PYCLRAY_CAST_BOUNDED). An empty slot has
+    lo > hi: the minima and maxima pass over it (all empty: lo > hi, a box no ray enters)."""
+    root = nodes[0]
+    lo = [root[f"lo_{axis}"].min() for axis in "xyz"]
+    hi = [root[f"hi_{axis}"].max() for axis in "xyz"]
+    return np.array(lo + hi + [0.0, 0.0], np.float32).view(cl.cltypes.float8)[0]
+
+
 def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
     scene = as_scene(scene)
     check_shape_count(scene)
@@ -198,8 +210,9 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
+    direction_codes = None
     if extent is not None:
-        lo, hi = extent
+        lo, hi, direction_codes = extent
     else:
         lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
@@ -220,7 +233,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     if count >= COHERENT_FROM:  # numba's code, imported for large batches only
         from .cast_order import coherent_order
 
-        order = coherent_order(origins, directions, lo, hi, scene_size)
+        order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
     else:
         order = np.zeros(1, np.int32)
     head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if count >= COHERENT_FROM else 0),

@@ -97,6 +97,27 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     return enter <= leave ? enter : (float8)(INFINITY);
 }
 
+/* Whether the ray enters the box (lo xyz, hi xyz in box.s012, box.s345) before limit: wide_entries'
+ * test of one box, in the same operations. cast tests the box of the root's children first: most
+ * of bench/secondary.py's view rays (from near the camera, many of them ending on the ground
+ * around the spheres' field or going up) enter no child, and this costs less than the root's visit
+ * (a float8 test of eight boxes and the stack). A child's box lies inside it, and a box that
+ * contains another is entered no later and left no earlier: a child entered is within it. */
+inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
+{
+    const float3 lo = box.s012, hi = box.s345;
+    const float3 near = b->negative ? hi : lo, far = b->negative ? lo : hi;
+    const float3 enter = (near - b->near_origin) * b->near_inverse;
+    const float3 leave = (far - b->far_origin) * b->far_inverse + b->far_add;
+    float entry = enter.y > enter.x ? enter.y : enter.x;
+    entry = enter.z > entry ? enter.z : entry;
+    entry = entry < 0.0f ? 0.0f : entry;
+    float exit = leave.y < leave.x ? leave.y : leave.x;
+    exit = leave.z < exit ? leave.z : exit;
+    exit = (limit < exit ? limit : exit) * BVH_GAMMA3_2;
+    return entry <= exit;
+}
+
 /* the index of the lowest set bit of a non-zero mask (ctz: OpenCL 2.0's, or a call into PoCL's
  * library: clang's own on PoCL's CPU device, else from clz, which OpenCL 1.2 has) */
 #ifdef PYCLRAY_INLINE_BUILTINS
@@ -113,14 +134,17 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
 
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
  * variable that VISIT may lower; below 0, as occluded's -inf once it has found a hit, it ends the
- * search within the leaf too): VISIT(q) runs for each shape of each such leaf. Each child
+ * search within the leaf too): VISIT(q) runs for each shape of each such leaf that LEAF_MASK(first,
+ * count) keeps (bit i for position first + i: the kernel's pre-test of all the leaf's shapes at
+ * once, whose mask's set bits are then visited in order, rather than a branch per shape on its own
+ * test that goes either way at random). Each child
  * entered is asked for from memory as it is pushed, PYCLRAY_CHILD_PREFETCH(code) (defined by the
  * kernel: a wide node's boxes, or a leaf's entries: rather than one miss after the other when
  * they are reached, the misses of a node's entered children overlap each other and the
  * nearer children's work). The stack holds
  * children codes (kernels' WideNode.child) and their entry distances; a wide node's hit children
  * go on it farthest first, so that the nearest is visited next. */
-#define PYCLRAY_TRAVERSE(nodes, box, limit, VISIT)                                      \
+#define PYCLRAY_TRAVERSE(nodes, box, limit, LEAF_MASK, VISIT)                           \
     {                                                                                   \
         int stack_child[BVH_STACK];                                                     \
         float stack_entry[BVH_STACK];                                                   \
@@ -133,7 +157,11 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
-                for (int q = first; q < first + count && !(limit < 0.0f); ++q) { VISIT(q) } \
+                for (int leaf_mask = LEAF_MASK(first, count); leaf_mask != 0 && !(limit < 0.0f); \
+                     leaf_mask &= leaf_mask - 1) {                                      \
+                    const int q = first + BVH_LOWEST_BIT(leaf_mask);                    \
+                    VISIT(q)                                                            \
+                }                                                                       \
                 continue;                                                               \
             }                                                                           \
             union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
