@@ -69,6 +69,32 @@ def test_the_compiled_widening_and_node_packing_keep_numpys_bits():
     assert words.tobytes() == packed.tobytes()
 
 
+def test_the_compiled_wide_node_packing_keeps_numpys_bits(monkeypatch):
+    """bvh_wide.pack_wide from SAH_FROM nodes on (bvh_fast.pack_wide_boxes) against its numpy form,
+    whole and by rows (an animation's refit), on a real tree's slots (empty ones included) given
+    boxes of every scale, beyond float32's range and infinite: the kernels see the same bits."""
+    from pyclray.engine import bvh_wide
+
+    rng = np.random.default_rng(11)
+    centres = rng.uniform(-1, 1, (20_000, 3))
+    tree = bvh.build(np.stack([centres - 0.01, centres + 0.01], axis=1))
+    assert tree.nodes >= bvh.SAH_FROM  # what this compares: the compiled pass
+    m = tree.nodes
+    lo = rng.normal(size=(m, 3)) * 10.0 ** rng.integers(-30, 45, (m, 3))
+    hi = lo + np.abs(rng.normal(size=(m, 3))) * 10.0 ** rng.integers(-30, 45, (m, 3))
+    lo[:2], hi[:2] = [[-np.inf] * 3, [1e39, 0, 0]], [[np.inf] * 3, [1e40, 1, 1]]
+    tree = bvh.BVH(lo, hi, tree.first, tree.count, tree.order)
+    wide = bvh_wide.collapse(tree)
+    assert (wide.binary < 0).any()  # empty slots are packed too
+    rows = np.arange(0, len(wide.binary), 5)
+    origin = np.array([1e5, -3.0, 0.25])
+    with np.errstate(over="ignore", invalid="ignore"):
+        compiled, by_rows = bvh_wide.pack_wide(tree, wide, origin), bvh_wide.pack_wide(tree, wide, origin, rows)
+        monkeypatch.setattr(bvh_wide, "SAH_FROM", 1 << 62)  # the numpy form
+        expected = bvh_wide.pack_wide(tree, wide, origin)
+    assert compiled.tobytes() == expected.tobytes() and by_rows.tobytes() == expected[rows].tobytes()
+
+
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 def test_the_host_and_device_vertex_passes_agree_bit_for_bit(monkeypatch, precision):
     """A small scene frames its vertices on the host, a large one on the device (prepared.on_device):

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.layout import Struct, layout
-from .bvh import _FLOAT_MAX, BVH, outward32
+from .bvh import _FLOAT_MAX, BVH, SAH_FROM, outward32
 
 WIDTH = 8  # children per wide node: one float8 box test of all of them per visit
 STACK = 256  # kernels/bvh.h: BVH_STACK
@@ -88,6 +88,14 @@ def pack_wide(tree: BVH, wide: WideBVH, origin, rows=None) -> np.ndarray:
     binary, child = (wide.binary, wide.child) if rows is None else (wide.binary[rows], wide.child[rows])
     out = np.zeros(len(binary), dtype=layout(WIDE_NODE, "fp32").dtype)
     origin = np.asarray(origin, np.float64)
+    out["child"] = child
+    if tree.nodes >= SAH_FROM:  # one compiled pass (bvh_fast: the same bits), numba being imported by then
+        from .bvh_fast import pack_wide_boxes
+
+        pack_wide_boxes(np.ascontiguousarray(tree.lo), np.ascontiguousarray(tree.hi),
+                        np.ascontiguousarray(binary, dtype=np.int64), origin,
+                        out.view(np.float32).reshape(len(binary), 56))
+        return out
     b = np.maximum(binary, 0)
     lo, hi = outward32(tree.lo[b] - origin, tree.hi[b] - origin)
     empty = binary < 0
@@ -95,7 +103,6 @@ def pack_wide(tree: BVH, wide: WideBVH, origin, rows=None) -> np.ndarray:
     for axis, name in enumerate("xyz"):
         out[f"lo_{name}"] = lo[..., axis]
         out[f"hi_{name}"] = hi[..., axis]
-    out["child"] = child
     return out
 
 
