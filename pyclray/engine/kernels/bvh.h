@@ -74,6 +74,21 @@ inline float float_above_wide(const double x)
 }
 #endif
 
+/* Per child of a wide node, the slab test's end: the entry (the axes' latest, from 0) where it is no
+ * later than the exit (the axes' earliest, limit at most, widened by 1 + 2 gamma(3): the products'
+ * rounding), else +inf. Max and min by comparison: no NaN reaches here (the box frame above). */
+inline float8 wide_slabs(const float8 enter_x, const float8 enter_y, const float8 enter_z, const float8 leave_x,
+                         const float8 leave_y, const float8 leave_z, const float limit)
+{
+    float8 enter = enter_y > enter_x ? enter_y : enter_x;
+    enter = enter_z > enter ? enter_z : enter;
+    enter = enter < (float8)(0.0f) ? (float8)(0.0f) : enter;
+    float8 leave = leave_y < leave_x ? leave_y : leave_x;
+    leave = leave_z < leave ? leave_z : leave;
+    leave = ((float8)(limit) < leave ? (float8)(limit) : leave) * BVH_GAMMA3_2;
+    return enter <= leave ? enter : (float8)(INFINITY);
+}
+
 /* The children of a wide node the ray enters before limit: their entry distances, +inf for the
  * others (one float8 test of all eight boxes). */
 inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const float limit)
@@ -87,14 +102,7 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     const float8 leave_x = (far_x - b->far_origin.x) * b->far_inverse.x + b->far_add.x;
     const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
     const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
-    /* max and min by comparison: no NaN reaches here (kernels/bvh.h's box frame) */
-    float8 enter = enter_y > enter_x ? enter_y : enter_x;
-    enter = enter_z > enter ? enter_z : enter;
-    enter = enter < (float8)(0.0f) ? (float8)(0.0f) : enter;
-    float8 leave = leave_y < leave_x ? leave_y : leave_x;
-    leave = leave_z < leave ? leave_z : leave;
-    leave = ((float8)(limit) < leave ? (float8)(limit) : leave) * BVH_GAMMA3_2;
-    return enter <= leave ? enter : (float8)(INFINITY);
+    return wide_slabs(enter_x, enter_y, enter_z, leave_x, leave_y, leave_z, limit);
 }
 
 /* Whether the ray enters the box (lo xyz, hi xyz in box.s012, box.s345) before limit: wide_entries'
@@ -132,6 +140,31 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
 #define BVH_NEAREST_FIRST 1
 #endif
 
+/* The set lanes of an int8 comparison's result (-1 or 0 each) as the bits of an int: a wide node's
+ * children entered, visited by their set bits (no branch per empty slot). */
+inline int bvh_lane_bits(const int8 set)
+{
+    const int8 bits = set & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    const int4 four = bits.lo | bits.hi;
+    const int2 two = four.lo | four.hi;
+    return two.x | two.y;
+}
+
+/* Push value with its entry onto a wide traversal's stack (stack_entry, stack_child, top), among
+ * the children of the node being visited (those above bottom) farthest deepest, so that the nearest
+ * is popped first; unsorted where sorted is 0 (an any-hit query). */
+#define BVH_STACK_PUSH(sorted, entry, value)                                            \
+    {                                                                                   \
+        int at = top++;                                                                 \
+        while ((sorted) && at > bottom && stack_entry[at - 1] < (entry)) {              \
+            stack_entry[at] = stack_entry[at - 1];                                      \
+            stack_child[at] = stack_child[at - 1];                                      \
+            --at;                                                                       \
+        }                                                                               \
+        stack_entry[at] = (entry);                                                      \
+        stack_child[at] = (value);                                                      \
+    }
+
 /* Visit, nearest box first, every leaf position q whose box the ray enters before limit (a float
  * variable that VISIT may lower; below 0, as occluded's -inf once it has found a hit, it ends the
  * search within the leaf too): VISIT(q) runs for each shape of each such leaf that LEAF_MASK(first,
@@ -167,24 +200,13 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
             union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
             entries.v = wide_entries(&nodes[code], &box, limit);                        \
             const int bottom = top;                                                     \
-            /* the children entered, as the bits of a mask (no branch per empty slot) */  \
-            const int8 entered = (entries.v < (float8)(INFINITY)) & (int8)(1, 2, 4, 8, 16, 32, 64, 128); \
-            const int4 entered4 = entered.lo | entered.hi;                              \
-            const int2 entered2 = entered4.lo | entered4.hi;                            \
-            for (int mask = entered2.x | entered2.y; mask != 0; mask &= mask - 1) {     \
+            /* the children entered (bvh_lane_bits), nearest popped first (any order for an \
+             * any-hit query) */                                                        \
+            for (int mask = bvh_lane_bits(entries.v < (float8)(INFINITY)); mask != 0; mask &= mask - 1) { \
                 const int slot = BVH_LOWEST_BIT(mask);                                  \
                 const float entry = entries.a[slot];                                    \
                 const int child = nodes[code].child[slot];                              \
-                /* insert among this node's pushed children, farthest deepest (any order \
-                 * for an any-hit query) */                                             \
-                int at = top++;                                                         \
-                while (BVH_NEAREST_FIRST && at > bottom && stack_entry[at - 1] < entry) { \
-                    stack_entry[at] = stack_entry[at - 1];                              \
-                    stack_child[at] = stack_child[at - 1];                              \
-                    --at;                                                               \
-                }                                                                       \
-                stack_entry[at] = entry;                                                \
-                stack_child[at] = child;                                                \
+                BVH_STACK_PUSH(BVH_NEAREST_FIRST, entry, child)                         \
                 PYCLRAY_CHILD_PREFETCH(child)                                           \
             }                                                                           \
         }                                                                               \
@@ -412,18 +434,15 @@ inline WidePacket wide_packet(const BoxPacket* b)
     const bool keep_y = (all_y || !ANY(b->negative_y)) && !ANY(b->far_add.y > SPLAT(0));
     const bool keep_z = (all_z || !ANY(b->negative_z)) && !ANY(b->far_add.z > SPLAT(0));
     w.negative = (int3)(all_x ? -1 : 0, all_y ? -1 : 0, all_z ? -1 : 0);
-    w.near_least = (float3)(keep_x ? WIDE_DOWN(lane_min(b->near_inverse.x)) : 0.0f,
-                            keep_y ? WIDE_DOWN(lane_min(b->near_inverse.y)) : 0.0f,
-                            keep_z ? WIDE_DOWN(lane_min(b->near_inverse.z)) : 0.0f);
-    w.near_most = (float3)(keep_x ? WIDE_UP(lane_max(b->near_inverse.x)) : 0.0f,
-                           keep_y ? WIDE_UP(lane_max(b->near_inverse.y)) : 0.0f,
-                           keep_z ? WIDE_UP(lane_max(b->near_inverse.z)) : 0.0f);
-    w.far_least = (float3)(keep_x ? WIDE_DOWN(lane_min(b->far_inverse.x)) : 0.0f,
-                           keep_y ? WIDE_DOWN(lane_min(b->far_inverse.y)) : 0.0f,
-                           keep_z ? WIDE_DOWN(lane_min(b->far_inverse.z)) : 0.0f);
-    w.far_most = (float3)(keep_x ? WIDE_UP(lane_max(b->far_inverse.x)) : 0.0f,
-                          keep_y ? WIDE_UP(lane_max(b->far_inverse.y)) : 0.0f,
-                          keep_z ? WIDE_UP(lane_max(b->far_inverse.z)) : 0.0f);
+    /* per kept axis the lanes' least (rounded down) or most (rounded up) of an inverse, else 0 */
+#define WIDE_LANES(ROUND, EXTREME, v)                                                    \
+    (float3)(keep_x ? ROUND(EXTREME((v).x)) : 0.0f, keep_y ? ROUND(EXTREME((v).y)) : 0.0f, \
+             keep_z ? ROUND(EXTREME((v).z)) : 0.0f)
+    w.near_least = WIDE_LANES(WIDE_DOWN, lane_min, b->near_inverse);
+    w.near_most = WIDE_LANES(WIDE_UP, lane_max, b->near_inverse);
+    w.far_least = WIDE_LANES(WIDE_DOWN, lane_min, b->far_inverse);
+    w.far_most = WIDE_LANES(WIDE_UP, lane_max, b->far_inverse);
+#undef WIDE_LANES
     w.far_add = (float3)(keep_x ? 0.0f : INFINITY, keep_y ? 0.0f : INFINITY, keep_z ? 0.0f : INFINITY);
     return w;
 }
@@ -459,13 +478,7 @@ inline float8 wide_packet_entries(__global const WideNode* node, const WidePacke
     const float8 leave_x = (leave_x0 > leave_x1 ? leave_x0 : leave_x1) + w->far_add.x;
     const float8 leave_y = (leave_y0 > leave_y1 ? leave_y0 : leave_y1) + w->far_add.y;
     const float8 leave_z = (leave_z0 > leave_z1 ? leave_z0 : leave_z1) + w->far_add.z;
-    float8 enter = enter_y > enter_x ? enter_y : enter_x;
-    enter = enter_z > enter ? enter_z : enter;
-    enter = enter < (float8)(0.0f) ? (float8)(0.0f) : enter;
-    float8 leave = leave_y < leave_x ? leave_y : leave_x;
-    leave = leave_z < leave ? leave_z : leave;
-    leave = ((float8)(farthest) < leave ? (float8)(farthest) : leave) * BVH_GAMMA3_2;
-    return enter <= leave ? enter : (float8)(INFINITY);
+    return wide_slabs(enter_x, enter_y, enter_z, leave_x, leave_y, leave_z, farthest);
 }
 
 /* Visit, nearest first, every leaf of the wide tree whose box some lane of the packet (its BoxPacket
@@ -492,25 +505,14 @@ inline float8 wide_packet_entries(__global const WideNode* node, const WidePacke
                 union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */ \
                 entries.v = wide_packet_entries(&nodes[code], &wide_box, farthest);     \
                 const int bottom = top;                                                 \
-                /* the children entered, as the bits of a mask (no branch per empty slot; an \
-                 * empty slot's code is 0, and its box, lo > hi, may pass where no axis is kept) */ \
-                const int8 entered = (entries.v < (float8)(INFINITY) & nodes[code].child != (int8)(0)) \
-                                     & (int8)(1, 2, 4, 8, 16, 32, 64, 128);             \
-                const int4 entered4 = entered.lo | entered.hi;                          \
-                const int2 entered2 = entered4.lo | entered4.hi;                        \
-                for (int mask = entered2.x | entered2.y; mask != 0; mask &= mask - 1) { \
+                /* the children entered (bvh_lane_bits; an empty slot's code is 0, and its \
+                 * box, lo > hi, may pass where no axis is kept), nearest popped first */ \
+                const int8 entered = entries.v < (float8)(INFINITY) & nodes[code].child != (int8)(0); \
+                for (int mask = bvh_lane_bits(entered); mask != 0; mask &= mask - 1) {  \
                     const int slot = BVH_LOWEST_BIT(mask);                              \
                     const float entry = entries.a[slot];                                \
                     const int child = nodes[code].child[slot];                          \
-                    /* insert among this node's pushed children, farthest deepest */    \
-                    int at = top++;                                                     \
-                    while (at > bottom && stack_entry[at - 1] < entry) {                \
-                        stack_entry[at] = stack_entry[at - 1];                          \
-                        stack_child[at] = stack_child[at - 1];                          \
-                        --at;                                                           \
-                    }                                                                   \
-                    stack_entry[at] = entry;                                            \
-                    stack_child[at] = code * 8 + slot;                                  \
+                    BVH_STACK_PUSH(1, entry, code * 8 + slot)                           \
                     if (child >= 0) {                                                   \
                         for (int byte = 0; byte < (int)sizeof(WideNode); byte += 64)    \
                             BVH_PREFETCH((__global const char*)&nodes[child] + byte)    \
