@@ -224,18 +224,16 @@ typedef union {
     real s[8];
 } MeshBlockLanes;
 
-/* the lanes' bits of a mask (one int) */
+/* the lanes' bits of a mask (one int): kernels/bvh.h's bvh_lane_bits, here for long lanes at fp64 */
 inline int mesh_block_bits(const blockmask m)
 {
-    const blockmask bits = m & (blockmask)(1, 2, 4, 8, 16, 32, 64, 128);
 #ifdef PYCLRAY_FP64
+    const blockmask bits = m & (blockmask)(1, 2, 4, 8, 16, 32, 64, 128);
     const long4 four = bits.lo | bits.hi;
     const long2 two = four.lo | four.hi;
     return (int)(two.x | two.y);
 #else
-    const int4 four = bits.lo | bits.hi;
-    const int2 two = four.lo | four.hi;
-    return two.x | two.y;
+    return bvh_lane_bits(m);
 #endif
 }
 
