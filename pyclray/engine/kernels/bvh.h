@@ -184,9 +184,18 @@ inline int bvh_lane_bits(const int8 set)
         int top = 0;                                                                    \
         stack_child[top] = 0;                                                           \
         stack_entry[top++] = 0.0f;                                                      \
-        while (top > 0 && !(limit < 0.0f)) {                                            \
-            --top;                                                                      \
-            if (!(stack_entry[top] <= limit)) continue;                                 \
+        while (top > 0 && !(limit < 0.0f))                                              \
+            PYCLRAY_TRAVERSE_STEP(nodes, box, limit, stack_child, stack_entry, top, LEAF_MASK, VISIT) \
+    }
+
+/* One step of PYCLRAY_TRAVERSE (top > 0): the nearest waiting child popped, and where the ray still
+ * enters it before limit, a leaf's shapes visited or a node's entered children pushed. Its own
+ * macro so that a caller can interleave several rays' traversals, a step of each in turn
+ * (kernels/pyclray.cl's cast): each ray's steps are the same, in the same order. */
+#define PYCLRAY_TRAVERSE_STEP(nodes, box, limit, stack_child, stack_entry, top, LEAF_MASK, VISIT) \
+    {                                                                                   \
+        --top;                                                                          \
+        if (stack_entry[top] <= limit) {                                                \
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
@@ -195,19 +204,19 @@ inline int bvh_lane_bits(const int8 set)
                     const int q = first + BVH_LOWEST_BIT(leaf_mask);                    \
                     VISIT(q)                                                            \
                 }                                                                       \
-                continue;                                                               \
-            }                                                                           \
-            union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */  \
-            entries.v = wide_entries(&nodes[code], &box, limit);                        \
-            const int bottom = top;                                                     \
-            /* the children entered (bvh_lane_bits), nearest popped first (any order for an \
-             * any-hit query) */                                                        \
-            for (int mask = bvh_lane_bits(entries.v < (float8)(INFINITY)); mask != 0; mask &= mask - 1) { \
-                const int slot = BVH_LOWEST_BIT(mask);                                  \
-                const float entry = entries.a[slot];                                    \
-                const int child = nodes[code].child[slot];                              \
-                BVH_STACK_PUSH(BVH_NEAREST_FIRST, entry, child)                         \
-                PYCLRAY_CHILD_PREFETCH(child)                                           \
+            } else {                                                                    \
+                union { float8 v; float a[8]; } entries;  /* no vstore8: a library call */ \
+                entries.v = wide_entries(&nodes[code], &box, limit);                    \
+                const int bottom = top;                                                 \
+                /* the children entered (bvh_lane_bits), nearest popped first (any order \
+                 * for an any-hit query) */                                             \
+                for (int mask = bvh_lane_bits(entries.v < (float8)(INFINITY)); mask != 0; mask &= mask - 1) { \
+                    const int slot = BVH_LOWEST_BIT(mask);                              \
+                    const float entry = entries.a[slot];                                \
+                    const int child = nodes[code].child[slot];                          \
+                    BVH_STACK_PUSH(BVH_NEAREST_FIRST, entry, child)                     \
+                    PYCLRAY_CHILD_PREFETCH(child)                                       \
+                }                                                                       \
             }                                                                           \
         }                                                                               \
     }
