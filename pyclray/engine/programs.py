@@ -131,6 +131,10 @@ class Variant:
             # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]
+            # a work-item's rays traverse interleaved where leaves are blocks (a mesh's triangles:
+            # kernels/pyclray.cl's cast_group), one after the other elsewhere
+            if any(REGISTRY[t].cast_blocks for t in self.shape_types):
+                lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
         if self.kind == "occluded":
             lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.kind == "rebase":
