@@ -130,3 +130,19 @@ def test_the_plain_built_ins_give_the_same_bits(monkeypatch):
     pyclray.clear_cache()
     for name in ("depth", "normal", "id"):
         assert np.array_equal(fast[name], plain[name], equal_nan=True), name
+
+
+def test_interleaved_rays_give_the_bits_of_a_ray_alone():
+    """Where leaves are blocks, a work-item's rays traverse interleaved, a step of each in turn
+    (kernels/pyclray.cl's cast_group): a ray cast alone (its group of one, nothing to interleave)
+    gives the bits it gives among a batch's others, so no step reads or writes another ray's
+    state (a stack, a limit, a best hit or a moved origin shared or swapped would change some of
+    these 120 rays, many of which meet the ties and the mixed leaves of mixed_scene)."""
+    origins, directions = rays(120, 3)
+    scene = mixed_scene()
+    together = pyclray.cast(scene, origins, directions)
+    assert np.isfinite(together["depth"]).mean() > 0.5
+    for i in range(len(origins)):
+        alone = pyclray.cast(scene, origins[i:i + 1], directions[i:i + 1])
+        for name in ("depth", "normal", "id"):
+            assert np.array_equal(alone[name][0], together[name][i], equal_nan=True), (name, i)
