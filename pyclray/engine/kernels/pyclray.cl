@@ -816,9 +816,10 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)
 #endif
 
-/* Each work-item traces CAST_GROUP rays (consecutive places of the order), one after the other. Their
- * setups come first, together: a ray's unit direction and the length of its rounding are a chain of
- * dependent divisions and square roots, on which, one ray at a time, about a quarter of the perf
+/* Each work-item traces CAST_GROUP rays (consecutive places of the order), one after the other
+ * (interleaved where leaves are blocks: cast_group, below). Their setups come first, together: a
+ * ray's unit direction and the length of its rounding are a chain of dependent divisions and
+ * square roots, on which, one ray at a time, about a quarter of the perf
  * samples of occluded on bench/secondary.py's view rays sat (most of those rays end at their first
  * test, the ground); a group's four-ray vectors take one instruction per division or root (below).
  * The group's first rows are asked for from memory as it starts, and the next group's rows too
