@@ -132,7 +132,7 @@ class Variant:
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]
             # a work-item's rays traverse interleaved where leaves are blocks (a mesh's triangles:
-            # kernels/pyclray.cl's cast_group), one after the other elsewhere
+            # kernels/pyclray.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
             if any(REGISTRY[t].cast_blocks for t in self.shape_types):
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
         if self.kind == "occluded":

@@ -1203,12 +1203,14 @@ inline void cast_end(const CastRay* S, __global const Camera* camera PYCLRAY_CAS
 
 PYCLRAY_KERNELS_BEGIN
 /* one work-item per group of CAST_GROUP places of the order: its rays' traversals interleaved where
- * the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py) */
+ * the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py), on PoCL's
+ * CPU device (PYCLRAY_INLINE_BUILTINS): a GPU hides a ray's misses behind its other work-items', and
+ * the group's 8 states (17 KB with their stacks) would not fit its private memory */
 PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, __global const Camera* camera
                                            PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
 {
     PYCLRAY_CAST_GROUP_SETUP
-#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED)
+#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
     CastRay state[CAST_GROUP];
     for (int l = 0; l < in_group; ++l)
         cast_start(&state[l], rays[l], &directions_of[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
