@@ -76,14 +76,18 @@ def test_scan_finds_what_numpys_checks_find():
 
 
 @pytest.mark.parametrize("name, row, value, message", [
+    ("origins", 100, np.nan, "origins: row 100 is not finite"),  # in the first chunk
     ("origins", 5000, np.nan, "origins: row 5000 is not finite"),
+    ("origins", 9200, 1e30, r"origins: row 9200 \(.*\) is too far from the scene's shapes for fp32"),
+    ("origins", 9000, np.inf, "origins: row 9000 is not finite"),  # in the second chunk (cast.FIRST_CHUNK)
+    ("directions", 9100, 0.0, "directions: row 9100 has zero length"),
     ("directions", 4100, np.inf, "directions: row 4100 is not finite"),
     ("directions", 4200, 0.0, "directions: row 4200 has zero length"),
 ])
 def test_a_large_batch_names_its_bad_row(name, row, value, message):
     """A batch large enough for the compiled scan fails as a small one does: one message naming
-    the first bad row."""
-    count = cast_module.COHERENT_FROM + 2000
+    the first bad row, in either of its chunks (cast.FIRST_CHUNK: rows from 3057 on are the second's)."""
+    count = 2 * cast_module.COHERENT_FROM + 2000  # two chunks: the second scanned after the first's launch
     rng = np.random.default_rng(8)
     rays = {"origins": rng.uniform(-1, 1, (count, 3)), "directions": rng.normal(size=(count, 3))}
     rays[name][row] = value
