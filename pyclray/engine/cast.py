@@ -302,15 +302,16 @@ def _launch_chunks(ctx, kernel, chunks, before, rays, args, outputs: dict) -> No
             head = [np.int32(stop - start), _ray_buffer(ctx, order), np.int32(ordered)]
             launch(ctx, kernel, *sizes, [*before, *head, *rays, *args, *buffers])
             ctx.queue.flush()  # the device starts on it now
-    finally:
+    except BaseException:
         ctx.queue.finish()
-    for array, buffer in zip(outputs.values(), buffers):
-        if cpu:
-            mapped = cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype,
-                                           is_blocking=True)[0]
-            mapped.base.release()
-        else:
-            cl.enqueue_copy(ctx.queue, array, buffer)
+        raise
+    if cpu:  # a map and an unmap of each, behind the kernels, then one wait
+        for array, buffer in zip(outputs.values(), buffers):
+            cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype,
+                                  is_blocking=False)[0].base.release()
+    else:
+        for array, buffer in zip(outputs.values(), buffers):
+            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
     ctx.queue.finish()
 
 
