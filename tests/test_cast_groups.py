@@ -59,15 +59,14 @@ def test_batches_ending_anywhere_in_a_group_give_the_same_bits():
 
 
 @pytest.mark.parametrize("shared_origin", [False, True])
-def test_a_batch_cast_in_chunks_gives_the_bits_of_small_batches(shared_origin):
-    """From 2 COHERENT_FROM rays on, a batch is ordered and cast in two chunks (engine/cast.py:
-    FIRST_CHUNK), the second ordered while the first runs, each ray read and written at its own
-    place through its chunk's order: every ray's results, with a tmax per ray, are those of the same
-    rays cast in batches too small to be ordered or chunked, bit for bit (an offset gone wrong in
-    the second chunk's order would write a ray's results at another's place)."""
+def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin):
+    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/cast.py: _order),
+    each ray read and written at its own place through the order: every ray's results, with a tmax
+    per ray and with one shared origin, are those of the same rays cast in batches too small to be
+    ordered, bit for bit (a ray written at another's place, or a limit read from another's, fails)."""
     scene, origins, directions = random_scene(5)
     rng = np.random.default_rng(5)
-    count = 2 * cast_module.COHERENT_FROM + 777
+    count = 2 * cast_module.COHERENT_FROM + 777  # several small batches' worth
     origins = origins[0] if shared_origin else origins[rng.integers(0, len(origins), count)] + rng.normal(size=(count, 3))
     directions = rng.normal(size=(count, 3))
     tmax = rng.uniform(0.5, 20.0, count)

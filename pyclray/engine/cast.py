@@ -7,7 +7,7 @@ from collections import OrderedDict
 import numpy as np
 import pyopencl as cl
 
-from ..model.aovs import AOVS, TABLE
+from ..model.aovs import AOVS
 from ..model.camera import ImagePlane
 from ..model.errors import DeviceError, PyclrayError, RequestError
 from ..model.layout import PRECISIONS, layout
@@ -16,7 +16,7 @@ from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
 from .prepared import CACHES, PREPARED_MAX, prepared_scene
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock
+from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -39,11 +39,13 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
 
 
 def _cast_rays(origins, directions, tmax):
-    """(origins (M, 3), directions (N, 3), tmax, leading shape): float64 arrays of the rays as given,
-    flattened; M is N, or 1 for one origin shared by every ray. A batch of fewer than COHERENT_FROM
-    rays is checked here (_check_rays); a larger one by its chunks' compiled scans (_ordered_chunks).
-    The kernel normalizes the directions (scaled by a power of two near their largest component
-    first, so that neither a tiny nor a huge finite direction under- or overflows in the length)."""
+    """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
+    given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
+    (lo, hi) and the rays' direction codes where a large batch's compiled scan found them
+    (cast_order.scan_codes), else None. The kernel normalizes the
+    directions (scaled by a power of two near their largest component first, so that neither a tiny
+    nor a huge finite direction under- or overflows in the length). Each check is one pass over the arrays; the row
+    of a failure is looked for only then."""
     directions = _ray_array("directions", directions)
     shape = directions.shape[:-1]
     origins = _ray_array("origins", origins)
@@ -51,8 +53,21 @@ def _cast_rays(origins, directions, tmax):
         raise PyclrayError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
         )
-    if directions.size // 3 < COHERENT_FROM:
-        _check_rays(origins, directions)
+    extent = None
+    if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, the origins' box, the codes
+        from .cast_order import scan_codes
+
+        fine, lo, hi, codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3))
+        extent = (lo, hi, codes) if fine else None
+    if extent is None:  # numpy's checks (and where one fails, its row)
+        for name, array in (("directions", directions), ("origins", origins)):
+            if not np.isfinite(array).all():
+                rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
+                _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
+        # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
+        flat = directions.reshape(-1, 3)
+        if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
+            _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
     if tmax is None:
         tmax = np.full(1, np.inf)
     else:
@@ -68,20 +83,7 @@ def _cast_rays(origins, directions, tmax):
         if bad.any():
             raise PyclrayError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
         tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
-    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape
-
-
-def _check_rays(origins: np.ndarray, directions: np.ndarray) -> None:
-    """numpy's checks of the rays as given (each one pass over the arrays; the row of a failure is
-    looked for only then): every coordinate finite, no zero direction."""
-    for name, array in (("directions", directions), ("origins", origins)):
-        if not np.isfinite(array).all():
-            rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
-            _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
-    # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
-    flat = directions.reshape(-1, 3)
-    if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
-        _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
+    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape, extent
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
@@ -212,7 +214,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
-    origins, directions, tmax, shape = _cast_rays(origins, directions, tmax)
+    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax)
     count = len(directions)
     real = REAL[precision]
     shape_types = prepared_scene(ctx, scene, precision).types  # the packed kinds (mesh instances among them)
@@ -220,40 +222,14 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
-    if count < COHERENT_FROM:  # one launch, the rays in their own order
+    direction_codes = None
+    if extent is not None:
+        lo, hi, direction_codes = extent
+    else:
         lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
-        _check_reach(origins, lo, hi, anchor, bound, precision)
-        chunks = iter([(0, count, None)])
-    else:
-        chunks = _ordered_chunks(origins, directions, anchor, bound, precision, scene_size)
-    if count == 0:
-        if kind == "occluded":
-            return np.zeros(shape, bool)
-        empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
-        return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    rays = [_ray_buffer(ctx, origins), np.int32(1 if len(origins) > 1 else 0), _ray_buffer(ctx, directions),
-            _ray_buffer(ctx, tmax), np.int32(1 if len(tmax) > 1 else 0), anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
-    if kind == "occluded":
-        variant, before = Variant("occluded", shape_types, (), precision), []
-        outputs = {"occluded": np.empty(count, np.bool_)}  # the kernel's chars 0 and 1: numpy's bools
-    else:
-        camera = camera_struct(np.eye(3), ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
-        variant, before = Variant("cast", shape_types, aovs, precision), [input_buffer(ctx, camera)]
-        outputs = {k: TABLE[k].empty((count,), precision) for k in aovs}
-    _launch_chunks(ctx, kernel_for(ctx, variant), chunks, before, rays, args, outputs)
-    if kind == "occluded":
-        return outputs["occluded"].reshape(shape)
-    results = {k: v.reshape(shape + v.shape[1:]) for k, v in outputs.items()}
-    return Frame(results, precision=precision, device=ctx.device.name.strip())
-
-
-def _check_reach(origins: np.ndarray, lo: np.ndarray, hi: np.ndarray, anchor: np.ndarray, bound: float,
-                 precision: str) -> None:
-    """Refuse origins (their box lo, hi) so far from the scene's anchor that the kernel's squares
-    of their distances would overflow; the row is looked for only then."""
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
         reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
-    if not reach <= bound:
+    if not reach <= bound:  # the row, looked for only now
         with np.errstate(over="ignore", invalid="ignore"):
             reach = np.abs(origins - anchor[:3]).max(axis=-1)
         row = int(np.argmax(~(reach <= bound)))
@@ -261,70 +237,35 @@ def _check_reach(origins: np.ndarray, lo: np.ndarray, hi: np.ndarray, anchor: np
             f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
             "(their distances overflow)"
         )
+    if count == 0:
+        if kind == "occluded":
+            return np.zeros(shape, bool)
+        empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
+        return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
+    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
+        from .cast_order import coherent_order
 
-
-# A large batch is ordered and cast in two chunks, its first FIRST_CHUNK of the rays: the host scans
-# and orders the second while the device casts the first (the host's scan and sort, 0.5 ms per
-# 100,000 rays on one thread, otherwise leave the device's threads waiting). Each ray is traced on
-# its own, so the chunks change no bit; each chunk's order is that of its own rays.
-FIRST_CHUNK = 0.3
-
-
-def _ordered_chunks(origins, directions, anchor, bound, precision, scene_size):
-    """(start, stop, order) per chunk of a batch of at least COHERENT_FROM rays, each found when
-    asked for (after the previous chunk's launch): its compiled scan (checks, origins' box, codes),
-    its reach check and its coherent order, as places of the whole batch. A chunk that fails a
-    check raises numpy's message about the whole batch (its first bad row: the earlier chunks passed)."""
-    from .cast_order import coherent_order, scan_codes  # numba's code, imported for large batches only
-
-    count = len(directions)
-    split = int(count * FIRST_CHUNK) if count >= 2 * COHERENT_FROM else count
-    for start, stop in ((0, split), (split, count)):
-        if start == stop:
-            continue
-        part = origins[start:stop] if len(origins) > 1 else origins
-        fine, lo, hi, codes = scan_codes(part, directions[start:stop])
-        if not fine:
-            _check_rays(origins, directions)
-            raise AssertionError("the compiled scan and numpy's checks disagree")  # never: both check the same
-        _check_reach(origins, lo, hi, anchor, bound, precision)
-        yield start, stop, coherent_order(part, directions[start:stop], lo, hi, scene_size, codes, start)
-
-
-def _launch_chunks(ctx, kernel, chunks, before, rays, args, outputs: dict) -> None:
-    """Launch the kernel once per chunk (start, stop, order or None: places start .. stop - 1 of the
-    batch in their own order) into the arrays of outputs, each chunk's launch started before the
-    next chunk is found, and wait for all. On a CPU device the kernel writes into the arrays' own
-    memory (USE_HOST_PTR), then maps make them current; elsewhere they are copied back. A chunk that
-    raises first lets the launched ones end (they read the rays' arrays)."""
-    cpu = bool(ctx.device.type & cl.device_type.CPU)
-    if cpu:
-        flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
-        buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
+        order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
     else:
-        buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, array.nbytes) for array in outputs.values()]
-    keep = []
-    try:
-        for start, stop, order in chunks:
-            ordered = order is not None
-            order = order if ordered else np.zeros(1, np.int32)
-            keep.append(order)
-            groups = -(-(stop - start) // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
-            sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
-            head = [np.int32(stop - start), _ray_buffer(ctx, order), np.int32(ordered)]
-            launch(ctx, kernel, *sizes, [*before, *head, *rays, *args, *buffers])
-            ctx.queue.flush()  # the device starts on it now
-    except BaseException:
-        ctx.queue.finish()
-        raise
-    if cpu:  # a map and an unmap of each, behind the kernels, then one wait
-        for array, buffer in zip(outputs.values(), buffers):
-            cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype,
-                                  is_blocking=False)[0].base.release()
-    else:
-        for array, buffer in zip(outputs.values(), buffers):
-            cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
-    ctx.queue.finish()
+        order = np.zeros(1, np.int32)
+    head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if count >= COHERENT_FROM else 0),
+            _ray_buffer(ctx, origins), np.int32(1 if len(origins) > 1 else 0), _ray_buffer(ctx, directions),
+            _ray_buffer(ctx, tmax), np.int32(1 if len(tmax) > 1 else 0),
+            anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
+    groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
+    sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
+    if kind == "occluded":
+        variant = Variant("occluded", shape_types, (), precision)
+        out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
+        _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
+        return out.reshape(shape)
+    identity = np.eye(3)
+    camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
+    variant = Variant("cast", shape_types, aovs, precision)
+    results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
+                         local_size=sizes[1])
+    results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
+    return Frame(results, precision=precision, device=ctx.device.name.strip())
 
 
 def _ray_buffer(ctx, array: np.ndarray):
@@ -335,6 +276,22 @@ def _ray_buffer(ctx, array: np.ndarray):
     if ctx.device.type & cl.device_type.CPU:
         return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=array)
     return input_buffer(ctx, array)
+
+
+def _run_into(ctx, kernel, sizes, args, out: np.ndarray) -> None:
+    """Run the kernel over sizes (global, local) with out as its last argument and wait: on a CPU
+    device it writes into out's own memory, then a map makes it current (as request.run_kernel does
+    for the images)."""
+    if ctx.device.type & cl.device_type.CPU:
+        buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out)
+        launch(ctx, kernel, *sizes, [*args, buffer])
+        mapped = cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, out.shape, out.dtype, is_blocking=True)[0]
+        mapped.base.release()
+        ctx.queue.finish()
+    else:
+        buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
+        launch(ctx, kernel, *sizes, [*args, buffer])
+        cl.enqueue_copy(ctx.queue, out, buffer)
 
 
 def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None) -> Frame:

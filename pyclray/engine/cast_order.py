@@ -150,9 +150,9 @@ def _codes(origins, directions, lo, scale, tables, with_origins):
 
 
 @numba.njit(cache=True, nogil=True)
-def _counting_sort(codes, offset=0):
-    """order[place]: the ray at each place of the stable sort of the codes, plus offset (a chunk's
-    start in its batch; a counting sort over the 2^15 codes: one pass to count, one to place)."""
+def _counting_sort(codes):
+    """order[place]: the ray at each place of the stable sort of the codes (a counting sort over
+    the 2^15 codes: one pass to count, one to place)."""
     count = codes.shape[0]
     starts = np.zeros(CODES + 1, np.int64)
     for i in range(count):
@@ -163,22 +163,22 @@ def _counting_sort(codes, offset=0):
     for i in range(count):
         at = starts[codes[i]]
         starts[codes[i]] = at + 1
-        order[at] = i + offset
+        order[at] = i
     return order
 
 
 def coherent_order(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                   scene_size: float, direction_codes: np.ndarray | None = None, offset: int = 0) -> np.ndarray:
+                   scene_size: float, direction_codes: np.ndarray | None = None) -> np.ndarray:
     """order[i]: the place in the batch of the i-th ray along a Morton curve of (origin, direction).
     Origins in cubic cells of the batch's box (lo, hi), never finer than 1/8 of the scene's size;
     directions by d / |d|_1. The rays are not gathered in that order: the kernel reads each through
     order (a gather on the host wrote 4.8 MB of fresh memory per 100,000 rays, page faults and all:
     more than the whole sort). direction_codes: scan_codes' codes, used where the origins share
-    one cell (else computed here); offset: added to every place (a chunk's start in its batch)."""
+    one cell (else computed here)."""
     extent = max(float((hi - lo).max()), scene_size, 1e-300)
     with_origins = len(origins) > 1 and float((hi - lo).max()) > extent / 8
     if direction_codes is not None and not with_origins:
-        return _counting_sort(direction_codes, offset)
+        return _counting_sort(direction_codes)
     tables = WITH_ORIGINS if with_origins else DIRECTIONS_ONLY
     return _counting_sort(_codes(origins, directions, np.ascontiguousarray(lo, np.float64), 8.0 / extent, tables,
-                                 with_origins), offset)
+                                 with_origins))
