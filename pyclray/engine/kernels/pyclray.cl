@@ -175,7 +175,9 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
 /* -- the nearest hit of each lane ----------------------------------------------------------------
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
- * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
+ * equally near with a lower id, or equally near with the same id and a lower key (below): an exact
+ * tie has one winner whatever the order of the visit, also between the triangles of one mesh (the
+ * BVH's order and the tile lists' give the same images).
  * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
  * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
 /* A type whose hit also says which of its own primitives each lane hit (mesh instances: the
@@ -193,11 +195,11 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     {                                                                                 \
         const intv closer = s < best, tied = s == best && s < MISS;                   \
         if (ANY(closer || tied)) {  /* the id is read only then */                    \
-            const intv id = SPLAT_INT(shape_id);                                      \
-            const intv nearer = closer || (tied && id < best_id);                     \
+            const intv id = SPLAT_INT(shape_id), key = SPLAT_INT((k) * 16 + (kind));  \
+            const intv nearer = closer || (tied && (id < best_id || (id == best_id && key < best_key))); \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
+            best_key = nearer ? key : best_key;                                       \
             PYCLRAY_KEEP_SUB(nearer)                                                  \
         }                                                                             \
     }
