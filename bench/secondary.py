@@ -15,6 +15,7 @@ kernels in that first call; it is reported as "first call") and then timed over 
 renders, which reuse the compiled kernels.
 
     .venv/bin/python -m bench.secondary [--rounds 4 --block 3] [--no-mitsuba] [--mitsuba-calls 2]
+    .venv/bin/python -m bench.secondary --flag-ab PYCLRAY_OLD_PRETEST --rounds 6   (a kernel change, A/B)
 """
 from __future__ import annotations
 
@@ -117,6 +118,40 @@ def mitsuba_direct(lit, light, calls: int) -> dict:
                                                  "q3": max(times), "n": calls}}
 
 
+def flag_ab(flag: str, rounds: int) -> None:
+    """A kernel change measured against the code before it in one process, where a shared machine's
+    load moves both alike (fresh processes taking turns moved by 10% between rounds either way): the
+    kernels built with and without -D<flag> (the old code kept under #ifdef <flag> while measuring)
+    take turns on the same calls, each switch rebuilding from the disk cache; medians of wall and
+    process CPU ms per call. A 3% change showed in every case this way (docs/benchmarks.md)."""
+    from pyclray.engine import programs
+
+    base = list(programs.BUILD_OPTIONS)
+    sets = {"view": view_rays(100_000), "box": scale.random_rays(100_000)}
+    for count in (16_384, 100_000):
+        scene = scale.scene(count)
+        times = {}
+        for r in range(rounds):
+            for name, (origins, directions) in sets.items():
+                for query, calls in (("occluded", 8), ("cast", 3)):
+                    function = getattr(pyclray, query)
+                    for on in ((True, False) if r % 2 else (False, True)):
+                        programs.BUILD_OPTIONS = base + ([f"-D{flag}"] if on else [])
+                        programs._programs.clear()
+                        function(scene, origins, directions)  # the switch's build and first call, untimed
+                        for _ in range(calls):
+                            cpu, wall = time.process_time(), time.perf_counter()
+                            function(scene, origins, directions)
+                            times.setdefault((name, query, flag if on else "without"), []).append(
+                                ((time.perf_counter() - wall) * 1e3, (time.process_time() - cpu) * 1e3))
+        programs.BUILD_OPTIONS = base
+        programs._programs.clear()
+        print(f"{count:,} spheres + ground, load {os.getloadavg()[0]:.2f}")
+        for key in sorted(times):
+            wall, cpu = np.median(np.array(times[key]), axis=0)
+            print(f"  {key[0]} rays, {key[1]:8s} {key[2]:24s} wall {wall:7.2f} ms  CPU {cpu:7.2f} ms")
+
+
 def ratios(results: dict) -> list[str]:
     """The issue's ratios: Open3D's time over pyclray's per query, shadows over no shadows, Mitsuba
     (warm) over pyclray's shadowed render."""
@@ -142,7 +177,11 @@ def main(argv=None) -> None:
     parser.add_argument("--block", type=int, default=3)
     parser.add_argument("--no-mitsuba", action="store_true")
     parser.add_argument("--mitsuba-calls", type=int, default=2, help="warm Mitsuba renders timed (default 2)")
+    parser.add_argument("--flag-ab", metavar="FLAG", help="instead: the casts' kernels with and without -DFLAG in turn (flag_ab)")
     args = parser.parse_args(argv)
+    if args.flag_ab:
+        flag_ab(args.flag_ab, args.rounds)
+        return
     print("load:", os.getloadavg())
     mitsuba_calls = 0 if args.no_mitsuba else max(args.mitsuba_calls, 1)
     results = {**casts(args.rounds, args.block), **shading(args.rounds, args.block, mitsuba_calls)}

@@ -56,3 +56,27 @@ def test_batches_ending_anywhere_in_a_group_give_the_same_bits():
         part = pyclray.cast(scene, origins[:size], directions[:size])
         assert_same_bits(part, {name: full[name][:size] for name in pyclray.AOVS})
         np.testing.assert_array_equal(pyclray.occluded(scene, origins[:size], directions[:size]), blocked[:size])
+
+
+@pytest.mark.parametrize("shared_origin", [False, True])
+def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin):
+    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/cast.py: _order),
+    each ray read and written at its own place through the order: every ray's results, with a tmax
+    per ray and with one shared origin, are those of the same rays cast in batches too small to be
+    ordered, bit for bit (a ray written at another's place, or a limit read from another's, fails)."""
+    scene, origins, directions = random_scene(5)
+    rng = np.random.default_rng(5)
+    count = 2 * cast_module.COHERENT_FROM + 777  # several small batches' worth
+    origins = origins[0] if shared_origin else origins[rng.integers(0, len(origins), count)] + rng.normal(size=(count, 3))
+    directions = rng.normal(size=(count, 3))
+    tmax = rng.uniform(0.5, 20.0, count)
+    whole = pyclray.cast(scene, origins, directions, tmax=tmax)
+    blocked = pyclray.occluded(scene, origins, directions, tmax=tmax)
+    small = cast_module.COHERENT_FROM - 1
+    for start in range(0, count, small):
+        part = slice(start, start + small)
+        some = origins if shared_origin else origins[part]
+        assert_same_bits(pyclray.cast(scene, some, directions[part], tmax=tmax[part]),
+                         {name: whole[name][part] for name in pyclray.AOVS})
+        np.testing.assert_array_equal(pyclray.occluded(scene, some, directions[part], tmax=tmax[part]), blocked[part])
+    assert 0 < blocked.sum() < count  # both answers among the rays

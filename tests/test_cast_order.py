@@ -77,12 +77,13 @@ def test_scan_finds_what_numpys_checks_find():
 
 @pytest.mark.parametrize("name, row, value, message", [
     ("origins", 5000, np.nan, "origins: row 5000 is not finite"),
+    ("origins", 5100, 1e30, r"origins: row 5100 \(.*\) is too far from the scene's shapes for fp32"),
     ("directions", 4100, np.inf, "directions: row 4100 is not finite"),
     ("directions", 4200, 0.0, "directions: row 4200 has zero length"),
 ])
 def test_a_large_batch_names_its_bad_row(name, row, value, message):
     """A batch large enough for the compiled scan fails as a small one does: one message naming
-    the first bad row."""
+    the first bad row (an origin too far for the precision too: its reach is checked from the scan's box)."""
     count = cast_module.COHERENT_FROM + 2000
     rng = np.random.default_rng(8)
     rays = {"origins": rng.uniform(-1, 1, (count, 3)), "directions": rng.normal(size=(count, 3))}

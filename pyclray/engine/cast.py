@@ -149,8 +149,9 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
                 own = kind.cls.cast_anchors(worlds[name], kind.ids)
                 if own is not None:
                     anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
-        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, np.ascontiguousarray(anchors)),
-                 _root_box(nodes)]
+        anchors = np.ascontiguousarray(anchors)
+        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, anchors),
+                 input_buffer(ctx, _box_anchors(anchors, anchor)), _root_box(nodes)]
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
@@ -177,6 +178,17 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         while len(_cast_prepared) > PREPARED_MAX:
             _cast_prepared.popitem(last=False)
     return args, anchor, size
+
+
+def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
+    """(N, 4) float32: per leaf position its anchor from the scene's anchor (the float64 difference)
+    and its radius, each rounded once to nearest, the bits the kernel's leaf pre-test had made of
+    them itself (kernels/pyclray.cl: cast_may_pass; an overflow is inf there too)."""
+    out = np.empty((len(anchors), 4), np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out[:, :3] = anchors[:, :3] - scene_anchor[:3]
+        out[:, 3] = anchors[:, 3]
+    return out
 
 
 def _root_box(nodes: np.ndarray):

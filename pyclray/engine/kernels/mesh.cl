@@ -117,10 +117,15 @@ inline MeshEdges mesh_edges_of(const real4 a, const real4 b, const real4 c, cons
     e.e2 = ax_ * by_ - ay_ * bx_;
 #ifdef PYCLRAY_MESH_EXACT
     if (ANY(e.e0 == 0 || e.e1 == 0 || e.e2 == 0)) {
+        /* those lanes only (as cast's blocks): a lane's bits never depend on the other lanes' rays
+         * (rescaled because another lane's edge function rounded to 0, a pixel's s could differ
+         * from the same ray's in a packet of other rays: on a device of another lane width) */
         MeshLanes Ax, Ay, Bx, By, Cx, Cy, E0, E1, E2;
         Ax.v = ax_; Ay.v = ay_; Bx.v = bx_; By.v = by_; Cx.v = cx_; Cy.v = cy_;
+        E0.v = e.e0; E1.v = e.e1; E2.v = e.e2;
         for (int l = 0; l < LANES; ++l)
-            mesh_exact_lane(Ax.s[l], Ay.s[l], Bx.s[l], By.s[l], Cx.s[l], Cy.s[l], &E0.s[l], &E1.s[l], &E2.s[l]);
+            if (E0.s[l] == 0 || E1.s[l] == 0 || E2.s[l] == 0)
+                mesh_exact_lane(Ax.s[l], Ay.s[l], Bx.s[l], By.s[l], Cx.s[l], Cy.s[l], &E0.s[l], &E1.s[l], &E2.s[l]);
         e.e0 = E0.v;
         e.e1 = E1.v;
         e.e2 = E2.v;

@@ -133,9 +133,11 @@
 #ifdef PYCLRAY_HAS_BOUNDED
 #ifdef PYCLRAY_CAST
 /* the wide BVH, per leaf position its shape's anchor in world coordinates (xyz) and bounding
- * radius (w), and the box of the root's children (lo xyz, hi xyz; PYCLRAY_CAST_BOUNDED) */
+ * radius (w), the same as the leaf pre-test takes them (box_anchors: xyz the anchor from the
+ * scene's anchor, w the radius, each rounded once to float: cast_may_pass), and the box of the
+ * root's children (lo xyz, hi xyz; PYCLRAY_CAST_BOUNDED) */
 #define PYCLRAY_BVH_ARGS(P) P(__global const WideNode*, nodes) P(__global const int*, refs) P(__global const double4*, anchors) \
-    P(const float8, root_box)
+    P(__global const float4*, box_anchors) P(const float8, root_box)
 #elif defined(PYCLRAY_SHADOWS)
 /* the wide BVH (camera packets traverse it: kernels/bvh.h's PYCLRAY_TRAVERSE_PACKET_WIDE), and the
  * binary one of the same boxes for shadow rays (kernels/shading.h) */
@@ -173,7 +175,9 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
 /* -- the nearest hit of each lane ----------------------------------------------------------------
  * Every shape is tested against the whole packet; a lane takes a shape's s where it is nearer, or
- * equally near with a lower id (the lowest id wins an exact tie, whatever the order of the visit).
+ * equally near with a lower id, or equally near with the same id and a lower key (below): an exact
+ * tie has one winner whatever the order of the visit, also between the triangles of one mesh (the
+ * BVH's order and the tile lists' give the same images).
  * A lane's winner is also kept as one key, 16 k + kind (k its index in its type's array; kinds are
  * 1 to 15, as in the BVH's refs), 0 on a miss: one select per shape instead of two. */
 /* A type whose hit also says which of its own primitives each lane hit (mesh instances: the
@@ -191,11 +195,11 @@ enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
     {                                                                                 \
         const intv closer = s < best, tied = s == best && s < MISS;                   \
         if (ANY(closer || tied)) {  /* the id is read only then */                    \
-            const intv id = SPLAT_INT(shape_id);                                      \
-            const intv nearer = closer || (tied && id < best_id);                     \
+            const intv id = SPLAT_INT(shape_id), key = SPLAT_INT((k) * 16 + (kind));  \
+            const intv nearer = closer || (tied && (id < best_id || (id == best_id && key < best_key))); \
             best = nearer ? s : best;                                                 \
             best_id = nearer ? id : best_id;                                          \
-            best_key = nearer ? SPLAT_INT((k) * 16 + (kind)) : best_key;              \
+            best_key = nearer ? key : best_key;                                       \
             PYCLRAY_KEEP_SUB(nearer)                                                  \
         }                                                                             \
     }
@@ -794,6 +798,7 @@ __kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_D
         CAST_PREFETCH(&nodes[code], sizeof(WideNode))                               \
     } else {                                                                        \
         const int first = (~(code)) >> 3, count = (~(code)) & 7;                    \
+        CAST_PREFETCH(&box_anchors[first], count * sizeof(float4))                  \
         CAST_PREFETCH(&anchors[first], count * sizeof(double4))                     \
         const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
@@ -859,20 +864,22 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s
 }
 
 /* Whether the ray (o, d: its origin from the scene's anchor and its unit direction, rounded to
- * float, the box tests' ray) may pass within R of a shape's anchor A (anchor.w = R). With g = A - o,
+ * float, the box tests' ray) may pass within R of a shape's anchor A (anchor: A - S and R, each
+ * rounded once to float on the host, as a convert_float would: the pre-test reads 16 bytes per
+ * shape, not the 32 of the float64 anchor, which only the shapes it keeps read). With g = A - o,
  * the ray's distance from A is |g x d|; rounding A - S (S the scene's anchor), o, g and d to float
  * and the cross product's products and sums err by a few eps32 (|A - S|_1 + |o|_1 + |g|_1): the
  * test widens R by 2^-16 (1 + that sum), hundreds of times more, and drops only a ray farther than
  * that from A, whose moved_ray would find it not near. Only where the box tests run (|o| < 2^100,
  * the scene within 2^100 of S): g is finite there; a square that overflows to inf is a distance
  * beyond 2^64, dropped only where the widened R is finite, below it. */
-inline bool cast_may_pass(const double4 anchor, const double4 scene_anchor, const float3 o, const float3 d)
+inline bool cast_may_pass(const float4 anchor, const float3 o, const float3 d)
 {
-    const float3 a = convert_float3(anchor.xyz - scene_anchor.xyz);
+    const float3 a = anchor.xyz;  /* the anchor from the scene's anchor, rounded once (host: cast_inputs) */
     const float3 g = a - o;
     const float3 gxd = (float3)(g.y * d.z - g.z * d.y, g.z * d.x - g.x * d.z, g.x * d.y - g.y * d.x);
     const float3 size = (a < (float3)(0.0f) ? -a : a) + (o < (float3)(0.0f) ? -o : o) + (g < (float3)(0.0f) ? -g : g);
-    const float reach = (float)anchor.w * (1.0f + 0x1p-16f) + 0x1p-16f * ((size.x + size.y) + size.z);
+    const float reach = anchor.w * (1.0f + 0x1p-16f) + 0x1p-16f * ((size.x + size.y) + size.z);
     return (gxd.x * gxd.x + gxd.y * gxd.y) + gxd.z * gxd.z <= reach * reach;
 }
 
@@ -883,12 +890,12 @@ inline bool cast_may_pass(const double4 anchor, const double4 scene_anchor, cons
  * A leaf of one ref (a mesh's block of triangles, kernels/mesh.cl, whose anchor is the whole mesh's)
  * is visited as it is: moved_ray's own test of that anchor is all a pre-test would do (on a mesh's
  * blocks it cost 7% of cast's time). */
-inline int cast_leaf_mask(__global const double4* anchors, const int first, const int count, const double4 scene_anchor,
-                          const float3 o, const float3 d)
+inline int cast_leaf_mask(__global const float4* box_anchors, const int first, const int count, const float3 o,
+                          const float3 d)
 {
     if (count == 1) return 1;
     int mask = 0;
-    for (int i = 0; i < count; ++i) mask |= cast_may_pass(anchors[first + i], scene_anchor, o, d) ? 1 << i : 0;
+    for (int i = 0; i < count; ++i) mask |= cast_may_pass(box_anchors[first + i], o, d) ? 1 << i : 0;
     return mask;
 }
 
@@ -1009,7 +1016,7 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
         ENTERED  /* the BVH's traversal (or its start, where cast interleaves rays) */ \
     }
 #define PYCLRAY_CAST_COUNT(Type, type) n_bounded += n_##type##s;
-#define PYCLRAY_CAST_LEAF_MASK(first, count) cast_leaf_mask(anchors, first, count, scene_anchor, o, box_direction)
+#define PYCLRAY_CAST_LEAF_MASK(first, count) cast_leaf_mask(box_anchors, first, count, o, box_direction)
 
 #ifndef PYCLRAY_OCCLUDED
 
