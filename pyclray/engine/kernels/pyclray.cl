@@ -1077,19 +1077,18 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
  * (CastRay) lives between its steps in the work-item's memory: cast_start sets it up (the ray, its
  * unbounded shapes, its box ray, the root pushed), cast_step is one step, cast_end writes its
  * results. */
+/* the state's parts, (type, name) each, kept as name_ and saved from cast_start's local of that name:
+ * the ray's, and (with bounded shapes) its traversal's */
+#define CAST_RAY_STATE(X) \
+    X(RayPacket, ray) X(double, t_max) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, length)
+#define CAST_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
+    X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
+#define CAST_STATE_FIELD(T, name) T name##_;
+#define CAST_STATE_SAVE(T, name) S->name##_ = name;
 typedef struct {
-    RayPacket ray_;
-    double t_max_, best_;
-    int r_, best_kind_, best_k_, best_q_;
-    real length_;
+    CAST_RAY_STATE(CAST_STATE_FIELD)
 #ifdef PYCLRAY_HAS_BOUNDED
-    RayPacket moved_;
-    double4 moved_anchor_;
-    double s0_;
-    bool near_;
-    float3 o_, box_direction_;
-    BoxRay box_;
-    float limit_;
+    CAST_TRAVERSAL_STATE(CAST_STATE_FIELD)
     int top_;
     int stack_child_[BVH_STACK];
     float stack_entry_[BVH_STACK];
@@ -1112,24 +1111,10 @@ inline void cast_start(CastRay* S, const int r, const CastDirection* direction, 
         float limit = float_above_wide(best);
         S->top_ = 0;
         PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
-        S->moved_ = moved;
-        S->moved_anchor_ = moved_anchor;
-        S->s0_ = s0;
-        S->near_ = near;
-        S->o_ = o;
-        S->box_direction_ = box_direction;
-        S->box_ = box;
-        S->limit_ = limit;
+        CAST_TRAVERSAL_STATE(CAST_STATE_SAVE)
     }
 #endif
-    S->ray_ = ray;
-    S->length_ = length;
-    S->t_max_ = t_max;
-    S->r_ = r;
-    S->best_ = best;
-    S->best_kind_ = best_kind;
-    S->best_k_ = best_k;
-    S->best_q_ = best_q;
+    CAST_RAY_STATE(CAST_STATE_SAVE)
 }
 
 #ifdef PYCLRAY_HAS_BOUNDED
