@@ -4,6 +4,7 @@ kernel (pyclray.engine.programs.Variant.source, kernels/lanes.h), and the cached
 plain path."""
 from __future__ import annotations
 
+import dataclasses
 import importlib
 
 import numpy as np
@@ -64,6 +65,29 @@ def test_inline_builtins_are_bit_identical(monkeypatch, seed, precision):
     for a, b in zip(fast, plain):
         same(a, b)
 
+
+
+@pytest.mark.parametrize("name", ["mesh", "instanced", "shapes-lit"])
+@pytest.mark.parametrize("lanes", [8, 1])
+def test_inline_builtins_are_bit_identical_through_the_bvh(monkeypatch, scenes_dir, name, lanes):
+    """The same with every shape type's code through the BVH (packets over the wide tree, shadow
+    rays over the binary one, a mesh's indexed triangles, instances; shaded with shadows), at the
+    CPU's width and at a GPU's one lane: the plain built-ins' program, which every device but PoCL's
+    CPU compiles, builds and gives PoCL's bits (an empty prefetch once left a loop without a body
+    there: the BVH's programs failed to build on Intel's CPU runtime and would have on GPUs)."""
+    if not device.is_pocl_cpu(device.context_for(None).device):
+        pytest.skip("device lacks PoCL: the inline built-ins are used on PoCL's CPU device only")
+    monkeypatch.setenv("PYCLRAY_LANES", str(lanes))
+    from pyclray.model.loader import load_scene
+
+    scene = load_scene(scenes_dir / f"{name}.toml")
+    scene = dataclasses.replace(scene, image=Image(53, 37))
+    asked = tuple(a for a in aovs.RENDER_AOVS if a != "label")
+    fast = pyclray.render(scene, asked, acceleration="bvh")
+    with monkeypatch.context() as patch:
+        with_plain_builtins(patch)
+        plain = pyclray.render(scene, asked, acceleration="bvh")
+    same(fast, plain)
 
 def without_culling(monkeypatch):
     from pyclray.engine import culling

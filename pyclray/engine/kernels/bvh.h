@@ -328,7 +328,7 @@ inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const
 #ifdef PYCLRAY_INLINE_BUILTINS
 #define BVH_PREFETCH(p) __builtin_prefetch(p);
 #else
-#define BVH_PREFETCH(p)
+#define BVH_PREFETCH(p) {}  /* a statement still: it may be a loop's body */
 #endif
 #define PYCLRAY_PACKET_CHILD_PREFETCH(nodes, child)                                     \
     {                                                                                   \
