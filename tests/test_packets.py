@@ -96,6 +96,14 @@ def test_the_lane_width_follows_the_device_and_the_environment(monkeypatch):
         assert lanes in programs.LANE_WIDTHS and lanes * bits <= programs.MAX_LANE_BITS
     if device.is_pocl_cpu(ctx.device) and ctx.device.preferred_vector_width_float >= 8:  # AVX or wider
         assert programs.lanes_for(ctx.device, "fp32") == 8 and programs.lanes_for(ctx.device, "fp64") == 4
+    # a CPU device that vectorizes across work-items itself reports a preferred width of 1 (Intel's
+    # CPU runtime): explicit packets of the widest lanes there; a GPU's 1 stays one ray a work-item
+    import pyopencl as cl
+    from types import SimpleNamespace
+
+    for kind, fp32, fp64 in ((cl.device_type.CPU, 8, 4), (cl.device_type.GPU, 1, 1)):
+        reports_1 = SimpleNamespace(type=kind, preferred_vector_width_float=1, preferred_vector_width_double=1)
+        assert (programs.lanes_for(reports_1, "fp32"), programs.lanes_for(reports_1, "fp64")) == (fp32, fp64)
     monkeypatch.setenv("PYCLRAY_LANES", "2")
     assert programs.lanes_for(ctx.device, "fp32") == 2
     monkeypatch.setenv("PYCLRAY_LANES", "3")
