@@ -69,16 +69,6 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
     (real4)(convert_real3(vertices[(f).y].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
     (real4)(convert_real3(vertices[(f).z].xyz - (eye)), (f).w >= 0 ? 1 : 0)
 
-/* a face's unit object normal normalize(cross(b - a, c - a)) from its float64 vertices: Mesh.face_normals'
- * operations in their order (numpy's cross product, its norm summed x, y, z), no contraction */
-inline double3 instance_object_normal(__global const double4* vertices, const int4 f)
-{
-#pragma OPENCL FP_CONTRACT OFF
-    const double3 a = vertices[f.x].xyz, e1 = vertices[f.y].xyz - a, e2 = vertices[f.z].xyz - a;
-    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    return n / sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
-}
-
 /* the packet in object space: from the eye (where its triangles are framed), along object_from_frame d / k */
 inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
 {
@@ -145,7 +135,8 @@ inline vec3v instance_normal(SHAPE_SPACE const Instance* inst, const intv which,
 {
     vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     INSTANCE_EACH_WINNER(which, {
-        const double3 n = instance_object_normal(vertices, faces[inst->first + q]);
+        const int4 f = faces[inst->first + q];  /* its unit object normal (kernels/mesh.cl) */
+        const double3 n = mesh_unit_normal(vertices[f.x].xyz, vertices[f.y].xyz, vertices[f.z].xyz);
         const double3 w = (double3)(instance_dot(inst->normal0, n), instance_dot(inst->normal1, n), instance_dot(inst->normal2, n));
         const real3 unit = convert_real3(w / sqrt((w.x * w.x + w.y * w.y) + w.z * w.z));
         normal = v3_select(normal, v3(SPLAT(unit.x), SPLAT(unit.y), SPLAT(unit.z)), lanes);

@@ -75,6 +75,27 @@ typedef union {
 } MeshLanes;
 #endif
 
+#if defined(PYCLRAY_FP64) || defined(cl_khr_fp64)
+/* A triangle's unit normal normalize(cross(b - a, c - a)) from its float64 vertices:
+ * pyclray.model.shapes.Mesh's face_normals, the same operations in the same order (numpy's cross
+ * product, its norm summed x, y, z), no contraction of a * b + c into an fma (here, whatever the rest
+ * of the program does): the bits the per-view copy carries. The winner's normal of an indexed mesh
+ * (mesh_world_normal), of cast's blocks (mesh_block_normal) and of mesh instances, in object space
+ * (kernels/instance.cl). The square root is the compiler's on PoCL's CPU device (the library's is a
+ * call there: kernels/lanes.h's v_sqrt), with the same IEEE result. */
+inline double3 mesh_unit_normal(const double3 a, const double3 b, const double3 c)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const double3 e1 = b - a, e2 = c - a;
+    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+#ifdef PYCLRAY_INLINE_BUILTINS
+    return n / __builtin_sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+#else
+    return n / sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+#endif
+}
+#endif
+
 /* kz = 0: (y, z, x); kz = 1: (z, x, y); kz = 2: as is (cyclic: the handedness is kept) */
 inline vec3v mesh_permute(const vec3v v, const intv z_is_x, const intv z_is_y)
 {
@@ -173,19 +194,13 @@ inline void mesh_assemble(const int4 face, __global const real4* vertices, Trian
     out->c = (real4)(vertices[face.z].xyz, valid);
 }
 
-/* The winner's unit world normal in w, from its float64 world vertices: pyclray.model.shapes.Mesh's
- * face_normals, the same operations in the same order (numpy's cross product, its norm summed x, y,
- * z), no contraction of a * b + c into an fma (here, whatever the rest of the program does): the bits
- * the per-view copy carries. */
+/* The winner's unit world normal in w, from its float64 world vertices (mesh_unit_normal) */
 inline void mesh_world_normal(Triangle* tri, const int4 face, __global const double4* world)
 {
-#pragma OPENCL FP_CONTRACT OFF
-    const double3 a = world[face.x].xyz, e1 = world[face.y].xyz - a, e2 = world[face.z].xyz - a;
-    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    const double length = sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
-    tri->a.w = (real)(n.x / length);
-    tri->b.w = (real)(n.y / length);
-    tri->c.w = (real)(n.z / length);
+    const double3 n = mesh_unit_normal(world[face.x].xyz, world[face.y].xyz, world[face.z].xyz);
+    tri->a.w = (real)n.x;
+    tri->b.w = (real)n.y;
+    tri->c.w = (real)n.z;
 }
 #ifdef PYCLRAY_SMOOTH
 /* an indexed triangle's vertex normals (smooth shading: one per shared vertex, zero for a flat mesh's) */
@@ -311,19 +326,16 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     return hit ? s : (blockv)(MISS);
 }
 
-/* the winner's unit world normal from its float64 vertices: mesh_world_normal's operations */
+/* the winner's unit world normal from its float64 vertices (mesh_unit_normal) */
 inline vec3v mesh_block_normal(__global const double* block, const int lane)
 {
-#pragma OPENCL FP_CONTRACT OFF
     const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
     __global const double* rows = block + 1;
     __global const uchar* corner = (__global const uchar*)(rows + 3 * unique) + lane;
 #define MESH_BLOCK_VERTEX(v) (double3)(rows[corner[(v) * count]], rows[unique + corner[(v) * count]], rows[2 * unique + corner[(v) * count]])
-    const double3 a = MESH_BLOCK_VERTEX(0), e1 = MESH_BLOCK_VERTEX(1) - a, e2 = MESH_BLOCK_VERTEX(2) - a;
+    const double3 n = mesh_unit_normal(MESH_BLOCK_VERTEX(0), MESH_BLOCK_VERTEX(1), MESH_BLOCK_VERTEX(2));
 #undef MESH_BLOCK_VERTEX
-    const double3 n = (double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    const double length = CAST_SQRT((n.x * n.x + n.y * n.y) + n.z * n.z);
-    return v3((real)(n.x / length), (real)(n.y / length), (real)(n.z / length));
+    return v3((real)n.x, (real)n.y, (real)n.z);
 }
 
 /* kernels/pyclray.cl's cast visit of a block (PYCLRAY_CAST_MODE_<type> BLOCKS): its lanes hit, in
