@@ -60,7 +60,7 @@ def test_scan_finds_what_numpys_checks_find():
     makes the batch not fine (the host then finds the row with numpy)."""
     rng = np.random.default_rng(7)
     origins, directions = rng.normal(size=(5000, 3)), rng.normal(size=(5000, 3))
-    fine, lo, hi = cast_order.scan(origins, directions)
+    fine, lo, hi, _ = cast_order.scan_codes(origins, directions)
     assert fine
     np.testing.assert_array_equal(lo, origins.min(axis=0))
     np.testing.assert_array_equal(hi, origins.max(axis=0))
@@ -69,10 +69,10 @@ def test_scan_finds_what_numpys_checks_find():
             spoilt = array.copy()
             spoilt[4321, 2] = bad
             pair = (spoilt, directions) if array is origins else (origins, spoilt)
-            assert not cast_order.scan(*pair)[0]
+            assert not cast_order.scan_codes(*pair)[0]
     zero = directions.copy()
     zero[17] = 0.0
-    assert not cast_order.scan(origins, zero)[0]
+    assert not cast_order.scan_codes(origins, zero)[0]
 
 
 @pytest.mark.parametrize("name, row, value, message", [

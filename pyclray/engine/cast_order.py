@@ -117,11 +117,6 @@ def scan_codes(origins: np.ndarray, directions: np.ndarray):
     return fine and no_zero, lo, hi, codes
 
 
-def scan(origins, directions):
-    """(fine, lo, hi) of scan_codes."""
-    return scan_codes(origins, directions)[:3]
-
-
 @numba.njit(cache=True, nogil=True)
 def _codes(origins, directions, lo, scale, tables, with_origins):
     """Per ray its code: origin cell (o - lo) * scale per axis (with_origins), direction cell of

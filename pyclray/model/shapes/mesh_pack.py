@@ -36,7 +36,6 @@ def indexed_smooth(meshes, precision: str):
     return out
 
 
-
 def cast_blocks(vertices, corners, ids, entries, starts):
     """Mesh.pack_cast_blocks: per block (entries[starts[i]:starts[i + 1]], triangles of one mesh) at
     a 64-byte boundary of float64s: a header (two int32: count | unique << 8, the mesh's id), the
