@@ -16,7 +16,6 @@ device and the phases' times.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 
 import numpy as np
@@ -25,9 +24,9 @@ import pyclray
 from pyclray.engine.device import context_for, describe
 
 from . import scale
-from .meshes import camera_for, meshes
+from .meshes import camera_for, incoherent_rays, meshes
 from .open3d_compare import blocks
-from .secondary import view_rays
+from .secondary import lit_scenes, view_rays
 
 AOVS = ("depth", "normal", "id", "primitive")
 
@@ -44,11 +43,7 @@ def mesh_rows(rounds: int, block: int) -> list[tuple[str, float]]:
             pyclray.render(scene, aovs=AOVS)
             builds.append((time.perf_counter() - start) * 1e3)
         rows.append((f"{label}: first render (build included)", float(np.median(builds))))
-        rng = np.random.default_rng(1)
-        lo, hi = mesh.box()
-        origins = rng.uniform(lo, hi, (100_000, 3))
-        directions = rng.normal(size=(100_000, 3))
-        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        origins, directions = incoherent_rays(mesh)
         timed = blocks({"primary": lambda: pyclray.render(scene, aovs=AOVS),
                         "cast": lambda: pyclray.cast(scene, origins, directions),
                         "occluded": lambda: pyclray.occluded(scene, origins, directions)}, rounds, block)
@@ -68,9 +63,7 @@ def sphere_rows(rounds: int, block: int, counts) -> list[tuple[str, float]]:
                             "occluded": lambda: pyclray.occluded(scene, origins, directions)}, rounds, block)
             rows += [(f"{count:,} spheres + ground, {name} rays: {query} 100,000", timed[query]["median"])
                      for query in ("cast", "occluded")]
-    scene = scale.scene(counts[-1])
-    lit = dataclasses.replace(scene, lights=(pyclray.PointLight((6.0, 14.0, 10.0), (300.0, 300.0, 300.0)),))
-    flat = dataclasses.replace(lit, shading=dataclasses.replace(lit.shading, shadows=False))
+    _, lit, flat = lit_scenes(counts[-1])
     timed = blocks({"shadows": lambda: pyclray.render(lit, aovs=("shaded",)),
                     "no shadows": lambda: pyclray.render(flat, aovs=("shaded",))}, rounds, block)
     rows += [(f"shaded 512x512, {counts[-1]:,} spheres, {k}", timed[k]["median"]) for k in ("shadows", "no shadows")]

@@ -74,6 +74,15 @@ def camera_for(mesh, size):
     return pyclray.Scene(pyclray.Camera(tuple(eye), tuple(centre), fov=45.0), pyclray.Image(size, size), (mesh,))
 
 
+def incoherent_rays(mesh, count: int = 100_000):
+    """(origins, unit directions): random origins in the mesh's box, uniform directions (seeded)."""
+    rng = np.random.default_rng(1)
+    lo, hi = mesh.box()
+    origins = rng.uniform(lo, hi, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
 def open3d_scene(mesh):
     import open3d as o3d
 
@@ -141,11 +150,7 @@ def run(bunny_path=None, rounds=3, block=5):
         for name in timed:
             timed[name]["cpu"] = float(np.median(cpu[name])) * 1e3
         rows.append((f"{label}: primary rays 512x512", timed))
-        rng = np.random.default_rng(1)
-        lo, hi = mesh.box()
-        origins = rng.uniform(lo, hi, (100_000, 3))
-        directions = rng.normal(size=(100_000, 3))
-        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        origins, directions = incoherent_rays(mesh)
         o3d_rays = o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32))
         systems, cpu = with_cpu({"pyclray": lambda: pyclray.cast(scene, origins, directions),
                                  "open3d": lambda: o3d_scene.cast_rays(o3d_rays)})
@@ -180,9 +185,7 @@ def memory_rows(bunny_path=None) -> list[str]:
         pyclray.clear_cache()
         pyclray.render(scene, aovs=("depth",))
         held = prepared_scene(context_for(None), scene, "fp32").nbytes()
-        rng = np.random.default_rng(1)
-        lo, hi = mesh.box()
-        pyclray.cast(scene, rng.uniform(lo, hi, (1000, 3)), rng.normal(size=(1000, 3)))
+        pyclray.cast(scene, *incoherent_rays(mesh, 1000))
         n = len(mesh.faces)
         rows.append(f"{label} ({n:,} triangles): render {held / n:.1f} B/triangle; a first cast adds {cast_bytes(scene) / n:.1f}")
     scene = field(100, 50_000, 64)

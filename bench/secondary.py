@@ -87,11 +87,15 @@ def casts(rounds: int, block: int) -> dict:
     return out
 
 
-def shading(rounds: int, block: int, mitsuba_calls: int) -> dict:
-    scene = scale.scene(100_000)
+def lit_scenes(count: int = 100_000):
+    """(the point light, the lit scene with shadows, the same without): bench/scale.py's spheres."""
     light = pyclray.PointLight((6.0, 14.0, 10.0), (300.0, 300.0, 300.0))
-    lit = dataclasses.replace(scene, lights=(light,))
-    unshadowed = dataclasses.replace(lit, shading=dataclasses.replace(lit.shading, shadows=False))
+    lit = dataclasses.replace(scale.scene(count), lights=(light,))
+    return light, lit, dataclasses.replace(lit, shading=dataclasses.replace(lit.shading, shadows=False))
+
+
+def shading(rounds: int, block: int, mitsuba_calls: int) -> dict:
+    light, lit, unshadowed = lit_scenes()
     systems = {
         "pyclray shaded, shadows": lambda: pyclray.render(lit, aovs=("shaded",)),
         "pyclray shaded, no shadows": lambda: pyclray.render(unshadowed, aovs=("shaded",)),
