@@ -39,10 +39,18 @@ def test_directions_at_the_ends_of_the_range_give_the_same_bits(precision):
                                   pyclray.occluded(scene, origins, tiny, precision=precision))
 
 
-def test_batches_ending_anywhere_in_a_group_give_the_same_bits():
+@pytest.fixture(params=["ordered", "caller's order"])
+def order_rule(request, monkeypatch):
+    """Large batches cast in the coherent order (as on a scene too large for the cache), or in the
+    caller's order (as on this small scene: cast_module._orders)."""
+    monkeypatch.setattr(cast_module, "ORDER_CACHE_SHARE", 0.0 if request.param == "ordered" else float("inf"))
+    return request.param
+
+
+def test_batches_ending_anywhere_in_a_group_give_the_same_bits(order_rule):
     """The rays of a batch of any length, unordered and in the coherent order (from COHERENT_FROM rays
-    on), are those of a longer batch, bit for bit: the places past a batch's end in its last group
-    and work-group (set up as copies of its last ray) write nothing and change nothing."""
+    on, where the scene is ordered), are those of a longer batch, bit for bit: the places past a batch's
+    end in its last group and work-group (set up as copies of its last ray) write nothing and change nothing."""
     scene, origins, directions = random_scene(4)
     rng = np.random.default_rng(4)
     count = cast_module.COHERENT_FROM + 300
@@ -59,11 +67,12 @@ def test_batches_ending_anywhere_in_a_group_give_the_same_bits():
 
 
 @pytest.mark.parametrize("shared_origin", [False, True])
-def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin):
-    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/cast.py: _order),
-    each ray read and written at its own place through the order: every ray's results, with a tmax
-    per ray and with one shared origin, are those of the same rays cast in batches too small to be
-    ordered, bit for bit (a ray written at another's place, or a limit read from another's, fails)."""
+def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin, order_rule):
+    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/cast.py: _orders;
+    forced here, the scene being small), each ray read and written at its own place through the
+    order: every ray's results, with a tmax per ray and with one shared origin, are those of the
+    same rays cast in batches too small to be ordered, bit for bit (a ray written at another's
+    place, or a limit read from another's, fails); and so in the caller's order."""
     scene, origins, directions = random_scene(5)
     rng = np.random.default_rng(5)
     count = 2 * cast_module.COHERENT_FROM + 777  # several small batches' worth
@@ -80,3 +89,37 @@ def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin):
                          {name: whole[name][part] for name in pyclray.AOVS})
         np.testing.assert_array_equal(pyclray.occluded(scene, some, directions[part], tmax=tmax[part]), blocked[part])
     assert 0 < blocked.sum() < count  # both answers among the rays
+
+
+def test_large_batches_are_ordered_where_the_scene_outgrows_the_cache_share(monkeypatch):
+    """On a CPU device a large batch is cast in the coherent order only where the scene's cast data
+    (cast_inputs' bytes: its tree, anchors and entries) exceed ORDER_CACHE_SHARE of the device's
+    last-level cache (engine/cast.py: _orders; a GPU orders every large batch); small batches never
+    are. The same rays give the same bits either way (the tests above)."""
+    from pyclray.engine import cast_order
+    from pyclray.engine.device import context_for
+    from pyclray.engine.prepared import prepared_scene
+
+    calls = []
+    real_order = cast_order.coherent_order
+    monkeypatch.setattr(cast_order, "coherent_order", lambda *a, **k: calls.append(1) or real_order(*a, **k))
+    scene, origins, directions = random_scene(6)
+    rng = np.random.default_rng(6)
+    count = cast_module.COHERENT_FROM + 100
+    origins, directions = rng.uniform(-6, 6, (count, 3)), rng.normal(size=(count, 3))
+    ctx = context_for(None)
+    types = prepared_scene(ctx, scene, "fp32").types
+    held = cast_module.cast_inputs(ctx, scene, "fp32", types)[3]
+    assert held > 0
+    cache = ctx.device.global_mem_cache_size
+    cpu = bool(ctx.device.type & cast_module.cl.device_type.CPU)
+    results = {}
+    for share, ordered in ((1.01 * held / cache, not cpu), (0.99 * held / cache, True)):
+        monkeypatch.setattr(cast_module, "ORDER_CACHE_SHARE", share)
+        calls.clear()
+        results[ordered] = pyclray.cast(scene, origins, directions)
+        assert len(calls) == (1 if ordered else 0)
+        pyclray.cast(scene, origins[:100], directions[:100])  # a small batch: never ordered
+        assert len(calls) == (1 if ordered else 0)
+    if len(results) == 2:
+        assert_same_bits(results[True], results[False])

@@ -38,11 +38,11 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
     raise PyclrayError(f"{name}: {where} {what}: {rows[index]}")
 
 
-def _cast_rays(origins, directions, tmax):
+def _cast_rays(origins, directions, tmax, codes: bool = True):
     """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
     given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
-    (lo, hi) and the rays' direction codes where a large batch's compiled scan found them
-    (cast_order.scan_codes), else None. The kernel normalizes the
+    (lo, hi) and the rays' direction codes (None unless codes: a batch that is not ordered) where a
+    large batch's compiled scan found them (cast_order.scan_codes), else None. The kernel normalizes the
     directions (scaled by a power of two near their largest component first, so that neither a tiny
     nor a huge finite direction under- or overflows in the length). Each check is one pass over the arrays; the row
     of a failure is looked for only then."""
@@ -57,8 +57,8 @@ def _cast_rays(origins, directions, tmax):
     if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, the origins' box, the codes
         from .cast_order import scan_codes
 
-        fine, lo, hi, codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3))
-        extent = (lo, hi, codes) if fine else None
+        fine, lo, hi, direction_codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3), codes)
+        extent = (lo, hi, direction_codes) if fine else None
     if extent is None:  # numpy's checks (and where one fails, its row)
         for name, array in (("directions", directions), ("origins", origins)):
             if not np.isfinite(array).all():
@@ -92,6 +92,27 @@ def _cast_rays(origins, directions, tmax):
 # time). Each ray is traced on its own, so the order changes no bit.
 COHERENT_FROM = 4096
 
+# ... on a CPU device, only where the scene's cast data (its tree, anchors and entries) outgrow this
+# share of the device's last-level cache (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE: 32 MiB of L3 here). Within
+# it any ray finds its nodes and shapes in the cache, and the order's cost (the host's sort, the
+# kernel's rows read and results written through it at scattered places) is more than it saves.
+# 100,000 random rays in the caller's order against the coherent one (docs/benchmarks.md, "Cast's
+# ray order by scene size"), two runs: 2.0 MB of 16,384 spheres up to 14% faster (none slower
+# beyond 2%), 5.4 MB of the 80,000-triangle bunny 5-12% faster; 69 MB of 1,000,000 triangles 2-6%
+# slower, and 12.7 MB of 100,000 spheres between (box rays' cast 4-7% slower, the rest either way).
+# A GPU orders every large batch: its work-items run in lock-step groups, where rays that part ways
+# wait for each other.
+ORDER_CACHE_SHARE = 0.25
+
+
+def _orders(ctx, scene_bytes: int) -> bool:
+    """Whether the scene's batches of COHERENT_FROM rays or more are cast in the coherent order on
+    this device (ORDER_CACHE_SHARE)."""
+    if not ctx.device.type & cl.device_type.CPU:
+        return True
+    return scene_bytes > ORDER_CACHE_SHARE * ctx.device.global_mem_cache_size
+
+
 # The rays one work-item traces, one after the other, their setups done together (kernels/pyclray.cl's
 # CAST_GROUP, which this must equal), and the work-items of a work-group: 128 rays, so that the
 # device's threads share a batch evenly (left to PoCL, 12,500 work-items made 5 work-groups for 2
@@ -111,16 +132,17 @@ _cast_prepared: OrderedDict = OrderedDict()
 CACHES.append(_cast_prepared)  # pyclray.clear_cache() empties it
 
 
-def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, np.ndarray, float]:
-    """(arguments, anchor, size): the BVH around the scene's anchor (its root box's centre), its refs and
-    the entries' anchors, and per shape type its packed buffer (each bounded entry relative to its
-    own anchor, in leaf order) and count. They depend on the shapes only, never on the rays."""
+def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, np.ndarray, float, int]:
+    """(arguments, anchor, size, bytes): the BVH around the scene's anchor (its root box's centre), its
+    refs and the entries' anchors, and per shape type its packed buffer (each bounded entry relative
+    to its own anchor, in leaf order) and count; bytes: those buffers' sizes together. They depend on
+    the shapes only, never on the rays."""
     key = (ctx.device.int_ptr, id(scene.shapes), precision)
     with render_lock:
         entry = _cast_prepared.get(key)
         if entry is not None and entry[0] is scene.shapes and entry[1] == shape_types:
             _cast_prepared.move_to_end(key)
-            return entry[2], entry[3], entry[4]
+            return entry[2], entry[3], entry[4], entry[5]
     prepared = prepared_scene(ctx, scene, precision)
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
@@ -173,11 +195,12 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                  input_buffer(ctx, np.ascontiguousarray(worlds[name])), *kind.shared, np.int32(kind.count)]
+    held = sum(a.size for a in args if isinstance(a, cl.MemoryObjectHolder))
     with render_lock:
-        _cast_prepared[key] = (scene.shapes, shape_types, args, anchor, size)
+        _cast_prepared[key] = (scene.shapes, shape_types, args, anchor, size, held)
         while len(_cast_prepared) > PREPARED_MAX:
             _cast_prepared.popitem(last=False)
-    return args, anchor, size
+    return args, anchor, size, held
 
 
 def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
@@ -214,11 +237,13 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
-    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax)
-    count = len(directions)
     real = REAL[precision]
     shape_types = prepared_scene(ctx, scene, precision).types  # the packed kinds (mesh instances among them)
-    args, anchor, scene_size = cast_inputs(ctx, scene, precision, shape_types)
+    args, anchor, scene_size, scene_bytes = cast_inputs(ctx, scene, precision, shape_types)
+    orders = _orders(ctx, scene_bytes)  # the scan of a large batch makes its codes only then
+    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders)
+    count = len(directions)
+    ordered = orders and count >= COHERENT_FROM
     # the distances the kernel squares, from a shape's anchor, must stay below the square root of
     # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
     bound = np.sqrt(np.finfo(real).max) / 4
@@ -242,13 +267,13 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
+    if ordered:  # numba's code, imported for large batches only
         from .cast_order import coherent_order
 
         order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
     else:
         order = np.zeros(1, np.int32)
-    head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if count >= COHERENT_FROM else 0),
+    head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if ordered else 0),
             _ray_buffer(ctx, origins), np.int32(1 if len(origins) > 1 else 0), _ray_buffer(ctx, directions),
             _ray_buffer(ctx, tmax), np.int32(1 if len(tmax) > 1 else 0),
             anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
