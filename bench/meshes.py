@@ -168,7 +168,7 @@ def cast_bytes(scene) -> int:
     from pyclray.engine import cast
 
     entry = next(v for v in cast._cast_prepared.values() if v[0] is scene.shapes)
-    held = sum(a.size for a in entry[2] if hasattr(a, "size") and not isinstance(a, np.generic))
+    held = entry[5]  # cast_inputs' bytes: the sizes of its buffers
     tree = prepared_scene(context_for(None), scene, "fp32").bvh
     return held + (tree.__dict__["bounds"].nbytes if "bounds" in tree.__dict__ else 0)
 
