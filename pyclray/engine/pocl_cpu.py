@@ -11,9 +11,13 @@ The replacement is the x86-64 micro-architecture level the CPU's flags allow, at
 ``x86-64-v3`` (AVX2 and FMA): what LLVM 14 compiled for the Zen 4 machines before (``znver3``, AVX2;
 it compiles no 512-bit vectors for these kernels, see programs.MAX_LANE_BITS), so the programs are
 those of before. The field is found by value, not by a layout: the one pointer among the struct's
-first words whose string is "generic", read through /proc/self/mem (a bad address is an error
+first 256 words whose string is "generic", read through /proc/self/mem (a bad address is an error
 there, not a crash). Anything unexpected (no such pointer, more than one, not Linux) leaves the
 device as it is, and its builds report the compiler's error as ever.
+
+PoCL keeps failed builds in its own cache (~/.cache/pocl) under a key that does not depend on that
+name: the programs built for the named CPU say so in their first line (programs.py), so that a
+failure cached by an earlier pyclray, before the name was set, is never found again.
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ import struct
 
 import pyopencl as cl
 
-_SCAN_WORDS = 1024  # PoCL 3.0's device struct is about 2 KB; the field sits at word 80
+_SCAN_WORDS = 256  # the first 2 KB of PoCL 3.0's device struct, which hold the field (at word 80)
 _patched: dict = {}  # device pointer -> the replacement name's buffer (kept alive: PoCL reads it)
 
 
@@ -44,6 +48,12 @@ def _level() -> bytes:
     if {"sse4_2", "popcnt", "ssse3"} <= flags:
         return b"x86-64-v2"
     return b"x86-64"
+
+
+def named_cpu(device: cl.Device) -> str | None:
+    """The CPU name given to this device (name_known_cpu), or None where it has its own."""
+    name = _patched.get(device.int_ptr)
+    return None if name is None else name.value.decode()
 
 
 def name_known_cpu(device: cl.Device) -> bool:

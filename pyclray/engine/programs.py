@@ -20,6 +20,7 @@ from ..model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's ty
 from .bvh import NODE
 from .bvh_wide import WIDE_NODE
 from .device import DeviceContext, is_pocl_cpu
+from .pocl_cpu import named_cpu
 from .shading import STRUCTS as SHADING_STRUCTS
 
 # Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
@@ -309,6 +310,9 @@ def _quiet_compiler():
 
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
     source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
+    cpu = named_cpu(ctx.device)
+    if cpu is not None:  # PoCL compiles for a CPU pyclray named (engine/pocl_cpu.py): a key of its own
+        source = f"/* pyclray: PoCL's CPU named {cpu} */\n{source}"
     folder = cache_dir()
     path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None
     if path is not None and path.is_file():
