@@ -71,7 +71,13 @@ def name_known_cpu(device: cl.Device) -> bool:
     except OSError:
         return False
     try:
-        raw = os.pread(fd, 8 * _SCAN_WORDS, key)
+        raw = b""
+        while len(raw) < 8 * _SCAN_WORDS:  # page by page: the struct may end a mapping (then the rest fails)
+            try:
+                raw += os.pread(fd, 4096 - (key + len(raw)) % 4096, key + len(raw))
+            except OSError:
+                break
+        raw = raw[: 8 * _SCAN_WORDS]
         found = []
         for index, word in enumerate(struct.unpack(f"<{len(raw) // 8}Q", raw)):
             if 0x10000 < word < 1 << 47:
