@@ -11,7 +11,7 @@ The replacement is the x86-64 micro-architecture level the CPU's flags allow, at
 ``x86-64-v3`` (AVX2 and FMA): what LLVM 14 compiled for the Zen 4 machines before (``znver3``, AVX2;
 it compiles no 512-bit vectors for these kernels, see programs.MAX_LANE_BITS), so the programs are
 those of before. The field is found by value, not by a layout: the one pointer among the struct's
-first 256 words whose string is "generic", read through /proc/self/mem (a bad address is an error
+128 words of the struct whose string is "generic", read through /proc/self/mem (a bad address is an error
 there, not a crash). Anything unexpected (no such pointer, more than one, not Linux) leaves the
 device as it is, and its builds report the compiler's error as ever.
 
@@ -27,7 +27,7 @@ import struct
 
 import pyopencl as cl
 
-_SCAN_WORDS = 256  # the first 2 KB of PoCL 3.0's device struct, which hold the field (at word 80)
+_SCAN_WORDS = 128  # PoCL 3.0's device struct is 1,032 bytes (its field is word 80); the heap goes on after it
 _patched: dict = {}  # device pointer -> the replacement name's buffer (kept alive: PoCL reads it)
 
 
