@@ -22,7 +22,8 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine import bvh, scene_bvh, views
+from pyclray.engine import api, bvh, scene_bvh
+from pyclray.engine.device import context_for
 
 from . import scale
 
@@ -78,7 +79,7 @@ def timed(cases: dict, rounds: int = ROUNDS) -> dict:
 def compare(label: str, scene: pyclray.Scene, origins, directions) -> None:
     """One table row: the scene through each tree."""
     scenes = {m: built_with(scene, m) for m in ("lbvh", "sah")}
-    trees = {m: views.scene_bvh(s).tree for m, s in scenes.items()}  # the prepared scenes' own
+    trees = {m: api.tracer_for(s, context_for(None), "fp32").prepared.bvh.tree for m, s in scenes.items()}  # the prepared scenes' own
     cases = {}
     for m, s in scenes.items():
         cases[f"render {m}"] = lambda s=s: pyclray.render(s, AOVS, acceleration="bvh")

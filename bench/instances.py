@@ -71,13 +71,13 @@ def mitsuba_scene(scene: pyclray.Scene):
 def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3, mitsuba=True):
     from pyclray.engine.device import context_for
     from pyclray.engine.instances import instance_bytes
-    from pyclray.engine.prepared import prepared_scene
+    from pyclray.engine.api import tracer_for
 
     scene = field(count, triangles, size)
     start = time.perf_counter()
     frame = pyclray.render(scene, aovs=AOVS)
     first = time.perf_counter() - start
-    cost = instance_bytes(prepared_scene(context_for(), scene, "fp32"))
+    cost = instance_bytes(tracer_for(scene, context_for(), "fp32").prepared)
     hit = float(np.mean(frame["id"] >= 0))
     out = {"scene": f"{count:,} instances of a {len(scene.shapes[0].faces):,}-triangle mesh, {size}x{size}, "
                     f"{hit:.0%} of the pixels hit", "first_render_s": first, "cost": cost}

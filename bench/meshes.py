@@ -33,7 +33,7 @@ import numpy as np
 
 import pyclray
 from pyclray.engine.device import context_for
-from pyclray.engine.prepared import prepared_scene
+from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 
 from .open3d_compare import blocks
@@ -141,7 +141,7 @@ def run(bunny_path=None, rounds=3, block=5):
             o3d_scene.cast_rays(rays[:1])
             theirs_build.append(time.perf_counter() - start)
             time.sleep(0.2)
-        held = prepared_scene(context_for(None), scene, "fp32").nbytes() / len(mesh.faces)
+        held = tracer_for(scene, context_for(None), "fp32").prepared.nbytes() / len(mesh.faces)
         rows.append((f"{label} ({len(mesh.faces):,} triangles, {held:.1f} B/triangle): first render / build + first cast",
                      {"pyclray": {"median": np.median(ours_build) * 1e3}, "open3d": {"median": np.median(theirs_build) * 1e3}}))
         systems, cpu = with_cpu({"pyclray": lambda: pyclray.render(scene, aovs=("depth", "normal", "id", "primitive")),
@@ -163,13 +163,11 @@ def run(bunny_path=None, rounds=3, block=5):
 
 
 def cast_bytes(scene) -> int:
-    """The bytes a scene's first cast added: cast's device buffers (engine/cast.py's cache) and the
-    leaf-order bounds the prepared scene's tree gathered for it."""
-    from pyclray.engine import cast
-
-    entry = next(v for v in cast._cast_prepared.values() if v[0] is scene.shapes)
-    held = entry[5]  # cast_inputs' bytes: the sizes of its buffers
-    tree = prepared_scene(context_for(None), scene, "fp32").bvh
+    """The bytes a scene's first cast added: cast's device buffers (its cached handle's cast inputs)
+    and the leaf-order bounds the prepared scene's tree gathered for it."""
+    tracer = tracer_for(scene, context_for(None), "fp32")
+    held = tracer.cast_inputs()[3]  # cast_inputs' bytes: the sizes of its buffers
+    tree = tracer.prepared.bvh
     return held + (tree.__dict__["bounds"].nbytes if "bounds" in tree.__dict__ else 0)
 
 
@@ -184,14 +182,14 @@ def memory_rows(bunny_path=None) -> list[str]:
         scene = camera_for(mesh, 64)
         pyclray.clear_cache()
         pyclray.render(scene, aovs=("depth",))
-        held = prepared_scene(context_for(None), scene, "fp32").nbytes()
+        held = tracer_for(scene, context_for(None), "fp32").prepared.nbytes()
         pyclray.cast(scene, *incoherent_rays(mesh, 1000))
         n = len(mesh.faces)
         rows.append(f"{label} ({n:,} triangles): render {held / n:.1f} B/triangle; a first cast adds {cast_bytes(scene) / n:.1f}")
     scene = field(100, 50_000, 64)
     pyclray.clear_cache()
     pyclray.render(scene, aovs=("depth",))
-    cost = instance_bytes(prepared_scene(context_for(None), scene, "fp32"))
+    cost = instance_bytes(tracer_for(scene, context_for(None), "fp32").prepared)
     unique = len(scene.shapes[0].faces)
     rows.append(f"a mesh of {unique:,} triangles shared by {cost['instances']} instances: {cost['shared_bytes'] / unique:.1f} "
                 f"B per unique triangle, {cost['bytes_per_instance']:.0f} B per instance")

@@ -35,7 +35,9 @@ import pyclray
 from pyclray.engine import bvh
 from pyclray.model.shapes import REGISTRY
 from pyclray.engine import bvh_wide
-from pyclray.engine import prepared, views
+from pyclray.engine import api
+from pyclray.engine.device import context_for
+from pyclray.engine.views import ViewState
 from pyclray.engine.scene_bvh import scene_bvh as build_scene_bvh
 
 from . import scale
@@ -43,7 +45,6 @@ from . import scale
 from . import HERE, OUT  # OUT: untracked (.gitignore); --update writes the tracked files in HERE instead
 RESULTS_NAME, REPORT_NAME = "open3d_results.json", "REPORT.md"
 BEGIN, END = "<!-- scale:begin -->", "<!-- scale:end -->"
-render_module = sys.modules["pyclray.engine.views"]
 
 
 def blocks(systems: dict, rounds: int, block: int, pause: float = 0.05) -> dict:
@@ -129,7 +130,7 @@ def scaling(counts, rounds: int, block: int) -> dict:
         # a moved camera: the same shapes tuple, so the tree is reused; the shapes are packed again
         moved = replace(scene, camera=pyclray.Camera((4.0, 10.0, 24.0), scale.TARGET, fov=scale.FOV))
         camera_move = once(lambda: pyclray.render(moved))
-        scene_bvh = views.scene_bvh(scene)
+        scene_bvh = api.tracer_for(scene, context_for(None), "fp32").prepared.bvh
         memory = {
             "binary nodes": scene_bvh.binary_nodes(np.zeros(3)).nbytes,
             "wide nodes": scene_bvh.nodes(np.zeros(3)).nbytes,
@@ -141,7 +142,7 @@ def scaling(counts, rounds: int, block: int) -> dict:
             "tree from bounds cpu ms": build_cpu,
             "wide tree ms": collapse,
             "wide tree cpu ms": collapse_cpu,
-            "auto": views.acceleration_for(scene),
+            "auto": ViewState().acceleration(scene, "auto", api.tracer_for(scene, context_for(None), "fp32").prepared),
             "render auto ms": timing["auto"],
             "scene BVH ms (bounds from the shapes, tree, wide tree)": prepare,
             "first render ms (BVH, packing, upload, render)": first,

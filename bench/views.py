@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine import prepared
+from pyclray.engine import api, prepared
 from pyclray.engine.device import context_for
 from pyclray.model.animation import Animation
 
@@ -137,11 +137,11 @@ def million(count: int = 1_000_000) -> dict:
     built = time.perf_counter() - start
     scene = pyclray.Scene(pyclray.Camera(scale.EYE, scale.TARGET, fov=scale.FOV), pyclray.Image(SIZE, SIZE),
                           (pyclray.Plane((0.0, 1.0, 0.0), 0.0), batch))
-    prepared.clear()
+    pyclray.clear_cache()
     start = time.perf_counter()
     pyclray.render(scene, AOVS)
     first = time.perf_counter() - start
-    held = prepared.prepared_scene(context_for(None), scene, "fp32").nbytes()
+    held = api.tracer_for(scene, context_for(None), "fp32").prepared.nbytes()
     print(f"  {count:,} spheres: Spheres() {built:.3f} s (target <= 1), first render {first:.2f} s (target <= 3; "
           f"program from the caches), {held / count:.1f} bytes per sphere (target <= 64)")
     return {"construct_s": built, "first_render_s": first, "bytes_per_sphere": held / count, "scene": scene}
@@ -181,7 +181,7 @@ def animation(count: int = 100_000, moving: int = 10) -> dict:
     # what the refit did to the tree, and what a rebuild of this scene would cost
     from pyclray.engine.bvh import sah_cost
 
-    last = next(p for p in prepared._prepared.values() if p.base is scene.shapes)
+    last = next(t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes)
     growth = sah_cost(last.bvh.tree) / last._refit.built_cost
     start = time.perf_counter()
     prepared.PreparedScene(context_for(None), last.shapes, "fp32")

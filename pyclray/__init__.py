@@ -19,9 +19,10 @@ if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.a
     _signal.signal(_signal.SIGINT, _quiet_interrupt)
 
 from .engine.device import list_devices, select_device
-from .engine.prepared import clear as clear_cache
-from .engine.render import render, render_animation, render_views
+from .engine.api import clear as clear_cache
+from .engine.api import render, render_animation, render_views
 from .engine.request import Frame
+from .engine.tracer import Tracer, prepare
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
@@ -36,8 +37,8 @@ from .version import __version__
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "cast", "list_devices", "load_scene", "render",
-    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "scene_from_dict", "select_device", "write_exr",
+    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
     "write_npz",
 ]
 
@@ -46,7 +47,7 @@ __all__ = [
 # path (a first render of a new process pays for every module it imports), and pyclray.cluster needs
 # the cluster extra (importing distributed takes a while). name -> (module, attribute)
 _LAZY = {
-    "cast": (".engine.cast", "cast"), "occluded": (".engine.cast", "occluded"),
+    "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
     "cluster": (".apps.cluster", None),

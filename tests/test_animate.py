@@ -257,7 +257,7 @@ def test_a_scene_without_animation_or_with_a_bad_one_exits_2(tmp_path, scene_fil
 def test_ctrl_c_or_a_failure_mid_sequence_leaves_the_old_output_and_no_temporaries(tmp_path, scene_file, monkeypatch, capsys, name):
     """Frame 3's render is interrupted (KeyboardInterrupt, as Ctrl-C raises it) or fails: animate
     exits 130 (quietly) or 1, the earlier output is untouched and nothing else is left."""
-    render_module = sys.modules["pyclray.engine.render"]  # the module (pyclray.render is the function)
+    render_module = sys.modules["pyclray.engine.api"]  # the module (pyclray.render is the function)
 
     out = tmp_path / name
     if name == "out":

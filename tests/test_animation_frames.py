@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import prepared, refit
+from pyclray.engine import api, refit
 from pyclray.engine.bvh import sah_cost
 from pyclray.model import animation
 from pyclray.model.animation import Animation, FrameShapes
@@ -53,9 +53,9 @@ def far_field(offset: float, count: int = 2000, moving: int = 5, orbit: bool = F
 
 
 def frames_equal_fresh(scene, precision="fp32", aovs=ALL):
-    prepared.clear()
+    pyclray.clear_cache()
     frames = [frame for _, frame in pyclray.render_animation(scene, aovs=aovs, precision=precision)]
-    kept = [p for p in prepared._prepared.values() if p.base is scene.shapes]
+    kept = [t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes]
     assert len(kept) == 1 and kept[0]._refit is not None  # one prepared scene, refitted frame after frame
     for k, frame in enumerate(frames):
         at = scene.at(scene.animation.frame_time(k))
@@ -98,9 +98,9 @@ def test_the_refit_tree_is_the_whole_trees_refit_and_writes_only_changed_nodes(m
     written = []
     state_refit = refit.RefitState.refit
     monkeypatch.setattr(refit.RefitState, "refit", lambda self, *a: written.append(state_refit(self, *a)) or written[-1])
-    prepared.clear()
+    pyclray.clear_cache()
     for k, _ in pyclray.render_animation(scene, aovs=("depth",)):
-        ready = next(p for p in prepared._prepared.values() if p.base is scene.shapes)
+        ready = next(t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes)
         tree, state = ready.bvh.tree, ready._refit
         if state is None:  # the first frame: prepared from nothing
             continue
@@ -123,7 +123,7 @@ def test_render_animation_walks_no_shapes_after_its_first_frame(monkeypatch):
     ones (FrameShapes): after the first frame (which prepares the scene), nothing iterates them or
     makes a tuple of all N, so a frame costs O(K) host work plus the refit."""
     scene = far_field(0.0)
-    prepared.clear()
+    pyclray.clear_cache()
     sequence = pyclray.render_animation(scene, aovs=("depth", "id"))
     next(sequence)
 
@@ -165,7 +165,7 @@ def test_frames_seen_by_a_still_camera_reuse_the_views_inputs(monkeypatch, orbit
     made, original = [], views.ViewInputs
     monkeypatch.setattr(views, "ViewInputs", lambda *args: made.append(args[-1]) or original(*args))
     scene = far_field(0.0, orbit=orbit)
-    prepared.clear()
+    pyclray.clear_cache()
     for _ in pyclray.render_animation(scene, aovs=("depth",)):
         pass
     assert made == ["bvh"] * (scene.animation.frame_count() if orbit else 1)

@@ -343,15 +343,18 @@ def test_every_shape_type_renders_the_same_through_the_bvh(builder, seed):
 
 def test_a_moved_camera_reuses_the_tree():
     """Only the boxes are re-expressed around the new eye: the tree is built once per shapes tuple."""
-    import sys
     from dataclasses import replace
 
-    render_module = sys.modules["pyclray.engine.views"]
+    from pyclray.engine.api import tracer_for
+    from pyclray.engine.device import context_for
+
+    def scene_bvh(scene):
+        return tracer_for(scene, context_for(None), "fp32").prepared.bvh
 
     scene = crowded_scene(7, size=16)
-    first = render_module.scene_bvh(scene)
+    first = scene_bvh(scene)
     moved = replace(scene, camera=pyclray.Camera((9.0, 4.0, 9.0), (0.0, 0.0, 0.0)))
-    assert render_module.scene_bvh(moved) is first
+    assert scene_bvh(moved) is first
     tiles = pyclray.render(moved, acceleration="tiles")
     through = pyclray.render(moved, acceleration="bvh")
     assert np.array_equal(tiles["id"], through["id"]) and np.array_equal(tiles["depth"], through["depth"])
@@ -381,13 +384,17 @@ def test_packets_of_every_width_traverse_to_the_same_bits(builder, monkeypatch, 
 def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
     """Tiles where a tile's list is short (views.TILE_LIST_MAX shapes on average), the BVH where
     it is long: tp02's three spheres, and 3,000 spheres filling a small image."""
-    import sys
+    from pyclray.engine.api import tracer_for
+    from pyclray.engine.device import context_for
+    from pyclray.engine.views import ViewState
 
-    render_module = sys.modules["pyclray.engine.views"]
+    def acceleration_for(scene, acceleration="auto"):
+        return ViewState().acceleration(scene, acceleration, tracer_for(scene, context_for(None), "fp32").prepared)
+
     tp02 = pyclray.load_scene(SCENES / "tp02.toml").with_size(64, 64)
-    assert render_module.acceleration_for(tp02) == "tiles"
-    assert render_module.acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"
-    assert render_module.acceleration_for(tp02, "bvh") == "bvh"
+    assert acceleration_for(tp02) == "tiles"
+    assert acceleration_for(crowded_scene(3, count=3000, size=64)) == "bvh"
+    assert acceleration_for(tp02, "bvh") == "bvh"
 
 
 @pytest.mark.parametrize("struct", [bvh.NODE, bvh_wide.WIDE_NODE], ids=lambda s: s.name)

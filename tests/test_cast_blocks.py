@@ -9,7 +9,7 @@ import pyclray
 from pyclray.engine import programs
 from pyclray.engine.cast_blocks import regroup
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.prepared import prepared_scene
+from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh import Mesh
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere, torus
 
@@ -81,7 +81,7 @@ def test_the_blocks_hold_the_leaves_triangles():
     entries keep their refs."""
     scene = mixed_scene()
     ctx = context_for()
-    prepared = prepared_scene(ctx, scene, "fp32")
+    prepared = tracer_for(scene, ctx, "fp32").prepared
     tree, types = prepared.bvh, prepared.types
     worlds = {name: prepared.kinds[name].world for name in types}
     old_nodes = tree.nodes(np.zeros(3))

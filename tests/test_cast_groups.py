@@ -98,7 +98,7 @@ def test_large_batches_are_ordered_where_the_scene_outgrows_the_cache_share(monk
     are. The same rays give the same bits either way (the tests above)."""
     from pyclray.engine import cast_order
     from pyclray.engine.device import context_for
-    from pyclray.engine.prepared import prepared_scene
+    from pyclray.engine.api import tracer_for
 
     calls = []
     real_order = cast_order.coherent_order
@@ -108,8 +108,7 @@ def test_large_batches_are_ordered_where_the_scene_outgrows_the_cache_share(monk
     count = cast_module.COHERENT_FROM + 100
     origins, directions = rng.uniform(-6, 6, (count, 3)), rng.normal(size=(count, 3))
     ctx = context_for(None)
-    types = prepared_scene(ctx, scene, "fp32").types
-    held = cast_module.cast_inputs(ctx, scene, "fp32", types)[3]
+    held = tracer_for(scene, ctx, "fp32").cast_inputs()[3]
     assert held > 0
     cache = ctx.device.global_mem_cache_size
     cpu = bool(ctx.device.type & cast_module.cl.device_type.CPU)

@@ -119,14 +119,13 @@ def test_a_slightly_different_mitsuba_scene_is_found_and_blamed_on_mitsuba():
 def test_a_slightly_wrong_pyclray_fails_the_check(monkeypatch):
     """The same 2e-5 on pyclray's side (its render and its casts of a grown sphere, the oracle and
     Mitsuba of the true scene): pyclray's fault, and the check fails saying so."""
-    import pyclray.engine.cast as cast_module
-    import pyclray.engine.render as render_module
+    import pyclray.engine.api as api
 
     scene = pyclray.load_scene(SCENES / "tp02.toml").with_size(*SMALL)
     wrong = grown(scene, 2e-5)
-    real_render, real_cast = render_module.render, cast_module.cast
-    monkeypatch.setattr(render_module, "render", lambda s, **kw: real_render(wrong, **kw))
-    monkeypatch.setattr(cast_module, "cast", lambda s, *a, **kw: real_cast(wrong, *a, **kw))
+    real_render, real_cast = api.render, api.cast
+    monkeypatch.setattr(api, "render", lambda s, **kw: real_render(wrong, **kw))
+    monkeypatch.setattr(api, "cast", lambda s, *a, **kw: real_cast(wrong, *a, **kw))
     images = check.cross_check(scene, "scalar_rgb")
     assert not images.passed and images.failures[0].startswith("depth: pyclray wrong by the float64 oracle")
     assert images.verdicts["depth"].pyclray > 100 and images.verdicts["depth"].mitsuba == 0

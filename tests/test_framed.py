@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import prepared
+from pyclray.engine import api, prepared
 from pyclray.engine.device import context_for
 
 from test_views import ALL, every_shape, fresh, moving_spheres, need, same
@@ -29,7 +29,7 @@ def rendered(monkeypatch, framed: bool, scene, indexed: bool | None = None, **op
     monkeypatch.setattr(prepared, "FRAMED_FROM", 0 if framed else 10**12)
     monkeypatch.setattr(prepared, "INDEXED", indexed)
     image = fresh(scene, **options)
-    kinds = prepared.prepared_scene(context_for(None), scene, options.get("precision", "fp32")).kinds
+    kinds = api.tracer_for(scene, context_for(None), options.get("precision", "fp32")).prepared.kinds
     assert kinds["spheres"].framed == framed and (kinds["mesh"].indexed is not None) == indexed  # what this compares
     return image
 
@@ -65,7 +65,7 @@ def test_framed_views_after_other_views_are_the_fresh_views(monkeypatch):
     scene = every_shape()
     other = dataclasses.replace(scene.camera, eye=(40.0, 30.0, -25.0))
     expected = {camera: fresh(dataclasses.replace(scene, camera=camera), aovs=ALL) for camera in (scene.camera, other)}
-    prepared.clear()
+    pyclray.clear_cache()
     for camera in (scene.camera, other, scene.camera):
         same(pyclray.render(scene, aovs=ALL, camera=camera), expected[camera])
 
@@ -77,9 +77,9 @@ def test_framed_animation_frames_equal_fresh_frames(monkeypatch, refit_max):
     monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
     monkeypatch.setattr(prepared.PreparedScene, "REFIT_COST_MAX", refit_max)
     scene = moving_spheres(400, orbit=True)
-    prepared.clear()
+    pyclray.clear_cache()
     frames = [frame for _, frame in pyclray.render_animation(scene, aovs=ALL)]
-    kept = [p for p in prepared._prepared.values() if p.base is scene.shapes]
+    kept = [t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes]
     assert len(kept) == 1 and kept[0].kinds["sphere"].framed
     for k, frame in enumerate(frames):
         at = scene.at(scene.animation.frame_time(k))
@@ -97,9 +97,9 @@ def test_a_framed_sphere_field_holds_at_most_64_bytes_a_sphere(monkeypatch):
     centres, radii = scale.sphere_field(50_000)
     scene = pyclray.Scene(pyclray.Camera(scale.EYE, scale.TARGET, fov=scale.FOV), pyclray.Image(32, 32),
                           (pyclray.Plane((0.0, 1.0, 0.0), 0.0), pyclray.Spheres(centres, radii)))
-    prepared.clear()
+    pyclray.clear_cache()
     pyclray.render(scene, aovs=("depth",))
-    held = prepared.prepared_scene(context_for(None), scene, "fp32").nbytes()
+    held = api.tracer_for(scene, context_for(None), "fp32").prepared.nbytes()
     assert held / 50_000 <= 64
 
 
@@ -116,9 +116,9 @@ def test_cast_through_a_framed_scene_is_casts_through_a_copied_one(monkeypatch, 
     for framed in (False, True):
         monkeypatch.setattr(prepared, "FRAMED_FROM", 0 if framed else 10**12)
         monkeypatch.setattr(prepared, "INDEXED", framed)
-        prepared.clear()
+        pyclray.clear_cache()
         results.append(pyclray.cast(scene, origins, directions, precision=precision))
-        assert (prepared.prepared_scene(context_for(None), scene, precision).kinds["mesh"].indexed is not None) == framed
+        assert (api.tracer_for(scene, context_for(None), precision).prepared.kinds["mesh"].indexed is not None) == framed
     same(*results)
     assert np.isfinite(results[0]["depth"]).sum() > 100  # rays that hit: what this compares
 
@@ -139,7 +139,7 @@ def test_the_mesh_tests_hold_for_framed_and_copied_meshes(monkeypatch, check, pa
         monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
     else:
         monkeypatch.setattr(prepared, "INDEXED", False)
-    prepared.clear()
+    pyclray.clear_cache()
     if check == "embree_watertight":
         test_mesh.test_embree_watertight_sphere_and_far_grid()
     elif check == "zero_area":
@@ -150,7 +150,7 @@ def test_the_mesh_tests_hold_for_framed_and_copied_meshes(monkeypatch, check, pa
         test_mesh_smooth.test_geometric_images_and_the_ground_stay_as_flat()
     else:
         test_mesh.test_render_agrees_with_the_oracle_far_from_the_origin(check[4:], 3e7)
-    kept = [p for p in prepared._prepared.values() if "mesh" in p.kinds]
+    kept = [t.prepared for t in api._tracers.values() if "mesh" in t.prepared.kinds]
     assert kept and all((p.kinds["mesh"].indexed is not None) == (path == "framed") for p in kept)  # what this tests
     assert path == "copied" or any(p.framed for p in kept)
-    prepared.clear()
+    pyclray.clear_cache()

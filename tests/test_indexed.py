@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import bvh, bvh_fast, indexed, prepared
+from pyclray.engine import api, bvh, bvh_fast, indexed, prepared
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.model.shapes.base import padded_bounds
 from pyclray.model.shapes.mesh import Mesh
@@ -106,9 +106,9 @@ def test_the_host_and_device_vertex_passes_agree_bit_for_bit(monkeypatch, precis
     for device in (False, True):
         monkeypatch.setattr(prepared, "DEVICE_REBASE_FROM", 0 if device else 10**12)
         images.append(fresh(scene, aovs=ALL, precision=precision))
-        kind = prepared.prepared_scene(context_for(None), scene, precision).kinds["mesh"]
+        kind = api.tracer_for(scene, context_for(None), precision).prepared.kinds["mesh"]
         assert kind.indexed is not None
-        assert prepared.prepared_scene(context_for(None), scene, precision).on_device == device  # what this compares
+        assert api.tracer_for(scene, context_for(None), precision).prepared.on_device == device  # what this compares
         host = np.empty_like(kind.indexed.vertices_host)
         import pyopencl as cl
 
@@ -128,9 +128,9 @@ def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
     mesh = sphere_mesh(rings=120, segments=240)
     scene = pyclray.Scene(pyclray.Camera((0.0, 1.0, 4.0), (0.0, 0.0, 0.0)), pyclray.Image(32, 32),
                           (pyclray.Plane((0.0, 1.0, 0.0), 1.5), mesh))
-    prepared.clear()
+    pyclray.clear_cache()
     pyclray.render(scene, aovs=("depth",))
-    held = prepared.prepared_scene(context_for(None), scene, "fp32")
+    held = api.tracer_for(scene, context_for(None), "fp32").prepared
     assert held.kinds["mesh"].indexed is not None and not held.framed  # indexed without being framed
     assert held.nbytes() / len(mesh.faces) <= 64
 

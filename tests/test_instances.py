@@ -9,7 +9,7 @@ import pytest
 import pyclray
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.engine.instances import instance_bytes
-from pyclray.engine.prepared import prepared_scene
+from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
 from pyclray.reference import oracle
 
@@ -53,7 +53,7 @@ def test_shared_meshes_are_packed_once():
     """Sixteen placements of one mesh: one instance entry each, the triangles and the BVH once
     (the floor, alone, stays triangles), and no shared copy in the flattened scene."""
     scene = field()
-    prepared = prepared_scene(context_for(), scene, "fp32")
+    prepared = tracer_for(scene, context_for(), "fp32").prepared
     kind = prepared.kinds["instance"]
     mesh = scene.shapes[0]
     vertices, faces = kind.shared_host[0], kind.shared_host[1]  # instances.SHARED's order
@@ -62,7 +62,7 @@ def test_shared_meshes_are_packed_once():
     assert np.array_equal(np.sort(faces[:, :3], axis=1), np.sort(mesh.faces[np.where(faces[:, 3] >= 0, faces[:, 3], ~faces[:, 3])], axis=1))
     assert set(kind.world["root"]) == {0} and set(kind.world["first"]) == {0}
     assert prepared.kinds["mesh"].count == len(scene.shapes[-1].faces)
-    assert "instance" not in prepared_scene(context_for(), flattened(scene), "fp32").kinds
+    assert "instance" not in tracer_for(flattened(scene), context_for(), "fp32").prepared.kinds
 
 
 def test_bytes_per_instance():
@@ -70,7 +70,7 @@ def test_bytes_per_instance():
     top-level tree), whatever its mesh's size; the mesh is paid for once, at most 64 bytes a triangle
     as a mesh of the scene (its vertices, faces and tree: issue 23's memory target)."""
     scene = field(count=10)
-    cost = instance_bytes(prepared_scene(context_for(), scene, "fp32"))
+    cost = instance_bytes(tracer_for(scene, context_for(), "fp32").prepared)
     assert cost["instances"] == 100 and cost["bytes_per_instance"] <= 1024
     assert cost["shared_bytes"] <= 64 * len(scene.shapes[0].faces)
 
@@ -127,7 +127,7 @@ def test_cast_and_occluded_through_instances(precision, offset):
     and a ray stopped short of its hit is not occluded."""
     need(precision)
     scene = field(offset)
-    assert "instance" in prepared_scene(context_for(), scene, precision).types
+    assert "instance" in tracer_for(scene, context_for(), precision).prepared.types
     rng = np.random.default_rng(2)
     origins = np.array(scene.camera.eye) + rng.normal(size=(1500, 3)) * 0.5
     aim = np.array(scene.camera.target) + rng.normal(size=(1500, 3)) * 3.0
@@ -150,7 +150,7 @@ def test_host_and_device_rebase_agree():
     ctx = context_for()
     if not has_fp64(ctx.device):
         pytest.skip("device lacks cl_khr_fp64")
-    prepared = prepared_scene(ctx, field(1e6), "fp32")
+    prepared = tracer_for(field(1e6), ctx, "fp32").prepared
     kind = prepared.kinds["instance"]
     eye, rows = np.array([1e6 + 0.3, -5e5 + 6.1, 2.5e5 + 9.7]), pyclray.Camera((0, 6, 9), (0, 0.5, 0)).basis()
     host = kind.cls.rebase(kind.world, eye, rows, "fp32", kind.ids, kind.primitives)
@@ -200,7 +200,7 @@ def test_export_writes_shapegroup_and_instances_that_read_back_shared(tmp_path):
     assert both.sum() > 500
     assert (np.abs(depth[both] - mine[both]) <= 2 * bound[both]).all()
     read = pyclray.load_scene(path)
-    prepared = prepared_scene(context_for(), read, "fp32")
+    prepared = tracer_for(read, context_for(), "fp32").prepared
     assert prepared.kinds["instance"].count == 25 and len(prepared.kinds["instance"].shared_host[1]) == 5000
 
 
@@ -212,7 +212,7 @@ def test_check_passes_on_the_instanced_field(scenes_dir):
     from pyclray.reference import check
 
     scene = pyclray.load_scene(scenes_dir / "instanced.toml").with_size(64, 48)
-    assert prepared_scene(context_for(), scene, "fp32").kinds["instance"].count == 25
+    assert tracer_for(scene, context_for(), "fp32").prepared.kinds["instance"].count == 25
     images = check.cross_check(scene, "scalar_rgb")
     assert images.passed, images.failures
     assert images.counts["primitives against the float64 oracle"] > 300, images.counts
@@ -242,7 +242,7 @@ def test_smooth_instances_match_the_float64_shading_model(precision):
                              lights=(light,), shading=Shading(shadows=False))
 
     scene = scene_of(True)
-    prepared = prepared_scene(context_for(), scene, precision)
+    prepared = tracer_for(scene, context_for(), precision).prepared
     assert prepared.kinds["instance"].count == 4 and "instance" in prepared.smooth
     counts = compare_shaded(scene, precision)
     assert counts["lit"] > 1500, counts
@@ -267,7 +267,7 @@ def test_shadows_through_instances_match_the_float64_model(precision):
     base = field(count=3)
     light = PointLight(position=(3.0, 8.0, 3.0), intensity=(60.0, 60.0, 60.0))
     scene = pyclray.Scene(base.camera, base.image, base.shapes, lights=(light,), shading=Shading(shadows=True))
-    assert "instance" in prepared_scene(context_for(), scene, precision).types
+    assert "instance" in tracer_for(scene, context_for(), precision).prepared.types
     counts = compare_shaded(scene, precision)
     assert counts["lit"] > 1000 and counts["shadowed"] > 100, counts
     flat = flattened(scene)

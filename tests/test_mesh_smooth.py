@@ -13,7 +13,7 @@ import pytest
 
 import pyclray
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.prepared import prepared_scene
+from pyclray.engine.api import tracer_for
 from pyclray.engine.programs import Variant
 from pyclray.model.lights import DirectionalLight, PointLight, Shading
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
@@ -85,8 +85,8 @@ def test_smooth_is_compiled_in_only_with_a_smooth_mesh_and_shading():
     """PYCLRAY_SMOOTH (the normals buffer, the interpolation) only with a smooth mesh present and
     the shaded image asked for; a flat mesh's scene has no shading-normal buffer."""
     ctx = context_for()
-    assert prepared_scene(ctx, lit_scene(bumpy()), "fp32").smooth == ("mesh",)
-    assert prepared_scene(ctx, lit_scene(bumpy(smooth=False)), "fp32").smooth == ()
+    assert tracer_for(lit_scene(bumpy()), ctx, "fp32").prepared.smooth == ("mesh",)
+    assert tracer_for(lit_scene(bumpy(smooth=False)), ctx, "fp32").prepared.smooth == ()
     shaded = Variant("render", ("plane", "mesh"), ("shaded",), "fp32", 8, smooth=("mesh",)).source()
     assert "#define PYCLRAY_SMOOTH 1" in shaded and "} TriangleNormals;" in shaded  # the struct's typedef
     depth = Variant("render", ("plane", "mesh"), ("depth",), "fp32", 8, smooth=("mesh",)).source()

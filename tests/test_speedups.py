@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import device, prepared, programs, request
+from pyclray.engine import api, device, programs, request
 from pyclray.model import aovs
 
 from pyclray import Camera, Image, Plane, Scene, Sphere
@@ -93,7 +93,7 @@ def without_culling(monkeypatch):
     from pyclray.engine import culling
 
     monkeypatch.setattr(culling, "ENABLED", False)
-    monkeypatch.setattr(prepared, "_prepared", prepared.OrderedDict())
+    monkeypatch.setattr(api, "_tracers", api.OrderedDict())
 
 
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
@@ -118,7 +118,7 @@ def test_a_moved_camera_is_a_new_render():
     moved = dataclasses.replace(first, camera=dataclasses.replace(first.camera, eye=tuple(np.add(first.camera.eye, 0.5))))
     a = pyclray.render(first)
     b = pyclray.render(moved)
-    prepared._prepared.clear()
+    api.clear()
     same(pyclray.render(moved), b)
     same(pyclray.render(first), a)
     assert not np.array_equal(a["depth"], b["depth"])

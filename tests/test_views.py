@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import prepared
+from pyclray.engine import api, prepared
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.model.aovs import RENDER_AOVS
 from pyclray.reference import oracle
@@ -29,7 +29,7 @@ def same(a, b):
 
 def fresh(scene, **options):
     """The render of a scene prepared from nothing."""
-    prepared.clear()
+    pyclray.clear_cache()
     return pyclray.render(scene, **options)
 
 
@@ -70,7 +70,7 @@ def test_a_far_view_after_a_near_one_is_the_fresh_far_view_bit_for_bit(monkeypat
     near = every_shape()
     far_scene = every_shape((offset, 0.3 * offset, -offset))
     expected = fresh(far_scene, aovs=ALL, precision=precision)
-    prepared.clear()
+    pyclray.clear_cache()
     pyclray.render(far_scene, aovs=ALL, precision=precision, camera=near.camera)  # a first view elsewhere
     pyclray.render(dataclasses.replace(far_scene, camera=near.camera), aovs=ALL, precision=precision)
     same(pyclray.render(far_scene, aovs=ALL, precision=precision), expected)
@@ -86,9 +86,9 @@ def test_camera_argument_replace_and_render_views_agree(acceleration):
         same(view, pyclray.render(scene, aovs=ALL, camera=camera, acceleration=acceleration))
         same(view, fresh(dataclasses.replace(scene, camera=camera), aovs=ALL, acceleration=acceleration))
     # the views came from one prepared scene: the shapes were packed and uploaded once
-    prepared.clear()
+    pyclray.clear_cache()
     list(pyclray.render_views(scene, cameras, aovs=("depth",)))
-    assert len(prepared._prepared) == 1
+    assert len(api._tracers) == 1
 
 
 def test_render_views_takes_scenes_of_other_sizes_and_rejects_other_things():
@@ -124,16 +124,16 @@ def test_a_moved_camera_uploads_no_shapes(monkeypatch):
     """After the first view, other cameras neither pack nor upload the shapes: the prepared scene is
     the same object and no shape is packed on the host (Shape.pack_world is never called again)."""
     scene = pyclray.load_scene("scenes/grid64.toml").with_size(32, 32)
-    prepared.clear()
+    pyclray.clear_cache()
     pyclray.render(scene)
-    first = prepared.prepared_scene(context_for(None), scene, "fp32")
+    first = api.tracer_for(scene, context_for(None), "fp32").prepared
     calls = []
     for cls in pyclray.model.shapes.REGISTRY.values():
         monkeypatch.setattr(cls, "pack_world", classmethod(lambda c, shapes: calls.append(c) or None))
     for a in np.linspace(0.1, 1.0, 4):
         pyclray.render(scene, camera=dataclasses.replace(scene.camera, eye=tuple(np.add(scene.camera.eye, a))))
     assert not calls
-    assert prepared.prepared_scene(context_for(None), scene, "fp32") is first
+    assert api.tracer_for(scene, context_for(None), "fp32").prepared is first
 
 
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
@@ -147,7 +147,7 @@ def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypat
     expected = fresh(scene, aovs=ALL, precision=precision)
     monkeypatch.setattr(prepared, "has_fp64", lambda device: False)
     same(fresh(scene, aovs=ALL, precision=precision), expected)
-    prepared.clear()
+    pyclray.clear_cache()
 
 
 def moving_spheres(count: int, moving: int = 6, size=(64, 48), orbit: bool = False) -> pyclray.Scene:
@@ -181,9 +181,9 @@ def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monke
     images equal those of the frame's scene prepared from nothing, bit for bit."""
     monkeypatch.setattr(prepared.PreparedScene, "REFIT_COST_MAX", refit_max)
     scene = moving_spheres(count, orbit=orbit)
-    prepared.clear()
+    pyclray.clear_cache()
     frames = [frame for _, frame in pyclray.render_animation(scene, aovs=ALL)]
-    kept = [p for p in prepared._prepared.values() if p.base is scene.shapes]
+    kept = [t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes]
     assert len(kept) == 1  # one prepared scene, updated (or rebuilt) frame after frame
     if refit_max and count >= prepared.DEVICE_REBASE_FROM:
         from pyclray.engine.bvh import sah_cost
@@ -215,9 +215,9 @@ def test_boxes_around_the_anchor_drop_no_shape_seen_from_far_off_it(precision, e
     # Sphere objects, not a batch: the error model's frame is per shape (a batch's is its own centre)
     shapes = tuple(pyclray.Sphere(tuple(c), float(r)) for c, r in zip(centres, radii))
     scene = pyclray.Scene(camera, pyclray.Image(40, 32), shapes)
-    prepared.clear()
+    pyclray.clear_cache()
     image = pyclray.render(scene, precision=precision, acceleration="bvh")
-    anchor = prepared.prepared_scene(context_for(None), scene, precision).anchor
+    anchor = api.tracer_for(scene, context_for(None), precision).prepared.anchor
     assert np.linalg.norm(anchor - corner) > 0.5 * extent  # the case this test is about
     origins, directions = oracle.camera_rays(scene)
     result = {name: image[name].reshape(-1, *image[name].shape[2:]) for name in ("depth", "normal", "id")}
@@ -230,7 +230,7 @@ def test_an_animation_frame_that_changes_no_shape_updates_nothing():
     materials compared or written (pack_materials gives a row even for no shape), the images kept."""
     scene = pyclray.load_scene("scenes/tp02_orbit.toml").with_size(16, 12)
     before = fresh(scene)
-    ready = prepared.prepared_scene(context_for(None), scene, "fp32")
+    ready = api.tracer_for(scene, context_for(None), "fp32").prepared
     assert ready.update(scene.shapes, [])
     same(pyclray.render(scene), before)
 
@@ -248,7 +248,7 @@ def test_render_views_of_a_mesh_equal_fresh_renders(monkeypatch, rebase):
     scene = pyclray.Scene(pyclray.Camera((0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=40.0), pyclray.Image(160, 120),
                           (pyclray.Plane((0.0, 1.0, 0.0), 0.0), mesh))
     cameras = [pyclray.Camera((4.0 * np.sin(a), 1.5, 4.0 * np.cos(a)), (0.0, 1.0, 0.0), fov=40.0) for a in np.linspace(0, 5, 8)]
-    prepared.clear()
+    pyclray.clear_cache()
     views = list(pyclray.render_views(scene, cameras, aovs=("depth", "normal", "id", "primitive")))
     for camera, view in zip(cameras, views):
         same(view, fresh(dataclasses.replace(scene, camera=camera), aovs=("depth", "normal", "id", "primitive")))

@@ -31,7 +31,7 @@ import dask
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_worker
 from distributed.scheduler import KilledWorker
 
-from ..engine.render import render
+from ..engine.api import render
 from ..engine.request import Frame, frame_camera
 from ..model.aovs import AOVS
 from ..model.camera import Camera

@@ -2,21 +2,16 @@
 (occluded), each ray traced on its own from its float64 origin and direction."""
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 import pyopencl as cl
 
-from ..model.aovs import AOVS
 from ..model.camera import ImagePlane
-from ..model.errors import DeviceError, PyclrayError, RequestError
-from ..model.layout import PRECISIONS, layout
-from ..model.loader import as_scene
-from ..model.scene import Scene, check_shape_count
-from .device import context_for, has_fp64, launch
-from .prepared import CACHES, PREPARED_MAX, prepared_scene
+from ..model.errors import DeviceError, PyclrayError
+from ..model.layout import layout
+from .device import has_fp64, launch
+from .prepared import PreparedScene
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
+from .request import REAL, Frame, camera_struct, input_buffer, run_kernel
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -128,22 +123,12 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
-_cast_prepared: OrderedDict = OrderedDict()
-CACHES.append(_cast_prepared)  # pyclray.clear_cache() empties it
-
-
-def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, np.ndarray, float, int]:
+def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tuple[list, np.ndarray, float, int]:
     """(arguments, anchor, size, bytes): the BVH around the scene's anchor (its root box's centre), its
     refs and the entries' anchors, and per shape type its packed buffer (each bounded entry relative
     to its own anchor, in leaf order) and count; bytes: those buffers' sizes together. They depend on
-    the shapes only, never on the rays."""
-    key = (ctx.device.int_ptr, id(scene.shapes), precision)
-    with render_lock:
-        entry = _cast_prepared.get(key)
-        if entry is not None and entry[0] is scene.shapes and entry[1] == shape_types:
-            _cast_prepared.move_to_end(key)
-            return entry[2], entry[3], entry[4], entry[5]
-    prepared = prepared_scene(ctx, scene, precision)
+    the shapes only, never on the rays: a scene handle makes them at its first cast and keeps them
+    until its shapes change."""
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
     # the largest side of the bounded shapes' box (0 without any): the coarsest cells of the rays' order
@@ -196,10 +181,6 @@ def cast_inputs(ctx, scene: Scene, precision: str, shape_types) -> tuple[list, n
         args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                  input_buffer(ctx, np.ascontiguousarray(worlds[name])), *kind.shared, np.int32(kind.count)]
     held = sum(a.size for a in args if isinstance(a, cl.MemoryObjectHolder))
-    with render_lock:
-        _cast_prepared[key] = (scene.shapes, shape_types, args, anchor, size, held)
-        while len(_cast_prepared) > PREPARED_MAX:
-            _cast_prepared.popitem(last=False)
     return args, anchor, size, held
 
 
@@ -224,22 +205,20 @@ def _root_box(nodes: np.ndarray):
     return np.array(lo + hi + [0.0, 0.0], np.float32).view(cl.cltypes.float8)[0]
 
 
-def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precision: str, device):
-    scene = as_scene(scene)
-    check_shape_count(scene)
-    ctx = context_for(device)
-    if kind == "cast":
-        aovs = check_request(aovs, precision, ctx)
-    elif not isinstance(precision, str) or precision not in PRECISIONS:
-        raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+def check_cast_device(ctx) -> None:
     if not has_fp64(ctx.device):
         raise DeviceError(
             f"cast takes its rays' coordinate differences in float64 and needs the cl_khr_fp64 extension, which "
             f"{ctx.device.name.strip()} lacks; use another device"
         )
+
+
+def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
+    """The nearest hit of each ray ("cast": a Frame of the aovs) or whether any ("occluded": a bool
+    array), on a scene handle (engine/tracer.py) whose request and device were checked."""
+    ctx, precision = tracer.ctx, tracer.precision
     real = REAL[precision]
-    shape_types = prepared_scene(ctx, scene, precision).types  # the packed kinds (mesh instances among them)
-    args, anchor, scene_size, scene_bytes = cast_inputs(ctx, scene, precision, shape_types)
+    args, anchor, scene_size, scene_bytes = tracer.cast_inputs()
     orders = _orders(ctx, scene_bytes)  # the scan of a large batch makes its codes only then
     origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders)
     count = len(directions)
@@ -280,15 +259,15 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
     groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
     sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
     if kind == "occluded":
-        variant = Variant("occluded", shape_types, (), precision)
+        variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
         return out.reshape(shape)
     identity = np.eye(3)
     camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
-    variant = Variant("cast", shape_types, aovs, precision)
+    variant = Variant("cast", tracer.prepared.types, aovs, precision)
     results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
-                         local_size=sizes[1])
+                         tracer.outputs, local_size=sizes[1])
     results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
 
@@ -317,28 +296,3 @@ def _run_into(ctx, kernel, sizes, args, out: np.ndarray) -> None:
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
         launch(ctx, kernel, *sizes, [*args, buffer])
         cl.enqueue_copy(ctx.queue, out, buffer)
-
-
-def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None) -> Frame:
-    """Cast arbitrary rays through the scene's shapes (the scene's camera and image are not used).
-
-    origins: (..., 3) like directions, or one (3,) origin for every ray; directions: (..., 3), any
-    non-zero length; tmax: None, one number or one per ray (shape (...)): hits farther than it
-    are misses. Returns a Frame of per-ray arrays: depth (...) is the distance from the origin
-    along the normalized direction (+inf on a miss), normal (..., 3), id (...).
-
-    Each ray is traced on its own, from its float64 origin and direction: its result does not
-    depend on the other rays of the batch, bit for bit, and its float32 depth and normal meet the
-    render's error model for the ray as given (see kernels/pyclray.cl). Needs cl_khr_fp64.
-    Raises PyclrayError for arrays of other shapes, rows that are not finite, zero directions, a
-    tmax that is not > 0, and origins so far from the shapes that the precision overflows.
-    """
-    return _cast_run("cast", scene, origins, directions, tmax, aovs, precision, device)
-
-
-def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None) -> np.ndarray:
-    """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array
-    of the rays' leading shape. The any-hit query of shadow rays: the search stops at the first
-    hit found. The same rays, arguments and exactness as cast: occluded is true exactly where
-    cast(..., tmax=tmax) finds a hit, up to hits within rounding of tmax."""
-    return _cast_run("occluded", scene, origins, directions, tmax, (), precision, device)

@@ -15,18 +15,13 @@ with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the rend
 where it tests it from its world entry (the same bits). Meshes on a device with float64 are shared
 vertices and faces whose vertices the per-view pass frames (INDEXED, engine/indexed.py), in any scene.
 
-Caches (bounded, least recently used; ``clear()`` drops them all, with their device buffers):
-prepared scenes per (device, shapes tuple, precision), at most PREPARED_MAX of them and about
-PREPARED_BYTES; and per scene object what its view needs (camera, tile lists, lights). An entry
-holds its tuple or scene, so an id() cannot be reused while it is cached. A new shapes tuple (a
-moved shape) is a new prepared scene, unless it was made from a prepared one by an animation that
-says which shapes changed (see ``prepared_scene``): then only those entries are rewritten and the
-BVH refitted.
+A scene handle (engine/tracer.py) owns one: nothing here is kept between calls. A frame of an
+animation (the same shapes, a few moved) updates it in place (``update``): only those entries are
+rewritten and the BVH refitted.
 """
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,32 +29,13 @@ import pyopencl as cl
 
 from ..model.scene import MAX_LENGTH, Scene
 from ..model.shapes import KINDS, REGISTRY
-from ..model.animation import derivation
 from ..model.shapes.base import entries
 from . import culling, instances, refit, shading
 from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64, launch
 from .indexed import IndexedEntries, indexed_bounds
 from .programs import Variant, kernels_for
-from .request import render_lock
 from .scene_bvh import SceneBVH, primitives_bvh
-
-PREPARED_MAX = 8
-PREPARED_BYTES = 1 << 30
-_prepared: OrderedDict = OrderedDict()
-
-
-# the caches of what views and casts of prepared scenes keep (engine/views.py, engine/cast.py)
-CACHES: list = []
-
-
-def clear() -> None:
-    """Drop every prepared scene and per-view input (their device memory goes with them)."""
-    with render_lock:
-        _prepared.clear()
-        for cache in CACHES:
-            cache.clear()
-
 
 @dataclass
 class Kind:
@@ -150,7 +126,7 @@ class PreparedScene:
 
     def __init__(self, ctx, shapes: tuple, precision: str):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
-        self.lock = threading.Lock()  # one view at a time uses the frame buffers
+        self.lock = threading.RLock()  # one view at a time uses the frame buffers
         self.view_key = self.view = None  # the camera the frame buffers hold: (eye, rows) bytes, arrays
         by_type: dict = {}
         for index, shape in enumerate(shapes):
@@ -256,7 +232,7 @@ class PreparedScene:
         made when first asked: only shadow rays traverse it (kernels/shading.h), so a scene that casts
         none holds the wide tree only (a million spheres: 12.7 bytes a sphere fewer)."""
         if self._nodes is None and self.bvh.types:
-            with render_lock:
+            with self.lock:
                 if self._nodes is None:
                     with np.errstate(over="ignore", invalid="ignore"):
                         self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
@@ -387,43 +363,3 @@ class PreparedScene:
         """(start, index) of the kind's entries for each screen tile of this view (culling.tile_lists)."""
         spheres = kind.cls.spheres_of(kind.world) if kind.cls.bounded else None
         return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
-
-
-def prepared_scene(ctx, scene: Scene, precision: str) -> PreparedScene:
-    """The scene's shapes prepared on this device at this precision: kept per shapes tuple (a moved
-    camera keeps the scene's tuple), built at the first view; a frame of an animation (a tuple that
-    pyclray.model.animation says was made from another by changing a few shapes) updates the prepared
-    scene of that other tuple in place (PreparedScene.update) instead."""
-    shapes = scene.shapes
-    key = (ctx.device.int_ptr, id(shapes), precision)
-    with render_lock:
-        entry = _prepared.get(key)
-        if entry is not None and entry.shapes is shapes:
-            _prepared.move_to_end(key)
-            return entry
-    derived = derivation(shapes)
-    if derived is not None:
-        base, changed = derived
-        with render_lock:
-            candidates = [(k, p) for k, p in _prepared.items()
-                          if p.base is base and k[0] == ctx.device.int_ptr and p.precision == precision]
-        for old_key, candidate in candidates:
-            with candidate.lock:
-                # an update writes the host arrays a CPU device reads: no kernel of a view still in
-                # flight (render_views enqueues the next view before returning a frame) may read them
-                candidate.ctx.queue.finish()
-                updated = candidate.shapes is not shapes and candidate.update(shapes, changed)
-            with render_lock:
-                _prepared.pop(old_key, None)
-                if updated:
-                    _prepared[key] = candidate
-                    return candidate
-    prepared = PreparedScene(ctx, shapes, precision)
-    if derived is not None:
-        prepared.base, prepared.dirty = derived[0], set(derived[1])
-    with render_lock:
-        _prepared[key] = prepared
-        while len(_prepared) > 1 and (len(_prepared) > PREPARED_MAX or
-                                      sum(p.nbytes() for p in _prepared.values()) > PREPARED_BYTES):
-            _prepared.popitem(last=False)
-    return prepared

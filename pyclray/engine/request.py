@@ -2,8 +2,6 @@
 camera's struct, and the kernel's launch over output buffers that become the returned arrays."""
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import pyopencl as cl
 
@@ -14,11 +12,6 @@ from .device import DeviceContext, has_fp64, launch
 from .programs import kernel_for
 
 REAL = {"fp32": np.float32, "fp64": np.float64}  # the numpy type of a precision
-_OUTPUTS_MAX = 12
-_outputs: dict = {}
-# renders that reuse the kept output buffers (devices other than CPUs) run one at a time; the
-# caches of prepared inputs take it too
-render_lock = threading.RLock()
 
 
 class Frame(dict):
@@ -82,14 +75,20 @@ def check_request(aovs, precision: str, ctx: DeviceContext, known=AOVS) -> tuple
     unknown = [a for a in aovs if not isinstance(a, str) or a not in known]
     if unknown or not aovs or len(set(aovs)) != len(aovs):
         raise RequestError(f"aovs: expected a non-empty selection of {', '.join(known)} without repeats, got {', '.join(a if isinstance(a, str) and a.isprintable() else repr(a) for a in aovs) or 'none'}")
+    check_precision(precision, ctx)
+    return tuple(a for a in known if a in aovs)  # canonical order: one program per set
+
+
+def check_precision(precision: str, ctx: DeviceContext | None = None) -> str:
+    """The precision's name, and (given a device) that the device has what it needs."""
     if not isinstance(precision, str) or precision not in PRECISIONS:
         raise RequestError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
-    if precision == "fp64" and not has_fp64(ctx.device):
+    if ctx is not None and precision == "fp64" and not has_fp64(ctx.device):
         raise DeviceError(
             f"precision fp64 needs the cl_khr_fp64 extension, which {ctx.device.name.strip()} lacks; "
             "use precision fp32 or another device"
         )
-    return tuple(a for a in known if a in aovs)  # canonical order: one program per set
+    return precision
 
 
 def camera_struct(rows, plane, width, height, precision, box_origin=(0.0, 0.0, 0.0)):
@@ -128,19 +127,31 @@ def input_buffer(ctx, array):
     return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
 
-def _output_buffers(ctx, count: int, aovs, precision: str) -> list:
-    """Device buffers for the asked images, kept per device and size and reused by every render
-    (renders are serialized by render_lock, and each copies its images out before the next)."""
-    buffers = []
-    for aov in aovs:
-        key = (ctx.device.int_ptr, aov, max(count * TABLE[aov].itemsize(precision), 1))
-        buffer = _outputs.get(key)
-        if buffer is None:
-            if len(_outputs) >= _OUTPUTS_MAX:
-                _outputs.clear()
-            buffer = _outputs[key] = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, key[2])
-        buffers.append(buffer)
-    return buffers
+class OutputBuffers:
+    """A scene handle's device buffers for the images of its renders on devices other than CPUs,
+    kept per image and size and reused by every render: its renders take ``lock`` from the launch to
+    the copies out, so one render's images are read before the next writes them."""
+
+    MOST = 12
+
+    def __init__(self, lock):
+        self.lock = lock
+        self.buffers: dict = {}
+
+    def get(self, ctx, count: int, aovs, precision: str) -> list:
+        buffers = []
+        for aov in aovs:
+            key = (aov, max(count * TABLE[aov].itemsize(precision), 1))
+            buffer = self.buffers.get(key)
+            if buffer is None:
+                if len(self.buffers) >= self.MOST:
+                    self.buffers.clear()
+                buffer = self.buffers[key] = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, key[1])
+            buffers.append(buffer)
+        return buffers
+
+    def nbytes(self) -> int:
+        return sum(buffer.size for buffer in self.buffers.values())
 
 
 def _interleave(aovs, buffers, extra) -> list:
@@ -156,9 +167,11 @@ def _zero_copy(ctx) -> bool:
     return bool(ctx.device.type & cl.device_type.CPU)
 
 
-def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None, extra=None):
+def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
+               local_size=None, extra=None):
     """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
-    return enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size, extra).result()
+    return enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept, local_size,
+                          extra).result()
 
 
 class Pending:
@@ -177,9 +190,10 @@ class Pending:
         return self.images
 
 
-def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, local_size=None,
-                   extra=None) -> Pending:
-    """Enqueue the kernel with output buffers for the asked images, new arrays (see Pending)."""
+def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
+                   local_size=None, extra=None) -> Pending:
+    """Enqueue the kernel with output buffers for the asked images, new arrays (see Pending); on
+    devices other than CPUs the images go through the handle's kept buffers."""
     outputs = {k: TABLE[k].empty((count,), precision) for k in aovs}
     images = {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
     kernel = kernel_for(ctx, variant)
@@ -199,8 +213,8 @@ def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shap
         ctx.queue.flush()  # the device starts on it now
         return Pending(images, unmaps, (buffers, maps))
     # other devices: device buffers kept and reused, and a copy of each image
-    with render_lock:
-        buffers = _output_buffers(ctx, count, aovs, precision)
+    with kept.lock:
+        buffers = kept.get(ctx, count, aovs, precision)
         launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
         for array, buffer in zip(outputs.values(), buffers):
             cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)

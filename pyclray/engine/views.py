@@ -1,9 +1,9 @@
-"""What a view of a prepared scene needs besides the shapes, kept per scene object: the camera, the
-lights in its frame, the tile lists, the acceleration choice and the range check."""
+"""What a view of a prepared scene needs besides the shapes: the camera, the lights in its frame,
+the tile lists, the acceleration choice and the range check. A scene handle (engine/tracer.py) keeps
+one ViewState per view it renders (camera, image, lights and shading), dropping them when its shapes
+change."""
 from __future__ import annotations
 
-import weakref
-from collections import OrderedDict
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,54 +11,9 @@ import pyopencl as cl
 
 from ..model.errors import PyclrayError, SceneError
 from ..model.scene import Scene, check_renderable, check_shape_count
-from ..model.shapes import REGISTRY
 from . import shading
-from .prepared import CACHES, PreparedScene, prepared_scene
-from .request import REAL, camera_struct, input_buffer, render_lock
-from .scene_bvh import SceneBVH
-
-
-class PerObject:
-    """Values computed from an object (a scene or its shapes tuple), the `most` most recently used:
-    keyed by the object's id and holding the object itself, so that neither an equal object nor a
-    new one at a recycled id takes another's value. The value is computed outside the lock."""
-
-    def __init__(self, most: int):
-        self.most = most
-        self.entries: OrderedDict = OrderedDict()
-        CACHES.append(self.entries)  # pyclray.clear_cache() empties it
-
-    def get(self, obj, compute):
-        key = id(obj)
-        with render_lock:
-            entry = self.entries.get(key)
-            if entry is not None and entry[0] is obj:
-                self.entries.move_to_end(key)
-                return entry[1]
-        value = compute()
-        with render_lock:
-            self.entries[key] = (obj, value)
-            while len(self.entries) > self.most:
-                self.entries.popitem(last=False)
-        return value
-
-
-_kinds = PerObject(16)
-
-
-def shape_kinds(scene: Scene) -> tuple[tuple[str, ...], int]:
-    """(the shape types present, the number of bounded shapes), once per shapes tuple: a warm
-    render of a scene of a million shapes must not walk them."""
-    return _kinds.get(scene.shapes, lambda: (
-        scene.shape_types(), sum(1 for shape in scene.shapes if REGISTRY[shape.type].bounded)))
-
-
-def scene_bvh(scene: Scene, ctx=None) -> SceneBVH:
-    """The BVH over the scene's bounded primitives, built once per shapes tuple (with its prepared
-    scene, on the default device at fp32 unless a context is given)."""
-    from .device import context_for
-
-    return prepared_scene(ctx or context_for(None), scene, "fp32").bvh
+from .prepared import PreparedScene
+from .request import REAL, camera_struct, input_buffer
 
 
 # Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
@@ -70,24 +25,16 @@ def scene_bvh(scene: Scene, ctx=None) -> SceneBVH:
 # many shapes has short lists, and computing them costs more than building the tree.
 TILE_LIST_MAX = 16.0
 TILES_MAX_SHAPES = 20_000
-_choices = PerObject(16)
 
 
-def acceleration_for(scene: Scene, acceleration: str = "auto", prepared: PreparedScene | None = None) -> str:
-    """"tiles" or "bvh" for a render of this scene (see TILE_LIST_MAX)."""
+def check_acceleration(acceleration) -> str:
     if acceleration not in ("auto", "bvh", "tiles"):
         raise PyclrayError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
-    if acceleration != "auto":
-        return acceleration
-    return _choices.get(scene, lambda: _cheaper_acceleration(scene, prepared))
+    return acceleration
 
 
-def _cheaper_acceleration(scene: Scene, prepared: PreparedScene | None) -> str:
+def cheaper_acceleration(scene: Scene, prepared: PreparedScene) -> str:
     """Tile lists while they average at most TILE_LIST_MAX shapes a tile, else the BVH."""
-    if prepared is None:
-        from .device import context_for
-
-        prepared = prepared_scene(context_for(None), scene, "fp32")
     if prepared.bounded > TILES_MAX_SHAPES:
         return "bvh"
     width, height = scene.image.width, scene.image.height
@@ -102,9 +49,6 @@ def _cheaper_acceleration(scene: Scene, prepared: PreparedScene | None) -> str:
     return "tiles" if pairs <= TILE_LIST_MAX * tiles else "bvh"
 
 
-_checked = PerObject(16)
-
-
 def check_entry_count(prepared: PreparedScene) -> None:
     """Refuse more entries of one type than the kernels can index (16 x index + type in 32 bits)."""
     from ..model import scene as scene_model
@@ -115,21 +59,51 @@ def check_entry_count(prepared: PreparedScene) -> None:
                              "type (the kernels index one by 16 x its position + its type in 32 bits)")
 
 
-def check_renderable_once(scene: Scene, precision: str, prepared: PreparedScene) -> None:
-    """scene.check_renderable once per scene object and precision, in O(1) where the prepared
-    scene's conservative bound holds (a new view of a million shapes must not walk them), shape by
-    shape only where it does not, to name the shape; a scene without shapes is warned about at
-    every render."""
-    if not scene.shapes:
-        check_renderable(scene, precision)
-        return
-    check_shape_count(scene)
-    check_entry_count(prepared)
-    done = _checked.get(scene, set)
-    if precision not in done:
-        if not prepared.within_range(scene.camera.eye, precision):
+class ViewState:
+    """What a scene handle keeps of one view (its camera, image, lights and shading) between renders:
+    whether its range check passed, its acceleration choice and its inputs per acceleration."""
+
+    def __init__(self):
+        self.checked = False
+        self.choice = None  # "tiles" or "bvh", once chosen for acceleration "auto"
+        self.inputs: dict = {}  # acceleration -> ViewInputs
+
+    def check_renderable(self, scene: Scene, precision: str, prepared: PreparedScene) -> None:
+        """scene.check_renderable once per view, in O(1) where the prepared scene's conservative
+        bound holds (a new view of a million shapes must not walk them), shape by shape only where it
+        does not, to name the shape; a scene without shapes is warned about at every render."""
+        if not scene.shapes:
             check_renderable(scene, precision)
-        done.add(precision)
+            return
+        check_shape_count(scene)
+        check_entry_count(prepared)
+        if not self.checked:
+            if not prepared.within_range(scene.camera.eye, precision):
+                check_renderable(scene, precision)
+            self.checked = True
+
+    def acceleration(self, scene: Scene, acceleration: str, prepared: PreparedScene) -> str:
+        """"tiles" or "bvh" for a render of this view (see TILE_LIST_MAX)."""
+        if check_acceleration(acceleration) != "auto":
+            return acceleration
+        if self.choice is None:
+            self.choice = cheaper_acceleration(scene, prepared)
+        return self.choice
+
+    def inputs_for(self, ctx, scene: Scene, prepared: PreparedScene, acceleration: str) -> "ViewInputs":
+        inputs = self.inputs.get(acceleration)
+        if inputs is None:
+            inputs = self.inputs[acceleration] = ViewInputs(ctx, scene, prepared, acceleration)
+        return inputs
+
+    def shapes_changed(self) -> None:
+        """The handle's shapes moved (an animation's frame, refitted in place): the range check, the
+        choice and the tile lists depend on them; the BVH's inputs (camera, lights) do not."""
+        self.checked, self.choice = False, None
+        self.inputs.pop("tiles", None)
+
+    def nbytes(self) -> int:
+        return sum(inputs.nbytes() for inputs in self.inputs.values())
 
 
 class ViewInputs:
@@ -142,20 +116,22 @@ class ViewInputs:
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
         plane = scene.camera.image_plane(width, height)
-        # made for this prepared scene (its anchor, its materials): one rebuilt for the same scene gets
-        # its own (a weak reference: an evicted prepared scene is not kept alive by its views)
-        self.prepared = weakref.ref(prepared)
-        self.made_for = (scene.camera, scene.image, scene.lights, scene.shading)  # what they are computed from
         self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
                 start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
-        # what the lights are packed from, when asked (not the scene: the last inputs, kept by _last,
-        # must not keep a dropped scene's shapes alive)
+        # what the lights are packed from, when asked (not the scene, whose shapes may move on)
         self._made = (ctx, scene.camera, scene.lights, scene.shading, precision)
         self._lighting = self._eye_parts = None
+
+    def nbytes(self) -> int:
+        """The bytes of its device buffers (the camera, tile lists, lights)."""
+        buffers = [self.camera, *(b for pair in self.tiles.values() for b in pair)]
+        if self._lighting is not None:
+            buffers.append(self._lighting[1])
+        return sum(b.size for b in buffers)
 
     def eye_parts(self) -> list:
         """The eye as a sum of two reals, for the position image (kernels/pyclray.cl): made when a
@@ -200,27 +176,3 @@ class ViewInputs:
                 start, index = self.tiles[kind.name]
                 args += [*entries, start, index, (np.int32(kind.count),)]
         return args
-
-
-_views = PerObject(16)
-# the last view inputs made per (device, precision): an animation's frame is a new scene object with
-# the same camera, image, lights and shading (and the prepared scene updated in place), whose inputs
-# through the BVH are those (tile lists depend on the shapes: not reused)
-_last: dict = {}
-CACHES.append(_last)
-
-
-def render_inputs(ctx, scene: Scene, precision: str, acceleration: str):
-    """(prepared scene, view inputs) of a render of this scene."""
-    prepared = prepared_scene(ctx, scene, precision)
-    per_scene = _views.get(scene, dict)
-    key = (ctx.device.int_ptr, precision, acceleration)
-    inputs = per_scene.get(key)
-    if inputs is None or inputs.prepared() is not prepared:
-        last = _last.get(key)
-        if acceleration == "bvh" and last is not None and last.prepared() is prepared and all(
-                a is b for a, b in zip(last.made_for, (scene.camera, scene.image, scene.lights, scene.shading))):
-            inputs = per_scene[key] = last
-        else:
-            inputs = per_scene[key] = _last[key] = ViewInputs(ctx, scene, prepared, acceleration)
-    return prepared, inputs

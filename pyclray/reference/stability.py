@@ -270,7 +270,7 @@ CASES = (
 
 def evaluate(scene: Scene, engines=("fp32", "fp64"), ref=None) -> dict:
     """engine -> compare() result; engines: "fp32", "fp64", "scalar_rgb", "llvm_ad_rgb"."""
-    from ..engine.render import render
+    from ..engine.api import render
 
     ref = ref if ref is not None else reference(scene)
     out = {}

@@ -135,7 +135,7 @@ def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
     written at a temporary beside it that files.replace_together renames at the end; a folder
     manages its own temporary folder (video.Folder). On any error or Ctrl-C both threads stop and the
     temporaries go: nothing partial is left, and an earlier output stays as it was."""
-    from ...engine.render import render_animation
+    from ...engine.api import render_animation
 
     on_cluster = args.workers is not None or args.scheduler is not None
     cluster = cluster_module() if on_cluster else None

@@ -12,7 +12,7 @@ from .texts import EXIT_STATUS_HELP
 
 def _band_renderer(scene, aovs, precision, device):
     """window (x0, y0, w, h) -> the images of that part of the image (pyclray.render's window)."""
-    from ...engine.render import render
+    from ...engine.api import render
 
     return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
 

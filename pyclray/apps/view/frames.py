@@ -40,7 +40,7 @@ class Picture:
 def render_picture(scene, camera, aov: str, size: tuple[int, int]) -> Picture:
     """The preview of `aov` of the scene seen by `camera` at `size` (width, height): the scene's
     shapes stay prepared on the device, so a new camera or size uploads the camera only."""
-    from ...engine.render import render
+    from ...engine.api import render
     from ...io.png import preview
 
     start = time.perf_counter()

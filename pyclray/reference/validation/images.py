@@ -65,7 +65,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     mitsuba_scene: the scene Mitsuba renders, if not the same one (tests pass a slightly moved
     scene to see the check fail)."""
     from .. import mitsuba, oracle
-    from ...engine.render import render
+    from ...engine.api import render
     from ...io.progress import step
 
     step("pyclray render")

@@ -48,7 +48,7 @@ def ray_level(
 
     mitsuba_scene: the scene Mitsuba intersects, if not the same one (for tests)."""
     from .. import mitsuba, oracle
-    from ...engine.cast import cast
+    from ...engine.api import cast
 
     width, height = scene.image.width, scene.image.height
     rng = np.random.default_rng(seed)

@@ -104,7 +104,7 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None, truth=No
     """pyclray's shaded image (fp32) against pi x Mitsuba's direct integrator, on the diffuse version.
     truth: the oracle's trace of the pixels (with "second"), if at hand (ImageCheck.truth)."""
     from ..mitsuba import beyond_counterparts
-    from ...engine.render import render
+    from ...engine.api import render
     from ...io.progress import step
 
     scene = diffuse_version(scene)

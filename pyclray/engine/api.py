@@ -1,0 +1,178 @@
+"""The module-level functions (pyclray.render, render_views, render_animation, cast, occluded,
+clear_cache): thin wrappers over one small cache of scene handles (engine/tracer.py), so that calls
+on the same shapes prepare them once.
+
+The cache is the only engine state that outlives a call: at most TRACERS_MAX handles and about
+TRACERS_BYTES of memory, the least recently used dropped first, each found by (device, shapes tuple,
+precision). An entry holds its tuple, so the tuple's id() cannot be reused while it is cached. A
+moved camera keeps the scene's tuple (dataclasses.replace), so it finds the same handle. An
+animation's frame (a tuple that pyclray.model.frames says was made from another by changing a few
+shapes) takes over the handle of that other tuple and updates it in place (Tracer.refit).
+"""
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+
+import numpy as np
+
+from ..model.animation import scene_at
+from ..model.aovs import AOVS, RENDER_AOVS
+from ..model.errors import SceneError
+from ..model.frames import derivation
+from ..model.loader import as_scene
+from ..model.scene import Scene, check_shape_count, checked_time
+from .cast import check_cast_device
+from .device import context_for
+from .render import with_camera
+from .request import Frame, check_precision, check_request
+from .tracer import Tracer
+
+TRACERS_MAX = 8
+TRACERS_BYTES = 1 << 30
+_tracers: OrderedDict = OrderedDict()
+_lock = threading.Lock()
+
+
+def clear() -> None:
+    """Drop every cached scene handle (their device memory goes with them once no call uses them;
+    handles from pyclray.prepare are the caller's and stay)."""
+    with _lock:
+        _tracers.clear()
+
+
+def tracer_for(scene: Scene, ctx, precision: str) -> Tracer:
+    """The cached handle of the scene's shapes on this device at this precision: made at the first
+    call; an animation's frame updates the handle of the tuple it was made from (see the module's
+    docstring)."""
+    shapes = scene.shapes
+    key = (ctx.device.int_ptr, id(shapes), precision)
+    with _lock:
+        tracer = _tracers.get(key)
+        if tracer is not None and tracer.shapes is shapes:
+            _tracers.move_to_end(key)
+            return tracer
+    derived = derivation(shapes)
+    if derived is not None:
+        base, changed = derived
+        with _lock:
+            candidates = [(k, t) for k, t in _tracers.items()
+                          if t.prepared.base is base and k[0] == ctx.device.int_ptr and t.precision == precision]
+        for old_key, candidate in candidates:
+            updated = candidate.shapes is not shapes and candidate.refit(shapes, changed)
+            with _lock:
+                _tracers.pop(old_key, None)
+                if updated:
+                    _tracers[key] = candidate
+                    return candidate
+    tracer = Tracer(scene, ctx.device, precision)
+    if derived is not None:  # the base its changes are from, for the next frame's update
+        tracer.prepared.base, tracer.prepared.dirty = derived[0], set(derived[1])
+    with _lock:
+        _tracers[key] = tracer
+        while len(_tracers) > 1 and (len(_tracers) > TRACERS_MAX or
+                                     sum(t.nbytes for t in _tracers.values()) > TRACERS_BYTES):
+            _tracers.popitem(last=False)
+    return tracer
+
+
+# -- renders -------------------------------------------------------------------------------------
+def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto",
+           camera=None) -> Frame:
+    """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
+
+    scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
+    SceneError (see scene.check_renderable).
+    aovs: which images (a subset of depth, normal, id, zdepth, position, shaded, primitive, label: only those
+    are computed; shaded casts shadow rays where the scene's [shading] asks for them; label, each
+    shape's label, is looked up from the id image);
+    precision: "fp32" or "fp64"; device: a pyopencl Device, a selector string, or None (default);
+    window: (x0, y0, width, height), a part of the image (column x0 and row y0 from the top left),
+    rendered into images of that size, the same pixels as in the whole image; default: all of it;
+    acceleration: how the kernel skips the shapes a ray cannot hit, "tiles" (screen-space tile
+    lists), "bvh" (the bounding volume hierarchy) or "auto" (tiles for a few shapes, else the BVH).
+    The images do not depend on it, bit for bit.
+    camera: a pyclray.Camera to render the scene's shapes from instead of its own (the same as
+    rendering ``dataclasses.replace(scene, camera=camera)``).
+
+    The scene's shapes are prepared on the device once and kept (a cached scene handle, see
+    pyclray.prepare for one of your own): a view from another camera uploads the camera only,
+    whatever the number of shapes.
+    """
+    return _start(scene, aovs, precision, device, window, acceleration, camera)()
+
+
+def _start(scene, aovs, precision, device, window=None, acceleration="auto", camera=None):
+    """render's checks, in their order, and its start on the cached handle (Tracer.start_render)."""
+    scene = as_scene(scene)
+    if camera is not None:
+        scene = with_camera(scene, camera)
+    ctx = context_for(device)
+    check_request(aovs, precision, ctx, RENDER_AOVS)
+    return tracer_for(scene, ctx, precision).start_render(scene, aovs, window, acceleration)
+
+
+def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", device=None, acceleration: str = "auto"):
+    """Yield the Frame of each camera (a pyclray.Camera, or a Scene whose camera and image size are
+    taken) in order: many views of one scene's shapes, prepared on the device once (a data set of
+    depth, normal and id maps from hundreds of poses). Each frame is exactly
+    ``render(scene, aovs, precision, device, camera=camera)``.
+
+    The next view is enqueued before a frame is returned: the host's work for it (checks, camera,
+    the per-view pass's launch) and the return of this one overlap the device's run of this one,
+    and the device goes from one view's kernel to the next without waiting for the host. An error
+    of a view is raised after the frames before it."""
+    scene = as_scene(scene)
+    ctx = context_for(device)
+    check_request(aovs, precision, ctx, RENDER_AOVS)
+    return tracer_for(scene, ctx, precision).views_of(scene, cameras, aovs, acceleration)
+
+
+def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):
+    """Yield (t, Frame) for each frame of the scene's animation: frame k at t = k / fps is
+    exactly ``render(scene.at(t), aovs, precision, device)``. frames: the frame indices (a range
+    or any iterable of ints; default all of them)."""
+    animation = scene.animation
+    if animation is None:
+        raise SceneError("the scene has no [animation] table", file=scene.source)
+    for k in range(animation.frame_count()) if frames is None else frames:
+        t = animation.frame_time(k)
+        # scene.at(t) with its shapes held as the animated scene's and the changes (O(K) work)
+        yield t, render(scene_at(scene, checked_time(t), lazy=True), aovs=aovs, precision=precision, device=device)
+
+
+# -- casts ---------------------------------------------------------------------------------------
+def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None) -> Frame:
+    """Cast arbitrary rays through the scene's shapes (the scene's camera and image are not used).
+
+    origins: (..., 3) like directions, or one (3,) origin for every ray; directions: (..., 3), any
+    non-zero length; tmax: None, one number or one per ray (shape (...)): hits farther than it
+    are misses. Returns a Frame of per-ray arrays: depth (...) is the distance from the origin
+    along the normalized direction (+inf on a miss), normal (..., 3), id (...).
+
+    Each ray is traced on its own, from its float64 origin and direction: its result does not
+    depend on the other rays of the batch, bit for bit, and its float32 depth and normal meet the
+    render's error model for the ray as given (see kernels/pyclray.cl). Needs cl_khr_fp64.
+    Raises PyclrayError for arrays of other shapes, rows that are not finite, zero directions, a
+    tmax that is not > 0, and origins so far from the shapes that the precision overflows.
+    """
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_request(aovs, precision, ctx)
+    check_cast_device(ctx)
+    return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmax)
+
+
+def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None) -> np.ndarray:
+    """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array
+    of the rays' leading shape. The any-hit query of shadow rays: the search stops at the first
+    hit found. The same rays, arguments and exactness as cast: occluded is true exactly where
+    cast(..., tmax=tmax) finds a hit, up to hits within rounding of tmax."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision)  # (fp64 on a device: the device check's matter, for casts)
+    check_cast_device(ctx)
+    return tracer_for(scene, ctx, precision).occluded(origins, directions, tmax)
+

@@ -1,0 +1,250 @@
+"""The scene handle: a scene prepared on one device at one precision, owned by the caller, and every
+query on it as a method (Open3D's RaycastingScene, Embree's RTCScene, Mitsuba's loaded Scene).
+
+    with pyclray.prepare(scene) as tracer:
+        frame = tracer.render(aovs=("depth", "id"))
+        hits = tracer.cast(origins, directions)
+
+All the device state of a scene lives here: the prepared shapes (engine/prepared.py), what each view
+needs besides them (engine/views.py: the camera, lights, tile lists, acceleration choice and range
+check), cast's inputs and, on devices other than CPUs, the images' buffers. Its memory is
+``nbytes``; ``close()`` (or leaving the ``with`` block) frees it, after which the handle refuses
+every query with a clear error. The module-level functions (pyclray.render, pyclray.cast, ...) are
+thin wrappers over a small cache of these (engine/api.py).
+"""
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from dataclasses import replace
+
+from ..model.aovs import AOVS
+from ..model.errors import RequestError
+from ..model.frames import derivation
+from ..model.loader import as_scene
+from ..model.scene import Scene, check_shape_count
+from . import cast as cast_queries
+from . import render as render_query
+from .device import context_for
+from .prepared import PreparedScene
+from .request import OutputBuffers, check_precision, check_request
+from .views import ViewState
+
+
+class Tracer:
+    """A scene's shapes prepared on one device at one precision, and the queries on them (see the
+    module's docstring). ``pyclray.prepare(scene, device, precision)`` makes one."""
+
+    VIEWS_MAX = 16  # the views (camera, image, lights, shading) whose inputs are kept
+
+    def __init__(self, scene, device=None, precision: str = "fp32"):
+        scene = as_scene(scene)
+        ctx = context_for(device)
+        check_precision(precision, ctx)
+        self.ctx, self.precision = ctx, precision
+        self.lock = threading.RLock()  # the handle's own state: its views, cast inputs, updates
+        self._scene = scene
+        self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
+        self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
+        self._cast_inputs = None  # cast's buffers, made at the first cast (engine/cast.py: cast_inputs)
+        self.outputs = OutputBuffers(self.lock)
+
+    # -- its life --------------------------------------------------------------------------------
+    def close(self) -> None:
+        """Free the device memory it holds (kernels still running keep what they read until done).
+        Any later query is an error; closing again does nothing."""
+        with self.lock:
+            self._prepared = None
+            self._views.clear()
+            self._cast_inputs = None
+            self.outputs.buffers.clear()
+
+    @property
+    def closed(self) -> bool:
+        return self._prepared is None
+
+    def __enter__(self) -> "Tracer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else f"{len(self._prepared.shapes)} shapes, {self.nbytes} bytes"
+        return f"<pyclray.Tracer {self.precision} on {self.ctx.device.name.strip()}: {state}>"
+
+    @property
+    def prepared(self) -> PreparedScene:
+        """The prepared shapes (engine/prepared.py); a RequestError once the handle is closed."""
+        prepared = self._prepared
+        if prepared is None:
+            raise RequestError("this pyclray.Tracer is closed: prepare the scene again (pyclray.prepare)")
+        return prepared
+
+    @property
+    def scene(self) -> Scene:
+        """The scene it was prepared for, or last updated to: its camera, image, lights and shading
+        are render's defaults."""
+        return self._scene
+
+    @property
+    def shapes(self) -> tuple:
+        return self.prepared.shapes
+
+    @property
+    def nbytes(self) -> int:
+        """The bytes of device memory it holds: the shapes, the BVH, each kept view's inputs, cast's
+        buffers and the images' buffers (on a CPU device these are host memory the device uses)."""
+        with self.lock:
+            if self._prepared is None:
+                return 0
+            total = self._prepared.nbytes() + self.outputs.nbytes()
+            total += sum(state.nbytes() for state in self._views.values())
+            return total + (0 if self._cast_inputs is None else self._cast_inputs[3])
+
+    # -- renders ---------------------------------------------------------------------------------
+    def render(self, camera=None, aovs=AOVS, window=None, acceleration: str = "auto"):
+        """Render the handle's scene (its image size, lights and shading) from its camera, or from
+        ``camera`` (a pyclray.Camera) instead: exactly ``pyclray.render(scene, aovs, precision,
+        device, window, acceleration, camera)`` (see there), without preparing anything again."""
+        return self.start_render(self._view(camera), aovs, window, acceleration)()
+
+    def render_views(self, cameras, aovs=AOVS, acceleration: str = "auto"):
+        """Yield the Frame of each camera (a pyclray.Camera, or a Scene whose camera and image size
+        are taken), in order: exactly ``pyclray.render_views(scene, cameras, ...)``. The next view is
+        enqueued before a frame is returned (the host's work for it overlaps the device's run of this
+        one); an error of a view is raised after the frames before it."""
+        return self.views_of(self._scene, cameras, aovs, acceleration)
+
+    def _view(self, camera) -> Scene:
+        if camera is None:
+            return self._scene
+        return render_query.with_camera(self._scene, camera)
+
+    def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto"):
+        """Enqueue a render of ``view`` (a Scene with this handle's shapes) and return a callable that
+        waits for it and returns its Frame (engine/render.py: start)."""
+        return render_query.start(self, view, aovs, window, acceleration)
+
+    def views_of(self, scene: Scene, cameras, aovs=AOVS, acceleration: str = "auto"):
+        """render_views of ``scene`` (this handle's shapes, its own lights and shading) from each camera."""
+        pending = None
+        try:
+            for camera in cameras:
+                try:
+                    if isinstance(camera, Scene):
+                        view = replace(scene, camera=camera.camera, image=camera.image)
+                    else:
+                        view = render_query.with_camera(scene, camera)
+                    started = self.start_render(view, aovs, acceleration=acceleration)
+                except Exception:
+                    if pending is not None:  # the frames before it first
+                        frame, pending = pending(), None
+                        yield frame
+                    raise
+                if pending is not None:
+                    frame, pending = pending(), None
+                    yield frame
+                pending = started
+            if pending is not None:
+                frame, pending = pending(), None
+                yield frame
+        finally:
+            if pending is not None:  # left early: the last view's kernel still writes into its arrays
+                pending()
+
+    def view_state(self, view: Scene) -> ViewState:
+        """What this handle keeps of a view (engine/views.py: ViewState), by the view's camera, image,
+        lights and shading (equal values share it), the VIEWS_MAX most recent."""
+        key = (view.camera, view.image, view.lights, view.shading)
+        with self.lock:
+            self.prepared  # closed: the error, before anything is made
+            state = self._views.get(key)
+            if state is None:
+                state = self._views[key] = ViewState()
+                while len(self._views) > self.VIEWS_MAX:
+                    self._views.popitem(last=False)
+            else:
+                self._views.move_to_end(key)
+            return state
+
+    # -- casts -----------------------------------------------------------------------------------
+    def cast(self, origins, directions, aovs=AOVS, tmax=None):
+        """The nearest hit of each ray: exactly ``pyclray.cast(scene, origins, directions, aovs,
+        precision, device, tmax)`` (see there)."""
+        check_shape_count(self._scene)
+        aovs = check_request(aovs, self.precision, self.ctx)
+        cast_queries.check_cast_device(self.ctx)
+        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs)
+
+    def occluded(self, origins, directions, tmax=None):
+        """Whether each ray hits any shape up to tmax: exactly ``pyclray.occluded(scene, origins,
+        directions, tmax, precision, device)`` (see there)."""
+        check_shape_count(self._scene)
+        cast_queries.check_cast_device(self.ctx)
+        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, ())
+
+    def cast_inputs(self):
+        """cast's buffers of the shapes (engine/cast.py: cast_inputs), made at the first cast."""
+        with self.lock:
+            prepared = self.prepared
+            if self._cast_inputs is None:
+                self._cast_inputs = cast_queries.cast_inputs(self.ctx, prepared, self.precision, prepared.types)
+            return self._cast_inputs
+
+    # -- a moved scene ---------------------------------------------------------------------------
+    def update(self, scene) -> "Tracer":
+        """Become the handle of ``scene``: its camera, image, lights and shading are the new
+        defaults; where its shapes are this handle's but for some moved or changed ones (an
+        animation's frame, ``scene.at(t)``; a tuple of as many shapes with some replaced), only those
+        are rewritten and the BVH refitted above them; other shapes (added, removed, another type or
+        primitive count, mesh instances) prepare the scene anew. The results are those of a handle
+        prepared for ``scene``, bit for bit. Returns the handle."""
+        scene = as_scene(scene)
+        with self.lock:
+            prepared = self.prepared
+            shapes = scene.shapes
+            if shapes is not prepared.shapes:
+                derived = derivation(shapes)
+                if derived is not None and derived[0] is prepared.base:
+                    changed = derived[1]
+                elif len(shapes) == len(prepared.shapes):
+                    # changed from the shapes it holds now: those become the base the changes are from
+                    changed = [i for i, (a, b) in enumerate(zip(shapes, prepared.shapes)) if a is not b]
+                    prepared.base, prepared.dirty = prepared.shapes, set()
+                else:
+                    changed = None
+                self.refit(shapes, changed)
+            self._scene = scene
+        return self
+
+    def refit(self, shapes: tuple, changed) -> bool:
+        """Update the prepared shapes in place for ``shapes`` (changed: the indices that differ from
+        its base's, None: unknown), or prepare them anew where that cannot be done. True if in place."""
+        with self.lock:
+            prepared = self.prepared
+            updated = False
+            if changed is not None:
+                with prepared.lock:
+                    # an update writes the host arrays a CPU device reads: no kernel of a view still in
+                    # flight (render_views enqueues the next view before returning a frame) may read them
+                    prepared.ctx.queue.finish()
+                    updated = prepared.update(shapes, changed)
+            if updated:
+                for state in self._views.values():
+                    state.shapes_changed()
+            else:
+                self._prepared = PreparedScene(self.ctx, shapes, self.precision)
+                if changed is not None:  # the base its changes are from, for the next frame's update
+                    self._prepared.base, self._prepared.dirty = prepared.base, set(changed)
+                self._views.clear()
+            self._cast_inputs = None
+            return updated
+
+
+def prepare(scene, device=None, precision: str = "fp32") -> Tracer:
+    """The scene prepared on a device (a pyopencl Device, a selector string, or None: the default)
+    at a precision ("fp32" or "fp64"), once: a handle (Tracer) whose methods render, render views,
+    cast and test occlusion without preparing anything again, until ``close()`` or the end of a
+    ``with`` block frees its device memory. scene: a Scene or the path of a scene file."""
+    return Tracer(scene, device, precision)
