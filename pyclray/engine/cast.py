@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..model.aovs import AOVS
-from ..model.camera import ImagePlane
+from ..model.cameras.perspective import ImagePlane, packed_frame
 from ..model.errors import DeviceError, PyclrayError, RequestError
 from ..model.layout import PRECISIONS, layout
 from ..model.loader import as_scene
@@ -16,7 +16,7 @@ from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
 from .prepared import CACHES, PREPARED_MAX, prepared_scene
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
+from .request import REAL, Frame, check_request, input_buffer, render_lock, run_kernel
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -285,7 +285,7 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
         _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
         return out.reshape(shape)
     identity = np.eye(3)
-    camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
+    camera = packed_frame(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", shape_types, aovs, precision)
     results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
                          local_size=sizes[1])

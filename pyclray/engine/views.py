@@ -14,7 +14,7 @@ from ..model.scene import Scene, check_renderable, check_shape_count
 from ..model.shapes import REGISTRY
 from . import shading
 from .prepared import CACHES, PreparedScene, prepared_scene
-from .request import REAL, camera_struct, input_buffer, render_lock
+from .request import REAL, input_buffer, render_lock
 from .scene_bvh import SceneBVH
 
 
@@ -146,7 +146,7 @@ class ViewInputs:
         # its own (a weak reference: an evicted prepared scene is not kept alive by its views)
         self.prepared = weakref.ref(prepared)
         self.made_for = (scene.camera, scene.image, scene.lights, scene.shading)  # what they are computed from
-        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - prepared.anchor))
+        self.camera = input_buffer(ctx, scene.camera.pack(width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
