@@ -5,12 +5,13 @@ import pytest
 
 from pyclray.engine.device import context_for, has_fp64
 from pyclray.engine.programs import kernel_dir
-from pyclray.model.layout import CAMERA, Struct, c_header, layout
+from pyclray.model.cameras import CAMERAS
+from pyclray.model.layout import Struct, c_header, layout
 from pyclray.model.shapes import KINDS
 
-# the camera, each packed kind's frame struct and its world struct (float64 fields: the per-view pass's
-# input; mesh instances' frame struct holds float64 fields too)
-STRUCTS = list(dict.fromkeys([CAMERA] + [cls.struct for cls in KINDS.values()] + [cls.world for cls in KINDS.values()]))
+# each camera model's struct, each packed kind's frame struct and its world struct (float64 fields: the
+# per-view pass's input; mesh instances' frame struct holds float64 fields too)
+STRUCTS = list(dict.fromkeys([model.struct for model in CAMERAS.values()] + [cls.struct for cls in KINDS.values()] + [cls.world for cls in KINDS.values()]))
 
 
 def measure_on_device(struct: Struct, precision: str) -> list[int]:

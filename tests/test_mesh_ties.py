@@ -15,7 +15,6 @@ import pytest
 
 import pyclray
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.request import camera_struct
 from pyclray.model.shapes.mesh_shapes import grid, torus
 from test_packets import at_width
 
@@ -46,7 +45,7 @@ def fans_scene():
     size = (32, 24)
     camera = pyclray.Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=50.0)
     assert np.array_equal(camera.basis(), [[-1, 0, 0], [0, 1, 0], [0, 0, -1]])  # frame -> world: x, z negated (exact)
-    struct = camera_struct(camera.basis(), camera.image_plane(*size), *size, "fp32")
+    struct = camera.pack(*size, "fp32")
     vertices, faces = [], []
     for i, j in [(3, 4), (10, 7), (17, 12), (25, 20), (30, 2), (8, 19), (21, 5), (14, 15)]:
         centre = 4.0 * kernel_ray(struct, i, j).astype(np.float64)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..model.camera import ImagePlane
+from ..model.cameras.perspective import ImagePlane, packed_frame
 from ..model.errors import DeviceError, PyclrayError
 from ..model.layout import layout
 from .device import has_fp64, launch
 from .prepared import PreparedScene
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, input_buffer, run_kernel
+from .request import REAL, Frame, input_buffer, run_kernel
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -264,7 +264,7 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
         _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
         return out.reshape(shape)
     identity = np.eye(3)
-    camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
+    camera = packed_frame(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", tracer.prepared.types, aovs, precision)
     results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
                          tracer.outputs, local_size=sizes[1])

@@ -15,7 +15,8 @@ from pathlib import Path
 import pyopencl as cl
 
 from ..model.errors import BuildError, DeviceError
-from ..model.layout import CAMERA, c_header
+from ..model.cameras.perspective import CAMERA
+from ..model.layout import c_header
 from ..model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
 from .bvh import NODE
 from .bvh_wide import WIDE_NODE

@@ -1,5 +1,5 @@
-"""A request's run on the device: the Frame it returns, the checks of its AOVs and precision, the
-camera's struct, and the kernel's launch over output buffers that become the returned arrays."""
+"""A request's run on the device: the Frame it returns, the checks of its AOVs and precision, and
+the kernel's launch over output buffers that become the returned arrays."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,7 @@ import pyopencl as cl
 
 from ..model.aovs import AOVS, TABLE
 from ..model.errors import DeviceError, RequestError
-from ..model.layout import CAMERA, PRECISIONS, layout
+from ..model.layout import PRECISIONS
 from .device import DeviceContext, has_fp64, launch
 from .programs import kernel_for
 
@@ -89,29 +89,6 @@ def check_precision(precision: str, ctx: DeviceContext | None = None) -> str:
             "use precision fp32 or another device"
         )
     return precision
-
-
-def camera_struct(rows, plane, width, height, precision, box_origin=(0.0, 0.0, 0.0)):
-    """The kernel's Camera (model/layout.py): the frame's rows u, v, w, the image plane (a
-    model.camera.ImagePlane at this size) and the eye in the BVH's frame (box_origin: the eye minus
-    the scene's anchor, float64). Twice the principal point goes as an integer and the rest, so
-    that the kernel's numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum (and exactly
-    width - 1 - 2 i, as ever, for a centred camera)."""
-    camera = np.zeros(1, dtype=layout(CAMERA, precision).dtype)
-    for name, row in zip("uvw", rows):
-        camera[name][0, :3] = row
-    # rounded to float: the box tests are in float; the margin, 2^-20 |o|_1 (as cast's box rays),
-    # covers that rounding and the kernel's differences of faces and origin (kernels/bvh.h)
-    origin = np.asarray(box_origin, np.float64)
-    camera["box_origin"][0, :3] = origin
-    camera["box_origin"][0, 3] = 2.0**-20 * float(np.abs(origin).sum())
-    camera["tan_x"], camera["tan_y"] = plane.tan_x, plane.tan_y
-    camera["width"], camera["height"] = width, height
-    for axis, c in (("x", plane.cx), ("y", plane.cy)):
-        whole = round(2 * c)
-        camera[f"centre_{axis}"] = whole
-        camera[f"centre_{axis}_low"] = 2 * c - whole  # exact in float64: |2 c| < 2^30
-    return camera
 
 
 def frame_camera(camera, width: int, height: int, col0: int = 0, row0: int = 0) -> dict:

@@ -13,7 +13,7 @@ from ..model.errors import PyclrayError, SceneError
 from ..model.scene import Scene, check_renderable, check_shape_count
 from . import shading
 from .prepared import PreparedScene
-from .request import REAL, camera_struct, input_buffer
+from .request import REAL, input_buffer
 
 
 # Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
@@ -116,7 +116,7 @@ class ViewInputs:
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
         plane = scene.camera.image_plane(width, height)
-        self.camera = input_buffer(ctx, camera_struct(self.rows, plane, width, height, precision, self.eye - prepared.anchor))
+        self.camera = input_buffer(ctx, scene.camera.pack(width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
         if acceleration == "tiles":
             for kind in prepared.kinds.values():

@@ -92,27 +92,3 @@ def c_header(structs, precision: str) -> str:
     parts += [layout(s, precision).c_typedef for s in structs]
     return "\n".join(parts)
 
-
-# The camera, as the render kernel reads it (one element).
-CAMERA = Struct(
-    "Camera",
-    (
-        ("u", "real4"),  # world_from_camera: columns u (left), v (up), w (forward)
-        ("v", "real4"),
-        ("w", "real4"),
-        # the eye in the render BVH's frame (world axes around the scene's anchor), rounded to float,
-        # and (w) a margin over that rounding (kernels/bvh.h: box_entries)
-        ("box_origin", "float4"),
-        # pixel (row j, column i) looks through sx = tan_x (centre_x - 1 - 2 i + centre_x_low) / width,
-        # sy = tan_y (centre_y - 1 - 2 j + centre_y_low) / height (model.camera.ImagePlane):
-        ("tan_x", "real"),  # width / (2 fx), height / (2 fy): a centred camera's tan of half its opening angles
-        ("tan_y", "real"),
-        ("centre_x_low", "real"),  # 2 cx - centre_x, 2 cy - centre_y: the principal point's fractions
-        ("centre_y_low", "real"),
-        ("width", "int"),
-        ("height", "int"),
-        ("centre_x", "int"),  # 2 cx and 2 cy rounded to integers: width and height for a centred camera
-        ("centre_y", "int"),
-    ),
-    "The camera frame (world_from_camera columns) and the image plane (its pixel-centre rays).",
-)

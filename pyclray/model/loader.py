@@ -6,8 +6,9 @@ import tomllib
 from pathlib import Path
 
 from .animation import Animation
-from .camera import Camera, Image
-from .errors import RequestError, SceneError, no_unknown_keys, typed_table
+from .camera import Image
+from .cameras import CAMERAS, DEFAULT_MODEL, CameraModel
+from .errors import RequestError, SceneError, no_unknown_keys, text, typed_table
 from .lights import Shading, lights_from_list
 from .scene import Scene
 from .shapes import REGISTRY
@@ -32,25 +33,13 @@ def _table(data: dict, key: str, *, required: bool) -> dict:
     return data[key]
 
 
-LOOK_AT_KEYS = ("eye", "target", "up", "fov", "fov_axis")
-INTRINSICS_KEYS = ("intrinsics", "pose")
-
-
-def camera_from_table(table: dict) -> Camera:
-    """The [camera] table: eye, target, up, fov, fov_axis, or intrinsics and pose (scene-format.md,
-    "Camera from intrinsics"), never a mix."""
-    if not any(key in table for key in INTRINSICS_KEYS):
-        no_unknown_keys(table, LOOK_AT_KEYS, required=("eye", "target", "fov"))
-        return Camera(**table)
-    no_unknown_keys(table, LOOK_AT_KEYS + INTRINSICS_KEYS)
-    for key in LOOK_AT_KEYS:
-        if key in table:
-            raise SceneError("a camera is given either by eye, target, up, fov, fov_axis or by intrinsics and pose, "
-                             "not a mix (the pose holds the eye)", key=key)
-    for key in INTRINSICS_KEYS:
-        if key not in table:
-            raise SceneError("missing required key: a camera from intrinsics needs both intrinsics and pose", key=key)
-    return Camera.from_intrinsics(table["intrinsics"], table["pose"])
+def camera_from_table(table: dict) -> CameraModel:
+    """The [camera] table: its model (default perspective; scene-format.md, "Camera models") reads
+    the other keys (the perspective camera: eye, target, up, fov, fov_axis, or intrinsics and pose)."""
+    model = text("model", table.get("model", DEFAULT_MODEL))
+    if model not in CAMERAS:
+        raise SceneError(f"unknown camera model {model!r} (expected one of: {', '.join(CAMERAS)})", key="model")
+    return CAMERAS[model].from_table({key: value for key, value in table.items() if key != "model"})
 
 
 def scene_from_dict(data: dict, source: str | None = None) -> Scene:

@@ -14,21 +14,19 @@ that differ between pyclray and Mitsuba, and how they are mapped here:
   edge, near the horizon, Mitsuba sees nothing where pyclray sees the plane:
   ``beyond_counterparts`` marks those pixels so that comparisons can leave them out.
 - normals: ``geo_normal`` is the geometric normal, outward and not flipped, as pyclray's.
-- cameras: a look-at camera is Mitsuba's ``look_at`` with its fov and fov_axis. A camera from
-  intrinsics (sensor_of) has ``to_world`` the matrix of its frame (columns u left, v up, w forward:
-  Mitsuba's camera space, OpenCV's x and y negated) and, since Mitsuba's pixels are square, only
-  fx = fy: fov = 2 atan(width / (2 fx)) along x, and the principal point through
-  ``principal_point_offset_x/_y``, which Mitsuba adds to the film position in [0, 1]^2 before
-  projecting (perspective.cpp's sample_ray): the optical axis meets the film at 0.5 - offset, so
-  offset_x = 0.5 - cx / width and offset_y = 0.5 - cy / height (K's cx, cy in pixels).
+- cameras: each camera model declares its Mitsuba sensor as data (``CameraModel.mitsuba_sensor``,
+  model/cameras): the perspective camera's is Mitsuba's perspective sensor (a look-at camera's
+  ``look_at`` with its fov and fov_axis; a camera from intrinsics with fx = fy: its frame as
+  ``to_world`` and its principal point as ``principal_point_offset_x/_y``). A model Mitsuba has no
+  sensor for (or a camera of fx != fy) is a SceneError.
 """
 from __future__ import annotations
 
 from contextlib import contextmanager
-from typing import NamedTuple
 
 import numpy as np
 
+from ..model.cameras import LookAt
 from ..model.errors import SceneError
 from ..model.lights import PointLight
 from ..model.scene import Scene
@@ -103,16 +101,6 @@ def load_dict(mi, description: dict):
     return mi.load_dict(ready, optimize=False)
 
 
-class LookAt(NamedTuple):
-    """A sensor's to_world given as a look-at: <lookat origin=... target=... up=...> in XML, and
-    for mi.load_dict the matrix Mitsuba's XML parser makes of it (Transform4f::look_at in float64,
-    rounded once to float32), so that the check's scene and an exported file are the same bit for bit."""
-
-    origin: list
-    target: list
-    up: list
-
-
 def _mitsuba_values(mi, value):
     """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f;
     a mesh's dict stays a dict (load_dict makes it an mi.Mesh)."""
@@ -143,32 +131,17 @@ def quiet_interrupts(mi):
         mi.set_log_level(previous)
 
 
-# Mitsuba's pixels are square: a camera from intrinsics maps to its sensor where fx and fy agree
-# to this (relative; K scaled to another image size may round them apart)
-SQUARE_PIXELS = 1e-9
-
-
 def sensor_of(scene: Scene) -> dict:
-    """The perspective sensor's camera properties (fov, fov_axis, principal point offsets, and
-    to_world as a 4x4 numpy matrix or the look_at arguments) of the scene's camera at its image
-    size; a SceneError where Mitsuba has no such camera (fx != fy). Needs no Mitsuba."""
-    camera, width, height = scene.camera, scene.image.width, scene.image.height
-    if camera.K is None:
-        return {"fov": camera.fov, "fov_axis": camera.fov_axis,
-                "look_at": {"origin": list(camera.eye), "target": list(camera.target), "up": list(camera.up)}}
-    K = camera.intrinsics(width, height)
-    fx, fy = float(K[0, 0]), float(K[1, 1])
-    if abs(fx - fy) > SQUARE_PIXELS * max(fx, fy):
-        raise SceneError(f"Mitsuba's perspective sensor has square pixels only (fx = fy); this camera has fx = {fx:g}, "
-                         f"fy = {fy:g} at {width}x{height}, so it cannot be checked against Mitsuba",
-                         file=scene.source, table="[camera]", key="intrinsics")
-    to_world = np.eye(4)
-    to_world[:3, :3] = camera.basis().T  # columns u, v, w: Mitsuba's camera space
-    to_world[:3, 3] = camera.eye
-    return {"fov": float(np.degrees(2 * np.arctan(width / (2 * fx)))), "fov_axis": "x",
-            "principal_point_offset_x": 0.5 - float(K[0, 2]) / width,
-            "principal_point_offset_y": 0.5 - float(K[1, 2]) / height,
-            "to_world": to_world}
+    """The sensor plugin of the scene's camera at its image size (its model's mitsuba_sensor) as plain
+    values: its type, its properties (a perspective sensor's fov, fov_axis, principal point offsets)
+    and to_world (a 4x4 numpy matrix or a LookAt); a SceneError naming the file and the camera's key
+    where Mitsuba has no such camera (a perspective camera of fx != fy). Needs no Mitsuba."""
+    try:
+        sensor = scene.camera.mitsuba_sensor(scene.image.width, scene.image.height)
+    except SceneError as error:
+        raise error.within(file=scene.source, table="[camera]") from None
+    return {"type": sensor.plugin, **sensor.properties,
+            "to_world": sensor.to_world if sensor.look_at is None else sensor.look_at}
 
 
 def mitsuba_dict(scene: Scene, aovs: str = AOV_SPEC, key=shape_key) -> dict:
@@ -180,16 +153,11 @@ def mitsuba_dict(scene: Scene, aovs: str = AOV_SPEC, key=shape_key) -> dict:
     ``pyclray.reference.mitsuba_export`` writes it as XML."""
     image = scene.image
     near, far = clip_range(scene)
-    camera = sensor_of(scene)
-    look_at = camera.pop("look_at", None)
-    if look_at is not None:
-        camera["to_world"] = LookAt(**look_at)
     out = {
         "type": "scene",
         "integrator": {"type": "aov", "aovs": aovs},
         "sensor": {
-            "type": "perspective",
-            **camera,
+            **sensor_of(scene),
             "near_clip": near,
             "far_clip": far,
             # one ray through each pixel centre
@@ -245,9 +213,7 @@ def shape_index_value(mi, shape, position: int) -> int:
 
 def axis_cosines(scene: Scene) -> np.ndarray:
     """cos of each pixel-centre ray's angle to the optical axis, (height, width) float64."""
-    from .oracle import image_plane
-
-    sx, sy = image_plane(scene)
+    sx, sy = scene.camera.plane_coordinates(scene.image.width, scene.image.height)
     return 1.0 / np.sqrt(1.0 + sx[None, :] ** 2 + sy[:, None] ** 2)
 
 

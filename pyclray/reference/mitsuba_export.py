@@ -14,12 +14,14 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..model.cameras import CAMERAS, LookAt
 from ..model.lights import effective_lights
-from .mitsuba import AOV_SPEC, LookAt, emitter_dict, mitsuba_dict
+from .mitsuba import AOV_SPEC, emitter_dict, mitsuba_dict
 
-# the element a plugin of each type is written as
+# the element a plugin of each type is written as (a sensor: each camera model's Mitsuba plugin)
 TAGS = {
-    "perspective": "sensor", "hdrfilm": "film", "stratified": "sampler", "independent": "sampler", "box": "rfilter",
+    **{model.mitsuba_plugin: "sensor" for model in CAMERAS.values() if model.mitsuba_plugin},
+    "hdrfilm": "film", "stratified": "sampler", "independent": "sampler", "box": "rfilter",
     "aov": "integrator", "direct": "integrator", "path": "integrator", "twosided": "bsdf", "diffuse": "bsdf",
     "sphere": "shape", "disk": "shape", "rectangle": "shape", "cube": "shape", "cylinder": "shape",
     "obj": "shape", "ply": "shape", "point": "emitter", "directional": "emitter",

@@ -13,32 +13,10 @@ from ..model.scene import Scene
 from .oracle_bvh import by_shape, nearest_two
 
 
-def image_plane(scene: Scene):
-    """(sx, sy): the pixel centres' coordinates on the image plane at distance 1 (x left, y up), per
-    column and per row, float64: sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height
-    (model.camera.ImagePlane; a look-at camera: cx = width / 2, so sx = tan_x (width - 2 i - 1) / width).
-    For a camera from intrinsics that is (cx - i - 0.5) / fx: the x of K^-1 [i + 0.5, j + 0.5, 1],
-    negated (OpenCV's x points right, the frame's u left)."""
-    width, height = scene.image.width, scene.image.height
-    plane = scene.camera.image_plane(width, height)
-    sx = plane.tan_x * ((2 * plane.cx - 1.0) - 2.0 * np.arange(width)) / width
-    sy = plane.tan_y * ((2 * plane.cy - 1.0) - 2.0 * np.arange(height)) / height
-    return sx, sy
-
-
 def camera_rays(scene: Scene):
-    """(origins, directions) of the pixel-centre rays, each (height, width, 3) float64, unit directions.
-
-    Pixel (row j, column i) looks through sx = tan_x (2 cx - 2 i - 1) / width,
-    sy = tan_y (2 cy - 2 j - 1) / height (image_plane): d = normalize(w + sx u + sy v); for a camera
-    from intrinsics that is normalize(R K^-1 [i + 0.5, j + 0.5, 1]).
-    """
-    u, v, w = scene.camera.basis()
-    sx, sy = image_plane(scene)
-    d = w + sx[None, :, None] * u + sy[:, None, None] * v
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    origins = np.broadcast_to(np.array(scene.camera.eye), d.shape)
-    return origins, d
+    """(origins, directions) of the scene's pixel-centre rays, each (height, width, 3) float64, unit
+    directions: its camera's own float64 rays (CameraModel.rays) at its image size."""
+    return scene.camera.rays(scene.image.width, scene.image.height)
 
 
 def trace(scene: Scene, origins, directions, aovs=AOVS, desc: str = "float64 oracle") -> dict:

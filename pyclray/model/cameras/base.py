@@ -1,0 +1,101 @@
+"""What a camera model is: the interface each model in CAMERAS implements (pbrt-v4's Camera and
+GenerateRay, Mitsuba's sensor plugins), and its Mitsuba 3 sensor as plain data."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple
+
+import numpy as np
+
+from ..errors import SceneError
+from ..layout import Struct
+
+MAX_IMAGE_SIDE = 1 << 16
+
+
+class LookAt(NamedTuple):
+    """A sensor's to_world given as a look-at: <lookat origin=... target=... up=...> in XML (the
+    check gives Mitsuba the matrix its XML parser makes of it, so that the check's scene and an
+    exported file are the same bit for bit)."""
+
+    origin: list
+    target: list
+    up: list
+
+
+@dataclass(frozen=True)
+class MitsubaSensor:
+    """A camera as a Mitsuba 3 sensor, as data (no Mitsuba needed): what ``pyclray check`` gives
+    Mitsuba, what ``pyclray export`` writes and what the Mitsuba XML reader reads back.
+
+    plugin: the sensor plugin (``<sensor type=...>``); properties: the plugin's own (a perspective
+    sensor's fov, fov_axis, principal_point_offset_x and _y); width, height: the film's size.
+    to_world: the camera-to-world matrix (4x4 float64, columns Mitsuba's camera axes x left, y up,
+    z forward, then the eye), or None where look_at gives it: the <lookat> it was written as (the
+    same rays as Mitsuba's own look_at). A sensor read from a file has its matrix, and its look_at
+    where to_world was one <lookat>. The near and far clip are the check's own (they depend on the
+    scene's shapes, not on the camera)."""
+
+    plugin: str
+    properties: dict
+    width: int
+    height: int
+    to_world: np.ndarray | None = None
+    look_at: LookAt | None = None
+
+
+class CameraModel(ABC):
+    """A camera model: a class per model, registered in pyclray.model.cameras.CAMERAS under its
+    ``model`` name, with one OpenCL function that makes a pixel's ray from its packed struct.
+
+    A model declares its ``[camera]`` keys and reads them (``from_table``: errors name the key,
+    the loader adds the file and the table), packs the struct its kernel function reads
+    (``struct``, ``pack``), makes the same pixel-centre rays in float64 for the oracle and the
+    checks (``rays``), gives K and the pose where they mean something (``intrinsics``, ``pose``),
+    names the keys an animation cannot change (``fixed_keys``) and, where Mitsuba 3 has a sensor
+    of the same rays (``mitsuba_plugin``), maps itself to that sensor (``mitsuba_sensor``) and
+    back (a classmethod ``from_mitsuba(sensor)``, given the properties ``mitsuba_properties`` names
+    as the XML reader reads them)."""
+
+    model: ClassVar[str]  # the [camera] table's model key, and the registry's
+    keys: ClassVar[tuple[str, ...]]  # the [camera] table's keys (besides model)
+    struct: ClassVar[Struct]  # the struct the kernel's camera function reads (model/layout.py)
+    mitsuba_plugin: ClassVar[str | None] = None  # Mitsuba 3's sensor plugin of the same rays, if any
+    # the properties of that sensor the XML reader takes: (name, Mitsuba type, default)
+    mitsuba_properties: ClassVar[tuple[tuple[str, str, object], ...]] = ()
+
+    @classmethod
+    @abstractmethod
+    def from_table(cls, table: dict) -> "CameraModel":
+        """The camera of a [camera] table's keys (without model); a SceneError naming the key."""
+
+    @property
+    @abstractmethod
+    def fixed_keys(self) -> tuple[str, ...]:
+        """The fields an animation cannot key (pyclray.model.animation)."""
+
+    @abstractmethod
+    def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """The kernel's struct (one element of layout(struct, precision).dtype) for an image of
+        width x height; box_origin: the eye in the render BVH's frame (the eye minus the scene's
+        anchor, float64)."""
+
+    @abstractmethod
+    def rays(self, width: int, height: int, window=None) -> tuple[np.ndarray, np.ndarray]:
+        """(origins, unit directions), each (rows, columns, 3) float64, of the pixel centres of a
+        width x height image, or of the window (x0, y0, columns, rows) of it (render's window):
+        the rays the kernel casts, computed in float64 for the oracle and the checks."""
+
+    @abstractmethod
+    def intrinsics(self, width: int, height: int) -> np.ndarray:
+        """K (3x3 float64) of the pixel-centre rays at this image size, OpenCV's convention."""
+
+    @abstractmethod
+    def pose(self) -> np.ndarray:
+        """The camera-to-world pose (4x4 float64), OpenCV's convention (x right, y down, z forward)."""
+
+    def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
+        """This camera as Mitsuba's sensor of a width x height film; a SceneError where Mitsuba has none."""
+        raise SceneError(f"Mitsuba 3 has no sensor of the {self.model} camera model, so this camera cannot be "
+                         "checked against Mitsuba or exported for it", key="model")
