@@ -81,26 +81,16 @@ class IndexedEntries:
         """The render kernel's arguments of the type (kernels/pyclray.cl: PYCLRAY_ENTRIES_INDEXED)."""
         return [self.faces_buffer, self.vertices, self.world_buffer, self.ids_buffer]
 
-    def rebase(self, prepared, eye, rows):
+    def rebase(self, prepared, eye, rows) -> None:
         """The per-view pass over the vertices: each in the eye's frame, on the device
-        (kernels/rebase_kernels.cl) where the scene rebases there, else on the host (in_frame: the
-        same float64 operations in the same order, the same bits). Returns the host pass's upload
-        (a pyopencl event holding its array), or None."""
-        count = len(self.world_vertices)
-        if prepared.on_device:
-            from .programs import Variant, kernels_for
+        (kernels/rebase_kernels.cl; indexed entries exist on devices with float64 only)."""
+        from .programs import Variant, kernels_for
 
-            kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
-            frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
-            kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
-                                       np.int32(count), *frame)
-            return None
-        # into a new array, uploaded in the queue's order: render_views may still be running the
-        # previous view's kernel, which reads the vertices' buffer (on a CPU device, vertices_host's
-        # own memory: written here directly, it would change under that kernel)
-        framed = np.zeros_like(self.vertices_host)
-        framed[:, :3] = in_frame(self.world_vertices[:, :3] - eye, rows)
-        return cl.enqueue_copy(prepared.ctx.queue, self.vertices, framed, is_blocking=False)
+        count = len(self.world_vertices)
+        kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
+        frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
+        kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
+                                   np.int32(count), *frame)
 
     # -- an animation's frame (pyclray.engine.refit) ---------------------------------------------
     def holds(self, index: int, shape) -> bool:

@@ -88,14 +88,6 @@ class Kind:
         return len(self.ids)
 
 
-# Scenes of fewer entries than this rebase on the host: measured per moved view (bench/views.py's
-# sphere fields, PoCL on 2 cores), the host takes 0.29 ms for 16 entries and 0.45 ms for 1,024, the
-# device 0.24 and 0.28 ms (a launch each); at 4,096 0.91 against 0.36, at 16,384 4.0 against 0.6.
-# Below the threshold the difference is a tenth of a millisecond, and such a scene's first render
-# then needs no second program (the rebase's), which would add its build to a cold start.
-DEVICE_REBASE_FROM = 1024
-
-
 # Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
 # framed so; smaller ones keep the per-view copy. Measured (process CPU time of 256x256 renders of
 # depth, normal, id over a ground plane and bench/views.py's sphere field, the same camera and a new
@@ -145,8 +137,10 @@ class PreparedScene:
         # Meshes are shared vertices and faces wherever the device has float64 (engine/indexed.py):
         # their world entries are never packed, their bounds come from the vertices and faces
         self.indexed = has_fp64(ctx.device) and INDEXED
+        # the others, a per-view pass rebases into the camera's frame: on the device (kernels/rebase.cl,
+        # float64) where it has float64, else on the host (Shape.rebase, the same operations)
+        self.on_device = has_fp64(ctx.device)
         worlds, bounds, shared, counts = {}, {}, {}, {}
-        self.on_device = False  # see below, once the entries are counted
         for t in self.types:
             cls = KINDS[t]
             mine, ids = by_type[t]
@@ -166,7 +160,6 @@ class PreparedScene:
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
                     bounds[t] = cls.bounds_of(world)
-        self.on_device = any(count >= DEVICE_REBASE_FROM for count in counts.values())
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
         # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
@@ -174,9 +167,6 @@ class PreparedScene:
         # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
         framable = sum(counts[t] for t in self.types if KINDS[t].frames_in_render)
         self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
-        # the others, a per-view pass rebases into the camera's frame: on the device (float64) where it
-        # has float64 and the scene is large enough to pay, else on the host
-        self.on_device = has_fp64(ctx.device) and (self.on_device or self.bvh.tree.nodes >= DEVICE_REBASE_FROM)
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
             world, ids, primitives, smooth = worlds[t]
@@ -334,16 +324,15 @@ class PreparedScene:
             frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
             if kind.indexed is not None:  # the shared vertices
-                upload = kind.indexed.rebase(self, eye, rows)
-                uploads += [] if upload is None else [upload]
+                kind.indexed.rebase(self, eye, rows)
                 continue
             if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue
-            if self.on_device and kind.count >= self.GROUP:
+            if self.on_device:
                 # its scalars' types declared once (device.launch): 13 us an enqueue instead of 52
                 launch(self.ctx, kernels[f"rebase_{kind.name}"], *self._groups(kind.count),
                        [kind.world_buffer, kind.frame, np.int32(kind.count), *frame])
-            else:  # on the host: a few entries (a ground plane) cost less than a launch
+            else:  # a device without float64
                 packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
                 uploads.append(cl.enqueue_copy(queue, kind.frame, packed, is_blocking=False))
         self.view_key, self.view = key, (eye, rows)
