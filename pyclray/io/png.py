@@ -133,16 +133,6 @@ def preview(aov: str, image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(maker.rgb(image))
 
 
-def depth_preview(depth: np.ndarray) -> np.ndarray:
-    """The depth preview of a whole image (see DepthPreview)."""
-    return preview("depth", depth)
-
-
-def normal_preview(normal: np.ndarray) -> np.ndarray:
-    """The normal preview of a whole image (see NormalPreview)."""
-    return preview("normal", normal)
-
-
 def srgb_preview(linear: np.ndarray) -> np.ndarray:
     """Linear RGB clamped to [0, 1] and encoded with the sRGB transfer curve (IEC 61966-2-1), NaN
     black. A float32 image (the render's) is looked up in tables of the same levels, bit for bit
@@ -199,11 +189,6 @@ def _srgb_tables():
     base[buckets >= infinity], step[buckets >= infinity] = 0, 0
     step[infinity] = 255
     return base.astype(np.uint8), step.astype(np.uint8), thr
-
-
-def id_colors(count: int) -> np.ndarray:
-    """(count, 3) uint8: distinct, bright colours, one per shape id (see colors_of)."""
-    return colors_of(np.arange(count))
 
 
 def colors_of(k) -> np.ndarray:
