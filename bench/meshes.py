@@ -163,13 +163,14 @@ def run(bunny_path=None, rounds=3, block=5):
 
 
 def cast_bytes(scene) -> int:
-    """The bytes a scene's first cast added: cast's device buffers (engine/cast.py's cache) and the
-    leaf-order bounds the prepared scene's tree gathered for it."""
-    from pyclray.engine import cast
+    """The bytes a scene's first cast added: cast's device buffers (engine/cast.py's cast_inputs, kept
+    from that cast) and the leaf-order bounds the prepared scene's tree gathered for it."""
+    from pyclray.engine.cast import cast_inputs
 
-    entry = next(v for v in cast._cast_prepared.values() if v[0] is scene.shapes)
-    held = entry[5]  # cast_inputs' bytes: the sizes of its buffers
-    tree = prepared_scene(context_for(None), scene, "fp32").bvh
+    ctx = context_for(None)
+    prepared = prepared_scene(ctx, scene, "fp32")
+    held = cast_inputs(ctx, scene, "fp32", prepared.types)[3]  # its buffers' sizes
+    tree = prepared.bvh
     return held + (tree.__dict__["bounds"].nbytes if "bounds" in tree.__dict__ else 0)
 
 
