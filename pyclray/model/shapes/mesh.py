@@ -10,6 +10,7 @@ applied to p (scene-format.md, "Triangle meshes").
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from functools import partial
 
 import numpy as np
 
@@ -414,6 +415,21 @@ class Mesh(Shape):
         return np.inf
 
     # -- Mitsuba 3 -------------------------------------------------------------------------------
+    mitsuba_plugins = ("obj", "ply")
+    mitsuba_in_groups = True
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's obj and ply: the triangle mesh of the file (relative to folder), placed by
+        to_world. Its geometric normals are the faces' in both; face_normals (whether Mitsuba shades
+        with them rather than the file's vertex normals) changes no geometry, and the mesh read is
+        not smooth (shaded with the faces' normals)."""
+        filename = props.take("filename", "string", required=True)
+        to_world = props.to_world()
+        props.ignore.update(("face_normals", "flip_tex_coords", "maintain_order"))  # shading, textures, merging
+        matrix = None if np.array_equal(to_world.matrix, np.eye(4)) else tuple(map(tuple, to_world.matrix.tolist()))
+        return partial(cls.load, folder / filename, matrix=matrix)
+
     def mitsuba_shapes(self, scene):
         """Mitsuba's mesh from the same arrays: world vertices (float64 here, float32 there) and faces
         (the bridge builds an mi.Mesh of a dict of type 'mesh')."""
