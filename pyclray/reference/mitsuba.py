@@ -256,11 +256,11 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     normal (geo_normal), sh_normal, id (-1 on a miss), primitive (prim_index, -1 on a miss), all
     (height, width[, 3]).
 
-    The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one
-    (the sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does
-    for each sample, as the ray-level check measures): Mitsuba 3.9.1's scalar aov integrator takes
-    time in proportion to the number of shapes per sample (15 s for grid1024 at 512x512, against
-    0.7 s for the same rays cast from here)."""
+    The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one (the
+    sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does for each
+    sample, as the ray-level check measures): Mitsuba 3.9.1's scalar aov integrator takes time in
+    proportion to the number of shapes per sample, far more than the same rays cast from here
+    (docs/benchmarks.md, "Why the engine does what it does")."""
     mi = import_mitsuba(variant)
     near, _ = clip_range(scene)
     if mi.variant().startswith("scalar"):
