@@ -86,7 +86,7 @@ def mitsuba_direct(scene):
     description = shaded_check.direct_scene_dict(shaded_check.diffuse_version(scene), lights[0], "llvm_ad_rgb")
     description["integrator"]["emitter_samples"] = len(lights)
     for k, light in enumerate(lights[1:]):
-        description[f"light{k + 1}"] = shaded_check._emitter(light)
+        description[f"light{k + 1}"] = mitsuba.emitter_dict(light)
     mi_scene = mi.load_dict(description, optimize=False)
     sensor, integrator = mi_scene.sensors()[0], mi_scene.integrator()
     return lambda: np.array(integrator.render(mi_scene, sensor))

@@ -5,7 +5,7 @@
 A_KERNELS, B_KERNELS: two pyclray/engine/kernels/ folders (B: this checkout's), e.g. a `git worktree`
 of main's beside a branch's. Only the OpenCL sources differ between A and B: the host code, and so the
 buffers' layout, is this checkout's, so it measures kernel changes that keep the layout. Each
-side's program is built from its folder (engine/programs.py reads its sources through _read, and
+side's program is built from its folder (engine/programs.py reads its sources from kernel_dir(), and
 cast's launch asks request.kernel_for: both are pointed at the side's build); the two then alternate
 in blocks of 3 calls (one untimed call and a short pause at each switch), and the medians of each
 call's process CPU time are compared. Before timing, every result of both (depth, normal, id at fp32
@@ -44,18 +44,18 @@ def switcher(folders: dict):
     """(use, kernel_for): use(side) makes the following casts run side's kernels, built from its
     folder once per variant."""
     built, current = {}, [next(iter(folders))]
-    own_kernel_for, own_read = cast_module.kernel_for, programs._read
+    own_kernel_for, own_kernel_dir = cast_module.kernel_for, programs.kernel_dir
 
     def kernel_for(ctx, variant):
         key = (current[0], variant)
         if key not in built:
-            programs._read = lambda name: Path(folders[current[0]], name).read_text(encoding="utf-8")
-            programs._programs.clear()
+            programs.kernel_dir = lambda: Path(folders[current[0]])
+            programs.clear()
             try:
                 built[key] = own_kernel_for(ctx, variant)
             finally:
-                programs._read = own_read
-                programs._programs.clear()
+                programs.kernel_dir = own_kernel_dir
+                programs.clear()
         return built[key]
 
     cast_module.kernel_for = request.kernel_for = kernel_for

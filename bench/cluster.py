@@ -214,12 +214,18 @@ def overhead(args) -> None:
                 done += 1
         return (time.perf_counter() - start) / count
 
+    def task(job: str, method: str, argument):
+        """One task as pyclray.cluster.run submits it: the method of the Job the worker holds."""
+        from distributed import get_worker
+
+        return getattr(get_worker().plugins[job], method)(argument)
+
     def round_trip(client, n=50):
         job = cluster.Job(scene, aovs=("depth",))
         client.register_plugin(job, name=job.name)
         start = time.perf_counter()
         for k in range(n):
-            client.submit(cluster._task, job.name, "frame", frames[k % len(frames)], pure=False).result()
+            client.submit(task, job.name, "frame", frames[k % len(frames)], pure=False).result()
         elapsed = (time.perf_counter() - start) / n
         client.unregister_worker_plugin(job.name)
         return elapsed

@@ -60,11 +60,11 @@ def mitsuba_scene(scene: pyclray.Scene):
     description = bridge.scene_dict(pyclray.Scene(scene.camera, scene.image, ()), "llvm_ad_rgb",
                                     "dd:depth,gn:geo_normal,si:shape_index")
     mesh = scene.shapes[0]
-    group = bridge._mesh(mi, {"type": "mesh", "vertex_positions": mesh.vertices, "faces": mesh.faces}, "rock")
+    group = bridge.mitsuba_mesh(mi, {"type": "mesh", "vertex_positions": mesh.vertices, "faces": mesh.faces}, "rock")
     description["group"] = {"type": "shapegroup", "rock": group}
     for k, shape in enumerate(scene.shapes):
         description[f"instance{k}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": "group"},
-                                       "to_world": bridge._mitsuba_values(mi, shape.transform())}
+                                       "to_world": bridge.mitsuba_values(mi, shape.transform())}
     return mi, mi.load_dict(description, optimize=False)
 
 

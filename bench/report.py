@@ -348,7 +348,7 @@ def main(argv=None) -> None:
         "  (kept by pyclray, see `pyclray/engine/prepared.py`), as repeated renders of one view do.",
         "- **pyclray-new-scene**: the same, but a new (equal) `Scene` object each call, as a moved camera",
         "  would be: the per-scene inputs and tile lists are rebuilt every time (program warm).",
-        "- **pyclray-cold**: the first render with a build: `pyclray.engine.programs._programs` cleared and",
+        "- **pyclray-cold**: the first render with a build: `pyclray.engine.programs.clear()` called and",
         "  `PYCLRAY_CACHE_DIR` an empty temporary directory before each round, and PoCL's own kernel cache",
         "  off (`POCL_KERNEL_CACHE=0`, set by `bench/conftest.py`), so each round compiles from source",
         "  (in the same process: the OpenCL platform and context are already up).",

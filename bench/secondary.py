@@ -141,7 +141,7 @@ def flag_ab(flag: str, rounds: int) -> None:
                     function = getattr(pyclray, query)
                     for on in ((True, False) if r % 2 else (False, True)):
                         programs.BUILD_OPTIONS = base + ([f"-D{flag}"] if on else [])
-                        programs._programs.clear()
+                        programs.clear()
                         function(scene, origins, directions)  # the switch's build and first call, untimed
                         for _ in range(calls):
                             cpu, wall = time.process_time(), time.perf_counter()
@@ -149,7 +149,7 @@ def flag_ab(flag: str, rounds: int) -> None:
                             times.setdefault((name, query, flag if on else "without"), []).append(
                                 ((time.perf_counter() - wall) * 1e3, (time.process_time() - cpu) * 1e3))
         programs.BUILD_OPTIONS = base
-        programs._programs.clear()
+        programs.clear()
         print(f"{count:,} spheres + ground, load {os.getloadavg()[0]:.2f}")
         for key in sorted(times):
             wall, cpu = np.median(np.array(times[key]), axis=0)

@@ -20,6 +20,7 @@ import pytest
 
 import pyclray
 from pyclray.engine import culling, device, programs, render
+from pyclray.model.aovs import TABLE
 from pyclray.reference import error_model, mitsuba, oracle
 
 from . import blocks
@@ -146,7 +147,7 @@ def test_pyclray_cold(benchmark, scenes_dir, name, aovs, precision):
     folders = []
 
     def setup():
-        programs._programs.clear()
+        programs.clear()
         folders.append(tempfile.mkdtemp(prefix="pyclray-cold-"))
         os.environ["PYCLRAY_CACHE_DIR"] = folders[-1]
 
@@ -229,7 +230,6 @@ def test_breakdown(benchmark, scenes_dir, part):
     import importlib
 
     render_module = importlib.import_module("pyclray.engine.views")
-    request_module = importlib.import_module("pyclray.engine.request")
     scene = load(scenes_dir, "tp02", ERROR_SIZE)
     if part == "kernel only, all AOVs, plane only":
         scene = dataclasses.replace(scene, shapes=scene.shapes[:1])
@@ -244,7 +244,7 @@ def test_breakdown(benchmark, scenes_dir, part):
     shape_args = [a for a in inputs.shape_args(prepared, "tiles") if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
     lanes = programs.lanes_for(ctx.device, "fp32")
     kernel = programs.kernel_for(ctx, programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
-    buffers = request_module._output_buffers(ctx, width * height, aovs, "fp32")
+    buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, width * height * TABLE[aov].itemsize("fp32")) for aov in aovs]
     tile = culling.TILE
     whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
     args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]

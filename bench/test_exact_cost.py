@@ -35,11 +35,19 @@ SCENE = Path(__file__).resolve().parent.parent / "scenes" / "tp02.toml"
 
 
 @pytest.fixture
-def simple_sphere(monkeypatch):
-    read = programs._read
-    monkeypatch.setattr(programs, "_read", lambda name: SIMPLE_SPHERE if name == "sphere.cl" else read(name))
-    monkeypatch.setattr(programs, "_programs", {})
+def simple_sphere(monkeypatch, tmp_path):
+    """The kernels read from a copy of their folder whose sphere.cl is SIMPLE_SPHERE, built anew."""
+    folder = tmp_path / "kernels"
+    folder.mkdir()
+    for source in programs.kernel_dir().iterdir():
+        if source.is_file():
+            (folder / source.name).write_bytes(source.read_bytes())
+    (folder / "sphere.cl").write_text(SIMPLE_SPHERE, encoding="utf-8")
+    monkeypatch.setattr(programs, "kernel_dir", lambda: folder)
     monkeypatch.setenv("PYCLRAY_CACHE_DIR", "off")
+    programs.clear()
+    yield
+    programs.clear()
 
 
 @pytest.mark.parametrize("aovs", [("depth",), ("depth", "normal", "id")], ids=["depth", "all"])

@@ -177,7 +177,7 @@ def test_gif_has_every_frame_and_each_is_the_depth_preview(tmp_path, scene_file)
         for k in range(FRAMES):
             gif.seek(k)
             # grey previews go into the GIF exactly (256 grey levels)
-            expected = png.depth_preview(pyclray.render(scene.at(k / 4.0), aovs=("depth",))["depth"])
+            expected = png.preview("depth", pyclray.render(scene.at(k / 4.0), aovs=("depth",))["depth"])
             assert np.array_equal(np.asarray(gif.convert("RGB")), expected), k
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.gif", "anim.toml"]
 
@@ -206,7 +206,7 @@ def test_mp4_decodes_to_every_frame_at_the_image_size(tmp_path, scene_file):
     # lossy (H.264, 4:2:0) but close: the mean error of frame k's preview is a few grey levels
     scene = pyclray.load_scene(scene_file)
     for k, frame in enumerate(decoded):
-        expected = png.normal_preview(pyclray.render(scene.at(k / 4.0), aovs=("normal",))["normal"])
+        expected = png.preview("normal", pyclray.render(scene.at(k / 4.0), aovs=("normal",))["normal"])
         assert np.abs(frame.astype(int) - expected).mean() < 12, k
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.mp4", "anim.toml"]
 

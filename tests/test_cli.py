@@ -290,8 +290,8 @@ def test_a_render_in_many_bands_is_the_whole_render(tmp_path, monkeypatch, capsy
     images = read_exr(out)
     for name in ("depth", "normal", "id"):
         assert np.array_equal(images[name], whole[name]), name
-    assert np.array_equal(read_png(tmp_path / "b.depth.png"), png.depth_preview(whole["depth"]))
-    assert np.array_equal(read_png(tmp_path / "b.normal.png"), png.normal_preview(whole["normal"]))
+    assert np.array_equal(read_png(tmp_path / "b.depth.png"), png.preview("depth", whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "b.normal.png"), png.preview("normal", whole["normal"]))
     assert "wrote" in capsys.readouterr().out
 
 

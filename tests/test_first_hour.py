@@ -257,7 +257,7 @@ def test_o_png_writes_the_preview_of_the_first_aov_asked(tmp_path):
     result = cli("render", TP02, "-o", tmp_path / "out.png", "--size", "40x30")
     assert result.returncode == 0, result.stderr
     whole = pyclray.render(pyclray.load_scene(TP02).with_size(40, 30), aovs=("depth", "shaded"))
-    assert np.array_equal(read_png(tmp_path / "out.png"), png.depth_preview(whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "out.png"), png.preview("depth", whole["depth"]))
     result = cli("render", TP02, "-o", tmp_path / "lit.PNG", "--size", "40x30", "--aov", "shaded,depth")
     assert result.returncode == 0 and result.stdout.strip().endswith("[the shaded preview]"), result.stdout
     assert np.array_equal(read_png(tmp_path / "lit.PNG"), png.srgb_preview(whole["shaded"]))

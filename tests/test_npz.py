@@ -87,7 +87,7 @@ def test_the_command_writes_npz_and_previews_in_bands(tmp_path, monkeypatch, cap
     data = pyclray.read_npz(out)
     for name in whole:
         assert np.array_equal(data[name], whole[name]), name
-    assert np.array_equal(read_png(tmp_path / "b.depth.png"), png.depth_preview(whole["depth"]))
+    assert np.array_equal(read_png(tmp_path / "b.depth.png"), png.preview("depth", whole["depth"]))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.depth.png", "b.id.png", "b.label.png", "b.npz"]
 
 

@@ -113,8 +113,8 @@ def test_streamed_previews_equal_the_whole_image_previews(tmp_path):
     out = tmp_path / "p.exr"
     written = write_images(out, frame_bands(frame, 16), width=40, height=70, aovs=tuple(frame), previews=True)
     assert written == [out, tmp_path / "p.depth.png", tmp_path / "p.normal.png", tmp_path / "p.id.png"]
-    assert np.array_equal(read_png(tmp_path / "p.depth.png"), png.depth_preview(frame["depth"]))
-    assert np.array_equal(read_png(tmp_path / "p.normal.png"), png.normal_preview(frame["normal"]))
+    assert np.array_equal(read_png(tmp_path / "p.depth.png"), png.preview("depth", frame["depth"]))
+    assert np.array_equal(read_png(tmp_path / "p.normal.png"), png.preview("normal", frame["normal"]))
     assert np.array_equal(read_png(tmp_path / "p.id.png"), png.id_preview(frame["id"]))
     assert no_temporaries(tmp_path)  # the depth preview's spill file is gone too
 

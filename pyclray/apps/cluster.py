@@ -44,9 +44,10 @@ WORKERS_TIMEOUT_S = 60
 # Pixels a band task of `pyclray render --workers` renders: 512x512 worth (5 MB of images at most),
 # enough work to make a task's overhead (milliseconds) small, small enough to spread an image
 TASK_PIXELS = 1 << 18
-# Tasks in flight: 4 per worker thread (one running, one waiting there, results on their way back),
-# at least 8 (short tasks need a deeper pipeline to hide the round trip, 10-20 ms here); more are
-# submitted as results are handed over, so memory stays bounded whatever the length of the run
+# Tasks in flight: 4 per worker thread (one running, one waiting there, results on their way back), at
+# least 8 (short tasks need a deeper pipeline to hide the round trip; docs/benchmarks.md, "Why the
+# engine does what it does"); more are submitted as results are handed over, so memory stays bounded
+# whatever the length of the run
 AHEAD_PER_THREAD = 4
 AHEAD_MIN = 8
 
@@ -86,10 +87,10 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     workers = workers or _cores()
     threads = str(max(1, _cores() // workers))
     env = {name: os.environ.get(name, threads) for name in ("POCL_CPU_MAX_CU_COUNT", "POCL_MAX_PTHREAD_COUNT")}
-    # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536 (to hand freed memory back to
-    # the system at once); that also turns off glibc's adaptive mmap threshold, so every frame's
-    # megabyte buffers are mapped and faulted in anew: 114 against 88 ms of CPU a 512x512 folder
-    # frame here. The workers of a local cluster keep glibc's defaults.
+    # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536 (to hand freed memory back to the
+    # system at once); that also turns off glibc's adaptive mmap threshold, so every frame's megabyte
+    # buffers are mapped and faulted in anew (docs/benchmarks.md, "Why the engine does what it does").
+    # The workers of a local cluster keep glibc's defaults.
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
         cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",

@@ -19,7 +19,7 @@ def aligned(array: np.ndarray) -> np.ndarray:
 
 def aligned_empty(shape, dtype) -> np.ndarray:
     """An uninitialized array aligned to ALIGNMENT bytes (numpy's large arrays start 16 bytes past a
-    page: aligned() would copy each, 5 ms a 16 MB array)."""
+    page: aligned() would copy each; docs/benchmarks.md, "Why the engine does what it does")."""
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape)) * dtype.itemsize
     raw = np.empty(nbytes + ALIGNMENT, np.uint8)

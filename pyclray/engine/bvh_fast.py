@@ -6,7 +6,7 @@ Imported for large scenes only, as bvh_sah: numba's import would cost every smal
 Each writes the same float64 operations, in the same order, as the numpy it replaces (no fastmath, no
 contraction: numba compiles a * b + c as written), so the bounds keep their bits; each makes one pass
 over its input instead of numpy's several temporaries (a million triangles' corners gathered, their
-minimum and maximum, the padding: 0.12 s in numpy, 10 ms here)."""
+minimum and maximum, the padding; docs/benchmarks.md, "Why the engine does what it does")."""
 from __future__ import annotations
 
 import numba
@@ -107,10 +107,11 @@ def pack_wide_boxes(lo, hi, binary, origin, out):
 
 @numba.njit(cache=True, nogil=True)
 def leaf_boxes(bounds, index, first, count, lo, hi, p0, p1, ordered):
-    """The float64 boxes of the leaves over leaf positions p0 .. p1 - 1 (whole leaves: a leaf's
-    first position in range), each the exact union of its primitives' bounds. The bounds of the
-    range are first gathered into leaf order in one sequential pass (its loads overlap: a third of
-    the time of gathering leaf by leaf), into ordered (scratch of p1 - p0 rows)."""
+    """The float64 boxes of the leaves over leaf positions p0 .. p1 - 1 (whole leaves: a leaf's first
+    position in range), each the exact union of its primitives' bounds. The bounds of the range are
+    first gathered into leaf order in one sequential pass (its loads overlap, where leaf by leaf each
+    waits; docs/benchmarks.md, "Why the engine does what it does"), into ordered (scratch of p1 - p0
+    rows)."""
     for p in range(p0, p1):
         q = index[p]
         for side in range(2):

@@ -40,22 +40,20 @@ import numpy as np
 from .bvh_fast import inner_boxes, leaf_boxes, leaf_cut
 
 BINS = 32
-# The SAH's cost of visiting a node, relative to a primitive's test. 1 (bvh.sah_cost's) makes leaves
-# of 1.4 primitives on average, 1.1 to 1.4 nodes a primitive: twice the LBVH's memory (nodes are 32
-# bytes on the device, 64 more as float64 world corners). 2 makes 0.7 to 0.8 nodes a primitive, as
-# the LBVH, for an SAH cost (counted with 1) 2-6% above the tree built with 1 (bench/bvh_build.py);
-# render times differed by less than the noise of the shared machine.
+# The SAH's cost of visiting a node, relative to a primitive's test. 1 (bvh.sah_cost's) makes leaves of
+# 1.4 primitives on average, 1.1 to 1.4 nodes a primitive: twice the LBVH's memory (nodes are 32 bytes
+# on the device, 64 more as float64 world corners). 2 makes 0.7 to 0.8 nodes a primitive, as the LBVH,
+# for a slightly higher SAH cost (counted with 1) and no slower renders (docs/benchmarks.md, "The BVH
+# builder").
 TRAVERSAL = 2.0
 SPLIT_ALONE_MIN = 4096
-# A node of at least 2 SAMPLE primitives chooses its split from the bins of every k-th row only (k =
-# m // SAMPLE: about SAMPLE rows, evenly spaced), and partitions all of them by it. A binning pass is
-# half a level's work; this saves it on the top levels (of 1,000,000 triangles, the 8 levels above
-# 8,192 primitives a node), 14% of the build (0.52 -> 0.45 s of CPU). The SAH cost, at the scene's
-# costs, 1.0031 of the full binned build's instead of 1.0006 on 1,000,000 triangles, the same on the
-# bunny, the torus and clustered spheres (bench/bvh_build.py's reference; 1024 or 2048 rows: 2-4%
-# faster, 1.0034-1.0076). A sampled node's child box (the union of its sampled bins) is only an
-# estimate, read only by a child of at most leaf_size primitives deciding whether to be a leaf; the
-# final boxes are recomputed exactly (_boxes).
+# A node of at least 2 SAMPLE primitives chooses its split from the bins of every k-th row only
+# (k = m // SAMPLE: about SAMPLE rows, evenly spaced), and partitions all of them by it. A binning
+# pass is half a level's work; this saves it on the top levels (of 1,000,000 triangles, the 8 levels
+# above 8,192 primitives a node) for a nearly unchanged SAH cost (docs/benchmarks.md, "Why the engine does what it
+# does"). A sampled node's child box (the union of its sampled bins) is only an estimate, read only by a
+# child of at most leaf_size primitives deciding whether to be a leaf; the final boxes are recomputed
+# exactly (_boxes).
 SAMPLE = 4096
 _STACK = 256  # pending nodes: one per level of the tree (right siblings) at most, with margin
 _BIG = np.float32(3.4e38)
@@ -233,7 +231,7 @@ def _grow(rows, index, first, count, start, geometry, leaf_size, bins, max_depth
             # partition in place (bins 0..best_k to the left), each side's centroid box on the way:
             # every row is swapped to the end of the left side and that end moves by one where the
             # row belongs there (no branch on the side: it is a coin toss per row, and mispredicted
-            # branches cost 2.5 times as much as the swaps)
+            # branches cost more than the swaps; docs/benchmarks.md, "Why the engine does what it does")
             a = best_axis
             l0 = l1 = l2 = r0 = r1 = r2 = _BIG  # each side's centroid box, in registers
             l3 = l4 = l5 = r3 = r4 = r5 = -_BIG
@@ -361,8 +359,9 @@ def build(bounds: np.ndarray, leaf_size: int, max_depth: int, bins: int = BINS, 
     root = np.array([0, n, 0, 1, 1]), np.empty(_GEOMETRY, np.float32)
     _root(rows, root[1])
     # a node of at least split_alone primitives is split on its own (one pass over its rows) and its
-    # children handed on; smaller ones are built whole, on whichever thread is free (a task costs
-    # the pool some 50 us: none of fewer than SPLIT_ALONE_MIN primitives is handed on)
+    # children handed on; smaller ones are built whole, on whichever thread is free (a task has a cost
+    # of its own: none of fewer than SPLIT_ALONE_MIN primitives is handed on; docs/benchmarks.md, "Why
+    # the engine does what it does")
     split_alone = max(n // (8 * threads), SPLIT_ALONE_MIN) if threads > 1 else n + 1
 
     def work(task):

@@ -1,11 +1,11 @@
-"""The coherent order of a large batch of cast rays, compiled by numba: each ray's 15-bit Morton code
-of its origin and direction, and a counting sort of the codes, in one pass each over the rays
-(numpy took seven passes, a radix argsort and gathered the rays in that order: 3.4 ms of host time
-per 100,000 rays, as much as the kernel of occluded on the view ray set of bench/secondary.py).
+"""The coherent order of a large batch of cast rays, compiled by numba: each ray's 15-bit Morton code of
+its origin and direction, and a counting sort of the codes, in one pass each over the rays (numpy took
+seven passes, a radix argsort and gathered the rays in that order; docs/benchmarks.md, "Why the engine
+does what it does").
 
 Imported by pyclray.engine.cast only for batches of at least its COHERENT_FROM rays (numba's import
-and its compiled code's load from numba's disk cache cost a process's first large cast about 0.4 s;
-the first on a machine, which compiles, about 2 s). Each ray
+and its compiled code's load from numba's disk cache are a process's first large cast's to pay, and
+the first on a machine compiles). Each ray
 is traced on its own, so the order changes no bit of any result; only which rays run side by side.
 """
 from __future__ import annotations
@@ -42,9 +42,9 @@ WITH_ORIGINS = morton_tables((3, 3, 3, 2, 2, 2))
 DIRECTIONS_ONLY = morton_tables((5, 5, 5))
 
 
-# scan_codes' passes index rows through the flat array (3 i + axis): indexed as [i, axis], numba's
-# code for a possibly negative index kept LLVM from vectorizing them (the direction codes of 100,000
-# rays: 0.55 ms that way, 0.12 ms this way).
+# scan_codes' passes index rows through the flat array (3 i + axis): indexed as [i, axis], numba's code
+# for a possibly negative index kept LLVM from vectorizing them (docs/benchmarks.md, "Why the engine
+# does what it does").
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
@@ -117,8 +117,9 @@ def scan_codes(origins: np.ndarray, directions: np.ndarray, codes: bool = True):
     """(fine, lo, hi, codes) of (N, 3) float64 arrays: whether every coordinate is finite and no
     direction is zero, the origins' box, and each ray's code by its direction alone (DIRECTIONS_ONLY:
     the order of a batch whose origins share one cell, such as a camera's; None unless codes), in one
-    compiled pass per quantity (0.25 ms per 100,000 rays; numpy's checks took five passes, its extent
-    six more). The box and the codes of a batch that is not fine are not used."""
+    compiled pass per quantity (numpy's checks took five passes, its extent six more;
+    docs/benchmarks.md, "Why the engine does what it does"). The box and the codes of a batch that is
+    not fine are not used."""
     origins, directions = np.ascontiguousarray(origins).reshape(-1), np.ascontiguousarray(directions).reshape(-1)
     fine = _all_finite(origins) and _all_finite(directions)
     lo, hi = _box(origins)

@@ -99,13 +99,12 @@ def is_pocl_cpu(device: cl.Device) -> bool:
 
 
 def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> None:
-    """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument (a number,
-    or a struct such as a double4) through its generic path, about 10 us each (60 us of a 1 ms
-    render of tp02); declared once per kernel as
-    scalar types (a kernel's arguments keep their types), its invoker packs them in microseconds.
-    A kernel object is shared by every render of its variant, and OpenCL's argument setting is not
-    thread-safe: setting the arguments and enqueueing happen under one lock (the kernel then runs
-    on its own; the lock is held for the enqueue only)."""
+    """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument (a number, or a
+    struct such as a double4) through its slow generic path; declared once per kernel as scalar types (a
+    kernel's arguments keep their types), its invoker packs them quickly (docs/benchmarks.md, "Why the
+    engine does what it does"). A kernel object is shared by every render of its variant, and OpenCL's
+    argument setting is not thread-safe: setting the arguments and enqueueing happen under one lock (the
+    kernel then runs on its own; the lock is held for the enqueue only)."""
     with _launch_lock:
         if not getattr(kernel, "_pyclray_scalar_types_set", False):
             kernel.set_scalar_arg_dtypes(

@@ -25,8 +25,8 @@ COMPILED_FROM = 16_384
 
 def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F, 2, 3) float64: each face's triangle's box, padded as Shape.bounds_of pads its world entry's
-    (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte
-    world entries (a 1,000,000-triangle mesh's pack and bounds took 0.12 s, this 10 ms)."""
+    (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
+    entries (docs/benchmarks.md, "Why the engine does what it does": bvh_fast's compiled passes)."""
     if len(faces) >= COMPILED_FROM:
         from .bvh_fast import triangle_bounds  # numba: large scenes only
 

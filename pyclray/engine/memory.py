@@ -9,8 +9,9 @@ from ..model.aovs import image_bytes
 from ..model.errors import RequestError
 
 
-# Images up to this many bytes are not checked (reading /proc/meminfo costs a tenth of a millisecond,
-# a tenth of a warm 512x512 render): every machine pyclray runs on has that much to spare.
+# Images up to this many bytes are not checked (reading /proc/meminfo costs a share of a warm render;
+# docs/benchmarks.md, "Why the engine does what it does"): every machine pyclray runs on has that much
+# to spare.
 ALWAYS_FITS = 64 << 20
 
 

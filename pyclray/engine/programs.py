@@ -367,3 +367,10 @@ def kernels_for(ctx: DeviceContext, variant: Variant) -> dict:
         program = _build(ctx, variant)
         kernels = _programs[key] = {kernel.function_name: kernel for kernel in program.all_kernels()}
         return kernels
+
+
+def clear() -> None:
+    """Forget the kernels built in this process (the disk cache keeps their programs): the next
+    kernel_for of each variant loads or builds its program again, as a new process's first render."""
+    with _lock:
+        _programs.clear()

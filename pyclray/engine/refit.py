@@ -18,12 +18,10 @@ from .programs import Variant, kernels_for
 from .request import input_buffer
 
 
-# Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this
-# factor: a refit keeps the tree's topology, so shapes that wander far apart make its boxes
-# overlap and rays visit more of them. Measured (bench/views.py, "animation"): 10 of 100,000
-# spheres moving across the whole field leave the cost at 0.98 of the built tree's; a frame's
-# update (refit included) costs about 0.3 ms where a rebuild of that scene costs 0.2 to 0.5 s.
-# (the factor is PreparedScene.REFIT_COST_MAX)
+# Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this factor: a
+# refit keeps the tree's topology, so shapes that wander far apart make its boxes overlap and rays visit
+# more of them; a frame's update costs a small part of a rebuild. The factor is
+# PreparedScene.REFIT_COST_MAX (docs/benchmarks.md, "Why the engine does what it does").
 
 
 def update(prepared, shapes: tuple, changed) -> bool:

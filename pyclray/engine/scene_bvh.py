@@ -28,7 +28,7 @@ class SceneBVH:
     @cached_property
     def bounds(self) -> np.ndarray:
         """(N, 2, 3) the unwidened bounds in leaf order, gathered when first asked (cast, a refit: a
-        render needs none of it, and a million triangles' gather costs 30 ms)."""
+        render needs none of it; docs/benchmarks.md, "Why the engine does what it does")."""
         return self.given_bounds[self.tree.order]
 
     @cached_property

@@ -43,7 +43,6 @@ from ..model.aovs import TABLE
 from ..model.errors import OutputError
 from .files import Background, reason
 
-ID_MISS_UINT = 0xFFFFFFFF
 EXR_CHANNELS = {name: aov.exr for name, aov in TABLE.items()}
 
 
@@ -64,20 +63,6 @@ def exr_channel_arrays(images) -> dict:
         for k, name in enumerate(names):
             channels[name] = (array[..., k] if len(names) > 1 else array, kind)
     return channels
-
-
-def exr_channels(images) -> dict:
-    """EXR channel name -> 2-D array (float32, or uint32 for id) as the file stores it."""
-    out = {}
-    for name, (array, kind) in exr_channel_arrays(images).items():
-        out[name] = _stored(array, kind)
-    return out
-
-
-def _stored(array, kind: str) -> np.ndarray:
-    if kind == "UINT":
-        return np.ascontiguousarray(array).astype("<i4", copy=False).view("<u4")
-    return np.ascontiguousarray(array, dtype="<f4")
 
 
 def _attribute(name: str, kind: str, value: bytes) -> bytes:

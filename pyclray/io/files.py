@@ -168,13 +168,6 @@ def write_together(outputs: Iterable[tuple[object, Callable[[str], None]]]) -> l
     return [Path(path) for path, _ in outputs]
 
 
-@contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds."""
-    with replace_together([path]) as (tmp,):
-        yield tmp
-
-
 class Background:
     """A writer's work, done in order on one thread of its own while the caller renders the next
     band: at most `depth` jobs wait (so at most that many bands are held); a job's error is raised

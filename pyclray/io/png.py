@@ -133,20 +133,11 @@ def preview(aov: str, image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(maker.rgb(image))
 
 
-def depth_preview(depth: np.ndarray) -> np.ndarray:
-    """The depth preview of a whole image (see DepthPreview)."""
-    return preview("depth", depth)
-
-
-def normal_preview(normal: np.ndarray) -> np.ndarray:
-    """The normal preview of a whole image (see NormalPreview)."""
-    return preview("normal", normal)
-
-
 def srgb_preview(linear: np.ndarray) -> np.ndarray:
-    """Linear RGB clamped to [0, 1] and encoded with the sRGB transfer curve (IEC 61966-2-1), NaN
-    black. A float32 image (the render's) is looked up in tables of the same levels, bit for bit
-    (_srgb_float32: a third of the time at 512 x 512, for pyclray view's frames)."""
+    """Linear RGB clamped to [0, 1] and encoded with the sRGB transfer curve (IEC 61966-2-1), NaN black.
+    A float32 image (the render's) is looked up in tables of the same levels, bit for bit
+    (_srgb_float32, quicker, for pyclray view's frames; docs/benchmarks.md, "Why the engine does what it
+    does")."""
     linear = np.asarray(linear)
     if linear.dtype == np.float32:
         return _srgb_float32(linear)
@@ -172,7 +163,7 @@ def _srgb_float32(linear: np.ndarray) -> np.ndarray:
 
 @functools.cache
 def _srgb_tables():
-    """(base, step, thr) of _srgb_float32, from _srgb_levels itself (10 ms, once). A bucket spans
+    """(base, step, thr) of _srgb_float32, from _srgb_levels itself (once). A bucket spans
     under 1 % of its values, less than one level of the curve (at most 3295 levels per unit, below
     0.0031308, where the buckets are narrower still): at most one step per bucket, found by bisection
     on its 16 low bits. Negative values and NaN (whose bits sort above +inf) are level 0, +inf 255;
@@ -199,11 +190,6 @@ def _srgb_tables():
     base[buckets >= infinity], step[buckets >= infinity] = 0, 0
     step[infinity] = 255
     return base.astype(np.uint8), step.astype(np.uint8), thr
-
-
-def id_colors(count: int) -> np.ndarray:
-    """(count, 3) uint8: distinct, bright colours, one per shape id (see colors_of)."""
-    return colors_of(np.arange(count))
 
 
 def colors_of(k) -> np.ndarray:

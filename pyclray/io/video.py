@@ -28,10 +28,9 @@ from .png import PREVIEWS, preview
 VIDEO_SUFFIXES = (".mp4", ".gif")
 FRAME_NAME = re.compile(r"frame_\d+(\.[a-z]+)?\.(exr|png)")  # what an animate folder holds
 VIDEO_CRF = 18  # H.264 constant rate factor: 18 is visually lossless for these flat previews
-# x264's ultrafast preset: with the packet kernel a 512x512 frame renders in about 1.4 ms, and
-# ultrafast encodes one in about 2.7 ms where veryfast takes 4.7 ms and medium 14 ms (one shared
-# core); its files are larger (3.2 kB a frame for tp02_orbit against 1.4 kB) but still small,
-# since the previews of a ray caster are smooth and noiseless
+# x264's ultrafast preset: it encodes a frame in about the time one renders, where slower presets take
+# several times that; its files are larger but still small, since the previews of a ray caster are
+# smooth and noiseless (docs/benchmarks.md, "Why the engine does what it does")
 VIDEO_PRESET = "ultrafast"
 QUEUE_FRAMES = 4  # frames rendered ahead of the writer: enough to keep it busy, little memory
 
@@ -165,10 +164,10 @@ class Video:
 
 
 class Gif:
-    """A looping GIF through Pillow, written at ``tmp`` (renamed by files.replace_together): each
-    frame is turned into a palette image as it arrives (grey previews exactly; colour ones by
-    Pillow's fast octree, 9 ms a frame at 512x512 and a mean error of about one level, where
-    median cut takes 280 ms and errs more); all are saved at the end."""
+    """A looping GIF through Pillow, written at ``tmp`` (renamed by files.replace_together): each frame
+    is turned into a palette image as it arrives (grey previews exactly; colour ones by Pillow's fast
+    octree, quicker than median cut and closer; docs/benchmarks.md, "Why the engine does what it does");
+    all are saved at the end."""
 
     def __init__(self, tmp: str, aov: str, fps: float):
         self.tmp, self.aov = tmp, aov

@@ -23,8 +23,8 @@ from .frames import FrameShapes, _frame_tuple, _remember, derivation, derived_fr
 INTERPOLATIONS = ("linear", "step")
 CAMERA = "camera"  # the camera's target name; the other targets are named by their "name" key
 KEYS_TABLE = "[[animation.keys]]"
-# Every frame's scene is checked at load (about 0.3 ms a frame for tp02): a million frames (11.5
-# hours at 24 fps) take minutes, so more is taken for a typo in duration or fps.
+# Every frame's scene is checked at load: a million frames (11.5 hours at 24 fps) take minutes, so more
+# is taken for a typo in duration or fps (docs/benchmarks.md, "Why the engine does what it does").
 MAX_FRAMES = 1_000_000
 
 

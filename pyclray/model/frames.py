@@ -42,10 +42,9 @@ def derived_from(shapes: tuple, base: tuple) -> tuple:
 
 class FrameShapes(Sequence):
     """The shapes of an animation's frame as render_animation renders it: the animated scene's tuple
-    with a few shapes replaced, held as that tuple and the replacements (O(K) to make, where a tuple
-    of N shapes touches every shape twice, to make it and to free it: scene.at took 1.1 to 1.2 ms at
-    100,000 spheres just after a render, the shapes out of the caches, and this frame 0.2 ms, at
-    load 3). Read-only and equal to the tuple it stands for; iterating it walks the N shapes
+    with a few shapes replaced, held as that tuple and the replacements (O(K) to make, where a tuple of
+    N shapes touches every shape twice, to make it and to free it; docs/benchmarks.md, "Why the engine
+    does what it does"). Read-only and equal to the tuple it stands for; iterating it walks the N shapes
     (nothing on a frame's render path does)."""
 
     __slots__ = ("base", "replaced")
@@ -79,11 +78,11 @@ class FrameShapes(Sequence):
         return f"FrameShapes({len(self.base)} shapes, {len(self.replaced)} replaced)"
 
 
-# A frame's copy of each animated collection of a scene (shapes, lights), kept from frame to frame
-# with the items the last frame replaced: a frame puts those back and replaces its own, then makes
-# its tuple in one pass (the collection's pointers copied once, O(K) Python work for K changes)
-# where copying the collection to a list, changing it and making a tuple of that walked it three
-# times (scene.at: 0.63 -> 0.25 ms at 100,000 spheres, load 1.5). Kept for the last few animated scenes.
+# A frame's copy of each animated collection of a scene (shapes, lights), kept from frame to frame with
+# the items the last frame replaced: a frame puts those back and replaces its own, then makes its tuple
+# in one pass (the collection's pointers copied once, O(K) Python work for K changes) where copying the
+# collection to a list, changing it and making a tuple of that walked it three times
+# (docs/benchmarks.md, "Why the engine does what it does"). Kept for the last few animated scenes.
 _WORKING_MAX = 4
 _working: dict = {}
 _working_lock = threading.Lock()

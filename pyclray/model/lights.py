@@ -117,7 +117,6 @@ class DirectionalLight:
 
 
 LIGHT_TYPES = {cls.type: cls for cls in (PointLight, DirectionalLight)}
-Light = PointLight | DirectionalLight
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,6 @@ from ..model.scene import Scene
 
 EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}  # unit roundoff: half an ulp of 1
 ORACLE_EPSILON = EPSILON["fp64"]
-ULP_ONE_FP32 = 2.0**-23  # the float32 ulp of 1
 SILHOUETTE_COS = 0.02
 K_ORACLE = 4.0
 K_MITSUBA = 6.0

@@ -74,7 +74,7 @@ def _is_mesh(value) -> bool:
     return isinstance(value, dict) and value.get("type") == "mesh" and isinstance(value.get("vertex_positions"), np.ndarray)
 
 
-def _mesh(mi, value: dict, name: str):
+def mitsuba_mesh(mi, value: dict, name: str):
     """An mi.Mesh of a dict of type 'mesh' with numpy arrays vertex_positions (V, 3) and faces (F, 3)
     (Mitsuba's float32 positions; face normals, or vertex_normals (V, 3) where given; its id is name)
     and its 'bsdf', if any, as a dict."""
@@ -97,11 +97,11 @@ def _mesh(mi, value: dict, name: str):
 def load_dict(mi, description: dict):
     """mi.load_dict of a scene_dict (its shapes kept in order), the meshes made mi.Mesh objects there:
     after the caller has added what it needs to their dicts (a BSDF)."""
-    ready = {key: _mesh(mi, value, key) if _is_mesh(value) else value for key, value in description.items()}
+    ready = {key: mitsuba_mesh(mi, value, key) if _is_mesh(value) else value for key, value in description.items()}
     return mi.load_dict(ready, optimize=False)
 
 
-def _mitsuba_values(mi, value):
+def mitsuba_values(mi, value):
     """A plain scene dict's values for Mitsuba: 4x4 numpy matrices and LookAt become ScalarTransform4f;
     a mesh's dict stays a dict (load_dict makes it an mi.Mesh)."""
     if _is_mesh(value):
@@ -115,7 +115,7 @@ def _mitsuba_values(mi, value):
         # each rounded once to float32 (a Transform4f of the matrix alone inverts it in float32)
         return mi.ScalarTransform4f(mi.ScalarMatrix4f(value.tolist()), mi.ScalarMatrix4f(np.linalg.inv(value).T.tolist()))
     if isinstance(value, dict):
-        return {k: _mitsuba_values(mi, v) for k, v in value.items()}
+        return {k: mitsuba_values(mi, v) for k, v in value.items()}
     return value
 
 
@@ -179,7 +179,7 @@ def mitsuba_dict(scene: Scene, aovs: str = AOV_SPEC, key=shape_key) -> dict:
 
 def scene_dict(scene: Scene, variant: str = DEFAULT_VARIANT, aovs: str = AOV_SPEC) -> dict:
     """mitsuba_dict with Mitsuba's own values (ScalarTransform4f), ready for mi.load_dict."""
-    return _mitsuba_values(import_mitsuba(variant), mitsuba_dict(scene, aovs))
+    return mitsuba_values(import_mitsuba(variant), mitsuba_dict(scene, aovs))
 
 
 def emitter_dict(light) -> dict:
@@ -222,11 +222,11 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     normal (geo_normal), sh_normal, id (-1 on a miss), primitive (prim_index, -1 on a miss), all
     (height, width[, 3]).
 
-    The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one
-    (the sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does
-    for each sample, as the ray-level check measures): Mitsuba 3.9.1's scalar aov integrator takes
-    time in proportion to the number of shapes per sample (15 s for grid1024 at 512x512, against
-    0.7 s for the same rays cast from here)."""
+    The JIT variants render with the aov integrator. The scalar ones cast the same rays one by one (the
+    sensor's sample_ray at each pixel centre, then ray_intersect: what the aov integrator does for each
+    sample, as the ray-level check measures): Mitsuba 3.9.1's scalar aov integrator takes time in
+    proportion to the number of shapes per sample, far more than the same rays cast from here
+    (docs/benchmarks.md, "Why the engine does what it does")."""
     mi = import_mitsuba(variant)
     near, _ = clip_range(scene)
     if mi.variant().startswith("scalar"):

@@ -77,7 +77,7 @@ def instanced(scene, out: dict, key, mesh_file) -> dict:
 
     groups: dict = {}
     for index, shape in enumerate(scene.shapes):
-        if shape.type == "mesh" and key(index) in out:
+        if shape.mitsuba_in_groups and key(index) in out:  # a shape Mitsuba's shapegroups hold (a mesh)
             groups.setdefault(shared_key(shape), []).append(index)
     placed = {}
     for members in (m for m in groups.values() if len(m) > 1):

@@ -13,7 +13,8 @@ import numpy as np
 # primitive only for a scene with a batch, label only for a scene with a label
 AOVS = ("shaded", "depth", "zdepth", "normal", "id", "primitive", "label")
 JPEG_QUALITY = 85
-# zlib's fastest level: a 512 x 512 shaded image in about 12 ms, a third larger than level 6 (25 ms)
+# zlib's fastest level: quicker than level 6, for a slightly larger file (docs/benchmarks.md, "Why the
+# engine does what it does")
 PNG_LEVEL = 1
 
 

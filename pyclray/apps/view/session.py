@@ -22,8 +22,8 @@ from .controls import Orbit, camera_toml
 from .frames import encode, render_picture
 
 SETTLE = 0.08  # seconds without motion after which the motion has stopped (mouse events come every ~16 ms)
-# seconds a frame's render and preview may take while moving: >= 30 frames/s with its JPEG (about
-# 1 ms at 512 x 512), the page's decode and paint
+# seconds a frame's render and preview may take while moving: >= 30 frames/s with its JPEG, the page's
+# decode and paint (docs/benchmarks.md, "Why the engine does what it does")
 MOVING_BUDGET = 0.022
 MAX_IN_FLIGHT = 2
 MAX_DIVISOR = 8  # the coarsest frame while moving: an eighth of each side

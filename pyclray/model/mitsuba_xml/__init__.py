@@ -73,7 +73,3 @@ def load_xml(raw: bytes, source: str | None = None) -> Scene:
         raise error.within(file=source) from None
     except RecursionError:
         raise SceneError("not a scene: elements nested too deeply", file=source) from None
-
-
-def is_xml(path) -> bool:
-    return Path(path).suffix.lower() == ".xml"

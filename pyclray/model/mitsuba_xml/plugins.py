@@ -6,7 +6,6 @@ error naming the element and its line.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,8 +14,8 @@ import numpy as np
 from ..camera import Camera, Image
 from ..errors import SceneError
 from ..lights import DirectionalLight, Material, PointLight
-from ..shapes import Box, Cylinder, Disk, Mesh, Rectangle, Sphere
-from .properties import IDENTITY, Properties, Transform
+from ..shapes import REGISTRY
+from .properties import IDENTITY, Properties
 from .tree import Element
 
 MITSUBA_DIFFUSE = (0.5, 0.5, 0.5)  # the reflectance of a shape without a bsdf (Mitsuba's default diffuse)
@@ -121,135 +120,20 @@ def shape_properties(element: Element) -> Properties:
     return props
 
 
-def add_shape(element: Element, reading: Reading, props: Properties, make, *args, **keys) -> None:
+def add_shape(element: Element, reading: Reading, props: Properties, make) -> None:
+    """make(name=..., material=...): the shape, once its nested elements and properties are read."""
     material_ = shape_material(element, props, reading)
     props.finish()
-    reading.shapes.append(checked(element, make, *args, name=name_of(element, reading, "shape"), material=material_,
-                                  **keys))
+    reading.shapes.append(checked(element, make, name=name_of(element, reading, "shape"), material=material_))
 
 
-def sphere(element: Element, reading: Reading) -> None:
-    props = shape_properties(element)
-    center = props.take("center", "point", np.zeros(3))
-    radius = props.take("radius", "float", 1.0)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    scale = to_world.similarity(element, "a sphere stays a sphere")
-    add_shape(element, reading, props, Sphere, tuple(to_world.point(center)), radius * scale)
-
-
-def flat_frame(element: Element, to_world: Transform):
-    """(centre, first axis, second axis, unit normal) of Mitsuba's unit shape in z = 0 under
-    to_world. Its normal is to_world's normal transform of +z, (M^-T) e_z, which is
-    det(M) cross(M e_x, M e_y) / |...|: a mirroring transform turns it around."""
-    columns = to_world.columns()
-    normal = np.cross(columns[0], columns[1]) * math.copysign(1.0, np.linalg.det(to_world.matrix[:3, :3]))
-    return to_world.point(np.zeros(3)), columns[0], columns[1], normal / np.linalg.norm(normal)
-
-
-def rectangle(element: Element, reading: Reading) -> None:
-    """Mitsuba's rectangle is [-1, 1]^2 in z = 0: centre, u and v are to_world's image of it; a
-    mirroring to_world swaps u and v, so that cross(u, v) stays along Mitsuba's normal."""
-    props = shape_properties(element)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    center, u, v, normal = flat_frame(element, to_world)
-    if np.dot(np.cross(u, v), normal) < 0:
-        u, v = v, u
-    add_shape(element, reading, props, Rectangle, tuple(center), tuple(u), tuple(v))
-
-
-def disk(element: Element, reading: Reading) -> None:
-    """Mitsuba's disk is the unit disk in z = 0: to_world must keep it round."""
-    props = shape_properties(element)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    center, u, v, normal = flat_frame(element, to_world)
-    ru, rv = np.linalg.norm(u), np.linalg.norm(v)
-    if abs(np.dot(u, v)) > 1e-9 * ru * rv or abs(ru - rv) > 1e-9 * max(ru, rv):
-        raise element.error("to_world turns the disk into an ellipse: pyclray's disks are round")
-    add_shape(element, reading, props, Disk, tuple(center), tuple(normal), float(0.5 * (ru + rv)))
-
-
-def rotation_axis_angle(R: np.ndarray):
-    """(axis, degrees) of a rotation matrix, via its quaternion (Shepperd's method: the largest of
-    the four squared components is taken first, so no division is near zero); (None, 0) for none."""
-    trace = np.trace(R)
-    squares = [trace, R[0, 0], R[1, 1], R[2, 2]]
-    k = int(np.argmax(squares))
-    if k == 0:
-        w = math.sqrt(1 + trace) / 2
-        x, y, z = (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)
-    else:
-        i, j, m = k - 1, k % 3, (k + 1) % 3
-        q = np.zeros(3)
-        q[i] = math.sqrt(max(0.0, 1 + R[i, i] - R[j, j] - R[m, m])) / 2
-        q[j] = (R[j, i] + R[i, j]) / (4 * q[i])
-        q[m] = (R[m, i] + R[i, m]) / (4 * q[i])
-        w = (R[m, j] - R[j, m]) / (4 * q[i])
-        x, y, z = q
-    vector = np.array([x, y, z]) * (1 if w >= 0 else -1)
-    length = np.linalg.norm(vector)
-    if length == 0:
-        return None, 0.0
-    return tuple(vector / length), math.degrees(2 * math.atan2(length, abs(w)))
-
-
-def cube(element: Element, reading: Reading) -> None:
-    """Mitsuba's cube is a 12-triangle mesh of [-1, 1]^3: a pyclray box where to_world keeps its
-    faces square to each other (no shear) and does not mirror it (a mirror turns the mesh's
-    triangles, and so its normals, inward)."""
-    props = shape_properties(element)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    columns = to_world.columns()
-    half = np.linalg.norm(columns, axis=1)
-    gram = columns @ columns.T / np.outer(half, half)
-    if np.abs(gram - np.eye(3)).max() > 1e-9:
-        raise element.error("to_world shears the cube: pyclray's boxes have square corners")
-    R = (columns / half[:, None]).T  # the box's unit axes as columns
-    if np.linalg.det(R) < 0:
-        raise element.error("to_world mirrors the cube, which turns its triangles' normals inward; pyclray's box "
-                            "has outward normals")
-    axis, angle = rotation_axis_angle(R)
-    add_shape(element, reading, props, Box, tuple(to_world.point(np.zeros(3))), tuple(2 * half), axis, angle)
-
-
-def cylinder(element: Element, reading: Reading) -> None:
-    """Mitsuba's cylinder is open (no caps): pyclray's cylinder with caps = false. Its local frame
-    (to_world, then p0 and the axis p1 - p0, then the radius) must keep its cross-section round."""
-    props = shape_properties(element)
-    p0 = props.take("p0", "point", np.zeros(3))
-    p1 = props.take("p1", "point", np.array([0.0, 0.0, 1.0]))
-    radius = props.take("radius", "float", 1.0)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    axis = p1 - p0
-    if not np.any(axis):
-        raise element.error("p0 and p1 are the same point")
-    from ..shapes.base import frame_columns
-
-    t1, t2, _ = frame_columns(axis / np.linalg.norm(axis))
-    x, y, z = (to_world.matrix[:3, :3] @ v for v in (t1 * radius, t2 * radius, axis))
-    rx, ry = np.linalg.norm(x), np.linalg.norm(y)
-    if (abs(np.dot(x, y)) > 1e-9 * rx * ry or abs(rx - ry) > 1e-9 * max(rx, ry)
-            or max(abs(np.dot(x, z)), abs(np.dot(y, z))) > 1e-9 * rx * np.linalg.norm(z)):
-        raise element.error("to_world makes the cylinder elliptic or slanted: pyclray's cylinders are round and upright")
-    add_shape(element, reading, props, Cylinder, tuple(to_world.point(p0)), tuple(to_world.point(p1)),
-              float(0.5 * (rx + ry)), False)
-
-
-def as_matrix(to_world: Transform):
-    """A mesh's matrix key (row by row), or None for the identity."""
-    return None if np.array_equal(to_world.matrix, np.eye(4)) else tuple(map(tuple, to_world.matrix.tolist()))
-
-
-def mesh_file(element: Element, reading: Reading) -> None:
-    """Mitsuba's obj and ply: pyclray's triangle mesh of the file (relative to the scene file's
-    folder), placed by to_world. Its geometric normals are the faces' in both; face_normals (whether
-    Mitsuba shades with them rather than the file's vertex normals) changes no geometry, and pyclray
-    shades with the faces' normals (its smooth shading is not there yet)."""
-    props = shape_properties(element)
-    filename = props.take("filename", "string", required=True)
-    to_world = props.take("to_world", "transform", IDENTITY)
-    props.ignore.update(("face_normals", "flip_tex_coords", "maintain_order"))  # shading, textures, merging
-    path = (reading.folder or Path(".")) / filename
-    add_shape(element, reading, props, Mesh.load, path, matrix=as_matrix(to_world))
+def registered_shape(cls):
+    """The builder of the plugins a shape type reads (cls.mitsuba_plugins): its from_mitsuba takes
+    the properties, the shape gets its name and material here."""
+    def build(element: Element, reading: Reading) -> None:
+        props = shape_properties(element)
+        add_shape(element, reading, props, cls.from_mitsuba(props, reading.folder or Path(".")))
+    return build
 
 
 def shapegroup(element: Element, reading: Reading) -> None:
@@ -263,8 +147,9 @@ def shapegroup(element: Element, reading: Reading) -> None:
         if child.tag != "shape":
             raise child.error("not read inside a shapegroup: pyclray reads its <shape>s")
         kind = plugin_type(child, SHAPES)
-        if kind not in ("obj", "ply"):
-            raise child.error(f"a {kind!r} shape in a shapegroup: pyclray instances triangle meshes (obj, ply)")
+        if kind not in IN_GROUPS:
+            raise child.error(f"a {kind!r} shape in a shapegroup: pyclray instances triangle meshes "
+                              f"({', '.join(IN_GROUPS)})")
         SHAPES[kind](child, group)
     reading.groups[element.attrs["id"]] = group.shapes
 
@@ -288,8 +173,11 @@ def instance(element: Element, reading: Reading) -> None:
         reading.shapes.append(checked(element, mesh.placed, matrix=matrix, name=f"{name}_{k}"))
 
 
-SHAPES = {"sphere": sphere, "rectangle": rectangle, "disk": disk, "cube": cube, "cylinder": cylinder,
-          "obj": mesh_file, "ply": mesh_file, "shapegroup": shapegroup, "instance": instance}
+# each shape type's plugins (the registry's), and the groups of shapes and their instances
+SHAPES = {plugin: registered_shape(cls) for cls in REGISTRY.values() for plugin in cls.mitsuba_plugins}
+SHAPES.update(shapegroup=shapegroup, instance=instance)
+# the plugins a shapegroup may hold (instances place them anew)
+IN_GROUPS = tuple(plugin for cls in REGISTRY.values() if cls.mitsuba_in_groups for plugin in cls.mitsuba_plugins)
 
 
 # -- emitters --------------------------------------------------------------------------------------

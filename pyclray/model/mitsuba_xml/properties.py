@@ -139,6 +139,14 @@ class Transform:
         """The images of the unit axes (the linear part's columns), rows of the result."""
         return self.matrix[:3, :3].T.copy()
 
+    def flat_frame(self):
+        """(centre, first axis, second axis, unit normal) of Mitsuba's unit shape in z = 0 under
+        this transform. Its normal is the normal transform of +z, (M^-T) e_z, which is
+        det(M) cross(M e_x, M e_y) / |...|: a mirroring transform turns it around."""
+        columns = self.columns()
+        normal = np.cross(columns[0], columns[1]) * math.copysign(1.0, np.linalg.det(self.matrix[:3, :3]))
+        return self.point(np.zeros(3)), columns[0], columns[1], normal / np.linalg.norm(normal)
+
     def similarity(self, element: Element, what: str) -> float:
         """The scale of a transform that is a rotation (or mirror) times one uniform scale; any other
         (a non-uniform scale, a shear) is an error: ``what`` says why the shape needs it."""
@@ -202,6 +210,10 @@ class Properties:
                 raise child.error(f"attribute 'value': expected true or false, got {text!r}")
             return text.lower() == "true"
         return text
+
+    def to_world(self) -> Transform:
+        """The plugin's to_world transform, the identity if it has none."""
+        return self.take("to_world", "transform", IDENTITY)
 
     def finish(self) -> None:
         """Every property taken or ignored; the nested plugins are the builder's (plugins.py)."""

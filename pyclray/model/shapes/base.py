@@ -14,7 +14,9 @@ type a shape is (pbrt-v4's Shape interface, Mitsuba's plugins):
 - the error model (pyclray.reference.error_model): ``anchor`` (the point its coordinates are measured from)
   and ``curvature_radius`` (how a position error turns the normal);
 - Mitsuba 3 (pyclray.mitsuba): ``mitsuba_shapes`` (its counterpart, one or more Mitsuba shapes that
-  all map back to this shape's id) and ``mitsuba_covers`` (where that counterpart ends);
+  all map back to this shape's id) and ``mitsuba_covers`` (where that counterpart ends); Mitsuba's
+  XML files (pyclray.model.mitsuba_xml): ``mitsuba_plugins`` (the plugins read as this type) and
+  ``from_mitsuba`` (how one is read), ``mitsuba_in_groups``;
 - optional: ``silhouette_radius`` (the silhouette rule's radius: inf for flat pieces),
   ``oracle_primitives`` (primitives of many), ``leaf_size`` (entries per BVH leaf), and for shapes
   lit by their own normals ``smooth_struct``, ``pack_smooth``, ``oracle_shading_normal`` and
@@ -326,6 +328,20 @@ class Shape:
         """Whether Mitsuba's counterpart holds these points of the shape (False where a stand-in
         ends, such as the plane's disk)."""
         return np.ones(np.shape(points)[:-1], bool)
+
+    # the <shape type=...> plugins of Mitsuba's XML read as this type (pyclray.model.mitsuba_xml),
+    # each by from_mitsuba; none for a type Mitsuba has no plugin for
+    mitsuba_plugins: ClassVar[tuple[str, ...]] = ()
+    # True where a <shapegroup> may hold it (an <instance> places it anew: ``placed(matrix=...)``)
+    mitsuba_in_groups: ClassVar[bool] = False
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """The shape of one of mitsuba_plugins: its properties taken from props (the plugin's
+        pyclray.model.mitsuba_xml.properties.Properties; what it cannot map is props.element.error),
+        the constructor with its arguments bound, called with the name and material by the reader.
+        folder: the one a file named by the plugin is relative to."""
+        raise NotImplementedError
 
 
 LABEL_MAX = 2**31 - 1  # labels are int32 in the label image

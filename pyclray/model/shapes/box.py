@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -35,6 +36,31 @@ def rotation(axis, angle_degrees) -> np.ndarray:
     theta = math.radians(angle_degrees)
     cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) * math.cos(theta) + math.sin(theta) * cross + (1 - math.cos(theta)) * np.outer(k, k)
+
+
+def rotation_axis_angle(R: np.ndarray):
+    """(axis, degrees) of a rotation matrix (the inverse of rotation), via its quaternion (Shepperd's
+    method: the largest of the four squared components is taken first, so no division is near
+    zero); (None, 0) for none."""
+    trace = np.trace(R)
+    squares = [trace, R[0, 0], R[1, 1], R[2, 2]]
+    k = int(np.argmax(squares))
+    if k == 0:
+        w = math.sqrt(1 + trace) / 2
+        x, y, z = (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)
+    else:
+        i, j, m = k - 1, k % 3, (k + 1) % 3
+        q = np.zeros(3)
+        q[i] = math.sqrt(max(0.0, 1 + R[i, i] - R[j, j] - R[m, m])) / 2
+        q[j] = (R[j, i] + R[i, j]) / (4 * q[i])
+        q[m] = (R[m, i] + R[i, m]) / (4 * q[i])
+        w = (R[m, j] - R[j, m]) / (4 * q[i])
+        x, y, z = q
+    vector = np.array([x, y, z]) * (1 if w >= 0 else -1)
+    length = np.linalg.norm(vector)
+    if length == 0:
+        return None, 0.0
+    return tuple(vector / length), math.degrees(2 * math.atan2(length, abs(w)))
 
 
 @dataclass(frozen=True)
@@ -191,6 +217,26 @@ class Box(Shape):
         return np.array(self.center)
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
+    mitsuba_plugins = ("cube",)
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's cube is a 12-triangle mesh of [-1, 1]^3: a box where to_world keeps its faces
+        square to each other (no shear) and does not mirror it (a mirror turns the mesh's
+        triangles, and so its normals, inward)."""
+        to_world = props.to_world()
+        columns = to_world.columns()
+        half = np.linalg.norm(columns, axis=1)
+        gram = columns @ columns.T / np.outer(half, half)
+        if np.abs(gram - np.eye(3)).max() > 1e-9:
+            raise props.element.error("to_world shears the cube: pyclray's boxes have square corners")
+        R = (columns / half[:, None]).T  # the box's unit axes as columns
+        if np.linalg.det(R) < 0:
+            raise props.element.error("to_world mirrors the cube, which turns its triangles' normals inward; "
+                                      "pyclray's box has outward normals")
+        axis, angle = rotation_axis_angle(R)
+        return partial(cls, tuple(to_world.point(np.zeros(3))), tuple(2 * half), axis, angle)
+
     def mitsuba_shapes(self, scene):
         """Mitsuba's cube is [-1, 1]^3: columns the half edges along the box's axes."""
         R = self.axes()

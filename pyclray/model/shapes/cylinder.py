@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -202,6 +203,28 @@ class Cylinder(Shape):
     mitsuba_error_scale = 3.0
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
+    mitsuba_plugins = ("cylinder",)
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's cylinder is open (no caps): a cylinder with caps = false. Its local frame
+        (to_world, then p0 and the axis p1 - p0, then the radius) must keep its cross-section round."""
+        p0 = props.take("p0", "point", np.zeros(3))
+        p1 = props.take("p1", "point", np.array([0.0, 0.0, 1.0]))
+        radius = props.take("radius", "float", 1.0)
+        to_world = props.to_world()
+        axis = p1 - p0
+        if not np.any(axis):
+            raise props.element.error("p0 and p1 are the same point")
+        t1, t2, _ = frame_columns(axis / np.linalg.norm(axis))
+        x, y, z = (to_world.matrix[:3, :3] @ v for v in (t1 * radius, t2 * radius, axis))
+        rx, ry = np.linalg.norm(x), np.linalg.norm(y)
+        if (abs(np.dot(x, y)) > 1e-9 * rx * ry or abs(rx - ry) > 1e-9 * max(rx, ry)
+                or max(abs(np.dot(x, z)), abs(np.dot(y, z))) > 1e-9 * rx * np.linalg.norm(z)):
+            raise props.element.error("to_world makes the cylinder elliptic or slanted: pyclray's cylinders are round "
+                                      "and upright")
+        return partial(cls, tuple(to_world.point(p0)), tuple(to_world.point(p1)), float(0.5 * (rx + ry)), False)
+
     def mitsuba_shapes(self, scene):
         """Mitsuba's cylinder is open: two disks close it, normals out of the solid."""
         parts = [{"type": "cylinder", "p0": list(self.p0), "p1": list(self.p1), "radius": self.radius}]

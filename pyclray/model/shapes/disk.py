@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -111,6 +112,17 @@ class Disk(Shape):
         return np.array(self.center)
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
+    mitsuba_plugins = ("disk",)
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's disk is the unit disk in z = 0: to_world must keep it round."""
+        center, u, v, normal = props.to_world().flat_frame()
+        ru, rv = np.linalg.norm(u), np.linalg.norm(v)
+        if abs(np.dot(u, v)) > 1e-9 * ru * rv or abs(ru - rv) > 1e-9 * max(ru, rv):
+            raise props.element.error("to_world turns the disk into an ellipse: pyclray's disks are round")
+        return partial(cls, tuple(center), tuple(normal), float(0.5 * (ru + rv)))
+
     def mitsuba_shapes(self, scene):
         t1, t2, n = frame_columns(self.unit_normal())
         r = self.radius

@@ -10,6 +10,7 @@ applied to p (scene-format.md, "Triangle meshes").
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from functools import partial
 
 import numpy as np
 
@@ -20,7 +21,8 @@ from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag, in_frame, padded_bounds
 from .box import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
-# without a mesh file, and every render, needs neither (3.7 ms of a cold start)
+# without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
+# does")
 
 FIXED = {"animatable": False}
 PLACEMENT = ("scale", "axis", "angle", "translate")
@@ -72,13 +74,8 @@ class Mesh(Shape):
     )
     kernel_files = ("mesh.cl",)
     # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh_wide.py:
-    # count < 8), about a packet's 8 lanes. Measured (python -m bench.mesh_leaves: process CPU time of
-    # a 512x512 render of depth, normal, id, primitive), leaves of at most 4, 6, 7: with the binned SAH
-    # (bvh_sah) 24.0, 24.2, 24.1 ms on the 75,408-triangle bunny, 117, 107, 107 ms on a 998,000-triangle
-    # sphere; with the LBVH 26.9, 25.0, 24.6 and 145, 127, 120 ms. A triangle test is cheap next to
-    # a node's box test and the stack. (A tree of SAH_FROM shapes or more takes at least
-    # engine/bvh.py's SCENE_LEAF_SIZE, 7: there leaves of 4 cost the bunny 1.06x and the million
-    # triangles 1.11x the CPU time, bench.mesh_leaves, which sets both.)
+    # count < 8), about a packet's 8 lanes: a triangle test is cheap next to a node's box test and the
+    # stack (docs/benchmarks.md, "Why the engine does what it does": Mesh.leaf_size)
     leaf_size = 7
     smooth_struct = Struct(
         "TriangleNormals",
@@ -414,6 +411,21 @@ class Mesh(Shape):
         return np.inf
 
     # -- Mitsuba 3 -------------------------------------------------------------------------------
+    mitsuba_plugins = ("obj", "ply")
+    mitsuba_in_groups = True
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's obj and ply: the triangle mesh of the file (relative to folder), placed by
+        to_world. Its geometric normals are the faces' in both; face_normals (whether Mitsuba shades
+        with them rather than the file's vertex normals) changes no geometry, and the mesh read is
+        not smooth (shaded with the faces' normals)."""
+        filename = props.take("filename", "string", required=True)
+        to_world = props.to_world()
+        props.ignore.update(("face_normals", "flip_tex_coords", "maintain_order"))  # shading, textures, merging
+        matrix = None if np.array_equal(to_world.matrix, np.eye(4)) else tuple(map(tuple, to_world.matrix.tolist()))
+        return partial(cls.load, folder / filename, matrix=matrix)
+
     def mitsuba_shapes(self, scene):
         """Mitsuba's mesh from the same arrays: world vertices (float64 here, float32 there) and faces
         (the bridge builds an mi.Mesh of a dict of type 'mesh')."""

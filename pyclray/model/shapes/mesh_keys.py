@@ -74,8 +74,8 @@ def _ready(array, dtype) -> bool:
 
 
 # The read-only arrays already checked (id -> (weak reference, what they were checked as)): a mesh
-# placed again (Mesh.placed, a file's meshes, 10,000 instances) is not checked again (1.6 ms each for
-# a 50,000-triangle mesh); an entry leaves with its array.
+# placed again (Mesh.placed, a file's meshes, 10,000 instances) is not checked again
+# (docs/benchmarks.md, "Why the engine does what it does"); an entry leaves with its array.
 _checked: dict = {}
 
 

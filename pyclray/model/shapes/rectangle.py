@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -149,6 +150,17 @@ class Rectangle(Shape):
         return np.array(self.center)
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
+    mitsuba_plugins = ("rectangle",)
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's rectangle is [-1, 1]^2 in z = 0: centre, u and v are to_world's image of it; a
+        mirroring to_world swaps u and v, so that cross(u, v) stays along Mitsuba's normal."""
+        center, u, v, normal = props.to_world().flat_frame()
+        if np.dot(np.cross(u, v), normal) < 0:
+            u, v = v, u
+        return partial(cls, tuple(center), tuple(u), tuple(v))
+
     def mitsuba_shapes(self, scene):
         """Mitsuba's rectangle is [-1, 1]^2 in z = 0 with normal +z: columns u, v and the normal."""
         return [{"type": "rectangle", "to_world": to_world((self.u, self.v, self.unit_normal()), self.center)}]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -125,5 +126,16 @@ class Sphere(Shape):
         return float(np.linalg.norm(np.subtract(self.center, point))) + self.radius
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
+    mitsuba_plugins = ("sphere",)
+
+    @classmethod
+    def from_mitsuba(cls, props, folder):
+        """Mitsuba's sphere: center and radius, placed by a to_world that keeps it a sphere."""
+        center = props.take("center", "point", np.zeros(3))
+        radius = props.take("radius", "float", 1.0)
+        to_world = props.to_world()
+        scale = to_world.similarity(props.element, "a sphere stays a sphere")
+        return partial(cls, tuple(to_world.point(center)), radius * scale)
+
     def mitsuba_shapes(self, scene):
         return [{"type": "sphere", "center": list(self.center), "radius": self.radius}]
