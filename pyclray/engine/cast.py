@@ -59,7 +59,7 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
             if not np.isfinite(array).all():
                 rows = array if array.shape == directions.shape else array[None]  # a shared origin: row 0, even with no rays
                 _first_bad(name, ~np.isfinite(rows).all(axis=-1), rows, "is not finite")
-        # column by column: numpy reduces the short last axis of an (N, 3) array ten times slower
+        # column by column: numpy's reductions over the short last axis of an (N, 3) array are slow
         flat = directions.reshape(-1, 3)
         if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
             _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
@@ -83,18 +83,15 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
 # at least this many (pyclray.engine.cast_order): neighbouring work-items then walk the same nodes
-# and shapes, which stay in cache (100,000 random rays into 100,000 spheres: a third of the kernel's
-# time). Each ray is traced on its own, so the order changes no bit.
+# and shapes, which stay in cache (docs/benchmarks.md, "Why the engine does what it does": COHERENT_FROM). Each ray is traced on its own, so
+# the order changes no bit.
 COHERENT_FROM = 4096
 
 # ... on a CPU device, only where the scene's cast data (its tree, anchors and entries) outgrow this
 # share of the device's last-level cache (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE: 32 MiB of L3 here). Within
 # it any ray finds its nodes and shapes in the cache, and the order's cost (the host's sort, the
 # kernel's rows read and results written through it at scattered places) is more than it saves.
-# 100,000 random rays in the caller's order against the coherent one (docs/benchmarks.md, "Cast's
-# ray order by scene size"), two runs: 2.0 MB of 16,384 spheres up to 14% faster (none slower
-# beyond 2%), 5.4 MB of the 80,000-triangle bunny 5-12% faster; 69 MB of 1,000,000 triangles 2-6%
-# slower, and 12.7 MB of 100,000 spheres between (box rays' cast 4-7% slower, the rest either way).
+# (docs/benchmarks.md, "Cast's ray order by scene size").
 # A GPU orders every large batch: its work-items run in lock-step groups, where rays that part ways
 # wait for each other.
 ORDER_CACHE_SHARE = 0.25
@@ -117,8 +114,8 @@ CAST_WORK_GROUP = 16
 
 
 def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) per axis of (N, 3) points, column by column (numpy reduces an (N, 3) array along its
-    first axis ten times slower)."""
+    """(lo, hi) per axis of (N, 3) points, column by column (numpy's reductions of an (N, 3) array
+    along its first axis are slow)."""
     return (np.array([points[:, i].min() for i in range(3)]), np.array([points[:, i].max() for i in range(3)]))
 
 

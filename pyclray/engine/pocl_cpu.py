@@ -11,8 +11,8 @@ The replacement is the x86-64 micro-architecture level the CPU's flags allow, at
 ``x86-64-v3`` (AVX2 and FMA): what LLVM 14 compiled for the Zen 4 machines before (``znver3``, AVX2;
 it compiles no 512-bit vectors for these kernels, see programs.MAX_LANE_BITS), so the programs are
 those of before. The field is found by value, not by a layout: the one pointer among the struct's
-128 words of the struct whose string is "generic", read through /proc/self/mem (a bad address is an error
-there, not a crash). Anything unexpected (no such pointer, more than one, not Linux) leaves the
+128 words whose string is "generic", read through /proc/self/mem (a bad address is an error there,
+not a crash). Anything unexpected (no such pointer, more than one, not Linux) leaves the
 device as it is, and its builds report the compiler's error as ever.
 
 PoCL keeps failed builds in its own cache (~/.cache/pocl) under a key that does not depend on that

@@ -89,22 +89,13 @@ class Kind:
 
 
 # Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
-# framed so; smaller ones keep the per-view copy. Measured (process CPU time of 256x256 renders of
-# depth, normal, id over a ground plane and bench/views.py's sphere field, the same camera and a new
-# one each call, PoCL on the 2 shared cores, load 3 to 4): framed against copied, at 100,000 spheres
-# 17.6-18.3 against 14.9-15.6 ms the same camera, 17.6-20.3 against 17.4-18.8 moved (framing computes at
-# each test the 32 bytes the copy holds per sphere); at 300,000 29.3 against 27.0 and 31.5 against
-# 31.9; at 1,000,000 68.8 against 69.8 and 69.5 against 77.5 (the copy's 32 MB no longer fit the
-# caches better than the world entries do), 63.7 bytes a sphere in all against 91.7. Meshes do not
-# depend on it (INDEXED below).
+# framed so; smaller ones keep the per-view copy, which is faster while it fits the caches; framed
+# entries hold a third less memory (docs/benchmarks.md, "Why the engine does what it does": FRAMED_FROM). Meshes do not depend on it (INDEXED below).
 FRAMED_FROM = 524_288
 
 # Meshes (Shape.indexed) are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
-# world entries and the per-view copy. Measured (512x512 depth, normal, id, primitive, CPU time,
-# docs/benchmarks.md): the 80,000-triangle bunny 3-10% slower than with the copy, 56.8 bytes a triangle
-# against 172.8; (earlier, framed against copied) the 998,000-triangle sphere 93.3-96.4 against
-# 95.1-98.4 ms, 61.2 bytes a triangle against 177.2. Tests set it False to compare with the per-view
+# world entries and the per-view copy (docs/benchmarks.md, "Why the engine does what it does": INDEXED). Tests set it False to compare with the per-view
 # copy (the path of devices without float64, where the winner's normal cannot be computed from
 # float64 vertices).
 INDEXED = True
@@ -231,9 +222,7 @@ class PreparedScene:
 
     # A refit keeps the tree's topology: shapes that wander far apart make its boxes overlap and
     # rays visit more of them. A frame rebuilds the scene where the refitted tree's SAH cost exceeds
-    # the built tree's by this factor. Measured (python -m bench.views, "animation"): 43 frames of 10
-    # of 100,000 spheres moving across the field leave the cost at 0.98 of the built tree's; a
-    # rebuild of that scene takes 0.2 to 0.5 s, a frame's update about 0.3 ms (load 3).
+    # the built tree's by this factor (docs/benchmarks.md, "Why the engine does what it does": REFIT_COST_MAX).
     REFIT_COST_MAX = 1.5
 
     def update(self, shapes: tuple, changed) -> bool:
@@ -329,7 +318,7 @@ class PreparedScene:
             if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
                 continue
             if self.on_device:
-                # its scalars' types declared once (device.launch): 13 us an enqueue instead of 52
+                # its scalars' types declared once (device.launch)
                 launch(self.ctx, kernels[f"rebase_{kind.name}"], *self._groups(kind.count),
                        [kind.world_buffer, kind.frame, np.int32(kind.count), *frame])
             else:  # a device without float64
@@ -343,8 +332,7 @@ class PreparedScene:
     def _groups(self, count: int):
         """(global size, local size) of a pass over count entries: work-groups of GROUP work-items
         (or the device's most), the count rounded up (the kernels skip the rest). Left to itself, PoCL
-        divides a count like 70,669 into tiny work-groups: the nodes' pass then took 2.0 ms for
-        100,000 spheres, 1.6 ms in groups of 256."""
+        divides a count like 70,669 into tiny work-groups (docs/benchmarks.md: PreparedScene.GROUP)."""
         group = min(self.GROUP, self.ctx.device.max_work_group_size)
         return (-(-count // group) * group,), (group,)
 

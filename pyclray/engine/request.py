@@ -35,7 +35,7 @@ class Frame(dict):
         self.precision = precision
         self.device = device
         # view: (camera, width, height, col0, row0) of a render, whose intrinsics and pose are
-        # computed when first asked for (a warm render of tp02 takes a millisecond: they took 30 us)
+        # computed when first asked for (a noticeable share of a warm render)
         self._camera = {"intrinsics": intrinsics, "pose": pose} if view is None else None
         self._view = view
 

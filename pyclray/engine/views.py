@@ -18,9 +18,8 @@ from .request import REAL, input_buffer
 
 # Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
 # BVH, whichever costs a packet less. Through tile lists a packet tests every shape of its tile's
-# list; through the BVH it pays its traversal. Measured (bench/REPORT.md, "Tiles or BVH"), the two
-# cost the same at about 16 shapes per tile on average (a field of 3,000 spheres at 512x512):
-# below, tiles win (2x at 1,000 spheres: no traversal at all), above, the BVH (3x at 30,000).
+# list; through the BVH it pays its traversal. The two cost the same at about 16 shapes per tile on
+# average; below, tiles win by 2x and more, above, the BVH (docs/benchmarks.md, "Why the engine does what it does": TILE_LIST_MAX).
 # Beyond TILES_MAX_SHAPES bounded entries the lists are not even computed: no visible scene of that
 # many shapes has short lists, and computing them costs more than building the tree.
 TILE_LIST_MAX = 16.0
