@@ -36,23 +36,12 @@ from pyclray.engine.device import context_for
 from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 
+from .engine_ab import subdivided
+
 from .open3d_compare import blocks
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 BUILDS = 5  # builds timed of each system, alternating: their median
-
-
-def subdivided(vertices, faces, times: int):
-    """Each triangle split into four (midpoints), times over."""
-    for _ in range(times):
-        edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        mid = len(vertices) + inverse.reshape(3, -1).T  # (F, 3): midpoints of ab, bc, ca
-        vertices = np.concatenate([vertices, 0.5 * (vertices[unique[:, 0]] + vertices[unique[:, 1]])])
-        a, b, c = faces.T
-        ab, bc, ca = mid.T
-        faces = np.concatenate([np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-    return vertices, faces
 
 
 def meshes(bunny_path):
