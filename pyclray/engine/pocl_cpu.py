@@ -23,7 +23,10 @@ import struct
 
 import pyopencl as cl
 
-_SCAN_WORDS = 1024  # PoCL 3.0's device struct is about 2 KB; the field sits at word 80
+# the words scanned: PoCL 3.0's device struct (a heap chunk of 1,040 bytes), whose field sits at word 80;
+# beyond it lie other allocations, one of which may hold another pointer to a "generic" string (seen:
+# at word 488, then the scan found two and changed nothing)
+_SCAN_WORDS = 128
 _patched: dict = {}  # device pointer -> the replacement name's buffer (kept alive: PoCL reads it)
 
 
