@@ -19,7 +19,7 @@ import pyopencl as cl
 import pytest
 
 import pyclray
-from pyclray.engine import culling, device, programs, render
+from pyclray.engine import culling, device, programs, render, signatures
 from pyclray.reference import error_model, mitsuba, oracle
 
 from . import blocks
@@ -240,18 +240,19 @@ def test_breakdown(benchmark, scenes_dir, part):
     prepared, inputs = render_module.render_inputs(ctx, scene, "fp32", "tiles")
     with prepared.lock:  # the frame buffers in this view's frame (the render above left them so)
         prepared.rebase(inputs.eye, inputs.rows)
-    camera = inputs.camera
-    shape_args = [a for a in inputs.shape_args(prepared, "tiles") if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
     lanes = programs.lanes_for(ctx.device, "fp32")
-    kernel = programs.kernel_for(ctx, programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
+    variant = programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes)
+    kernel = programs.kernel_for(ctx, variant)
     buffers = request_module._output_buffers(ctx, width * height, aovs, "fp32")
     tile = culling.TILE
-    whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
-    args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]
+    args = signatures.arguments(variant, {
+        "camera": inputs.camera, "col0": np.int32(0), "row0": np.int32(0), "cols": np.int32(width),
+        "rows": np.int32(height), "tile_shift": np.int32(tile.bit_length() - 1), "tiles_x": np.int32(width // tile),
+        **inputs.shape_args(prepared, "tiles"), **{signatures.image_parameter(a): b for a, b in zip(aovs, buffers)}})
     global_size, local_size = render.launch_size(lanes, 0, 0, width, height, ctx.device.max_work_group_size)
 
     def kernel_only():
-        kernel(ctx.queue, global_size, local_size, *args, *buffers)
+        kernel(ctx.queue, global_size, local_size, *args)
         ctx.queue.finish()
 
     small = scene.with_size(16, 16)

@@ -21,8 +21,9 @@ from .bvh import NODE
 from .bvh_wide import WIDE_NODE
 from .device import DeviceContext, is_pocl_cpu
 from .shading import STRUCTS as SHADING_STRUCTS
+from .signatures import SIGNATURES, c_defines
 
-# each query's kernel file (the kernel of that name is in it)
+# each query's kernel file (the kernel of that name is in it; its signature: engine/signatures.py)
 QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl"}
 # the images that need the nearest hit's shape, not only its distance (PYCLRAY_TRACK_ID)
 WINNER_AOVS = ("normal", "id", "shaded", "primitive", "barycentric")
@@ -153,33 +154,28 @@ class Variant:
             lines.append("#define PYCLRAY_REBASE 1")
         if self.framed and self.kind == "render":
             lines.append("#define PYCLRAY_FRAMED 1")
-        if any(self._mode(REGISTRY[t]) == "INDEXED" for t in self.shape_types):
+        if any(self.mode(t) == "INDEXED" for t in self.shape_types):
             lines.append("#define PYCLRAY_INDEXED 1")
         if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
         # where a render reads each type's shapes (kernels/entries.h): framed where tested, or copied
-        lines += [f"#define PYCLRAY_MODE_{t} {self._mode(REGISTRY[t])}" for t in self.shape_types]
+        lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
-            smooth = [REGISTRY[t] for t in self.smooth]
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
-            lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
-                         + " ".join(f"P(__global const {'real4' if self._mode(c) == 'INDEXED' else c.smooth_struct.name}*, "
-                                    f"{c.type}_smooth)" for c in smooth))
+        if self.kind in SIGNATURES:  # the kernel's parameters (engine/signatures.py)
+            lines += c_defines(self)
         return lines
 
     def _shape_calls(self) -> list[str]:
-        """Per type, its shared arrays' arguments (PYCLRAY_SHARED_ARGS_<type>(P): Shape.shared, after
-        its entries' array) and, for the usual types, how the kernel calls its functions (a type with
-        shared arrays defines PYCLRAY_HIT_<type> and the others in its kernel file: mesh instances)."""
+        """For the usual types, how the kernel calls their functions (a type with shared arrays, whose
+        functions take them too, defines PYCLRAY_HIT_<type> and the others in its kernel file: mesh
+        instances)."""
         lines = []
         for t in self.shape_types:
-            cls = REGISTRY[t]
-            args = " ".join(f"P(__global const {c_type}*, {t}_{name})" for name, c_type in cls.shared)
-            lines.append(f"#define PYCLRAY_SHARED_ARGS_{t}(P) {args}")
-            if not cls.shared:
+            if not REGISTRY[t].shared:
                 lines += [f"#define PYCLRAY_HIT_{t}(shape, ray, limit) {t}_hit(shape, ray)",
                           # a shadow ray (kernels/shading.h): self, the lanes whose winner is this entry
                           f"#define PYCLRAY_SHADOW_HIT_{t}(shape, ray, limit, self) {t}_hit(shape, ray)",
@@ -189,9 +185,10 @@ class Variant:
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
         return lines
 
-    def _mode(self, shape) -> str:
-        """Where a render reads a type's shapes (kernels/entries.h): framed where tested from their
+    def mode(self, t: str) -> str:
+        """Where a render reads the shapes of type t (kernels/entries.h): framed where tested from their
         world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
+        shape = REGISTRY[t]
         if self.indexed and self.kind == "render" and shape.indexed:
             return "INDEXED"
         return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
@@ -221,7 +218,7 @@ class Variant:
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read(name) for name in ("shapes.h", "args.h", "camera.h", "bvh.h")]
+        parts += [_read(name) for name in ("shapes.h", "camera.h", "bvh.h")]
         if cast:  # one ray at a time through the wide tree; mesh instances' own trees as packets of one
             parts += [_read(name) for name in ("bvh_ray.h", "bvh_packet.h", "cast.h")]
         else:  # camera packets through the wide tree (with the BVH), shadow rays through the binary one

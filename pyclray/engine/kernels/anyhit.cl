@@ -9,17 +9,8 @@
 #define PYCLRAY_CAST_REACH t_max
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)  /* no winner is kept */
 
-/* the occluded kernel's arguments after the first (SHAPE as for render) */
-#define PYCLRAY_OCCLUDED_ARGS(P, SHAPE)                                               \
-    P(__global const int*, order) P(const int, ordered)                               \
-    P(__global const double*, origins) P(const int, origin_stride)                    \
-    P(__global const double*, directions) P(__global const double*, limits)           \
-    P(const int, limit_stride) P(const double4, scene_anchor)                         \
-    PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) P(__global char*, occluded_out)
-
 PYCLRAY_KERNELS_BEGIN
-inline void occluded_ray(const int r, const CastDirection* direction, const int n_rays
-                         PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void occluded_ray(const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_RAY
     bool found = false;
@@ -34,16 +25,15 @@ inline void occluded_ray(const int r, const CastDirection* direction, const int 
     occluded_out[r] = found ? 1 : 0;
 }
 
-PYCLRAY_WORK_ITEM_FUNCTION void occluded_group(const int group, const int n_rays
-                                               PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+PYCLRAY_WORK_ITEM_FUNCTION void occluded_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
     for (int l = 0; l < in_group; ++l)
-        occluded_ray(rays[l], &directions_of[l], n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        occluded_ray(rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
 }
 
-__kernel void occluded(const int n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+__kernel void occluded(PYCLRAY_PARAMETERS)
 {
     const int group = get_global_id(0);
-    if (group * CAST_GROUP < n_rays) occluded_group(group, n_rays PYCLRAY_OCCLUDED_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    if (group * CAST_GROUP < n_rays) occluded_group(group, PYCLRAY_ARGUMENTS);
 }

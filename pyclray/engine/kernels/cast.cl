@@ -47,14 +47,6 @@
         normal = PYCLRAY_NORMAL_##type(&framed, &ray, camera, MISS, 1);             \
     }
 
-/* the cast kernel's arguments after the camera (SHAPE as for render) */
-#define PYCLRAY_CAST_ARGS(P, SHAPE)                                                   \
-    P(const int, n_rays) P(__global const int*, order) P(const int, ordered)          \
-    P(__global const double*, origins) P(const int, origin_stride)                    \
-    P(__global const double*, directions) P(__global const double*, limits)           \
-    P(const int, limit_stride) P(const double4, scene_anchor)                         \
-    PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_OUTPUT_ARGS(P)
-
 /* Each work-item's rays (a group of CAST_GROUP) traverse the BVH together: a step of each in turn
  * (kernels/bvh_ray.h's PYCLRAY_TRAVERSE_STEP: a node's children pushed, or a leaf's shapes tested), so
  * that the misses of one ray's next node or leaf overlap the others' work and misses, where one ray
@@ -86,8 +78,7 @@ typedef struct {
 
 /* (always inlined on PoCL's CPU device, as the functions above: a step is called per ray in the
  * interleaving loop) */
-inline void cast_start(CastRay* S, const int r, const CastDirection* direction, __global const Camera* camera
-                       PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void cast_start(CastRay* S, const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_RAY
     /* hits up to t_max count: best starts just above it */
@@ -125,7 +116,7 @@ inline void cast_start(CastRay* S, const int r, const CastDirection* direction, 
 #define top (S->top_)
 #define stack_child (S->stack_child_)
 #define stack_entry (S->stack_entry_)
-inline void cast_step(CastRay* S, __global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void cast_step(CastRay* S, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 1, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
 }
@@ -147,7 +138,7 @@ inline void cast_step(CastRay* S, __global const Camera* camera PYCLRAY_CAST_ARG
 #undef stack_entry
 #endif
 
-inline void cast_end(const CastRay* S, __global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 {
     RayPacket ray = S->ray_;
     const double best = S->best_, t_max = S->t_max_;
@@ -155,7 +146,7 @@ inline void cast_end(const CastRay* S, __global const Camera* camera PYCLRAY_CAS
     const bool hit = best <= t_max && best < INFINITY;
     const size_t index = (size_t)S->r_;
 #ifdef PYCLRAY_AOV_DEPTH
-    depth[index] = hit ? (real)best : MISS;
+    depth_out[index] = hit ? (real)best : MISS;
 #endif
 #ifdef PYCLRAY_AOV_NORMAL
     {
@@ -187,42 +178,41 @@ PYCLRAY_KERNELS_BEGIN
  * the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py), on PoCL's
  * CPU device (PYCLRAY_INLINE_BUILTINS): a GPU hides a ray's misses behind its other work-items', and
  * the group's 8 states (17 KB with their stacks) would not fit its private memory */
-PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, __global const Camera* camera
-                                           PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
 #if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
     CastRay state[CAST_GROUP];
     for (int l = 0; l < in_group; ++l)
-        cast_start(&state[l], rays[l], &directions_of[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        cast_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
     /* a step of each ray still traversing, until none is (cast's limit never falls below 0) */
     for (bool going = true; going;) {
         going = false;
         for (int l = 0; l < in_group; ++l) {
             if (state[l].top_ > 0) {
-                cast_step(&state[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+                cast_step(&state[l], PYCLRAY_ARGUMENTS);
                 going = true;
             }
         }
     }
     for (int l = 0; l < in_group; ++l)
-        cast_end(&state[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        cast_end(&state[l], PYCLRAY_ARGUMENTS);
 #else
     /* one ray after the other (no block types: spheres' short paths through data that the caches
      * hold gained nothing from interleaving and lost 7-17% of their CPU time on 16,384 spheres) */
     for (int l = 0; l < in_group; ++l) {
         CastRay one;
-        cast_start(&one, rays[l], &directions_of[l], camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        cast_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
 #ifdef PYCLRAY_HAS_BOUNDED
-        while (one.top_ > 0) cast_step(&one, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        while (one.top_ > 0) cast_step(&one, PYCLRAY_ARGUMENTS);
 #endif
-        cast_end(&one, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+        cast_end(&one, PYCLRAY_ARGUMENTS);
     }
 #endif
 }
 
-__kernel void cast(__global const Camera* camera PYCLRAY_CAST_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+__kernel void cast(PYCLRAY_PARAMETERS)
 {
     const int group = get_global_id(0);
-    if (group * CAST_GROUP < n_rays) cast_group(group, camera PYCLRAY_CAST_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+    if (group * CAST_GROUP < n_rays) cast_group(group, PYCLRAY_ARGUMENTS);
 }

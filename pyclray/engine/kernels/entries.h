@@ -5,23 +5,21 @@
  * take) come from one of three places, chosen per type (PYCLRAY_MODE_<type>, from the host: in a
  * framed scene, pyclray.engine.prepared's FRAMED_FROM, Shape.frames_in_render and Shape.indexed):
  * - FRAMED (devices with float64): each shape is framed where it is tested, from its float64 world
- *   entry, by its <type>_rebase (the per-view pass's function, compiled without contraction as
+ *   entry (type##_worlds), on the eye's frame (frame_origin, frame_u, frame_v, frame_w), by its <type>_rebase (the per-view pass's function, compiled without contraction as
  *   there: the same bits) into a private copy; its id and its index within its shape come from
  *   their own arrays. The scene holds its world entries only: no copy per view, no pass over them
  *   when the camera moves (pyclray.engine.prepared).
  * - COPIED: the per-view pass's buffer of the entries in the frame (type##s), ids included (in a
  *   framed program, copied to private memory where tested: the shape functions take one space).
  * PYCLRAY_SHAPE_OF(Type, type, k, name) declares name, a pointer to shape k of its type in the frame;
- * PYCLRAY_ID_OF(type, k) and PYCLRAY_PRIMITIVE_AT(type, k) are its id and its index in its shape. */
-#define PYCLRAY_ENTRIES_FRAMED(P, Type, type) \
-    P(__global const Type##World*, type##_worlds) P(__global const int*, type##_ids) P(__global const int*, type##_primitives)
+ * PYCLRAY_ID_OF(type, k) and PYCLRAY_PRIMITIVE_AT(type, k) are its id and its index in its shape.
+ * The kernel's parameters of each mode: pyclray/engine/signatures.py. */
 #define PYCLRAY_SHAPE_FRAMED(Type, type, k, name)                                     \
     Type name##_framed;                                                               \
     type##_rebase(&type##_worlds[k], &name##_framed, &view_frame);                    \
     const Type* const name = &name##_framed;
 #define PYCLRAY_ID_FRAMED(type, k) type##_ids[k]
 #define PYCLRAY_PRIMITIVE_FRAMED(type, k) type##_primitives[k]
-#define PYCLRAY_ENTRIES_COPIED(P, Type, type) P(__global const Type*, type##s)
 #ifdef PYCLRAY_FRAMED
 #define PYCLRAY_SHAPE_COPIED(Type, type, k, name)                                     \
     const Type name##_copy = type##s[k];                                              \
@@ -32,11 +30,8 @@
 #define PYCLRAY_ID_COPIED(type, k) type##s[k].id
 #define PYCLRAY_PRIMITIVE_COPIED(type, k) type##s[k].primitive
 /* - INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
- * and the per-view pass's vertices (<type>_assemble), its id from its own array, its index in its
+ * (type##_faces) and the per-view pass's vertices (type##_vertices: <type>_assemble), its id from its own array, its index in its
  * shape from its face; the winner's world normal from the float64 vertices (<type>_world_normal) */
-#define PYCLRAY_ENTRIES_INDEXED(P, Type, type)                                        \
-    P(__global const int4*, type##_faces) P(__global const real4*, type##_vertices)   \
-    P(__global const double4*, type##_world_vertices) P(__global const int*, type##_ids)
 #define PYCLRAY_SHAPE_INDEXED(Type, type, k, name)                                    \
     Type name##_framed;                                                               \
     type##_assemble(type##_faces[k], type##_vertices, &name##_framed);                \
@@ -53,7 +48,6 @@
 #define PYCLRAY_SMOOTH_COPIED(type, k) type##_smooth[k]
 #define PYCLRAY_SMOOTH_INDEXED(type, k) type##_smooth_of(type##_faces[k], type##_smooth)
 #define PYCLRAY_SMOOTH_AT(type, k) PYCLRAY_CAT(PYCLRAY_SMOOTH_, PYCLRAY_MODE_##type)(type, k)
-#define PYCLRAY_ENTRIES(P, Type, type) PYCLRAY_CAT(PYCLRAY_ENTRIES_, PYCLRAY_MODE_##type)(P, Type, type)
 #define PYCLRAY_SHAPE_OF(Type, type, k, name) PYCLRAY_CAT(PYCLRAY_SHAPE_, PYCLRAY_MODE_##type)(Type, type, k, name)
 #define PYCLRAY_ID_OF(type, k) PYCLRAY_CAT(PYCLRAY_ID_, PYCLRAY_MODE_##type)(type, k)
 #define PYCLRAY_PRIMITIVE_AT(type, k) PYCLRAY_CAT(PYCLRAY_PRIMITIVE_, PYCLRAY_MODE_##type)(type, k)

@@ -149,7 +149,7 @@ inline void write_vec3s(const vec3v v, const PacketPlace place, const int first,
  * stores, the ends of a row lane by lane. */
 #ifdef PYCLRAY_AOV_DEPTH
 #define PYCLRAY_WRITE_DEPTH(index, first, end) \
-    write_reals(best < MISS ? best * v_sqrt(ray.a) : SPLAT(MISS), index, first, end, depth);
+    write_reals(best < MISS ? best * v_sqrt(ray.a) : SPLAT(MISS), index, first, end, depth_out);
 #else
 #define PYCLRAY_WRITE_DEPTH(index, first, end)
 #endif

@@ -16,7 +16,6 @@
 #endif
 /* without shading (kernels/shading.h defines these), no material, light or shadow code at all */
 #ifndef PYCLRAY_AOV_SHADED
-#define PYCLRAY_SHADED_ARGS(P)
 #define PYCLRAY_MATERIALS_BEGIN
 #define PYCLRAY_MATERIAL_OF(id, mine, flat)
 #define PYCLRAY_WRITE_SHADED(index, first, end)

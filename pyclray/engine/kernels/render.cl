@@ -68,15 +68,8 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
  * cols x rows images; packets start at multiples of their size in the image, so that a window's
  * pixels are the whole image's, and none straddles two tiles). Tiles are 1 << tile_shift pixels
  * square, tiles_x per image row (and the work-groups where the device allows). */
-/* the render kernel's arguments after the camera; SHAPE: PYCLRAY_SHAPE_PARAMETERS or _PASSED */
-#define PYCLRAY_RENDER_ARGS(P, SHAPE)                                                 \
-    P(const int, col0) P(const int, row0) P(const int, cols) P(const int, rows)       \
-    P(const int, tile_shift) P(const int, tiles_x)                                    \
-    PYCLRAY_FRAME_ARGS(P) PYCLRAY_BVH_ARGS(P) PYCLRAY_SHAPES(SHAPE) PYCLRAY_RENDER_OUTPUT_ARGS(P)
-
 PYCLRAY_KERNELS_BEGIN
-PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, __global const Camera* camera
-                                              PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYCLRAY_PARAMETERS)
 {
     const int i0 = (col0 / PYCLRAY_PACKET_W + packet) * PYCLRAY_PACKET_W;
     const int j0 = (row0 / PYCLRAY_PACKET_H + r) * PYCLRAY_PACKET_H;
@@ -135,11 +128,11 @@ inline int scattered_group(const int g, const int n)
     return (int)(((long)g * (long)s) % (long)n);
 }
 
-__kernel void render(__global const Camera* camera PYCLRAY_RENDER_ARGS(PYCLRAY_DECLARE, PYCLRAY_SHAPE_PARAMETERS))
+__kernel void render(PYCLRAY_PARAMETERS)
 {
     const int nx = get_num_groups(0);
     const int n = nx * get_num_groups(1), in_order = get_group_id(1) * nx + get_group_id(0);
     const int g = n < SCATTERED_BELOW ? scattered_group(in_order, n) : in_order;
     render_packet((g % nx) * get_local_size(0) + get_local_id(0), (g / nx) * get_local_size(1) + get_local_id(1),
-                  camera PYCLRAY_RENDER_ARGS(PYCLRAY_PASS, PYCLRAY_SHAPE_PASSED));
+                  PYCLRAY_ARGUMENTS);
 }

@@ -61,15 +61,10 @@
     const vec3v n_facing = v3_select(v3_scale(n_shading, SPLAT(-1)), n_shading, v3_dot(n_shading, D) < 0); \
     const vec3v n_l = v3_select(n_s, n_facing, has_shading);
 #else
-#define PYCLRAY_SMOOTH_ARGS(P)
 #define PYCLRAY_SMOOTH_BEGIN
 #define PYCLRAY_SMOOTH_NORMALS
 #define PYCLRAY_LIGHTING_NORMAL const vec3v n_l = n_s;
 #endif
-
-#define PYCLRAY_SHADED_ARGS(P)                                                        \
-    P(__global const Material*, materials) P(__global const Light*, lights) P(const int, n_lights) \
-    P(const real4, ambient) P(const real4, background) PYCLRAY_SMOOTH_ARGS(P) P(__global real*, shaded_out)
 
 /* per lane: the winner's material (albedo, specular, shininess) and whether its type is flat,
  * gathered in the winners' loop of kernels/nearest.h (each distinct winner once) */
