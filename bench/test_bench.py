@@ -19,7 +19,7 @@ import pyopencl as cl
 import pytest
 
 import pyclray
-from pyclray.engine import culling, device, programs, render
+from pyclray.engine import api, culling, device, programs, render, signatures
 from pyclray.model.aovs import TABLE
 from pyclray.reference import error_model, mitsuba, oracle
 
@@ -227,9 +227,6 @@ BREAKDOWN = {
 
 @pytest.mark.parametrize("part", list(BREAKDOWN))
 def test_breakdown(benchmark, scenes_dir, part):
-    import importlib
-
-    render_module = importlib.import_module("pyclray.engine.views")
     scene = load(scenes_dir, "tp02", ERROR_SIZE)
     if part == "kernel only, all AOVs, plane only":
         scene = dataclasses.replace(scene, shapes=scene.shapes[:1])
@@ -237,21 +234,24 @@ def test_breakdown(benchmark, scenes_dir, part):
     ctx = device.context_for(None)
     width = height = ERROR_SIZE
     pyclray.render(scene, aovs)  # builds, and prepares the scene's inputs
-    prepared, inputs = render_module.render_inputs(ctx, scene, "fp32", "tiles")
+    tracer = api.tracer_for(scene, ctx, "fp32")
+    prepared = tracer.prepared
+    inputs = tracer.view_state(scene).inputs_for(ctx, scene, prepared, "tiles")
     with prepared.lock:  # the frame buffers in this view's frame (the render above left them so)
         prepared.rebase(inputs.eye, inputs.rows)
-    camera = inputs.camera
-    shape_args = [a for a in inputs.shape_args(prepared, "tiles") if not isinstance(a, tuple)]  # (tuples: shadow rays' only)
     lanes = programs.lanes_for(ctx.device, "fp32")
-    kernel = programs.kernel_for(ctx, programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes))
+    variant = programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes)
+    kernel = programs.kernel_for(ctx, variant)
     buffers = [cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, width * height * TABLE[aov].itemsize("fp32")) for aov in aovs]
     tile = culling.TILE
-    whole = (np.int32(0), np.int32(0), np.int32(width), np.int32(height))
-    args = [camera, *whole, np.int32(tile.bit_length() - 1), np.int32(width // tile), *shape_args]
+    args = signatures.arguments(variant, {
+        "camera": inputs.camera, "col0": np.int32(0), "row0": np.int32(0), "cols": np.int32(width),
+        "rows": np.int32(height), "tile_shift": np.int32(tile.bit_length() - 1), "tiles_x": np.int32(width // tile),
+        **inputs.shape_args(prepared, "tiles"), **{signatures.image_parameter(a): b for a, b in zip(aovs, buffers)}})
     global_size, local_size = render.launch_size(lanes, 0, 0, width, height, ctx.device.max_work_group_size)
 
     def kernel_only():
-        kernel(ctx.queue, global_size, local_size, *args, *buffers)
+        kernel(ctx.queue, global_size, local_size, *args)
         ctx.queue.finish()
 
     small = scene.with_size(16, 16)

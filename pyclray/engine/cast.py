@@ -12,6 +12,7 @@ from .device import has_fp64, launch
 from .prepared import PreparedScene
 from .programs import Variant, kernel_for
 from .request import REAL, Frame, input_buffer, run_kernel
+from .signatures import arguments, shared_arguments
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -120,12 +121,12 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
-def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tuple[list, np.ndarray, float, int]:
-    """(arguments, anchor, size, bytes): the BVH around the scene's anchor (its root box's centre), its
-    refs and the entries' anchors, and per shape type its packed buffer (each bounded entry relative
-    to its own anchor, in leaf order) and count; bytes: those buffers' sizes together. They depend on
-    the shapes only, never on the rays: a scene handle makes them at its first cast and keeps them
-    until its shapes change."""
+def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tuple[dict, np.ndarray, float, int]:
+    """(arguments by name, anchor, size, bytes): the BVH around the scene's anchor (its root box's
+    centre), its refs and the entries' anchors, and per shape type its packed buffer (each bounded
+    entry relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
+    They depend on the shapes only, never on the rays: a scene handle makes them at its first cast
+    and keeps them until its shapes change."""
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
     # the largest side of the bounded shapes' box (0 without any): the coarsest cells of the rays' order
@@ -134,7 +135,7 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
     # (kernels/pyclray.cl: its rays then test every bounded shape)
     large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
     anchor = np.append(anchor, 1.0 if large else 0.0)
-    args = []
+    args = {}
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
     blocks = {}
@@ -154,15 +155,16 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
                 if own is not None:
                     anchors[: len(tree.leaf_type)][tree.leaf_type == tree.types.index(name)] = own
         anchors = np.ascontiguousarray(anchors)
-        args += [input_buffer(ctx, nodes), input_buffer(ctx, refs), input_buffer(ctx, anchors),
-                 input_buffer(ctx, _box_anchors(anchors, anchor)), _root_box(nodes)]
+        args.update(nodes=input_buffer(ctx, nodes), refs=input_buffer(ctx, refs), anchors=input_buffer(ctx, anchors),
+                    box_anchors=input_buffer(ctx, _box_anchors(anchors, anchor)), root_box=_root_box(nodes))
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
         if name in blocks:  # its blocks in place of its world entries, and no packed entries (kernels/mesh.cl)
             data, count = blocks[name]
-            args += [input_buffer(ctx, np.zeros(1, layout(kind.cls.struct, precision).dtype)), input_buffer(ctx, data),
-                     *kind.shared, np.int32(count)]
+            args.update({f"{name}s": input_buffer(ctx, np.zeros(1, layout(kind.cls.struct, precision).dtype)),
+                         f"{name}_worlds": input_buffer(ctx, data), **shared_arguments(name, kind.shared),
+                         f"n_{name}s": np.int32(count)})
             continue
         if kind.cls.bounded and blocks:
             origin = entry_anchors[name][:, :3]
@@ -175,9 +177,10 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
             raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
-        args += [input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
-                 input_buffer(ctx, np.ascontiguousarray(worlds[name])), *kind.shared, np.int32(kind.count)]
-    held = sum(a.size for a in args if isinstance(a, cl.MemoryObjectHolder))
+        args.update({f"{name}s": input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
+                     f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
+                     **shared_arguments(name, kind.shared), f"n_{name}s": np.int32(kind.count)})
+    held = sum(a.size for a in args.values() if isinstance(a, cl.MemoryObjectHolder))
     return args, anchor, size, held
 
 
@@ -249,22 +252,24 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
         order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
     else:
         order = np.zeros(1, np.int32)
-    head = [np.int32(count), _ray_buffer(ctx, order), np.int32(1 if ordered else 0),
-            _ray_buffer(ctx, origins), np.int32(1 if len(origins) > 1 else 0), _ray_buffer(ctx, directions),
-            _ray_buffer(ctx, tmax), np.int32(1 if len(tmax) > 1 else 0),
-            anchor.astype(np.float64).view(cl.cltypes.double4)[0]]
+    # the kernel's arguments by name (engine/signatures.py: cast's and occluded's rays), but for the results
+    rays = {"n_rays": np.int32(count), "order": _ray_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
+            "origins": _ray_buffer(ctx, origins), "origin_stride": np.int32(1 if len(origins) > 1 else 0),
+            "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),
+            "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
+            "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
     groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
     sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
     if kind == "occluded":
         variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
-        _run_into(ctx, kernel_for(ctx, variant), sizes, [*head, *args], out)
+        _run_into(ctx, variant, sizes, rays, out)
         return out.reshape(shape)
     identity = np.eye(3)
     camera = packed_frame(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", tracer.prepared.types, aovs, precision)
-    results = run_kernel(ctx, variant, [input_buffer(ctx, camera), *head, *args], sizes[0], count, aovs, precision, (count,),
-                         tracer.outputs, local_size=sizes[1])
+    results = run_kernel(ctx, variant, {"camera": input_buffer(ctx, camera), **rays}, sizes[0], count, aovs, precision,
+                         (count,), tracer.outputs, local_size=sizes[1])
     results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
 
@@ -279,17 +284,18 @@ def _ray_buffer(ctx, array: np.ndarray):
     return input_buffer(ctx, array)
 
 
-def _run_into(ctx, kernel, sizes, args, out: np.ndarray) -> None:
-    """Run the kernel over sizes (global, local) with out as its last argument and wait: on a CPU
-    device it writes into out's own memory, then a map makes it current (as request.run_kernel does
-    for the images)."""
+def _run_into(ctx, variant, sizes, args: dict, out: np.ndarray) -> None:
+    """Run the occluded kernel over sizes (global, local) with its arguments args (by name) and out as
+    its result, and wait: on a CPU device it writes into out's own memory, then a map makes it current
+    (as request.run_kernel does for the images)."""
+    kernel = kernel_for(ctx, variant)
     if ctx.device.type & cl.device_type.CPU:
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out)
-        launch(ctx, kernel, *sizes, [*args, buffer])
+        launch(ctx, kernel, *sizes, arguments(variant, {**args, "occluded_out": buffer}))
         mapped = cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, out.shape, out.dtype, is_blocking=True)[0]
         mapped.base.release()
         ctx.queue.finish()
     else:
         buffer = cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-        launch(ctx, kernel, *sizes, [*args, buffer])
+        launch(ctx, kernel, *sizes, arguments(variant, {**args, "occluded_out": buffer}))
         cl.enqueue_copy(ctx.queue, out, buffer)

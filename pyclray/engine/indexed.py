@@ -77,10 +77,6 @@ class IndexedEntries:
     def nbytes(self) -> int:
         return self.world_vertices.nbytes + self.faces.nbytes + self.ids.nbytes + self.vertices_host.nbytes
 
-    def kernel_args(self) -> list:
-        """The render kernel's arguments of the type (kernels/pyclray.cl: PYCLRAY_ENTRIES_INDEXED)."""
-        return [self.faces_buffer, self.vertices, self.world_buffer, self.ids_buffer]
-
     def rebase(self, prepared, eye, rows) -> None:
         """The per-view pass over the vertices: each in the eye's frame, on the device
         (kernels/rebase_kernels.cl; indexed entries exist on devices with float64 only)."""

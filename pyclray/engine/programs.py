@@ -23,6 +23,12 @@ from .bvh_wide import WIDE_NODE
 from .device import DeviceContext, is_pocl_cpu
 from .pocl_cpu import named_cpu
 from .shading import STRUCTS as SHADING_STRUCTS
+from .signatures import SIGNATURES, c_defines
+
+# each query's kernel file (the kernel of that name is in it; its signature: engine/signatures.py)
+QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl"}
+# the images that need the nearest hit's shape, not only its distance (PYCLRAY_TRACK_ID)
+WINNER_AOVS = ("normal", "id", "shaded", "primitive", "barycentric")
 
 # Exact IEEE division and square root on every device (CPUs do this anyway; GPUs may not by default).
 BUILD_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
@@ -37,7 +43,7 @@ _programs: dict = {}
 def kernel_dir():
     """The kernels/ folder: package data of pyclray.engine (in a checkout and in an installed wheel alike)."""
     folder = resources.files(__package__).joinpath("kernels")
-    if folder.joinpath("pyclray.cl").is_file():
+    if folder.joinpath("render.cl").is_file():
         return folder
     raise FileNotFoundError("pyclray's kernels/ folder is missing from this installation")
 
@@ -112,7 +118,8 @@ class Variant:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
 
     def defines(self) -> list[str]:
-        """The #defines that select this variant in kernels/pyclray.cl."""
+        """The #defines that select this variant in its query's kernel file (QUERY_FILES) and the
+        headers and shape files it includes."""
 
         def listed(types):
             return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
@@ -132,6 +139,8 @@ class Variant:
         if self.bvh and self.kind == "render":
             lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
+        if any(aov in WINNER_AOVS for aov in self.aovs):  # the winner matters, not only its distance
+            lines.append("#define PYCLRAY_TRACK_ID 1")
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
         if self.kind in ("cast", "occluded"):
@@ -140,42 +149,35 @@ class Variant:
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]
             # a work-item's rays traverse interleaved where leaves are blocks (a mesh's triangles:
-            # kernels/pyclray.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
+            # kernels/cast.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
             if any(REGISTRY[t].cast_blocks for t in self.shape_types):
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
-        if self.kind == "occluded":
-            lines.append("#define PYCLRAY_OCCLUDED 1")
         if self.kind == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")
         if self.framed and self.kind == "render":
             lines.append("#define PYCLRAY_FRAMED 1")
-        if any(self._mode(REGISTRY[t]) == "INDEXED" for t in self.shape_types):
+        if any(self.mode(t) == "INDEXED" for t in self.shape_types):
             lines.append("#define PYCLRAY_INDEXED 1")
         if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
-        # where a render reads each type's shapes (kernels/pyclray.cl): framed where tested, or copied
-        lines += [f"#define PYCLRAY_MODE_{t} {self._mode(REGISTRY[t])}" for t in self.shape_types]
+        # where a render reads each type's shapes (kernels/entries.h): framed where tested, or copied
+        lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
-            smooth = [REGISTRY[t] for t in self.smooth]
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
-            lines.append("#define PYCLRAY_SMOOTH_ARGS(P) "
-                         + " ".join(f"P(__global const {'real4' if self._mode(c) == 'INDEXED' else c.smooth_struct.name}*, "
-                                    f"{c.type}_smooth)" for c in smooth))
+        if self.kind in SIGNATURES:  # the kernel's parameters (engine/signatures.py)
+            lines += c_defines(self)
         return lines
 
     def _shape_calls(self) -> list[str]:
-        """Per type, its shared arrays' arguments (PYCLRAY_SHARED_ARGS_<type>(P): Shape.shared, after
-        its entries' array) and, for the usual types, how the kernel calls its functions (a type with
-        shared arrays defines PYCLRAY_HIT_<type> and the others in its kernel file: mesh instances)."""
+        """For the usual types, how the kernel calls their functions (a type with shared arrays, whose
+        functions take them too, defines PYCLRAY_HIT_<type> and the others in its kernel file: mesh
+        instances)."""
         lines = []
         for t in self.shape_types:
-            cls = REGISTRY[t]
-            args = " ".join(f"P(__global const {c_type}*, {t}_{name})" for name, c_type in cls.shared)
-            lines.append(f"#define PYCLRAY_SHARED_ARGS_{t}(P) {args}")
-            if not cls.shared:
+            if not REGISTRY[t].shared:
                 lines += [f"#define PYCLRAY_HIT_{t}(shape, ray, limit) {t}_hit(shape, ray)",
                           # a shadow ray (kernels/shading.h): self, the lanes whose winner is this entry
                           f"#define PYCLRAY_SHADOW_HIT_{t}(shape, ray, limit, self) {t}_hit(shape, ray)",
@@ -185,9 +187,10 @@ class Variant:
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
         return lines
 
-    def _mode(self, shape) -> str:
-        """Where a render reads a type's shapes (kernels/pyclray.cl): framed where tested from their
+    def mode(self, t: str) -> str:
+        """Where a render reads the shapes of type t (kernels/entries.h): framed where tested from their
         world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
+        shape = REGISTRY[t]
         if self.indexed and self.kind == "render" and shape.indexed:
             return "INDEXED"
         return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
@@ -199,7 +202,7 @@ class Variant:
         not inline there): the square root, reductions and vector stores written with the compiler's
         own operations (kernels/lanes.h); the camera's and the shapes' functions always inlined
         (PoCL's inliner leaves some out, just above its threshold), and each kernel's per-work-item
-        function kept out of the kernel, whose body PoCL copies three times (kernels/pyclray.cl).
+        function kept out of the kernel, whose body PoCL copies three times (kernels/common.h).
         None of it changes a bit of the results (tests/test_speedups.py)."""
         shapes = [REGISTRY[t] for t in self.shape_types]
         if self.kind == "rebase":
@@ -207,7 +210,7 @@ class Variant:
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines)]
         parts += [_read("common.h")]
-        if inline_builtins:
+        if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
@@ -217,14 +220,24 @@ class Variant:
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read("camera.h"), _read("bvh.h")] + ([_read("cast.h")] if cast else [])
+        parts += [_read(name) for name in ("shapes.h", "camera.h", "bvh.h")]
+        if cast:  # one ray at a time through the wide tree; mesh instances' own trees as packets of one
+            parts += [_read(name) for name in ("bvh_ray.h", "bvh_packet.h", "cast.h")]
+        else:  # camera packets through the wide tree (with the BVH), shadow rays through the binary one
+            parts.append(_read("bvh_packet.h"))
+            if self.bvh and self.bounded_types():
+                parts.append(_read("bvh_wide_packet.h"))
         if framed:  # each framed type's <type>_rebase (the per-view pass's, to the same bits), then its tests
             parts += [FRAMING_BEGIN, _read("frame.h"), "#define PYCLRAY_REBASE 1"]
             parts += [_read(name) for name in _kernel_files([s for s in shapes if s.frames_in_render])] + [FRAMING_END]
         parts += [_read(name) for name in _kernel_files(shapes)]
-        if shading:  # materials, lights and shadows: only in the programs that shade
-            parts.append(_read("shading.h"))
-        parts.append(_read("pyclray.cl"))  # pops the always_inline attribute before its kernels
+        if cast:
+            parts.append(_read("rays.h"))
+        else:
+            if shading:  # materials, lights and shadows: only in the programs that shade
+                parts.append(_read("shading.h"))
+            parts += [_read(name) for name in ("entries.h", "nearest.h", "images.h")]
+        parts.append(_read(QUERY_FILES[self.kind]))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
     def _rebase_source(self, shapes, inline_builtins: bool = False) -> str:

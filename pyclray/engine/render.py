@@ -52,29 +52,26 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
                       framed=prepared.framed, indexed=prepared.indexed)
-    # a tuple in shape_args is the argument of shadow rays only (each shape type's count, tile lists)
-    shape_args = inputs.shape_args(prepared, acceleration, shadows)
-    shape_args = [a for arg in shape_args for a in ((arg if shadows else ()) if isinstance(arg, tuple) else (arg,))]
     tile = culling.TILE
-    tiles_x = -(-view.image.width // tile)
-    args = [inputs.camera, np.int32(col0), np.int32(row0), np.int32(cols), np.int32(rows),
-            np.int32(tile.bit_length() - 1), np.int32(tiles_x), *shape_args]
-    # the arguments before each image's buffer, in the kernel's order (kernels/pyclray.cl)
-    extra = {}
+    # the kernel's arguments by name (engine/signatures.py: the render kernel's), but for the images' buffers
+    args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
+            "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
+            "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
     if "position" in aovs:
-        extra["position"] = inputs.eye_parts()
+        args["eye_high"], args["eye_low"] = inputs.eye_parts()
     if "shaded" in aovs:
-        extra["shaded"] = inputs.lighting(prepared) + [prepared.kinds[t].smooth for t in smooth]
+        args.update(inputs.lighting(prepared))
+        args.update({f"{t}_smooth": prepared.kinds[t].smooth for t in smooth})
     global_size, local_size = launch_size(lanes, col0, row0, cols, rows, ctx.device.max_work_group_size)
     # the frame buffers hold this view from its pass to its kernel: both enqueued under the lock, on the
     # device's one in-order queue, which runs another view's pass only after this kernel
     with prepared.lock:
         uploads = prepared.rebase(inputs.eye, inputs.rows)
         pending = enqueue_kernel(ctx, variant, args, global_size, cols * rows, aovs, precision, (rows, cols), tracer.outputs,
-                                 local_size, extra)
+                                 local_size)
     # until it has run: what it reads (a CPU device reads the host arrays themselves, which a handle
     # closed or a cache cleared between two frames of render_views would otherwise free)
-    pending.keep = (pending.keep, uploads, prepared, inputs, args, extra)
+    pending.keep = (pending.keep, uploads, prepared, inputs, args)
 
     def frame() -> Frame:
         return Frame(with_labels(view, pending.result(), asked), precision=precision, device=ctx.device.name.strip(),
@@ -86,7 +83,7 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
 def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):
     """(global size, local size or None) of the render kernel over a window: one packet of
     programs.packet_shape(lanes) pixels per work-item, packets aligned to multiples of that shape in
-    the image (kernels/pyclray.cl: render_packet); work-groups of one tile's packets where the device
+    the image (kernels/render.cl: render_packet); work-groups of one tile's packets where the device
     allows (the kernel needs none)."""
     width, height = packet_shape(lanes)
     tile = culling.TILE

@@ -10,6 +10,7 @@ from ..model.errors import DeviceError, RequestError
 from ..model.layout import PRECISIONS
 from .device import DeviceContext, has_fp64, launch
 from .programs import kernel_for
+from .signatures import arguments, image_parameter
 
 REAL = {"fp32": np.float32, "fp64": np.float64}  # the numpy type of a precision
 
@@ -131,12 +132,9 @@ class OutputBuffers:
         return sum(buffer.size for buffer in self.buffers.values())
 
 
-def _interleave(aovs, buffers, extra) -> list:
-    """Each image's buffer, preceded by the arguments that image's code takes (extra[aov])."""
-    out = []
-    for aov, buffer in zip(aovs, buffers):
-        out += (extra or {}).get(aov, []) + [buffer]
-    return out
+def _with_images(args: dict, aovs, buffers) -> dict:
+    """The kernel's arguments by name: args and each image's buffer."""
+    return {**args, **{image_parameter(aov): buffer for aov, buffer in zip(aovs, buffers)}}
 
 
 def _zero_copy(ctx) -> bool:
@@ -144,11 +142,10 @@ def _zero_copy(ctx) -> bool:
     return bool(ctx.device.type & cl.device_type.CPU)
 
 
-def run_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
-               local_size=None, extra=None):
+def run_kernel(ctx, variant, args: dict, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
+               local_size=None):
     """Enqueue the kernel with output buffers for the asked images and read them back into new arrays."""
-    return enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept, local_size,
-                          extra).result()
+    return enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept, local_size).result()
 
 
 class Pending:
@@ -167,10 +164,11 @@ class Pending:
         return self.images
 
 
-def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
-                   local_size=None, extra=None) -> Pending:
-    """Enqueue the kernel with output buffers for the asked images, new arrays (see Pending); on
-    devices other than CPUs the images go through the handle's kept buffers."""
+def enqueue_kernel(ctx, variant, args: dict, global_size, count, aovs, precision, shape_prefix, kept: OutputBuffers,
+                   local_size=None) -> Pending:
+    """Enqueue the kernel with output buffers for the asked images, new arrays (see Pending). args:
+    the kernel's other arguments by parameter name (engine/signatures.py); on devices other than
+    CPUs the images go through the handle's kept buffers."""
     outputs = {k: TABLE[k].empty((count,), precision) for k in aovs}
     images = {k: v.reshape(shape_prefix + v.shape[1:]) for k, v in outputs.items()}
     kernel = kernel_for(ctx, variant)
@@ -181,7 +179,7 @@ def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shap
         # enqueued next runs on while its images are returned, engine/render.py: render_views)
         flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
         buffers = [cl.Buffer(ctx.context, flags, hostbuf=array) for array in outputs.values()]
-        launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
+        launch(ctx, kernel, global_size, local_size, arguments(variant, _with_images(args, aovs, buffers)))
         maps = [
             cl.enqueue_map_buffer(ctx.queue, buffer, cl.map_flags.READ, 0, array.shape, array.dtype, is_blocking=False)[0]
             for array, buffer in zip(outputs.values(), buffers)
@@ -192,7 +190,7 @@ def enqueue_kernel(ctx, variant, args, global_size, count, aovs, precision, shap
     # other devices: device buffers kept and reused, and a copy of each image
     with kept.lock:
         buffers = kept.get(ctx, count, aovs, precision)
-        launch(ctx, kernel, global_size, local_size, [*args, *_interleave(aovs, buffers, extra)])
+        launch(ctx, kernel, global_size, local_size, arguments(variant, _with_images(args, aovs, buffers)))
         for array, buffer in zip(outputs.values(), buffers):
             cl.enqueue_copy(ctx.queue, array, buffer, is_blocking=False)
         ctx.queue.finish()

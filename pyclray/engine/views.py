@@ -14,6 +14,7 @@ from ..model.scene import Scene, check_renderable, check_shape_count
 from . import shading
 from .prepared import PreparedScene
 from .request import REAL, input_buffer
+from .signatures import shared_arguments
 
 
 # Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
@@ -129,7 +130,7 @@ class ViewInputs:
         """The bytes of its device buffers (the camera, tile lists, lights)."""
         buffers = [self.camera, *(b for pair in self.tiles.values() for b in pair)]
         if self._lighting is not None:
-            buffers.append(self._lighting[1])
+            buffers.append(self._lighting["lights"])
         return sum(b.size for b in buffers)
 
     def eye_parts(self) -> list:
@@ -141,37 +142,45 @@ class ViewInputs:
             self._eye_parts = [np.array((*eye_high, 0), real), np.array((*(self.eye - eye_high.astype(np.float64)), 0), real)]
         return self._eye_parts
 
-    def lighting(self, prepared: PreparedScene) -> list:
-        """The shaded image's arguments (kernels/shading.h): materials, the lights in the camera's
-        frame, their count, ambient and background; made when a view first asks for that image (a
-        view of depth, normal and id packs no lights: render_views' host work per view)."""
+    def lighting(self, prepared: PreparedScene) -> dict:
+        """The shaded image's arguments by name (kernels/shading.h): materials, the lights in the
+        camera's frame, their count, ambient and background; made when a view first asks for that
+        image (a view of depth, normal and id packs no lights: render_views' host work per view)."""
         if self._lighting is None:
             ctx, camera, lights, shades, precision = self._made
             packed = shading.pack_lights(SimpleNamespace(camera=camera, lights=lights), precision)
             real = REAL[precision]
-            self._lighting = [prepared.materials, input_buffer(ctx, packed), np.int32(len(packed)),
-                              np.array((*shades.ambient, 0), real), np.array((*shades.background, 0), real)]
+            self._lighting = {"materials": prepared.materials, "lights": input_buffer(ctx, packed),
+                              "n_lights": np.int32(len(packed)), "ambient": np.array((*shades.ambient, 0), real),
+                              "background": np.array((*shades.background, 0), real)}
         return self._lighting
 
-    def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> list:
-        """The kernel's shape arguments: the BVH (the wide nodes, with shadows the binary ones too,
-        refs) and per type its frame buffer and count, or per type its frame buffer and tile lists
-        (a tuple: the argument of shadow rays only, each type's count)."""
-        args = []
+    def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> dict:
+        """The render kernel's shape arguments by name (engine/signatures.py): a framed scene's eye
+        frame; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
+        entries and count, or per type its entries and tile lists (and with shadows its count)."""
+        args = {}
         if prepared.framed:  # the eye's frame (the eye, the camera's axes), float64: each shape is framed on it
-            args += [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (self.eye, *self.rows)]
+            for name, v in zip(("frame_origin", "frame_u", "frame_v", "frame_w"), (self.eye, *self.rows)):
+                args[name] = np.append(v, 0.0).view(cl.cltypes.double4)[0]
         if acceleration == "bvh" and prepared.bvh.types:
-            args += [prepared.wide_nodes, *([prepared.nodes] if shadows else []), prepared.refs]
-        for kind in prepared.kinds.values():
-            # its entries: the world entries, ids and primitive indices (framed) or the frame buffer
+            args["wide_nodes"], args["refs"] = prepared.wide_nodes, prepared.refs
+            if shadows:
+                args["nodes"] = prepared.nodes
+        for t, kind in prepared.kinds.items():
+            # its entries: the faces and vertices (indexed), the world entries, ids and primitive
+            # indices (framed), or the frame buffer; then the arrays its entries share
             if kind.indexed is not None:
-                entries = kind.indexed.kernel_args()
+                args.update({f"{t}_faces": kind.indexed.faces_buffer, f"{t}_vertices": kind.indexed.vertices,
+                             f"{t}_world_vertices": kind.indexed.world_buffer, f"{t}_ids": kind.indexed.ids_buffer})
+            elif kind.framed:
+                args.update({f"{t}_worlds": kind.world_buffer, f"{t}_ids": kind.ids_buffer,
+                             f"{t}_primitives": kind.primitives_buffer})
             else:
-                entries = [kind.world_buffer, kind.ids_buffer, kind.primitives_buffer] if kind.framed else [kind.frame]
-            entries += kind.shared  # the arrays its entries share (mesh instances' triangles and BVHs)
-            if acceleration == "bvh":
-                args += [*entries, np.int32(kind.count)]
-            else:
-                start, index = self.tiles[kind.name]
-                args += [*entries, start, index, (np.int32(kind.count),)]
+                args[f"{t}s"] = kind.frame
+            args.update(shared_arguments(t, kind.shared))
+            if acceleration == "bvh" or shadows:
+                args[f"n_{t}s"] = np.int32(kind.count)
+            if acceleration != "bvh":
+                args[f"{t}_tile_start"], args[f"{t}_tile_list"] = self.tiles[t]
         return args

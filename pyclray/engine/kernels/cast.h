@@ -1,4 +1,4 @@
-/* cast's frames (kernels/pyclray.cl): each shape a ray visits is framed on that ray's own origin by
+/* cast's frames (kernels/rays.h): each shape a ray visits is framed on that ray's own origin by
  * its <type>_rebase, as the per-view pass frames it on the eye (kernels/rebase.cl), so that the
  * terms a ray's origin decides (a sphere's c = |F|^2 - r^2, a plane's or a face's signed distance, a
  * cylinder's distance from its axis) come from the shape's float64 world entry and the float64

@@ -12,7 +12,7 @@
  * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_frame d
  * / k (exact: k is a power of two), whose length is at most 1, so that kernels/bvh.h's cone is at
  * least as wide in the object's units as in the world's. Each lane's nearest triangle is kept with
- * its hit (kernels/pyclray.cl's best_sub): the winners' normals (the object normal through
+ * its hit (kernels/nearest.h's best_sub): the winners' normals (the object normal through
  * sign(det A) A^-T, normalized in float64), indices and barycentrics come from it. */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
@@ -304,7 +304,7 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
 #define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
     instance_cast_normal(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #else
-/* how kernels/pyclray.cl calls an instance's functions: with the shared arrays, the lanes' best so
+/* how kernels/nearest.h calls an instance's functions: with the shared arrays, the lanes' best so
  * far, and for the winners the triangle each lane's hit was on (best_sub, kept from hit_sub) */
 #define PYCLRAY_SUBPRIMITIVES 1
 #define PYCLRAY_HIT_instance(shape, ray, limit) \

@@ -218,7 +218,7 @@ inline vec3v v3_normalize(vec3v v)
 }
 
 /* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
- * cast traces one ray at a time (LANES 1; a work-item traces CAST_GROUP of them) from each shape's own anchor (kernels/pyclray.cl) and
+ * cast traces one ray at a time (LANES 1; a work-item traces CAST_GROUP of them) from each shape's own anchor (kernels/rays.h) and
  * keeps the ray as given in float64: its world origin (unbounded shapes, which have no anchor, read
  * it) and its unit direction, of which dir is the rounding. */
 typedef struct {
@@ -236,7 +236,7 @@ typedef struct {
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
  * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the
- * eye (kernels/pyclray.cl) */
+ * eye (kernels/entries.h) */
 #if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED)
 #define SHAPE_SPACE
 #else

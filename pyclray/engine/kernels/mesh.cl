@@ -338,7 +338,7 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
     return v3((real)n.x, (real)n.y, (real)n.z);
 }
 
-/* kernels/pyclray.cl's cast visit of a block (PYCLRAY_CAST_MODE_<type> BLOCKS): its lanes hit, in
+/* kernels/rays.h's cast visit of a block (PYCLRAY_CAST_MODE_<type> BLOCKS): its lanes hit, in
  * lane order (the leaf's order: the same winner on an exact tie as one by one) */
 #define MESH_BLOCKS(type) ((__global const double*)type##_worlds)
 #define PYCLRAY_CAST_TEST_BLOCKS(Type, type)                                        \

@@ -1,5 +1,5 @@
 /* The shaded image (scene-format.md, "Shading"): compiled in only when it is asked for, and its shadow
- * rays only with PYCLRAY_SHADOWS. The host puts this file before kernels/pyclray.cl, whose render
+ * rays only with PYCLRAY_SHADOWS. The host puts this file before kernels/render.cl, whose render
  * kernel expands the macros below (they use the kernel's arguments: the shapes, the camera).
  *
  * Everything is computed in the camera's frame, where the hit point is p = s D (D the camera ray's
@@ -61,18 +61,13 @@
     const vec3v n_facing = v3_select(v3_scale(n_shading, SPLAT(-1)), n_shading, v3_dot(n_shading, D) < 0); \
     const vec3v n_l = v3_select(n_s, n_facing, has_shading);
 #else
-#define PYCLRAY_SMOOTH_ARGS(P)
 #define PYCLRAY_SMOOTH_BEGIN
 #define PYCLRAY_SMOOTH_NORMALS
 #define PYCLRAY_LIGHTING_NORMAL const vec3v n_l = n_s;
 #endif
 
-#define PYCLRAY_SHADED_ARGS(P)                                                        \
-    P(__global const Material*, materials) P(__global const Light*, lights) P(const int, n_lights) \
-    P(const real4, ambient) P(const real4, background) PYCLRAY_SMOOTH_ARGS(P) P(__global real*, shaded_out)
-
 /* per lane: the winner's material (albedo, specular, shininess) and whether its type is flat,
- * gathered in the winners' loop of kernels/pyclray.cl (each distinct winner once) */
+ * gathered in the winners' loop of kernels/nearest.h (each distinct winner once) */
 #define PYCLRAY_MATERIALS_BEGIN                                                       \
     vec3v albedo = v3(SPLAT(0), SPLAT(0), SPLAT(0));                                  \
     realv specular = SPLAT(0), shininess = SPLAT(1);                                  \
@@ -149,7 +144,7 @@ inline void shadow_box_origins(ShadowBoxes* s, const vec3v origin, const realv m
 }
 
 /* per lane, where the ray from its own origin enters the node's box before limit, else +inf
- * (kernels/bvh.h's box_entries, with the faces taken relative to the origin and the margin; the
+ * (kernels/bvh_packet.h's box_entries, with the faces taken relative to the origin and the margin; the
  * origin's rounding by the margin, the faces' differences by the ray's cone, as there) */
 inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
 {
@@ -184,7 +179,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
         }                                                                             \
     }
 /* A point light's shadow packet, traversed from the light (all its lanes share that origin, so
- * kernels/bvh.h's box_entries takes each node's faces relative to it once for all lanes): lane i's
+ * kernels/bvh_packet.h's box_entries takes each node's faces relative to it once for all lanes): lane i's
  * box ray runs from the light along -dir_i over [0, limit_i], the segment the shape tests cover
  * from the lane's own origin (they are still made from there: their exactness does not change).
  * A point the shape test puts at s along dir_i from the origin o_i lies at limit_i - s from the

@@ -1,0 +1,138 @@
+/* The render query: the nearest hit of each camera ray, a packet of pixels per work-item, written
+ * into the images asked for. The host puts before this file common.h, lanes.h, the generated struct
+ * header, shapes.h, camera.h, the BVH's headers, the file of each shape type present, shading.h (with
+ * the shaded image), entries.h, nearest.h and images.h, and selects what is compiled with #defines
+ * (pyclray/engine/programs.py): the precision (PYCLRAY_FP64), the lanes and the packet's shape, the
+ * shape types present and where each is read (PYCLRAY_MODE_<type>), tile lists or the BVH
+ * (PYCLRAY_BVH), the images asked for (PYCLRAY_AOV_<name>) and shadow rays (PYCLRAY_SHADOWS).
+ * Geometry and camera come in buffers, so moving a shape or the camera never recompiles. */
+
+/* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and
+ * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera frame. */
+#if PYCLRAY_PACKET_H == 1
+#define PYCLRAY_LANE_COLUMN LANE_INDEX
+#define PYCLRAY_LANE_ROW SPLAT_INT(0)
+#else
+#define PYCLRAY_LANE_COLUMN (LANE_INDEX % SPLAT_INT(PYCLRAY_PACKET_W))
+#define PYCLRAY_LANE_ROW (LANE_INDEX / SPLAT_INT(PYCLRAY_PACKET_W))
+#endif
+inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j0)
+{
+    const int width = camera->width, height = camera->height;
+    const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
+    /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
+     * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
+     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
+     * keeps its relative precision even for a tiny fov or next to the principal point */
+    const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
+                                            / SPLAT((real)width));
+    const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
+                                            / SPLAT((real)height));
+    /* normalized in the camera frame, where each component is divided on its own: the tiny
+     * lateral components of a narrow field of view keep their relative precision */
+    const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
+    RayPacket ray;
+    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
+    ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_SHADOWS
+    ray.from_eye = 1;
+#endif
+    return ray;
+}
+
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_ONE_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
+/* One bounded type (PYCLRAY_ONE_BOUNDED): leaf position q is entry q of its arrays, so a leaf's
+ * entries are asked for at once where the traversal first meets the leaf (kernels/bvh_wide_packet.h): the
+ * entries its tests read, in the frame (COPIED), in the world (FRAMED), or its faces (INDEXED: the
+ * vertices they name follow when read). PoCL's CPU device only: elsewhere OpenCL's prefetch is a
+ * call, or nothing. */
+#define PYCLRAY_PREFETCH_RANGE(p, bytes) \
+    for (int byte = 0; byte < (bytes); byte += 64) __builtin_prefetch((__global const char*)(p) + byte);
+#define PYCLRAY_PREFETCH_COPIED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##s[leaf_first], leaf_count * (int)sizeof(Type))
+#define PYCLRAY_PREFETCH_FRAMED(Type, type) \
+    PYCLRAY_PREFETCH_RANGE(&type##_worlds[leaf_first], leaf_count * (int)sizeof(Type##World))
+#define PYCLRAY_PREFETCH_INDEXED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##_faces[leaf_first], leaf_count * (int)sizeof(int4))
+#define PYCLRAY_PACKET_PREFETCH_TYPE(Type, type) PYCLRAY_CAT(PYCLRAY_PREFETCH_, PYCLRAY_MODE_##type)(Type, type)
+#undef PYCLRAY_PACKET_LEAF_PREFETCH
+#define PYCLRAY_PACKET_LEAF_PREFETCH(first, count)                                    \
+    {                                                                                 \
+        const int leaf_first = (first), leaf_count = (count);                         \
+        PYCLRAY_BOUNDED(PYCLRAY_PACKET_PREFETCH_TYPE)                                 \
+    }
+#endif
+
+/* One work-item per packet of PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels: packet column
+ * get_global_id(0) and row get_global_id(1), counted from the packet of the window's first pixel (a
+ * render of a window of the image starts at row row0 and column col0, and writes its own
+ * cols x rows images; packets start at multiples of their size in the image, so that a window's
+ * pixels are the whole image's, and none straddles two tiles). Tiles are 1 << tile_shift pixels
+ * square, tiles_x per image row (and the work-groups where the device allows). */
+PYCLRAY_KERNELS_BEGIN
+PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYCLRAY_PARAMETERS)
+{
+    const int i0 = (col0 / PYCLRAY_PACKET_W + packet) * PYCLRAY_PACKET_W;
+    const int j0 = (row0 / PYCLRAY_PACKET_H + r) * PYCLRAY_PACKET_H;
+    if (i0 >= col0 + cols || j0 >= row0 + rows) return;
+    const int tile = (j0 >> tile_shift) * tiles_x + (i0 >> tile_shift);  /* shifts: no division per packet */
+    /* the columns and rows in the window (no min or max: PoCL's would be calls, see v_sqrt); lane 0
+     * is element (j0 - row0) cols + (i0 - col0) of the window's images */
+    const int from = col0 > i0 ? col0 - i0 : 0;
+    const int to = col0 + cols - i0 < PYCLRAY_PACKET_W ? col0 + cols - i0 : PYCLRAY_PACKET_W;
+    PacketPlace place;
+    place.index = (long)(j0 - row0) * (long)cols + (long)(i0 - col0);
+    place.stride = cols;
+    place.row_first = row0 > j0 ? row0 - j0 : 0;
+    place.row_end = row0 + rows - j0 < PYCLRAY_PACKET_H ? row0 + rows - j0 : PYCLRAY_PACKET_H;
+    const RayPacket ray = camera_rays(camera, i0, j0);
+#ifdef PYCLRAY_FRAMED
+    const Frame view_frame = {frame_origin.xyz, frame_u.xyz, frame_v.xyz, frame_w.xyz};  /* the eye's */
+#endif
+
+    PYCLRAY_FIND_NEAREST
+#if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
+    /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
+    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
+    PYCLRAY_TRAVERSE_PACKET_WIDE(wide_nodes, box, best, PYCLRAY_VISIT)
+#endif
+    PYCLRAY_WRITE_IMAGES(place, from, to)
+}
+
+/* The work-groups in a scattered order: group g of n works on the block of packets at g s mod n,
+ * s the first integer from 5n/8 up that is prime to n (a bijection; consecutive groups land far
+ * apart). Why: PoCL's CPU device hands its threads runs of consecutive work-groups (64 at a time
+ * for a 256x256 image's 256 groups, a quarter of the image); in image order a thread that drew the
+ * sky idled while the other traced the ground, and a render kept 1.5 of the 2 cores busy.
+ * Scattered, each run samples the whole image: 1.8 cores, a same-camera render of 100,000 spheres
+ * at 256x256 15% faster, a view of render_views 12% (medians of alternating runs against image
+ * order, quiet machine). Every packet is still traced once, by the same code. Not for cast and
+ * occluded: their batches come in ray order, and a thread's consecutive groups reuse what the ones
+ * before brought into its caches (scattered, 100,000 view rays over 16,384 spheres took 11.8 ms
+ * instead of 8.7, occluded 3.2-4.2 instead of 2.3). Nor for images of SCATTERED_BELOW groups or
+ * more (a 512x512 image has 1,024): their 16 runs or more balance the threads well enough, and
+ * scattering only costs the caches what neighbouring tiles share (a 998,000-triangle mesh at 512x512: 35-37 ms
+ * scattered against 33-34 ms in order). */
+#define SCATTERED_BELOW 1024
+inline int scattered_group(const int g, const int n)
+{
+    int s = n - n / 4 - n / 8;
+    for (;; ++s) {
+        int a = s, b = n;  /* Euclid's gcd(s, n) */
+        while (b != 0) {
+            const int t = a % b;
+            a = b;
+            b = t;
+        }
+        if (a == 1) break;
+    }
+    return (int)(((long)g * (long)s) % (long)n);
+}
+
+__kernel void render(PYCLRAY_PARAMETERS)
+{
+    const int nx = get_num_groups(0);
+    const int n = nx * get_num_groups(1), in_order = get_group_id(1) * nx + get_group_id(0);
+    const int g = n < SCATTERED_BELOW ? scattered_group(in_order, n) : in_order;
+    render_packet((g % nx) * get_local_size(0) + get_local_id(0), (g / nx) * get_local_size(1) + get_local_id(1),
+                  PYCLRAY_ARGUMENTS);
+}
