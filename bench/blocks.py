@@ -76,7 +76,7 @@ def mitsuba_direct(scene):
     """Mitsuba llvm_ad_rgb's direct integrator on the scene (its diffuse version: two-sided diffuse
     BSDFs, the same lights as emitters), one pixel-centre sample per pixel and as many emitter
     samples as the scene has lights: the same number of shadow rays per pixel as pyclray casts."""
-    from pyclray.engine import device
+    from pyclray.engine.opencl import device
     from pyclray.reference import mitsuba
     from pyclray.reference.validation import shaded as shaded_check
     from pyclray.model.lights import effective_lights
@@ -95,7 +95,7 @@ def mitsuba_direct(scene):
 def calls_of(group: str) -> dict:
     """label -> a call of the group's cases."""
     import pyclray
-    from pyclray.engine import device
+    from pyclray.engine.opencl import device
 
     name, size, cases = GROUPS[group]
     scene = pyclray.load_scene(SCENES / f"{name}.toml").with_size(size, size)
@@ -115,7 +115,7 @@ def calls_of(group: str) -> dict:
             lit = replace(scene, shading=replace(scene.shading, shadows=shadows))
             calls[label] = lambda lit=lit: pyclray.render(lit, ("shaded",))
         elif case == "llvm":
-            from pyclray.engine import device
+            from pyclray.engine.opencl import device
             from pyclray.reference import mitsuba
 
             mitsuba.import_mitsuba("llvm_ad_rgb")

@@ -10,7 +10,7 @@ The reference (``reference``) is a full binned SAH build written for clarity, in
 level by level: at every node, 32 bins along each of the three axes, every split between bins
 weighed by the surface area heuristic (traversal and intersection cost 1, as bvh.sah_cost), a leaf
 where the node holds at most LEAF_SIZE primitives and testing them costs no more than the best
-split. It is slow (seconds per 100,000 primitives) and independent of pyclray.engine.bvh_sah's
+split. It is slow (seconds per 100,000 primitives) and independent of pyclray.engine.bvh.sah's
 compiled builder, which it checks. The SAH cost (bvh.sah_cost: the expected number of box and
 primitive tests of a random ray, relative to the root's area) is the quality measure.
 
@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from pyclray.engine import bvh
+from pyclray.engine.bvh import tree as bvh
 
 from . import scale
 
@@ -195,7 +195,7 @@ COLD = """
 import sys, time
 import numpy as np
 bounds = np.load(sys.argv[1])
-from pyclray.engine import bvh
+from pyclray.engine.bvh import tree as bvh
 start = time.perf_counter()
 bvh.build(bounds)
 print(time.perf_counter() - start)

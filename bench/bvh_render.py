@@ -1,5 +1,5 @@
 """What the tree's quality does to render time: the same scenes rendered through the Morton LBVH and
-through the binned SAH tree (pyclray.engine.bvh.build's two methods), in one process, in blocks
+through the binned SAH tree (pyclray.engine.bvh.tree.build's two methods), in one process, in blocks
 (each case a block of calls on its own, a pause at each switch, the order reversed every other
 round; the median of all timed calls, in wall and in CPU seconds: the CPU time moves less with the
 load of a shared machine).
@@ -22,8 +22,10 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine import api, bvh, scene_bvh
-from pyclray.engine.device import context_for
+from pyclray.engine import api
+from pyclray.engine.bvh import tree as bvh
+from pyclray.engine.bvh import scene as scene_bvh
+from pyclray.engine.opencl.device import context_for
 
 from . import scale
 

@@ -5,8 +5,8 @@
 A_KERNELS, B_KERNELS: two pyclray/engine/kernels/ folders (B: this checkout's), e.g. a `git worktree`
 of main's beside a branch's. Only the OpenCL sources differ between A and B: the host code, and so the
 buffers' layout, is this checkout's, so it measures kernel changes that keep the layout. Each
-side's program is built from its folder (engine/programs.py reads its sources from kernel_dir(), and
-cast's launch asks request.kernel_for: both are pointed at the side's build); the two then alternate
+side's program is built from its folder (engine/launch/programs.py reads its sources from kernel_dir(), and
+cast's launch asks run.kernel_for: both are pointed at the side's build); the two then alternate
 in blocks of 3 calls (one untimed call and a short pause at each switch), and the medians of each
 call's process CPU time are compared. Before timing, every result of both (depth, normal, id at fp32
 and fp64, occluded) is compared bit for bit.
@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 import pyclray
-from pyclray.engine import cast as cast_module
-from pyclray.engine import programs, request
+from pyclray.engine.queries import cast as cast_module
+from pyclray.engine.launch import programs
+from pyclray.engine.launch import run
 
 from .meshes import camera_for, meshes
 
@@ -58,7 +59,7 @@ def switcher(folders: dict):
                 programs.clear()
         return built[key]
 
-    cast_module.kernel_for = request.kernel_for = kernel_for
+    cast_module.kernel_for = run.kernel_for = kernel_for
 
     def use(side):
         current[0] = side

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine.device import context_for, describe
+from pyclray.engine.opencl.device import context_for, describe
 
 from . import scale
 from .meshes import camera_for, incoherent_rays, meshes

@@ -11,7 +11,7 @@ with one shapegroup holding the mesh and one instance per placement, its aov int
 depth, geometric normal and shape index (as pyclray.reference.mitsuba renders a check). Both warm:
 each system renders once before its timed block (Mitsuba's JIT compiles its kernel at the first),
 blocks rotate with a pause at each switch (bench.open3d_compare.blocks). Prints the medians (ms),
-the speed-up, pyclray's bytes per instance (engine/instances.py's instance_bytes) and its first
+the speed-up, pyclray's bytes per instance (engine/scene/instances.py's instance_bytes) and its first
 render (the scene's build: packing, both levels' BVHs). The machine is shared: compare ratios.
 --no-mitsuba times pyclray alone: Mitsuba 3.9's llvm render of a shapegroup's instances grows faster
 than their number (measured here: 10 s for 1,000 instances, 130 s and 3.2 GB for 3,000; at 10,000
@@ -69,8 +69,8 @@ def mitsuba_scene(scene: pyclray.Scene):
 
 
 def run(count=10_000, triangles=50_000, size=512, rounds=3, block=3, mitsuba=True):
-    from pyclray.engine.device import context_for
-    from pyclray.engine.instances import instance_bytes
+    from pyclray.engine.opencl.device import context_for
+    from pyclray.engine.scene.instances import instance_bytes
     from pyclray.engine.api import tracer_for
 
     scene = field(count, triangles, size)

@@ -7,11 +7,11 @@ cost the scene is prepared anew, then a 512x512 render of depth, normal, id and 
 times, the variants rotating over the rounds. Reported: the median process CPU time (all of PoCL's
 threads together), which another process's load on this shared machine does not inflate as it does
 wall time; each variant as a ratio to the first (the baseline: leaves of 7, a node's visit 4 shape
-tests, engine/bvh.py's SCENE_LEAF_SIZE and SCENE_TRAVERSAL). The wide BVH's leaf code holds at most 7
-(engine/bvh_wide.py).
+tests, engine/bvh/tree.py's SCENE_LEAF_SIZE and SCENE_TRAVERSAL). The wide BVH's leaf code holds at most 7
+(engine/bvh/wide.py).
 
 A scene of SAH_FROM shapes or more (both meshes) takes its leaf size and node cost from
-engine/scene_bvh.py's SCENE_LEAF_SIZE (a floor over Mesh.leaf_size) and SCENE_TRAVERSAL: both are
+engine/bvh/scene.py's SCENE_LEAF_SIZE (a floor over Mesh.leaf_size) and SCENE_TRAVERSAL: both are
 set here for each variant, and Mesh.leaf_size with them (smaller scenes)."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine import scene_bvh
+from pyclray.engine.bvh import scene as scene_bvh
 
 from .meshes import camera_for, meshes
 

@@ -16,10 +16,10 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
 - memory: the bytes the prepared scene holds per triangle (PreparedScene.nbytes: vertices, faces or
   triangle entries, ids, the BVH; issue 23's target <= 64), in the build's row; and after the
   table (memory_rows): what a first cast adds per triangle (cast's buffers, built when a cast first
-  asks: engine/cast.py's cast_inputs, a mesh's in blocks (engine/cast_blocks.py), and the tree's
+  asks: engine/queries/cast.py's cast_inputs, a mesh's in blocks (engine/queries/cast_blocks.py), and the tree's
   leaf-order bounds on the host where a cast gathered them), and a mesh shared
   by 100 instances (bench.instances' field: the shared vertices, faces and tree per unique triangle,
-  engine/instances.py's instance_bytes).
+  engine/scene/instances.py's instance_bytes).
 Prints a table of medians (ms) and the ratios, for primary and incoherent rays also of each call's
 process CPU time (with_cpu). The machine is shared: compare ratios.
 """
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 import pyclray
-from pyclray.engine.device import context_for
+from pyclray.engine.opencl.device import context_for
 from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 
@@ -162,7 +162,7 @@ def cast_bytes(scene) -> int:
 
 def memory_rows(bunny_path=None) -> list[str]:
     """Bytes per triangle: each mesh's prepared scene and what a first cast adds; a shared mesh's."""
-    from pyclray.engine.instances import instance_bytes
+    from pyclray.engine.scene.instances import instance_bytes
 
     from .instances import field
 

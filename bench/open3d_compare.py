@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 
 import pyclray
-from pyclray.engine import bvh
+from pyclray.engine.bvh import tree as bvh
 from pyclray.model.shapes import REGISTRY
-from pyclray.engine import bvh_wide
+from pyclray.engine.bvh import wide as bvh_wide
 from pyclray.engine import api
-from pyclray.engine.device import context_for
-from pyclray.engine.views import ViewState
-from pyclray.engine.scene_bvh import scene_bvh as build_scene_bvh
+from pyclray.engine.opencl.device import context_for
+from pyclray.engine.scene.views import ViewState
+from pyclray.engine.bvh.scene import scene_bvh as build_scene_bvh
 
 from . import scale
 

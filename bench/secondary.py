@@ -128,7 +128,7 @@ def flag_ab(flag: str, rounds: int) -> None:
     kernels built with and without -D<flag> (the old code kept under #ifdef <flag> while measuring)
     take turns on the same calls, each switch rebuilding from the disk cache; medians of wall and
     process CPU ms per call. A 3% change showed in every case this way (docs/benchmarks.md)."""
-    from pyclray.engine import programs
+    from pyclray.engine.launch import programs
 
     base = list(programs.BUILD_OPTIONS)
     sets = {"view": view_rays(100_000), "box": scale.random_rays(100_000)}

@@ -19,7 +19,12 @@ import pyopencl as cl
 import pytest
 
 import pyclray
-from pyclray.engine import api, culling, device, programs, render, signatures
+from pyclray.engine import api
+from pyclray.engine.bvh import tiles as culling
+from pyclray.engine.opencl import device
+from pyclray.engine.launch import programs
+from pyclray.engine.queries import render
+from pyclray.engine.launch import signatures
 from pyclray.model.aovs import TABLE
 from pyclray.reference import error_model, mitsuba, oracle
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import pyclray
-from pyclray.engine import programs
+from pyclray.engine.launch import programs
 
 SIMPLE_SPHERE = """
 /* The textbook sphere, for the cost comparison only: b^2 - a c, (b -+ sqrt) / a, p - C. */

@@ -1,4 +1,4 @@
-"""Build once, render many: the targets of the device-resident scene (pyclray.engine.prepared).
+"""Build once, render many: the targets of the device-resident scene (pyclray.engine.scene.prepared).
 
     python -m bench.views               # everything (a few minutes; Open3D part only if installed)
     python -m bench.views --quick       # 100,000 spheres only
@@ -29,8 +29,9 @@ import time
 import numpy as np
 
 import pyclray
-from pyclray.engine import api, prepared
-from pyclray.engine.device import context_for
+from pyclray.engine import api
+from pyclray.engine.scene import prepared
+from pyclray.engine.opencl.device import context_for
 from pyclray.model.animation import Animation
 
 from . import scale
@@ -181,7 +182,7 @@ def animation(count: int = 100_000, moving: int = 10) -> dict:
     # what the refits did to the tree: the last frame's against the tree built for the static scene
     # (the frames and the static renders take turns on one prepared scene, refitted from that
     # tree), and what a rebuild of this scene would cost
-    from pyclray.engine.bvh import sah_cost
+    from pyclray.engine.bvh.tree import sah_cost
 
     ctx = context_for(None)
     built = sah_cost(prepared.PreparedScene(ctx, static.shapes, "fp32").bvh.tree)

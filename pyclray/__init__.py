@@ -18,10 +18,10 @@ def _quiet_interrupt(number, frame):
 if _os.path.basename(_sys.argv[0]) in ("pyclray", "pyclray.exe", "-m") if _sys.argv else False:
     _signal.signal(_signal.SIGINT, _quiet_interrupt)
 
-from .engine.device import list_devices, select_device
+from .engine.opencl.device import list_devices, select_device
 from .engine.api import clear as clear_cache
 from .engine.api import render, render_animation, render_views
-from .engine.request import Frame
+from .engine.queries.requests import Frame
 from .engine.tracer import Tracer, prepare
 from .model.animation import Animation, Key
 from .model.aovs import AOVS

@@ -1,11 +1,11 @@
-"""A plain float64 traversal of a BVH (pyclray/engine/bvh.py's flat layout), the reference the BVH
+"""A plain float64 traversal of a BVH (pyclray/engine/bvh/tree.py's flat layout), the reference the BVH
 tests hold the builders' trees to."""
 import numpy as np
 
 
 def traverse_reference(tree, origin, direction, t_max=np.inf):
     """The shapes (positions in the input bounds) whose leaf boxes the ray origin + t direction,
-    0 < t <= t_max, meets: a stack traversal of tree (a pyclray.engine.bvh.BVH)."""
+    0 < t <= t_max, meets: a stack traversal of tree (a pyclray.engine.bvh.tree.BVH)."""
     origin = np.asarray(origin, np.float64)
     direction = np.asarray(direction, np.float64)
     out = []

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 
 CAMERA = '[camera]\neye = [0.0, 2.0, 6.0]\ntarget = [0.0, 0.5, 0.0]\nfov = 45.0\n[image]\nwidth = 8\nheight = 8\n'
 

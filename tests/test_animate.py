@@ -12,7 +12,7 @@ import pytest
 
 import pyclray
 from pyclray.apps import cli
-from pyclray.engine import programs
+from pyclray.engine.launch import programs
 from pyclray.io import png
 from pyclray.io.exr import read_exr
 
@@ -94,7 +94,7 @@ def test_frame_k_is_the_render_of_the_scene_at_k_over_fps(scene_file):
 def test_one_program_serves_every_frame():
     """Builds (compiled or read from the disk cache) happen for the first frame only; each later
     frame of the orbiting camera fetches two kernels from memory: the per-view pass's (into the moved
-    camera's frame, on the device: pyclray.engine.prepared) and the render's."""
+    camera's frame, on the device: pyclray.engine.scene.prepared) and the render's."""
     scene = pyclray.load_scene(REPO / "scenes/tp02_orbit.toml").with_size(32, 32)
     builds = lambda: programs.stats["compiled"] + programs.stats["from_disk"]
     counts, fetched = [], []

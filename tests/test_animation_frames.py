@@ -1,4 +1,4 @@
-"""An animation's frame on a prepared scene (pyclray.engine.refit): only the shapes that moved are
+"""An animation's frame on a prepared scene (pyclray.engine.scene.refit): only the shapes that moved are
 rewritten, the BVH refitted above them, and render_animation's frames never walk the N shapes.
 Every image is compared bit for bit with the frame's scene prepared from nothing (test_views.fresh),
 which the rest of the suite holds to the float64 oracle; the tree is compared exactly with a refit
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import api, refit
-from pyclray.engine.bvh import sah_cost
+from pyclray.engine import api
+from pyclray.engine.scene import refit
+from pyclray.engine.bvh.tree import sah_cost
 from pyclray.model import animation
 from pyclray.model.animation import Animation, FrameShapes
 
@@ -160,7 +161,7 @@ def test_frames_seen_by_a_still_camera_reuse_the_views_inputs(monkeypatch, orbit
     """A frame whose camera, image, lights and shading are the animated scene's objects reuses the
     last frame's view inputs through the BVH (its camera struct and lights are made from those
     alone; its images are the fresh frame's: the tests above); a moving camera makes its own."""
-    from pyclray.engine import views
+    from pyclray.engine.scene import views
 
     made, original = [], views.ViewInputs
     monkeypatch.setattr(views, "ViewInputs", lambda *args: made.append(args[-1]) or original(*args))

@@ -1,4 +1,4 @@
-"""The BVH (pyclray/engine/bvh.py): its structure, and traversal against float64 brute force; in the
+"""The BVH (pyclray/engine/bvh/tree.py): its structure, and traversal against float64 brute force; in the
 kernels, render through the BVH gives the tile-culled render's images bit for bit.
 
 Exact where exactness is possible: a node's box holds its children's boxes exactly (min/max of
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import bvh
-from pyclray.engine import bvh_wide
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.bvh import tree as bvh
+from pyclray.engine.bvh import wide as bvh_wide
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes import REGISTRY
 
 from bvh_reference import traverse_reference
@@ -113,7 +113,7 @@ def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_
     """A scene's SAH tree is built for render's packets (bvh.SCENE_LEAF_SIZE, SCENE_TRAVERSAL: a
     node's visit costs about four shape tests there): weighed with those costs, it is within 1.1
     times a full binned SAH build made for the same costs (which the LBVH is not)."""
-    from pyclray.engine.scene_bvh import primitives_bvh
+    from pyclray.engine.bvh.scene import primitives_bvh
 
     bounds = make()
     leaf, cost = bvh.SCENE_LEAF_SIZE, bvh.SCENE_TRAVERSAL
@@ -130,14 +130,14 @@ def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
     type (kernels/pyclray.cl: PYCLRAY_ONE_BOUNDED), and asks for them from memory where the
     traversal first meets the leaf: that needs refs[q] to be entry q of the type's array, q * 16 +
     its kind; with two types it is not so."""
-    from pyclray.engine.scene_bvh import primitives_bvh
+    from pyclray.engine.bvh.scene import primitives_bvh
 
     bounds = bvh.widened(random_bounds(3, n))
     refs = primitives_bvh({"sphere": bounds}).refs(("plane", "sphere"))
     assert np.array_equal(refs, np.arange(n) * 16 + 2)
     two = primitives_bvh({"sphere": bounds, "box": bounds}).refs(("box", "sphere"))
     assert not np.array_equal(two >> 4, np.arange(2 * n))
-    from pyclray.engine.programs import Variant
+    from pyclray.engine.launch.programs import Variant
 
     def defines(types):
         return Variant("render", types, ("depth",), "fp32", 8, bvh=True).defines()
@@ -156,7 +156,7 @@ def test_the_reference_build_is_a_valid_tree():
 def test_the_sah_tree_is_the_same_whatever_the_threads():
     """Node numbers follow from the splits alone (bvh_sah._grow), not from which thread built what:
     one, two or three threads build the same arrays, bit for bit, and a valid tree."""
-    from pyclray.engine import bvh_sah
+    from pyclray.engine.bvh import sah as bvh_sah
 
     bounds = random_bounds(8, 30000)
     trees = [bvh_sah.build(bounds, bvh.LEAF_SIZE, bvh.MAX_SAH_DEPTH, threads=t) for t in (1, 2, 3)]
@@ -190,7 +190,7 @@ def test_the_sah_tree_keeps_within_its_depth(max_depth):
     """The kernels' stacks bound the depth (bvh.MAX_SAH_DEPTH): where the SAH's splits would go
     deeper, object median splits keep every leaf within max_depth levels; the tree stays valid.
     Boxes of sizes over twelve decades along a line make the SAH peel a few off at each split."""
-    from pyclray.engine import bvh_sah
+    from pyclray.engine.bvh import sah as bvh_sah
 
     rng = np.random.default_rng(max_depth)
     x = np.sort(10 ** rng.uniform(-6, 6, 1000))
@@ -207,7 +207,7 @@ def test_sampled_splits_keep_within_the_depth(max_depth):
     """Nodes of at least 2 bvh_sah.SAMPLE primitives choose their split from a sample of their rows:
     the depth bound is then checked on the real sides after the partition (the sample's counts
     only estimate them). The same peeling boxes, 20 times as many: sampled nodes at the top."""
-    from pyclray.engine import bvh_sah
+    from pyclray.engine.bvh import sah as bvh_sah
 
     rng = np.random.default_rng(max_depth)
     n = 20_000
@@ -347,7 +347,7 @@ def test_a_moved_camera_reuses_the_tree():
     from dataclasses import replace
 
     from pyclray.engine.api import tracer_for
-    from pyclray.engine.device import context_for
+    from pyclray.engine.opencl.device import context_for
 
     def scene_bvh(scene):
         return tracer_for(scene, context_for(None), "fp32").prepared.bvh
@@ -386,8 +386,8 @@ def test_auto_takes_tiles_for_short_lists_and_the_bvh_for_long_ones():
     """Tiles where a tile's list is short (views.TILE_LIST_MAX shapes on average), the BVH where
     it is long: tp02's three spheres, and 3,000 spheres filling a small image."""
     from pyclray.engine.api import tracer_for
-    from pyclray.engine.device import context_for
-    from pyclray.engine.views import ViewState
+    from pyclray.engine.opencl.device import context_for
+    from pyclray.engine.scene.views import ViewState
 
     def acceleration_for(scene, acceleration="auto"):
         return ViewState().acceleration(scene, acceleration, tracer_for(scene, context_for(None), "fp32").prepared)
@@ -421,7 +421,7 @@ def test_the_stiff_cases_render_the_same_through_the_bvh(builder, case):
 
 @pytest.mark.parametrize("refit_max", [1.5, 0.0])  # refit in place; every frame rebuilt
 def test_animation_refits_the_sah_tree(monkeypatch, refit_max):
-    """The refit of an animation's frame (pyclray.engine.refit) reads only the layout both builds
+    """The refit of an animation's frame (pyclray.engine.scene.refit) reads only the layout both builds
     share (children first and first + 1, leaves' ranges): over the SAH tree too, every frame
     equals its scene prepared from nothing, bit for bit (tests/test_views.py's test, on this tree)."""
     from test_views import test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames as frames_test

@@ -18,7 +18,7 @@ import pytest
 import pyclray
 from pyclray.reference import error_model
 from pyclray.reference import oracle
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.reference.validation.images import next_to_id_change
 
 from conftest import SCENES
@@ -352,7 +352,7 @@ def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
     small to be reordered, for cast and occluded."""
     import sys
 
-    render_module = sys.modules["pyclray.engine.cast"]
+    render_module = sys.modules["pyclray.engine.queries.cast"]
     scene, origins, directions = random_scene(12)
     rng = np.random.default_rng(12)
     count = render_module.COHERENT_FROM + 1000

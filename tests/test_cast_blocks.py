@@ -1,4 +1,4 @@
-"""cast's blocks (engine/cast_blocks.py, kernels/mesh.cl): a leaf's triangles of one mesh tested at
+"""cast's blocks (engine/queries/cast_blocks.py, kernels/mesh.cl): a leaf's triangles of one mesh tested at
 once give the bits of the triangles tested one by one (the ENTRY mode every other type uses), in
 scenes where leaves mix meshes, other bounded types and exact ties; and the blocks hold what the
 leaves held."""
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import programs
-from pyclray.engine.cast_blocks import regroup
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.launch import programs
+from pyclray.engine.queries.cast_blocks import regroup
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh import Mesh
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere, torus

@@ -1,5 +1,5 @@
 """cast and occluded trace CAST_GROUP (8) rays per work-item, their directions set up four at once in
-vector registers, in work-groups of CAST_WORK_GROUP work-items (kernels/pyclray.cl, engine/cast.py).
+vector registers, in work-groups of CAST_WORK_GROUP work-items (kernels/pyclray.cl, engine/queries/cast.py).
 Each ray's computations are its own, so these hold the results to bits: of directions at the ends
 of float64's range (the power of two that scales a direction before its length is taken is clamped
 there), and of every place of a group and a work-group, batches ending anywhere."""
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import cast as cast_module
+from pyclray.engine.queries import cast as cast_module
 
 from test_cast import random_scene
 
@@ -68,7 +68,7 @@ def test_batches_ending_anywhere_in_a_group_give_the_same_bits(order_rule):
 
 @pytest.mark.parametrize("shared_origin", [False, True])
 def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin, order_rule):
-    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/cast.py: _orders;
+    """A batch of COHERENT_FROM rays or more is cast in a coherent order (engine/queries/cast.py: _orders;
     forced here, the scene being small), each ray read and written at its own place through the
     order: every ray's results, with a tmax per ray and with one shared origin, are those of the
     same rays cast in batches too small to be ordered, bit for bit (a ray written at another's
@@ -94,10 +94,10 @@ def test_an_ordered_batch_gives_the_bits_of_small_batches(shared_origin, order_r
 def test_large_batches_are_ordered_where_the_scene_outgrows_the_cache_share(monkeypatch):
     """On a CPU device a large batch is cast in the coherent order only where the scene's cast data
     (cast_inputs' bytes: its tree, anchors and entries) exceed ORDER_CACHE_SHARE of the device's
-    last-level cache (engine/cast.py: _orders; a GPU orders every large batch); small batches never
+    last-level cache (engine/queries/cast.py: _orders; a GPU orders every large batch); small batches never
     are. The same rays give the same bits either way (the tests above)."""
-    from pyclray.engine import cast_order
-    from pyclray.engine.device import context_for
+    from pyclray.engine.queries import ray_order as cast_order
+    from pyclray.engine.opencl.device import context_for
     from pyclray.engine.api import tracer_for
 
     calls = []

@@ -1,4 +1,4 @@
-"""pyclray.engine.cast_order: the coherent order of large cast batches (numba). The order changes no
+"""pyclray.engine.queries.ray_order: the coherent order of large cast batches (numba). The order changes no
 result (tests/test_cast.py holds cast's bits to those of small, unordered batches); these tests hold
 its parts to their definitions: the codes to a plain Morton interleave of the cells, the counting
 sort to numpy's stable argsort, the scan to numpy's checks, and a large batch's bad row to the same
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import cast as cast_module
-from pyclray.engine import cast_order
+from pyclray.engine.queries import cast as cast_module
+from pyclray.engine.queries import ray_order as cast_order
 
 
 def reference_codes(origins, directions, lo, extent, with_origins):

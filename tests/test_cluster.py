@@ -16,7 +16,7 @@ import pytest
 import pyclray
 from pyclray.apps import cli
 from pyclray import cluster
-from pyclray.engine import programs
+from pyclray.engine.launch import programs
 from pyclray.model.errors import DeviceError, SceneError
 from pyclray.io.exr import read_exr
 

@@ -222,7 +222,7 @@ def test_a_render_too_large_for_memory_is_a_request_error_naming_the_bytes():
 
 def test_the_memory_check_uses_what_is_available(monkeypatch):
     import pyclray
-    from pyclray.engine import memory
+    from pyclray.engine.queries import memory
     from pyclray.model.aovs import image_bytes
 
     scene = pyclray.load_scene(TP02).with_size(64, 32)
@@ -238,7 +238,7 @@ def test_the_memory_check_uses_what_is_available(monkeypatch):
 
 
 def test_available_memory_is_read_on_linux():
-    from pyclray.engine.memory import available_bytes
+    from pyclray.engine.queries.memory import available_bytes
 
     if sys.platform.startswith("linux"):
         assert available_bytes() > 0

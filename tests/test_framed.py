@@ -1,4 +1,4 @@
-"""Framed renders (pyclray.engine.prepared.FRAMED_FROM, Shape.frames_in_render): a large scene on a
+"""Framed renders (pyclray.engine.scene.prepared.FRAMED_FROM, Shape.frames_in_render): a large scene on a
 device with float64 holds its spheres' float64 world entries only, and the render kernel frames each
 sphere on the eye where it tests it, with the per-view pass's own function (kernels/frame.h, the
 shapes' <type>_rebase) compiled as the pass is. Its images must be the per-view copy's, bit for bit,
@@ -6,7 +6,7 @@ whatever the offset, precision, acceleration or view history: the copy's images 
 float64 oracle by the rest of the suite (test_render.py, test_shapes.py, test_views.py), so this
 holds the framed path to the same exactness. FRAMED_FROM is set to 0 (frame every scene) or out of
 reach (copy every scene) to compare the two on small scenes. Meshes are indexed (shared vertices and
-faces, engine/indexed.py) on every device with float64, framed scene or not: prepared.INDEXED False
+faces, engine/scene/indexed.py) on every device with float64, framed scene or not: prepared.INDEXED False
 gives them the per-view copy (devices without float64) to compare with."""
 from __future__ import annotations
 
@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import api, prepared
-from pyclray.engine.device import context_for
+from pyclray.engine import api
+from pyclray.engine.scene import prepared
+from pyclray.engine.opencl.device import context_for
 
 from test_views import ALL, every_shape, fresh, moving_spheres, need, same
 
@@ -129,7 +130,7 @@ def test_the_mesh_tests_hold_for_framed_and_copied_meshes(monkeypatch, check, pa
     """tests/test_mesh.py's watertightness (Embree's sphere and far grid: every ray from inside hits),
     zero-area triangles (never hit, no NaN), oracle tests at 3e7 from the origin, and
     tests/test_mesh_smooth.py's smooth shading (which run on indexed meshes: their triangles assembled
-    from shared vertices and faces, their shading normals per vertex, engine/indexed.py), run on
+    from shared vertices and faces, their shading normals per vertex, engine/scene/indexed.py), run on
     framed scenes (indexed meshes beside framed shapes) and on the per-view copy of each triangle
     (prepared.INDEXED False: the path of devices without float64)."""
     import test_mesh

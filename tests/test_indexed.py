@@ -1,5 +1,5 @@
-"""Meshes as shared vertices and faces (pyclray.engine.indexed), the path of every device with float64,
-and the compiled passes over a large scene's boxes (pyclray.engine.bvh_fast). What this holds: the
+"""Meshes as shared vertices and faces (pyclray.engine.scene.indexed), the path of every device with float64,
+and the compiled passes over a large scene's boxes (pyclray.engine.bvh.passes). What this holds: the
 indexed path's bounds and node boxes are the bits of the numpy code they replace (so the tree and the
 images do not depend on which ran), its host and device vertex passes agree bit for bit, its images
 are the per-view copy's (tests/test_framed.py holds every image of every shape to that), and its
@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import api, bvh, bvh_fast, indexed, prepared
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine import api
+from pyclray.engine.bvh import tree as bvh
+from pyclray.engine.bvh import passes as bvh_fast
+from pyclray.engine.scene import indexed
+from pyclray.engine.scene import prepared
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes.base import padded_bounds
 from pyclray.model.shapes.mesh import Mesh
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
@@ -73,7 +77,7 @@ def test_the_compiled_wide_node_packing_keeps_numpys_bits(monkeypatch):
     """bvh_wide.pack_wide from SAH_FROM nodes on (bvh_fast.pack_wide_boxes) against its numpy form,
     whole and by rows (an animation's refit), on a real tree's slots (empty ones included) given
     boxes of every scale, beyond float32's range and infinite: the kernels see the same bits."""
-    from pyclray.engine import bvh_wide
+    from pyclray.engine.bvh import wide as bvh_wide
 
     rng = np.random.default_rng(11)
     centres = rng.uniform(-1, 1, (20_000, 3))
@@ -120,8 +124,8 @@ def test_a_moved_indexed_mesh_is_refitted_in_place(monkeypatch, shared, count):
     on a device whose buffers are the host's arrays and (shared False) on one they are copied to:
     each frame is its scene prepared from nothing, bit for bit."""
     need_fp64()
-    from pyclray.engine import refit
-    from pyclray.engine.buffers import shares_host_memory
+    from pyclray.engine.scene import refit
+    from pyclray.engine.opencl.buffers import shares_host_memory
 
     if shared and not shares_host_memory(context_for(None)):
         # only refit is told the buffers are the arrays: on a device whose buffers are copies (a GPU)

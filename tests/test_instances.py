@@ -1,4 +1,4 @@
-"""Mesh instances (model/shapes/instance.py, engine/instances.py, kernels/instance.cl): meshes that
+"""Mesh instances (model/shapes/instance.py, engine/scene/instances.py, kernels/instance.cl): meshes that
 share their arrays render as one copy of the triangles and one BVH in object space plus a transform
 per instance. Each test says why it can fail: a wrong inverse, normal matrix or box unit shows as
 depth, normal, id or primitive off the float64 oracle (within the one error model), or as images
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.instances import instance_bytes
+from pyclray.engine.opencl.device import context_for, has_fp64
+from pyclray.engine.scene.instances import instance_bytes
 from pyclray.engine.api import tracer_for
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
 from pyclray.reference import oracle
@@ -144,7 +144,7 @@ def test_cast_and_occluded_through_instances(precision, offset):
 def test_host_and_device_rebase_agree():
     """The per-view entries of instances from the host (Instances._rebase) and from the device
     (kernels/instance.cl's instance_rebase) are the same bits."""
-    from pyclray.engine.programs import Variant, kernels_for
+    from pyclray.engine.launch.programs import Variant, kernels_for
     import pyopencl as cl
 
     ctx = context_for()

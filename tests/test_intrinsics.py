@@ -13,8 +13,8 @@ import pytest
 
 import pyclray
 from pyclray import SceneError
-from pyclray.engine import culling
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.bvh import tiles as culling
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.reference import check, error_model, mitsuba, oracle
 
 from conftest import REPO, SCENES

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import request
+from pyclray.engine.launch import run
 from pyclray.io import png
 from pyclray.model.loader import scene_from_dict
 from pyclray.model.shapes import REGISTRY
@@ -58,8 +58,8 @@ def test_label_alone_is_label_alone_and_the_kernel_never_sees_it(monkeypatch):
     render (the same program)."""
     scene = labelled()
     variants = []
-    real = request.kernel_for
-    monkeypatch.setattr(request, "kernel_for", lambda ctx, variant: variants.append(variant) or real(ctx, variant))
+    real = run.kernel_for
+    monkeypatch.setattr(run, "kernel_for", lambda ctx, variant: variants.append(variant) or real(ctx, variant))
     frame = pyclray.render(scene, aovs=("label",))
     ids = pyclray.render(scene, aovs=("id",))
     assert list(frame) == ["label"] and np.array_equal(frame["label"], expected_labels(scene, ids["id"]))

@@ -3,8 +3,8 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.programs import kernel_dir
+from pyclray.engine.opencl.device import context_for, has_fp64
+from pyclray.engine.launch.programs import kernel_dir
 from pyclray.model.cameras import CAMERAS
 from pyclray.model.layout import Struct, c_header, layout
 from pyclray.model.shapes import KINDS

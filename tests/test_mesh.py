@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere, torus, uv_sphere
 from pyclray.reference import oracle
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.engine.api import tracer_for
-from pyclray.engine.programs import Variant
+from pyclray.engine.launch.programs import Variant
 from pyclray.model.lights import DirectionalLight, PointLight, Shading
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
 

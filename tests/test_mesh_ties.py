@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes.mesh_shapes import grid, torus
 from test_packets import at_width
 

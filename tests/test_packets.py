@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import device, programs
+from pyclray.engine.opencl import device
+from pyclray.engine.launch import programs
 from pyclray.model.aovs import RENDER_AOVS
 from test_render import assert_matches_oracle, small
 from test_speedups import random_scene, same

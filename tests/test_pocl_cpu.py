@@ -1,4 +1,4 @@
-"""PoCL 3.0 on a CPU its LLVM 14 calls "generic" (engine/pocl_cpu.py): pyclray names the x86-64 level
+"""PoCL 3.0 on a CPU its LLVM 14 calls "generic" (engine/opencl/pocl_cpu.py): pyclray names the x86-64 level
 the CPU's flags allow, so that every program builds; a CPU PoCL knows is left as it is."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import pyopencl as cl
 
 import pyclray
-from pyclray.engine import pocl_cpu
-from pyclray.engine.device import context_for, is_pocl_cpu
+from pyclray.engine.opencl import pocl_cpu
+from pyclray.engine.opencl.device import context_for, is_pocl_cpu
 
 
 def test_the_level_is_one_llvm_14_knows():

@@ -16,8 +16,8 @@ import pytest
 import pyclray
 from pyclray.reference import error_model
 from pyclray.reference import oracle
-from pyclray.engine.device import context_for, has_fp64
-from pyclray.engine.programs import Variant, stats
+from pyclray.engine.opencl.device import context_for, has_fp64
+from pyclray.engine.launch.programs import Variant, stats
 from pyclray.model.shapes import Plane, Sphere
 
 # fp32 bounds, the error model's targets (pyclray.accuracy): 8 ulps of t x 1/|cos| for depth (sx,
@@ -179,7 +179,7 @@ def test_only_the_shape_types_present_are_compiled():
 
 def test_a_depth_only_request_has_no_normal_or_id_buffer():
     ctx = context_for()
-    from pyclray.engine.programs import kernel_for
+    from pyclray.engine.launch.programs import kernel_for
 
     depth_only = kernel_for(ctx, Variant("render", ("plane", "sphere"), ("depth",), "fp32"))
     everything = kernel_for(ctx, Variant("render", ("plane", "sphere"), ("depth", "normal", "id"), "fp32"))
@@ -221,7 +221,7 @@ def test_moving_the_camera_or_a_shape_never_recompiles():
 
 CROSS_PROCESS = """
 import json, pyclray
-from pyclray.engine.programs import stats
+from pyclray.engine.launch.programs import stats
 pyclray.render(pyclray.load_scene("scenes/tp02.toml").with_size(16, 16))
 print(json.dumps(stats))
 """
@@ -243,7 +243,7 @@ def test_a_second_process_loads_the_program_from_the_disk_cache(tmp_path):
 def test_fp64_unavailable_is_a_clear_error(monkeypatch):
     import importlib
 
-    render_module = importlib.import_module("pyclray.engine.request")  # the module, not the function
+    render_module = importlib.import_module("pyclray.engine.queries.requests")  # the module, not the function
     monkeypatch.setattr(render_module, "has_fp64", lambda device: False)
     scene = small(pyclray.load_scene("scenes/tp02.toml"), 8)
     with pytest.raises(pyclray.DeviceError, match="cl_khr_fp64"):
@@ -260,7 +260,7 @@ def test_bad_aov_requests(aovs):
 
 
 def test_device_selection():
-    from pyclray.engine.device import select_device
+    from pyclray.engine.opencl.device import select_device
 
     default = select_device()
     if os.environ.get("PYOPENCL_CTX"):  # the user's choice wins (the suite run on another device)

@@ -16,9 +16,9 @@ import pytest
 
 import pyclray
 from pyclray import SceneError
-from pyclray.engine.shading import shadow_reach
+from pyclray.engine.scene.lighting import shadow_reach
 from pyclray.reference import error_model, oracle, shading
-from pyclray.engine.programs import Variant
+from pyclray.engine.launch.programs import Variant
 from pyclray.model.lights import DirectionalLight, Material, PointLight, Shading
 from pyclray.model.shapes import REGISTRY, Box, Disk, Plane, Sphere
 
@@ -183,8 +183,8 @@ def test_a_depth_only_render_has_no_shading_code():
 
 
 def test_a_shaded_render_without_shadows_casts_no_shadow_rays(scenes_dir):
-    from pyclray.engine.device import context_for
-    from pyclray.engine.programs import kernel_for
+    from pyclray.engine.opencl.device import context_for
+    from pyclray.engine.launch.programs import kernel_for
 
     scene = pyclray.load_scene(scenes_dir / "tp02-lit.toml").with_size(16, 16)
     no_shadows = Variant("render", scene.shape_types(), ("shaded",), "fp32", 8, shadows=False)
@@ -303,7 +303,7 @@ def test_lit_regions_are_lit_and_shadowed_regions_shadowed(name, shift):
 
 
 def test_fp64_shading_matches_the_float64_model(scenes_dir):
-    from pyclray.engine.device import context_for, has_fp64
+    from pyclray.engine.opencl.device import context_for, has_fp64
 
     if not has_fp64(context_for(None).device):
         pytest.skip("device lacks cl_khr_fp64")

@@ -19,7 +19,7 @@ import pytest
 
 import pyclray
 from pyclray.reference import error_model
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes import REGISTRY
 
 from oracle_checks import assert_agrees_with_oracle

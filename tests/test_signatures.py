@@ -1,4 +1,4 @@
-"""Each kernel's signature, declared once (pyclray.engine.signatures): the C parameter list a program
+"""Each kernel's signature, declared once (pyclray.engine.launch.signatures): the C parameter list a program
 is built with agrees with what the built kernel reports, and the argument list pyopencl gets is
 assembled from names, in that order, refusing a missing or an extra name at once."""
 import warnings
@@ -7,9 +7,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from pyclray.engine import signatures
-from pyclray.engine.device import context_for, has_fp64, is_pocl_cpu
-from pyclray.engine.programs import Variant
+from pyclray.engine.launch import signatures
+from pyclray.engine.opencl.device import context_for, has_fp64, is_pocl_cpu
+from pyclray.engine.launch.programs import Variant
 
 ALL = ("plane", "sphere", "cylinder", "disk", "rectangle", "box", "spheres", "mesh", "instance")
 IMAGES = ("depth", "normal", "id", "zdepth", "position", "shaded", "primitive", "barycentric")

@@ -1,6 +1,6 @@
 """The render path's speed-ups change no bit of the results: on PoCL, the compiler's own square root,
 reductions and vector stores, the functions always inlined and the packet's function kept out of the
-kernel (pyclray.engine.programs.Variant.source, kernels/lanes.h), and the cached inputs give the same images as the
+kernel (pyclray.engine.launch.programs.Variant.source, kernels/lanes.h), and the cached inputs give the same images as the
 plain path."""
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import api, device, programs, request
+from pyclray.engine import api
+from pyclray.engine.opencl import device
+from pyclray.engine.launch import programs
+from pyclray.engine.launch import run as request
 from pyclray.model import aovs
 
 from pyclray import Camera, Image, Plane, Scene, Sphere
@@ -90,7 +93,7 @@ def test_inline_builtins_are_bit_identical_through_the_bvh(monkeypatch, scenes_d
     same(fast, plain)
 
 def without_culling(monkeypatch):
-    from pyclray.engine import culling
+    from pyclray.engine.bvh import tiles as culling
 
     monkeypatch.setattr(culling, "ENABLED", False)
     monkeypatch.setattr(api, "_tracers", api.OrderedDict())

@@ -10,7 +10,7 @@ import pytest
 import pyclray
 from pyclray.reference import error_model
 from pyclray.reference import stability
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine.opencl.device import context_for, has_fp64
 
 
 @pytest.mark.parametrize("case", stability.CASES, ids=[c.name for c in stability.CASES])

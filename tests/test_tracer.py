@@ -118,8 +118,8 @@ def test_the_functions_share_one_cached_handle_per_shapes_tuple():
 # The engine's state that outlives a call, each with why it is module-level: the cache of handles
 # behind the module-level functions; the device contexts and the built programs (per device, shared
 # by every handle on it); the build counters; the CPU names given to PoCL's devices.
-MODULE_STATE = {("api.py", "_tracers"), ("device.py", "_contexts"), ("programs.py", "_programs"),
-                ("programs.py", "stats"), ("pocl_cpu.py", "_patched")}
+MODULE_STATE = {("api.py", "_tracers"), ("opencl/device.py", "_contexts"), ("launch/programs.py", "_programs"),
+                ("launch/programs.py", "stats"), ("opencl/pocl_cpu.py", "_patched")}
 
 
 def test_the_engine_keeps_no_other_module_level_state():

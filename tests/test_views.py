@@ -1,4 +1,4 @@
-"""Build once, render many (pyclray.engine.prepared): the scene's shapes are prepared on the device
+"""Build once, render many (pyclray.engine.scene.prepared): the scene's shapes are prepared on the device
 once per shapes tuple, and a view from another camera rebases them into its frame on the device.
 What a view computes must not depend on the views before it: every test here compares bit for bit
 with a render from a freshly prepared scene (the cache cleared), which is itself held to the float64
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine import api, prepared
-from pyclray.engine.device import context_for, has_fp64
+from pyclray.engine import api
+from pyclray.engine.scene import prepared
+from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.aovs import RENDER_AOVS
 from pyclray.reference import oracle
 
@@ -102,7 +103,7 @@ def test_render_views_takes_scenes_of_other_sizes_and_rejects_other_things():
 
 
 def test_render_views_yields_the_frames_before_a_bad_view_then_raises_and_can_stop_early():
-    """render_views enqueues the next view before it returns a frame (engine/render.py): a bad view
+    """render_views enqueues the next view before it returns a frame (engine/queries/render.py): a bad view
     (here not a camera) must still come after the frames before it, as a loop of render() would
     give them, and an iterator left after its first frame (a view still in flight) must leave the
     scene in a state where the next render is the fresh one, bit for bit."""
@@ -186,7 +187,7 @@ def test_animation_frames_update_the_prepared_scene_and_equal_fresh_frames(monke
     kept = [t.prepared for t in api._tracers.values() if t.prepared.base is scene.shapes]
     assert len(kept) == 1  # one prepared scene, updated (or rebuilt) frame after frame
     if refit_max and count > 1000:  # the large field is refitted (the small one's few moves may degrade its tree)
-        from pyclray.engine.bvh import sah_cost
+        from pyclray.engine.bvh.tree import sah_cost
 
         state = kept[0]._refit
         assert np.isclose(state.cost(), sah_cost(kept[0].bvh.tree), rtol=1e-9)  # the kept cost is the tree's

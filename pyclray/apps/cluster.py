@@ -7,8 +7,8 @@ Warm workers. A job (the scene, the images asked, precision, device, and what a 
 WorkerPlugin registered once with Client.register_plugin: Dask pickles it once and the scheduler hands
 it to every worker, and to any worker that joins later (one a nanny restarts after a crash). Its setup
 opens the worker's OpenCL context and builds the program (a one-pixel render) before the first task;
-the worker process then keeps them (pyclray.engine.programs' caches) and the packed inputs of the scenes it
-renders (pyclray.engine.prepared's), so a task carries only what changes: a frame's index, a camera, a window.
+the worker process then keeps them (pyclray.engine.launch.programs' caches) and the packed inputs of the scenes it
+renders (pyclray.engine.scene.prepared's), so a task carries only what changes: a frame's index, a camera, a window.
 
 Results come back to the client as tasks complete and are handed over in task order, whatever order
 the workers finish in; a few tasks per worker thread are in flight, and the next is submitted as one
@@ -32,7 +32,7 @@ from distributed import Client, LocalCluster, WorkerPlugin, as_completed, get_wo
 from distributed.scheduler import KilledWorker
 
 from ..engine.api import render
-from ..engine.request import Frame, frame_camera
+from ..engine.queries.requests import Frame, frame_camera
 from ..model.aovs import AOVS
 from ..model.camera import Camera
 from ..model.errors import PyclrayError
@@ -296,7 +296,7 @@ def render_image(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
     the same images, bit for bit."""
     import numpy as np
 
-    from ..engine.memory import check_images_fit
+    from ..engine.queries.memory import check_images_fit
     from ..model.aovs import TABLE
 
     # the whole image is put together here: it must fit in this machine's memory (a RequestError

@@ -22,10 +22,10 @@ from ..model.errors import SceneError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count, checked_time
-from .cast import check_cast_device
-from .device import context_for
-from .render import with_camera
-from .request import Frame, check_precision, check_request
+from .queries.cast import check_cast_device
+from .opencl.device import context_for
+from .queries.render import with_camera
+from .queries.requests import Frame, check_precision, check_request
 from .tracer import Tracer
 
 TRACERS_MAX = 8

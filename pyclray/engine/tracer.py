@@ -5,8 +5,8 @@ query on it as a method (Open3D's RaycastingScene, Embree's RTCScene, Mitsuba's 
         frame = tracer.render(aovs=("depth", "id"))
         hits = tracer.cast(origins, directions)
 
-All the device state of a scene lives here: the prepared shapes (engine/prepared.py), what each view
-needs besides them (engine/views.py: the camera, lights, tile lists, acceleration choice and range
+All the device state of a scene lives here: the prepared shapes (engine/scene/prepared.py), what each view
+needs besides them (engine/scene/views.py: the camera, lights, tile lists, acceleration choice and range
 check), cast's inputs and, on devices other than CPUs, the images' buffers. Its memory is
 ``nbytes``; ``close()`` (or leaving the ``with`` block) frees it, after which the handle refuses
 every query with a clear error. The module-level functions (pyclray.render, pyclray.cast, ...) are
@@ -23,12 +23,13 @@ from ..model.errors import RequestError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
-from . import cast as cast_queries
-from . import render as render_query
-from .device import context_for
-from .prepared import PreparedScene
-from .request import OutputBuffers, check_precision, check_request
-from .views import ViewState
+from .queries import cast as cast_queries
+from .queries import render as render_query
+from .opencl.device import context_for
+from .scene.prepared import PreparedScene
+from .launch.run import OutputBuffers
+from .queries.requests import check_precision, check_request
+from .scene.views import ViewState
 
 
 class Tracer:
@@ -46,7 +47,7 @@ class Tracer:
         self._scene = scene
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
-        self._cast_inputs = None  # cast's buffers, made at the first cast (engine/cast.py: cast_inputs)
+        self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
         self.outputs = OutputBuffers(self.lock)
 
     # -- its life --------------------------------------------------------------------------------
@@ -75,7 +76,7 @@ class Tracer:
 
     @property
     def prepared(self) -> PreparedScene:
-        """The prepared shapes (engine/prepared.py); a RequestError once the handle is closed."""
+        """The prepared shapes (engine/scene/prepared.py); a RequestError once the handle is closed."""
         prepared = self._prepared
         if prepared is None:
             raise RequestError("this pyclray.Tracer is closed: prepare the scene again (pyclray.prepare)")
@@ -123,7 +124,7 @@ class Tracer:
 
     def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto"):
         """Enqueue a render of ``view`` (a Scene with this handle's shapes) and return a callable that
-        waits for it and returns its Frame (engine/render.py: start)."""
+        waits for it and returns its Frame (engine/queries/render.py: start)."""
         return render_query.start(self, view, aovs, window, acceleration)
 
     def views_of(self, scene: Scene, cameras, aovs=AOVS, acceleration: str = "auto"):
@@ -154,7 +155,7 @@ class Tracer:
                 pending()
 
     def view_state(self, view: Scene) -> ViewState:
-        """What this handle keeps of a view (engine/views.py: ViewState), by the view's camera, image,
+        """What this handle keeps of a view (engine/scene/views.py: ViewState), by the view's camera, image,
         lights and shading (equal values share it), the VIEWS_MAX most recent."""
         key = (view.camera, view.image, view.lights, view.shading)
         with self.lock:
@@ -185,7 +186,7 @@ class Tracer:
         return cast_queries.run_cast(self, "occluded", origins, directions, tmax, ())
 
     def cast_inputs(self):
-        """cast's buffers of the shapes (engine/cast.py: cast_inputs), made at the first cast."""
+        """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""
         with self.lock:
             prepared = self.prepared
             if self._cast_inputs is None:

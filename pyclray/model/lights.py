@@ -15,6 +15,7 @@ from numbers import Real
 import numpy as np
 
 from .errors import SceneError, _shown, no_unknown_keys, norm3, number, text, typed_table, vector3
+from .layout import Struct
 
 MATERIAL_KEYS = ("color", "specular", "shininess")
 DEFAULT_COLOR = (0.8, 0.8, 0.8)
@@ -185,3 +186,26 @@ def headlight(camera) -> DirectionalLight:
 def effective_lights(scene) -> tuple:
     """The lights that shade the scene: its [[lights]], or the headlight."""
     return scene.lights if scene.lights else (headlight(scene.camera),)
+
+
+# -- what the kernels read of them (kernels/shading.h; packed by pyclray.engine.scene.lighting) --
+# Per shape id: its material.
+MATERIAL = Struct(
+    "Material",
+    (
+        ("color", "real4"),  # albedo rgb; w: specular
+        ("shininess", "real"),
+    ),
+    "A shape's material by id: color.xyz albedo, color.w specular, shininess.",
+)
+# Per light: a point light's position in the frame (w = 1) or a directional light's unit direction
+# toward the light in the frame (w = 0), and its intensity or irradiance.
+LIGHT = Struct(
+    "Light",
+    (
+        ("position", "real4"),  # point: xyz in the frame, w = 1; directional: toward the light, w = 0
+        ("power", "real4"),  # rgb intensity (point) or irradiance (directional)
+    ),
+    "A light in the camera's frame: position.w = 1 point (xyz its position), 0 directional (xyz toward it).",
+)
+STRUCTS = (MATERIAL, LIGHT)

@@ -49,7 +49,7 @@ def _build_tree(scene, pad: float = 0.0):
     sphere of radius 1000 under the book's 486 spheres) holds every ray anyway, and would make the
     Morton codes of all the others' centres coarse (an LBVH of ties); such shapes, and the unbounded
     ones, are tested against every ray."""
-    from ..engine.bvh import build, widened
+    from ..engine.bvh.tree import build, widened
 
     bounded = [index for index, shape in enumerate(scene.shapes) if shape.bounded]
     boxes = np.array([scene.shapes[index].box() for index in bounded]).reshape(-1, 2, 3)

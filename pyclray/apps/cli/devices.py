@@ -5,7 +5,7 @@ from .options import BadInput
 
 
 def run(args) -> int:
-    from ...engine.device import list_devices
+    from ...engine.opencl.device import list_devices
 
     devices = list_devices()
     if not devices:

@@ -1,5 +1,5 @@
-/* The BVH's boxes and what every traversal shares (pyclray/engine/bvh.py builds the trees,
- * pyclray/engine/prepared.py packs them). The traversals: one ray through the wide tree
+/* The BVH's boxes and what every traversal shares (pyclray/engine/bvh/tree.py builds the trees,
+ * pyclray/engine/scene/prepared.py packs them). The traversals: one ray through the wide tree
  * (kernels/bvh_ray.h: cast and any-hit), a packet through the binary tree (kernels/bvh_packet.h:
  * shadow rays, mesh instances' own trees) and a packet through the wide tree
  * (kernels/bvh_wide_packet.h: render's camera rays).

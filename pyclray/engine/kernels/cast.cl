@@ -1,5 +1,5 @@
 /* The cast query: the nearest hit of each ray of a batch given in world coordinates (origins,
- * directions and limits in float64), its distance, normal and id (pyclray/engine/cast.py). The host
+ * directions and limits in float64), its distance, normal and id (pyclray/engine/queries/cast.py). The host
  * puts before this file common.h, lanes.h, the generated struct header, shapes.h, camera.h, the BVH's
  * headers, cast.h, the file of each shape type present and rays.h. */
 

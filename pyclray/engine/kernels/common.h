@@ -35,7 +35,7 @@ typedef float4 real4;
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif
 
-/* On PoCL's CPU device every function before a query's kernels is always inlined (pyclray/engine/programs.py),
+/* On PoCL's CPU device every function before a query's kernels is always inlined (pyclray/engine/launch/programs.py),
  * the kernels themselves not: each query's file starts its kernels with PYCLRAY_KERNELS_BEGIN. */
 #ifdef PYCLRAY_INLINE_BUILTINS
 #define PYCLRAY_KERNELS_BEGIN _Pragma("clang attribute pop")

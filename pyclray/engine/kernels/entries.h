@@ -3,17 +3,17 @@
  *
  * A render's shapes in the eye's frame (origin the eye, the camera's axes: what the shape tests
  * take) come from one of three places, chosen per type (PYCLRAY_MODE_<type>, from the host: in a
- * framed scene, pyclray.engine.prepared's FRAMED_FROM, Shape.frames_in_render and Shape.indexed):
+ * framed scene, pyclray.engine.scene.prepared's FRAMED_FROM, Shape.frames_in_render and Shape.indexed):
  * - FRAMED (devices with float64): each shape is framed where it is tested, from its float64 world
  *   entry (type##_worlds), on the eye's frame (frame_origin, frame_u, frame_v, frame_w), by its <type>_rebase (the per-view pass's function, compiled without contraction as
  *   there: the same bits) into a private copy; its id and its index within its shape come from
  *   their own arrays. The scene holds its world entries only: no copy per view, no pass over them
- *   when the camera moves (pyclray.engine.prepared).
+ *   when the camera moves (pyclray.engine.scene.prepared).
  * - COPIED: the per-view pass's buffer of the entries in the frame (type##s), ids included (in a
  *   framed program, copied to private memory where tested: the shape functions take one space).
  * PYCLRAY_SHAPE_OF(Type, type, k, name) declares name, a pointer to shape k of its type in the frame;
  * PYCLRAY_ID_OF(type, k) and PYCLRAY_PRIMITIVE_AT(type, k) are its id and its index in its shape.
- * The kernel's parameters of each mode: pyclray/engine/signatures.py. */
+ * The kernel's parameters of each mode: pyclray/engine/launch/signatures.py. */
 #define PYCLRAY_SHAPE_FRAMED(Type, type, k, name)                                     \
     Type name##_framed;                                                               \
     type##_rebase(&type##_worlds[k], &name##_framed, &view_frame);                    \
@@ -29,7 +29,7 @@
 #endif
 #define PYCLRAY_ID_COPIED(type, k) type##s[k].id
 #define PYCLRAY_PRIMITIVE_COPIED(type, k) type##s[k].primitive
-/* - INDEXED (a framed scene's triangles, pyclray/engine/indexed.py): each triangle assembled from its face
+/* - INDEXED (a framed scene's triangles, pyclray/engine/scene/indexed.py): each triangle assembled from its face
  * (type##_faces) and the per-view pass's vertices (type##_vertices: <type>_assemble), its id from its own array, its index in its
  * shape from its face; the winner's world normal from the float64 vertices (<type>_world_normal) */
 #define PYCLRAY_SHAPE_INDEXED(Type, type, k, name)                                    \
@@ -62,7 +62,7 @@
 #else
 /* per shape type, for each tile of the image the shapes that can be seen in it
  * (type##_tile_list[type##_tile_start[tile] .. type##_tile_start[tile + 1]], increasing; the host's
- * conservative screen bounds, pyclray/engine/culling.py): the others miss every ray there */
+ * conservative screen bounds, pyclray/engine/bvh/tiles.py): the others miss every ray there */
 #define PYCLRAY_FIRST(type) type##_tile_start[tile]
 #define PYCLRAY_END(type) type##_tile_start[tile + 1]
 #define PYCLRAY_SHAPE_AT(type, q) type##_tile_list[q]

@@ -1,7 +1,7 @@
 /* A render's images: where a packet's pixels lie in them, the stores that write them, and what each
  * image writes (only the images asked for: PYCLRAY_AOV_<name>, from the host).
  *
- * A render's packet covers PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels (pyclray/engine/programs.py:
+ * A render's packet covers PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels (pyclray/engine/launch/programs.py:
  * packet_shape): lane l is column l % W, row l / W of it, element index + (l / W) stride + l % W of
  * the images. A packet cut by the border of the window writes its columns first <= c < end of its
  * rows row_first <= r < row_end only; a whole row of W lanes with one vector store. */

@@ -4,7 +4,7 @@
  * one copy in object space (instance_vertices: the meshes' float64 vertices; instance_faces: each
  * triangle's three vertices and its index in its mesh, ~index where it has zero area, from the
  * instance's first, in its tree's leaf order; instance_nodes from the instance's root), shared by all
- * its instances (engine/instances.py). A packet enters an instance through its
+ * its instances (engine/scene/instances.py). A packet enters an instance through its
  * per-view entry: the eye in object space (float64) and the frame's directions there (the rows of
  * object_from_frame / k, k a power of two, rounded once). Each triangle it visits is framed on that
  * object-space eye (its float64 vertices minus the eye, rounded once: the same bits for a vertex
@@ -59,7 +59,7 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
 #ifndef PYCLRAY_REBASE
 
 /* a shadow ray leaving a triangle never meets it again (as a mesh's); shadow rays see instances'
- * meshes as their own triangles, though (engine/render.py), so this only completes the type */
+ * meshes as their own triangles, though (engine/queries/render.py), so this only completes the type */
 #define PYCLRAY_FLAT_instance 1
 
 /* a face's corners framed on the object-space eye: each vertex's float64 difference rounded once; w

@@ -183,7 +183,7 @@ inline realv mesh_hit(MESH_SPACE const Triangle* tri, const RayPacket* ray)
 }
 
 #ifdef PYCLRAY_INDEXED
-/* An indexed triangle (pyclray/engine/indexed.py) in the frame: its face's vertices as the per-view
+/* An indexed triangle (pyclray/engine/scene/indexed.py) in the frame: its face's vertices as the per-view
  * pass framed them, w 1 (0 for a zero-area triangle, whose face holds ~index: never hit); the world
  * normal in w is the winner's only (mesh_world_normal). */
 inline void mesh_assemble(const int4 face, __global const real4* vertices, Triangle* out)
@@ -218,7 +218,7 @@ inline TriangleNormals mesh_smooth_of(const int4 face, __global const real4* nor
 #ifdef PYCLRAY_CAST
 /* -- cast: a leaf's triangles of one mesh tested at once, one triangle per lane (Embree's triangle8)
  *
- * cast meets a leaf's triangles of one mesh as one block (pyclray/engine/cast_blocks.py groups them,
+ * cast meets a leaf's triangles of one mesh as one block (pyclray/engine/queries/cast_blocks.py groups them,
  * pyclray/model/shapes/mesh_pack.py's cast_blocks packs them): at a 64-byte boundary of the blocks
  * array (the type's world argument in cast), float64s: the header (two ints: count | unique << 8,
  * the mesh's id), the block's unique vertices (float64 world coordinates, rows x, y, z of unique

@@ -1,4 +1,4 @@
-/* The scene's per-view pass (pyclray/engine/prepared.py): the world's float64 entries rebased into the
+/* The scene's per-view pass (pyclray/engine/scene/prepared.py): the world's float64 entries rebased into the
  * frame of a camera, one work-item per entry, so that a moved camera uploads only itself and the
  * kernels keep testing shapes in the camera's frame. The host puts before this file common.h, the
  * generated struct header and each present shape type's file (with PYCLRAY_REBASE: their

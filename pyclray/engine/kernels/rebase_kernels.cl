@@ -11,7 +11,7 @@
     }
 PYCLRAY_SHAPES(PYCLRAY_REBASE_KERNEL)
 
-/* The vertices of indexed triangles (pyclray/engine/indexed.py) in the frame, w = 0: the per-view pass
+/* The vertices of indexed triangles (pyclray/engine/scene/indexed.py) in the frame, w = 0: the per-view pass
  * of a framed scene's meshes, each vertex framed as mesh_rebase frames a triangle's corners. */
 __kernel void rebase_vertices(__global const double4* world, __global real4* out, const int n, const double4 origin,
                               const double4 u, const double4 v, const double4 w)
@@ -22,7 +22,7 @@ __kernel void rebase_vertices(__global const double4* world, __global real4* out
     out[k] = (real4)(to_frame(&frame, world[k].xyz - frame.origin), 0);
 }
 
-/* An animation frame's changed entries (pyclray.engine.prepared.PreparedScene.update): rows of width
+/* An animation frame's changed entries (pyclray.engine.scene.prepared.PreparedScene.update): rows of width
  * 16-byte words each (a world or frame struct, or a BVH node) written at their indices. */
 __kernel void scatter_rows(__global uint4* out, __global const int* index, __global const uint4* rows,
                            const int n, const int width)

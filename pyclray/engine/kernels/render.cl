@@ -2,7 +2,7 @@
  * into the images asked for. The host puts before this file common.h, lanes.h, the generated struct
  * header, shapes.h, camera.h, the BVH's headers, the file of each shape type present, shading.h (with
  * the shaded image), entries.h, nearest.h and images.h, and selects what is compiled with #defines
- * (pyclray/engine/programs.py): the precision (PYCLRAY_FP64), the lanes and the packet's shape, the
+ * (pyclray/engine/launch/programs.py): the precision (PYCLRAY_FP64), the lanes and the packet's shape, the
  * shape types present and where each is read (PYCLRAY_MODE_<type>), tile lists or the BVH
  * (PYCLRAY_BVH), the images asked for (PYCLRAY_AOV_<name>) and shadow rays (PYCLRAY_SHADOWS).
  * Geometry and camera come in buffers, so moving a shape or the camera never recompiles. */

@@ -36,7 +36,7 @@
 #else
 #define SHADING_EPSILON 0x1p-24f
 #endif
-#define SHADOW_OFFSET_K 16  /* pyclray.engine.shading.SHADOW_OFFSET_K */
+#define SHADOW_OFFSET_K 16  /* pyclray.engine.scene.lighting.SHADOW_OFFSET_K */
 
 /* Smooth shading (PYCLRAY_SMOOTH: a shape of a type in PYCLRAY_SMOOTH_TYPES, a smooth mesh, is
  * present): the winner's shading normal, <type>_shading_normal (world, unit; (0, 0, 0) where the

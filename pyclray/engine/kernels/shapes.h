@@ -3,7 +3,7 @@
  *   realv type_hit(shape, ray)             per lane, the nearest s > 0 along ray->dir, or MISS
  *   vec3v type_normal(shape, ray, camera)  the unit world normal, used in the lanes the shape won
  * called through PYCLRAY_HIT_<type>, PYCLRAY_NORMAL_<type>, PYCLRAY_PRIMITIVE_<type> and
- * PYCLRAY_BARYCENTRIC_<type> (pyclray/engine/programs.py writes them for each type; a type with
+ * PYCLRAY_BARYCENTRIC_<type> (pyclray/engine/launch/programs.py writes them for each type; a type with
  * arrays shared by its entries, Shape.shared, defines its own: mesh instances, kernels/instance.cl,
  * which also take the lanes' best so far and keep each lane's triangle).
  *

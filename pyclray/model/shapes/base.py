@@ -108,10 +108,10 @@ class Shape:
     barycentric: ClassVar[bool] = False
     # the kernel files this type needs, in order (a batch type reuses its single shape's code)
     kernel_files: ClassVar[tuple[str, ...]] = ()
-    # In a framed scene (engine/prepared.py's FRAMED_FROM) a render frames each entry of a type with
+    # In a framed scene (engine/scene/prepared.py's FRAMED_FROM) a render frames each entry of a type with
     # frames_in_render on the eye where it tests it, from its world entry (<type>_rebase): no per-view
     # copy (struct) of them, no pass over them for a new camera; an indexed type's triangles are kept
-    # as shared vertices and faces (pack_indexed, engine/indexed.py; <type>_assemble and
+    # as shared vertices and faces (pack_indexed, engine/scene/indexed.py; <type>_assemble and
     # <type>_world_normal in its kernel file). The others keep the per-view pass's copy.
     frames_in_render: ClassVar[bool] = False
     indexed: ClassVar[bool] = False
@@ -126,7 +126,7 @@ class Shape:
     def pack_indexed_smooth(cls, shapes, precision: str):
         """An indexed type's (V, 4) vertex shading normals (pack_indexed's vertices), or None."""
         return None
-    # the most entries of this type per BVH leaf (None: engine/bvh.py's LEAF_SIZE); a scene's tree
+    # the most entries of this type per BVH leaf (None: engine/bvh/tree.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None
     # a type whose shapes may shade with their own normals (a smooth mesh's interpolated vertex
@@ -245,7 +245,7 @@ class Shape:
     def cast_anchors(cls, world, ids):
         """(N, 4) float64 per world entry (ids: their shapes' ids): the point cast packs the entry
         relative to (xyz) and a radius about it holding the entry (w), or None for the default, the
-        centre of each entry's own box (pyclray.engine.scene_bvh.SceneBVH.anchors)."""
+        centre of each entry's own box (pyclray.engine.bvh.scene.SceneBVH.anchors)."""
         return None
 
     @classmethod

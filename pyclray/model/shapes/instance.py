@@ -6,7 +6,7 @@ item 12, Embree's instances, Mitsuba's shapegroup/instance).
 Not a scene type of its own: the scene holds Mesh shapes (the oracle, the checks and Mitsuba see
 each as the mesh it is), and only the prepared scene packs the meshes that share their arrays as
 instances (``Mesh.packed_as``). An instance's entry holds object_from_world (float64), its normal
-matrix and its object box; engine/instances.py builds the one BVH per shared mesh (in object space)
+matrix and its object box; engine/scene/instances.py builds the one BVH per shared mesh (in object space)
 over the shared triangles, and kernels/instance.cl enters it through the inverse transform.
 
 Per view (``_rebase``, kernels/instance.cl's instance_rebase: the same float64 operations), each
@@ -32,7 +32,7 @@ from .mesh_sharing import shared_key
 # the shared arrays the kernel takes after the instances' array: (name, OpenCL C element type)
 # (each distinct mesh once: its object-space vertices (float64, w 0), its faces in its tree's leaf order
 # (three vertex indices into the vertices and its index in its mesh, ~index where it has zero area), the
-# tree's nodes, and the vertices' unit object-space normals where an instance is smooth: engine/instances.py)
+# tree's nodes, and the vertices' unit object-space normals where an instance is smooth: engine/scene/instances.py)
 SHARED = (("vertices", "double4"), ("faces", "int4"), ("nodes", "BvhNode"), ("normals", "double4"))
 
 
@@ -62,7 +62,7 @@ class Instances(Shape):
             ("anchor", "double4"),  # the object-space point its BVH's boxes are around; w: k (a power of two)
             ("lo", "double4"),  # the mesh's object-space box
             ("hi", "double4"),
-            ("root", "int"),  # its BVH's first node and first triangle in the shared arrays (engine/instances.py)
+            ("root", "int"),  # its BVH's first node and first triangle in the shared arrays (engine/scene/instances.py)
             ("first", "int"),
         ),
         "A mesh instance: object_from_world, its normal matrix, its object box and its BVH in the shared arrays.",

@@ -73,7 +73,7 @@ class Mesh(Shape):
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
     kernel_files = ("mesh.cl",)
-    # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh_wide.py:
+    # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh/wide.py:
     # count < 8), about a packet's 8 lanes: a triangle test is cheap next to a node's box test and the
     # stack (docs/benchmarks.md, "Why the engine does what it does": Mesh.leaf_size)
     leaf_size = 7
@@ -312,7 +312,7 @@ class Mesh(Shape):
         np.maximum.at(hi, group, bounds[:, 1])
         out = np.empty((len(ids), 4))
         out[:, :3] = (0.5 * (lo + hi))[group]
-        # the radius with the margin of the BVH's boxes (2^-12 of their size: engine/bvh.py's WIDEN)
+        # the radius with the margin of the BVH's boxes (2^-12 of their size: engine/bvh/tree.py's WIDEN)
         out[:, 3] = (0.5 * np.linalg.norm(hi - lo, axis=1) * (1 + 2.0**-12))[group]
         return out
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...engine.shading import shadow_reach
+from ...engine.scene.lighting import shadow_reach
 from ...model.lights import DirectionalLight, Material, Shading, effective_lights
 from .. import error_model, shading
 from .arbitrate import Verdicts, decide

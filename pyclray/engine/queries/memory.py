@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..model.aovs import image_bytes
-from ..model.errors import RequestError
+from ...model.aovs import image_bytes
+from ...model.errors import RequestError
 
 
 # Images up to this many bytes are not checked (reading /proc/meminfo costs a share of a warm render;

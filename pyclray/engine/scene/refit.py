@@ -1,4 +1,4 @@
-"""An animation's frame on a prepared scene (pyclray.engine.prepared): the shapes it changed written
+"""An animation's frame on a prepared scene (pyclray.engine.scene.prepared): the shapes it changed written
 in place, the BVH refitted above them (or the scene rebuilt where a refit would degrade the tree),
 and while the camera stays, the frame buffers brought to the view entry by entry (no whole pass).
 
@@ -10,12 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from . import shading
-from .buffers import shares_host_memory
-from .bvh import outward32, sah_cost, widened
-from .bvh_wide import pack_wide, row_of
-from .programs import Variant, kernels_for
-from .request import input_buffer
+from . import lighting
+from ..opencl.buffers import shares_host_memory
+from ..bvh.tree import outward32, sah_cost, widened
+from ..bvh.wide import pack_wide, row_of
+from ..launch.programs import Variant, kernels_for
+from ..launch.run import input_buffer
 
 
 # Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this factor: a
@@ -55,7 +55,7 @@ def update(prepared, shapes: tuple, changed) -> bool:
     packed, positions, bounds_rows, moved = {}, [], [], []
     for name, (mine, where, at) in by_kind.items():
         kind = prepared.kinds[name]
-        if kind.indexed is not None:  # shared vertices (engine/indexed.py): each shape's rewritten, its faces' bounds
+        if kind.indexed is not None:  # shared vertices (engine/scene/indexed.py): each shape's rewritten, its faces' bounds
             for i, shape, mine_where in zip(at, mine, where):
                 world, bounds = kind.indexed.moved_bounds(i, shape, mine_where)
                 moved.append((kind, i, world))
@@ -123,7 +123,7 @@ def update(prepared, shapes: tuple, changed) -> bool:
     # materials (an animated colour or size): the rows of the shapes whose material is another object
     materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
     if materials:
-        rows = shading.pack_materials([shape for _, shape in materials], prepared.precision)
+        rows = lighting.pack_materials([shape for _, shape in materials], prepared.precision)
         materials = [i for i, _ in materials]
         if not (rows == prepared._materials_host[materials]).all():
             prepared._materials_host[materials] = rows

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable, Mapping
 
-from ..model.shapes import KINDS
+from ...model.shapes import KINDS
 
 
 # -- conditions: each takes the variant and, in a per-type group, the type's name (None elsewhere) --
@@ -36,7 +36,7 @@ def _through_bvh(variant, _type=None) -> bool:
 
 
 def _tiles(variant, _type=None) -> bool:
-    """A render through tile lists (pyclray/engine/culling.py), not the BVH."""
+    """A render through tile lists (pyclray/engine/bvh/tiles.py), not the BVH."""
     return not variant.bvh
 
 
@@ -146,7 +146,7 @@ RENDER = (
         # how many: through the BVH, and for shadow rays, which test every shape of the type
         Parameter("n_{type}s", "const int", (_through_bvh,)),
         # through tile lists: each tile's shapes, {type}_tile_list[{type}_tile_start[tile] ..
-        # {type}_tile_start[tile + 1]] (pyclray/engine/culling.py)
+        # {type}_tile_start[tile + 1]] (pyclray/engine/bvh/tiles.py)
         Parameter("{type}_tile_start", "__global const int*", (_tiles,)),
         Parameter("{type}_tile_list", "__global const int*", (_tiles,)),
         Parameter("n_{type}s", "const int", (_tiles, _shadows)),

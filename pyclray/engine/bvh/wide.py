@@ -1,4 +1,4 @@
-"""The wide BVH the kernels traverse: the binary tree (pyclray.engine.bvh) collapsed three levels at
+"""The wide BVH the kernels traverse: the binary tree (pyclray.engine.bvh.tree) collapsed three levels at
 a time, up to 8 children a node, their boxes tested at once in one float8 test per visit."""
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.layout import Struct, layout
-from .bvh import _FLOAT_MAX, BVH, SAH_FROM, outward32
+from ...model.layout import Struct, layout
+from .tree import _FLOAT_MAX, BVH, SAH_FROM, outward32
 
 WIDTH = 8  # children per wide node: one float8 box test of all of them per visit
 STACK = 256  # kernels/bvh.h: BVH_STACK
@@ -90,7 +90,7 @@ def pack_wide(tree: BVH, wide: WideBVH, origin, rows=None) -> np.ndarray:
     origin = np.asarray(origin, np.float64)
     out["child"] = child
     if tree.nodes >= SAH_FROM:  # one compiled pass (bvh_fast: the same bits), numba being imported by then
-        from .bvh_fast import pack_wide_boxes
+        from .passes import pack_wide_boxes
 
         pack_wide_boxes(np.ascontiguousarray(tree.lo), np.ascontiguousarray(tree.hi),
                         np.ascontiguousarray(binary, dtype=np.int64), origin,

@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..model.shapes.base import in_frame
-from .buffers import aligned, aligned_empty, device_buffer as _buffer
+from ...model.shapes.base import in_frame
+from ..opencl.buffers import aligned, aligned_empty, device_buffer as _buffer
 
 # entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
 # bvh.SAH_FROM); below, numpy's gathers (no numba import in a small scene's cold start)
@@ -28,12 +28,12 @@ def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
     entries (docs/benchmarks.md, "Why the engine does what it does": bvh_fast's compiled passes)."""
     if len(faces) >= COMPILED_FROM:
-        from .bvh_fast import triangle_bounds  # numba: large scenes only
+        from ..bvh.passes import triangle_bounds  # numba: large scenes only
 
         out = np.empty((len(faces), 2, 3))
         triangle_bounds(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int32), out)
         return out
-    from ..model.shapes.base import padded_bounds
+    from ...model.shapes.base import padded_bounds
 
     a, b, c = (vertices[faces[:, k], :3] for k in range(3))
     return padded_bounds(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c))
@@ -80,7 +80,7 @@ class IndexedEntries:
     def rebase(self, prepared, eye, rows) -> None:
         """The per-view pass over the vertices: each in the eye's frame, on the device
         (kernels/rebase_kernels.cl; indexed entries exist on devices with float64 only)."""
-        from .programs import Variant, kernels_for
+        from ..launch.programs import Variant, kernels_for
 
         count = len(self.world_vertices)
         kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
@@ -88,7 +88,7 @@ class IndexedEntries:
         kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
                                    np.int32(count), *frame)
 
-    # -- an animation's frame (pyclray.engine.refit) ---------------------------------------------
+    # -- an animation's frame (pyclray.engine.scene.refit) ---------------------------------------------
     def holds(self, index: int, shape) -> bool:
         """Whether the shape at this scene index can take this one's vertices in place (as many)."""
         return self.vertex_range[index][1] == len(shape.vertices)

@@ -7,9 +7,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..model.shapes import KINDS
-from .bvh import BINARY_STACK, BVH, LEAF_SIZE, SAH_FROM, SCENE_LEAF_SIZE, SCENE_TRAVERSAL, WIDEN, build, pack_nodes, widened
-from .bvh_wide import STACK, WIDTH, WideBVH, collapse, pack_wide
+from ...model.shapes import KINDS
+from .tree import BINARY_STACK, BVH, LEAF_SIZE, SAH_FROM, SCENE_LEAF_SIZE, SCENE_TRAVERSAL, WIDEN, build, pack_nodes, widened
+from .wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """Compiled passes over a large scene's boxes (numba): a mesh's triangle bounds from its shared
-vertices and faces (engine/indexed.py), the widened bounds the BVH is built over (bvh.widened), the
+vertices and faces (engine/scene/indexed.py), the widened bounds the BVH is built over (bvh.widened), the
 binary nodes' packing (bvh.pack_nodes) and the SAH tree's float64 node boxes (bvh_sah).
 Imported for large scenes only, as bvh_sah: numba's import would cost every small scene's cold start.
 

@@ -9,15 +9,15 @@ from types import SimpleNamespace
 import numpy as np
 import pyopencl as cl
 
-from ..model.errors import PyclrayError, SceneError
-from ..model.scene import Scene, check_renderable, check_shape_count
-from . import shading
+from ...model.errors import PyclrayError, SceneError
+from ...model.scene import Scene, check_renderable, check_shape_count
+from . import lighting
 from .prepared import PreparedScene
-from .request import REAL, input_buffer
-from .signatures import shared_arguments
+from ..launch.run import REAL, input_buffer
+from ..launch.signatures import shared_arguments
 
 
-# Render visits the bounded shapes through tile lists (pyclray/engine/culling.py) or through the
+# Render visits the bounded shapes through tile lists (pyclray/engine/tiles.py) or through the
 # BVH, whichever costs a packet less. Through tile lists a packet tests every shape of its tile's
 # list; through the BVH it pays its traversal. The two cost the same at about 16 shapes per tile on
 # average; below, tiles win by 2x and more, above, the BVH (docs/benchmarks.md, "Why the engine does what it does": TILE_LIST_MAX).
@@ -51,7 +51,7 @@ def cheaper_acceleration(scene: Scene, prepared: PreparedScene) -> str:
 
 def check_entry_count(prepared: PreparedScene) -> None:
     """Refuse more entries of one type than the kernels can index (16 x index + type in 32 bits)."""
-    from ..model import scene as scene_model
+    from ...model import scene as scene_model
 
     for kind in prepared.kinds.values():
         if kind.count > scene_model.MAX_SHAPES:
@@ -148,7 +148,7 @@ class ViewInputs:
         image (a view of depth, normal and id packs no lights: render_views' host work per view)."""
         if self._lighting is None:
             ctx, camera, lights, shades, precision = self._made
-            packed = shading.pack_lights(SimpleNamespace(camera=camera, lights=lights), precision)
+            packed = lighting.pack_lights(SimpleNamespace(camera=camera, lights=lights), precision)
             real = REAL[precision]
             self._lighting = {"materials": prepared.materials, "lights": input_buffer(ctx, packed),
                               "n_lights": np.int32(len(packed)), "ambient": np.array((*shades.ambient, 0), real),
@@ -156,7 +156,7 @@ class ViewInputs:
         return self._lighting
 
     def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> dict:
-        """The render kernel's shape arguments by name (engine/signatures.py): a framed scene's eye
+        """The render kernel's shape arguments by name (engine/launch/signatures.py): a framed scene's eye
         frame; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
         entries and count, or per type its entries and tile lists (and with shadows its count)."""
         args = {}

@@ -1,5 +1,5 @@
 """A top-down binned SAH build (Wald, "On fast construction of SAH-based bounding volume
-hierarchies", 2007), compiled by numba: pyclray.engine.bvh.build's builder for large N.
+hierarchies", 2007), compiled by numba: pyclray.engine.bvh.tree.build's builder for large N.
 
 Imported only by bvh.build, and only for scenes of at least bvh.SAH_FROM primitives: numba's
 import and its compiled code's load from numba's disk cache (cache=True) would otherwise cost every
@@ -37,7 +37,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import numba
 import numpy as np
 
-from .bvh_fast import inner_boxes, leaf_boxes, leaf_cut
+from .passes import inner_boxes, leaf_boxes, leaf_cut
 
 BINS = 32
 # The SAH's cost of visiting a node, relative to a primitive's test. 1 (bvh.sah_cost's) makes leaves of

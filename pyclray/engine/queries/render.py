@@ -5,15 +5,16 @@ import numpy as np
 
 from dataclasses import replace
 
-from ..model.aovs import RENDER_AOVS, kernel_aovs
-from ..model.camera import Camera
-from ..model.errors import PyclrayError, RequestError
-from ..model.scene import Scene
-from . import culling
+from ...model.aovs import RENDER_AOVS, kernel_aovs
+from ...model.camera import Camera
+from ...model.errors import PyclrayError, RequestError
+from ...model.scene import Scene
+from ..bvh import tiles
 from .labels import with_labels
 from .memory import check_images_fit
-from .programs import Variant, lanes_for, packet_shape
-from .request import Frame, check_request, enqueue_kernel
+from ..launch.programs import Variant, lanes_for, packet_shape
+from .requests import Frame, check_request
+from ..launch.run import enqueue_kernel
 
 
 def _window(scene: Scene, window) -> tuple[int, int, int, int]:
@@ -52,8 +53,8 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
                       framed=prepared.framed, indexed=prepared.indexed)
-    tile = culling.TILE
-    # the kernel's arguments by name (engine/signatures.py: the render kernel's), but for the images' buffers
+    tile = tiles.TILE
+    # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
             "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
             "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
@@ -86,7 +87,7 @@ def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_grou
     the image (kernels/render.cl: render_packet); work-groups of one tile's packets where the device
     allows (the kernel needs none)."""
     width, height = packet_shape(lanes)
-    tile = culling.TILE
+    tile = tiles.TILE
     packets = (-(-(col0 + cols) // width) - col0 // width, -(-(row0 + rows) // height) - row0 // height)
     group = (tile // width, tile // height)
     global_size = tuple(-(-n // g) * g for n, g in zip(packets, group))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.errors import PyclrayError
+from ...model.errors import PyclrayError
 
 # a ref holds its index shifted by 4 bits in an int: a block's place (64-byte units) below 2^27
 MAX_PLACE = 2**27
@@ -101,7 +101,7 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
 
 def _corners(kind, world) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (V, 3+) float64, corners (F, 3)): the type's entries (in leaf order) as vertex
-    indices, -1 where never hit: an indexed type's shared vertices and faces (engine/indexed.py), else
+    indices, -1 where never hit: an indexed type's shared vertices and faces (engine/scene/indexed.py), else
     each entry's own three corners from its world entry (a zero world normal: never hit)."""
     if kind.indexed is not None:
         faces = kind.indexed.faces

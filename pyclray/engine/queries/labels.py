@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.shapes.base import labels_of
+from ...model.shapes.base import labels_of
 
 
 def with_labels(scene, images: dict, asked) -> dict:

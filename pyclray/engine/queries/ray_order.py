@@ -3,7 +3,7 @@ its origin and direction, and a counting sort of the codes, in one pass each ove
 seven passes, a radix argsort and gathered the rays in that order; docs/benchmarks.md, "Why the engine
 does what it does").
 
-Imported by pyclray.engine.cast only for batches of at least its COHERENT_FROM rays (numba's import
+Imported by pyclray.engine.queries.cast only for batches of at least its COHERENT_FROM rays (numba's import
 and its compiled code's load from numba's disk cache are a process's first large cast's to pay, and
 the first on a machine compiles). Each ray
 is traced on its own, so the order changes no bit of any result; only which rays run side by side.

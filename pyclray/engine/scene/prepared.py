@@ -13,7 +13,7 @@ without float64 rebase on the host (``Shape.rebase``, the same formulas) and upl
 So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
 with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the render kernel frames each
 where it tests it from its world entry (the same bits). Meshes on a device with float64 are shared
-vertices and faces whose vertices the per-view pass frames (INDEXED, engine/indexed.py), in any scene.
+vertices and faces whose vertices the per-view pass frames (INDEXED, engine/scene/indexed.py), in any scene.
 
 A scene handle (engine/tracer.py) owns one: nothing here is kept between calls. A frame of an
 animation (the same shapes, a few moved) updates it in place (``update``): only those entries are
@@ -27,15 +27,18 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..model.scene import MAX_LENGTH, Scene
-from ..model.shapes import KINDS, REGISTRY
-from ..model.shapes.base import entries
-from . import culling, instances, refit, shading
-from .buffers import aligned, device_buffer as _buffer
-from .device import has_fp64, launch
+from ...model.scene import MAX_LENGTH, Scene
+from ...model.shapes import KINDS, REGISTRY
+from ...model.shapes.base import entries
+from ..bvh import tiles
+from . import instances
+from . import refit
+from . import lighting
+from ..opencl.buffers import aligned, device_buffer as _buffer
+from ..opencl.device import has_fp64, launch
 from .indexed import IndexedEntries, indexed_bounds
-from .programs import Variant, kernels_for
-from .scene_bvh import SceneBVH, primitives_bvh
+from ..launch.programs import Variant, kernels_for
+from ..bvh.scene import SceneBVH, primitives_bvh
 
 @dataclass
 class Kind:
@@ -125,7 +128,7 @@ class PreparedScene:
                     packed[kind] = group
             by_type = packed
         self.types = tuple(t for t in KINDS if t in by_type)
-        # Meshes are shared vertices and faces wherever the device has float64 (engine/indexed.py):
+        # Meshes are shared vertices and faces wherever the device has float64 (engine/scene/indexed.py):
         # their world entries are never packed, their bounds come from the vertices and faces
         self.indexed = has_fp64(ctx.device) and INDEXED
         # the others, a per-view pass rebases into the camera's frame: on the device (kernels/rebase.cl,
@@ -200,7 +203,7 @@ class PreparedScene:
             self._refs_host = aligned(np.zeros(1, np.int32) if one else self.bvh.refs(self.types))
             self.refs = _buffer(ctx, self._refs_host)
         with np.errstate(over="ignore", invalid="ignore"):
-            self._materials_host = aligned(shading.pack_materials(shapes, precision))
+            self._materials_host = aligned(lighting.pack_materials(shapes, precision))
         self.base, self.dirty = shapes, set()  # see update
         self.stale: dict = {}  # type name (or "nodes") -> world entries changed on the host only
         self._refit = None
@@ -226,7 +229,7 @@ class PreparedScene:
     REFIT_COST_MAX = 1.5
 
     def update(self, shapes: tuple, changed) -> bool:
-        """Become the prepared scene of an animation's frame (see pyclray.engine.refit.update); a
+        """Become the prepared scene of an animation's frame (see pyclray.engine.scene.refit.update); a
         scene with shared arrays (mesh instances) is built anew."""
         if any(kind.cls.shared for kind in self.kinds.values()):
             return False
@@ -235,7 +238,7 @@ class PreparedScene:
     def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
         cls = KINDS[t]
-        if isinstance(world, tuple):  # shared vertices and faces (engine/indexed.py)
+        if isinstance(world, tuple):  # shared vertices and faces (engine/scene/indexed.py)
             indexed = IndexedEntries(self, cls, shapes, *world, order, ids)
             return Kind(t, cls, None, indexed.ids, None, None, None, None, None, None, indexed=indexed, shapes=shapes,
                         order=order)
@@ -337,6 +340,6 @@ class PreparedScene:
         return (-(-count // group) * group,), (group,)
 
     def tile_lists(self, kind: Kind, eye, rows, plane, width, height):
-        """(start, index) of the kind's entries for each screen tile of this view (culling.tile_lists)."""
+        """(start, index) of the kind's entries for each screen tile of this view (tiles.tile_lists)."""
         spheres = kind.cls.spheres_of(kind.world) if kind.cls.bounded else None
-        return culling.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
+        return tiles.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)

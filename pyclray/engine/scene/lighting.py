@@ -5,30 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.layout import Struct, layout
-from ..model.lights import PointLight, effective_lights
-
-# Per shape id: its material.
-MATERIAL = Struct(
-    "Material",
-    (
-        ("color", "real4"),  # albedo rgb; w: specular
-        ("shininess", "real"),
-    ),
-    "A shape's material by id: color.xyz albedo, color.w specular, shininess.",
-)
-# Per light: a point light's position in the frame (w = 1) or a directional light's unit direction
-# toward the light in the frame (w = 0), and its intensity or irradiance.
-LIGHT = Struct(
-    "Light",
-    (
-        ("position", "real4"),  # point: xyz in the frame, w = 1; directional: toward the light, w = 0
-        ("power", "real4"),  # rgb intensity (point) or irradiance (directional)
-    ),
-    "A light in the camera's frame: position.w = 1 point (xyz its position), 0 directional (xyz toward it).",
-)
-STRUCTS = (MATERIAL, LIGHT)
-
+from ...model.layout import layout
+from ...model.lights import LIGHT, MATERIAL, PointLight, effective_lights
 
 SHADOW_OFFSET_K = 16  # kernels/shading.h: the shadow ray's offset K eps |n_s| . |p|, where it is offset
 

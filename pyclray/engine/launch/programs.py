@@ -14,18 +14,18 @@ from pathlib import Path
 
 import pyopencl as cl
 
-from ..model.errors import BuildError, DeviceError
-from ..model.cameras.perspective import CAMERA
-from ..model.layout import c_header
-from ..model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
-from .bvh import NODE
-from .bvh_wide import WIDE_NODE
-from .device import DeviceContext, is_pocl_cpu
-from .pocl_cpu import named_cpu
-from .shading import STRUCTS as SHADING_STRUCTS
+from ...model.errors import BuildError, DeviceError
+from ...model.cameras.perspective import CAMERA
+from ...model.layout import c_header
+from ...model.lights import STRUCTS as SHADING_STRUCTS
+from ...model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
+from ..bvh.tree import NODE
+from ..bvh.wide import WIDE_NODE
+from ..opencl.device import DeviceContext, is_pocl_cpu
+from ..opencl.pocl_cpu import named_cpu
 from .signatures import SIGNATURES, c_defines
 
-# each query's kernel file (the kernel of that name is in it; its signature: engine/signatures.py)
+# each query's kernel file (the kernel of that name is in it; its signature: engine/launch/signatures.py)
 QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl"}
 # the images that need the nearest hit's shape, not only its distance (PYCLRAY_TRACK_ID)
 WINNER_AOVS = ("normal", "id", "shaded", "primitive", "barycentric")
@@ -42,7 +42,7 @@ _programs: dict = {}
 # -- sources and programs --------------------------------------------------------------------
 def kernel_dir():
     """The kernels/ folder: package data of pyclray.engine (in a checkout and in an installed wheel alike)."""
-    folder = resources.files(__package__).joinpath("kernels")
+    folder = resources.files("pyclray.engine").joinpath("kernels")
     if folder.joinpath("render.cl").is_file():
         return folder
     raise FileNotFoundError("pyclray's kernels/ folder is missing from this installation")
@@ -98,7 +98,7 @@ class Variant:
     """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
 
     kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, traced one
-    # at a time, CAST_GROUP of them per work-item: engine/cast.py), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
+    # at a time, CAST_GROUP of them per work-item: engine/queries/cast.py), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
     # camera's frame: kernels/rebase.cl)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
@@ -108,10 +108,10 @@ class Variant:
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
     smooth: tuple[str, ...] = ()  # with "shaded": the types with a shape lit by its own normals (a smooth mesh)
     # render: each shape framed on the eye from its float64 world entry where it is tested (devices
-    # with float64), instead of read from the per-view pass's buffers (pyclray.engine.prepared)
+    # with float64), instead of read from the per-view pass's buffers (pyclray.engine.scene.prepared)
     framed: bool = False
     # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
-    # float64, engine/indexed.py), framed or not
+    # float64, engine/scene/indexed.py), framed or not
     indexed: bool = False
 
     def bounded_types(self) -> tuple[str, ...]:
@@ -167,7 +167,7 @@ class Variant:
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
-        if self.kind in SIGNATURES:  # the kernel's parameters (engine/signatures.py)
+        if self.kind in SIGNATURES:  # the kernel's parameters (engine/launch/signatures.py)
             lines += c_defines(self)
         return lines
 
@@ -325,7 +325,7 @@ def _quiet_compiler():
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:
     source, options = variant.source(inline_builtins=is_pocl_cpu(ctx.device)), variant.options()
     cpu = named_cpu(ctx.device)
-    if cpu is not None:  # PoCL compiles for a CPU pyclray named (engine/pocl_cpu.py): a key of its own
+    if cpu is not None:  # PoCL compiles for a CPU pyclray named (engine/opencl/pocl_cpu.py): a key of its own
         source = f"/* pyclray: PoCL's CPU named {cpu} */\n{source}"
     folder = cache_dir()
     path = folder / f"{_disk_key(source, options, ctx.device)}.bin" if folder else None

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .bvh import build, pack_nodes, widened
+from ..bvh.tree import build, pack_nodes, widened
 from .indexed import indexed_bounds
 
 # leaves of the mesh's own tree: as a mesh's in the scene's tree (Mesh.leaf_size: about a packet's lanes)
@@ -25,8 +25,8 @@ def pack_shared(cls, meshes, world) -> list[np.ndarray]:
     writes each instance's root and first into world. Per triangle of a closed mesh: a face (16
     bytes), half a vertex (32 bytes each) and the tree's share, about 48 bytes (the world triangles
     and their indices took 100)."""
-    from ..model.shapes.mesh_sharing import shared_key
-    from ..model.shapes.mesh import Mesh
+    from ...model.shapes.mesh_sharing import shared_key
+    from ...model.shapes.mesh import Mesh
 
     vertices, faces, nodes, normals = [], [], [], []
     smooth = {shared_key(mesh) for mesh in meshes if mesh.smooth}

@@ -5,14 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..model.cameras.perspective import ImagePlane, packed_frame
-from ..model.errors import DeviceError, PyclrayError
-from ..model.layout import layout
-from .device import has_fp64, launch
-from .prepared import PreparedScene
-from .programs import Variant, kernel_for
-from .request import REAL, Frame, input_buffer, run_kernel
-from .signatures import arguments, shared_arguments
+from ...model.cameras.perspective import ImagePlane, packed_frame
+from ...model.errors import DeviceError, PyclrayError
+from ...model.layout import layout
+from ..opencl.device import has_fp64, launch
+from ..scene.prepared import PreparedScene
+from ..launch.programs import Variant, kernel_for
+from ..launch.run import REAL, input_buffer, run_kernel
+from .requests import Frame
+from ..launch.signatures import arguments, shared_arguments
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -51,7 +52,7 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
         )
     extent = None
     if directions.size // 3 >= COHERENT_FROM:  # one compiled pass: the checks below, the origins' box, the codes
-        from .cast_order import scan_codes
+        from .ray_order import scan_codes
 
         fine, lo, hi, direction_codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3), codes)
         extent = (lo, hi, direction_codes) if fine else None
@@ -83,7 +84,7 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
-# at least this many (pyclray.engine.cast_order): neighbouring work-items then walk the same nodes
+# at least this many (pyclray.engine.queries.ray_order): neighbouring work-items then walk the same nodes
 # and shapes, which stay in cache (docs/benchmarks.md, "Why the engine does what it does": COHERENT_FROM). Each ray is traced on its own, so
 # the order changes no bit.
 COHERENT_FROM = 4096
@@ -247,12 +248,12 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
     if ordered:  # numba's code, imported for large batches only
-        from .cast_order import coherent_order
+        from .ray_order import coherent_order
 
         order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
     else:
         order = np.zeros(1, np.int32)
-    # the kernel's arguments by name (engine/signatures.py: cast's and occluded's rays), but for the results
+    # the kernel's arguments by name (engine/launch/signatures.py: cast's and occluded's rays), but for the results
     rays = {"n_rays": np.int32(count), "order": _ray_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
             "origins": _ray_buffer(ctx, origins), "origin_stride": np.int32(1 if len(origins) > 1 else 0),
             "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..model.errors import DeviceError
+from ...model.errors import DeviceError
 from .pocl_cpu import name_known_cpu
 
 INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
@@ -87,7 +87,7 @@ def context_for(device: cl.Device | str | None = None) -> DeviceContext:
     key = device.int_ptr
     with _lock:
         if key not in _contexts:
-            name_known_cpu(device)  # PoCL on a CPU newer than its LLVM (engine/pocl_cpu.py)
+            name_known_cpu(device)  # PoCL on a CPU newer than its LLVM (engine/opencl/pocl_cpu.py)
             context = cl.Context([device])
             _contexts[key] = DeviceContext(device, context, cl.CommandQueue(context, device))
         return _contexts[key]

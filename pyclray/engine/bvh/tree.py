@@ -1,5 +1,5 @@
 """A bounding volume hierarchy over shapes' world bounds: a binned SAH tree for large scenes
-(pyclray.engine.bvh_sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
+(pyclray.engine.bvh.sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
 
 The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves of
 at most LEAF_SIZE where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is
@@ -27,7 +27,7 @@ them outward to the kernel's precision) and two integers: ``first`` and ``count`
 leaf holding the shapes order[first : first + count]; count == 0: an internal node whose children
 are nodes first and first + 1, numbered after it. Node 0 is the root. Both builders give their
 nodes exactly the union of their shapes' boxes (float64 min and max); the refit of an animation
-(pyclray.engine.refit) and the wide tree (bvh_wide) read only this layout.
+(pyclray.engine.scene.refit) and the wide tree (bvh_wide) read only this layout.
 """
 from __future__ import annotations
 
@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.layout import Struct, layout
-from .buffers import aligned_empty
+from ...model.layout import Struct, layout
+from ..opencl.buffers import aligned_empty
 
 LEAF_SIZE = 4  # shapes per leaf at most: the kernel tests a leaf's shapes one after the other
 # How much a shape's box is widened, relative to its size, and the ray's cone in the kernel,
@@ -217,10 +217,10 @@ def build(bounds: np.ndarray, leaf_size: int | None = None, method: str | None =
     if method is None:
         method = "sah" if n >= SAH_FROM else "lbvh"
     if method == "sah" and n > 1:
-        from . import bvh_sah  # numba: imported for large scenes only (see bvh_sah)
+        from . import sah  # numba: imported for large scenes only (see sah
 
-        return BVH(*bvh_sah.build(bounds, leaf_size, MAX_SAH_DEPTH,
-                                  traversal=bvh_sah.TRAVERSAL if traversal is None else traversal))
+        return BVH(*sah.build(bounds, leaf_size, MAX_SAH_DEPTH,
+                              traversal=sah.TRAVERSAL if traversal is None else traversal))
     if method not in ("sah", "lbvh"):
         raise ValueError(f"BVH build method: expected 'sah' or 'lbvh', got {method!r}")
     order, keys = morton_order(0.5 * (bounds[:, 0] + bounds[:, 1]))
@@ -304,7 +304,7 @@ def widened(bounds: np.ndarray) -> np.ndarray:
     bounds = np.asarray(bounds, np.float64)
     out = np.empty_like(bounds)
     if len(bounds) >= SAH_FROM:  # one compiled pass (numba is imported for the SAH build anyway): 0.1 s less a million
-        from .bvh_fast import widen
+        from .passes import widen
 
         widen(np.ascontiguousarray(bounds), WIDEN, out)
         return out
@@ -335,7 +335,7 @@ def pack_nodes(tree: BVH, origin) -> np.ndarray:
     assert out.itemsize == 32  # two float4 (pack_binary writes its words)
     origin = np.asarray(origin, np.float64)
     if tree.nodes >= SAH_FROM:  # one compiled pass (bvh_fast: the same bits), numba being imported by then
-        from .bvh_fast import pack_binary
+        from .passes import pack_binary
 
         words = out.view(np.float32).reshape(tree.nodes, 8)
         pack_binary(np.ascontiguousarray(tree.lo), np.ascontiguousarray(tree.hi), tree.first.astype(np.int32),

@@ -1,0 +1,1 @@
+"""Bounding volume hierarchies: the trees, their builders and packings, and screen tiles."""

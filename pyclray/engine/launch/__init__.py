@@ -1,0 +1,1 @@
+"""Programs and launches: each kernel's variant, source and signature, built and run."""

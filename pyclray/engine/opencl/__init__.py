@@ -1,0 +1,1 @@
+"""OpenCL devices, contexts, buffers and PoCL's CPU name: the engine's ground floor."""
