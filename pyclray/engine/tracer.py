@@ -38,8 +38,9 @@ class Tracer:
 
     VIEWS_MAX = 16  # the views (camera, image, lights, shading) whose inputs are kept
 
-    def __init__(self, scene, device=None, precision: str = "fp32"):
-        scene = as_scene(scene)
+    def __init__(self, scene: Scene, device=None, precision: str = "fp32"):
+        if not isinstance(scene, Scene):  # (pyclray.prepare also takes a scene file's path)
+            raise RequestError(f"scene: expected a pyclray.Scene, got {type(scene).__name__}")
         ctx = context_for(device)
         check_precision(precision, ctx)
         self.ctx, self.precision = ctx, precision
@@ -248,4 +249,4 @@ def prepare(scene, device=None, precision: str = "fp32") -> Tracer:
     at a precision ("fp32" or "fp64"), once: a handle (Tracer) whose methods render, render views,
     cast and test occlusion without preparing anything again, until ``close()`` or the end of a
     ``with`` block frees its device memory. scene: a Scene or the path of a scene file."""
-    return Tracer(scene, device, precision)
+    return Tracer(as_scene(scene), device, precision)
