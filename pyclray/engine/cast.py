@@ -8,7 +8,6 @@ import numpy as np
 import pyopencl as cl
 
 from ..model.aovs import AOVS
-from ..model.camera import ImagePlane
 from ..model.errors import DeviceError, PyclrayError, RequestError
 from ..model.layout import PRECISIONS, layout
 from ..model.loader import as_scene
@@ -16,7 +15,7 @@ from ..model.scene import Scene, check_shape_count
 from .device import context_for, has_fp64, launch
 from .prepared import CACHES, PREPARED_MAX, prepared_scene
 from .programs import Variant, kernel_for
-from .request import REAL, Frame, camera_struct, check_request, input_buffer, render_lock, run_kernel
+from .request import REAL, Frame, check_request, input_buffer, render_lock, run_kernel
 from .signatures import arguments, shared_arguments
 
 def _ray_array(name: str, value) -> np.ndarray:
@@ -289,11 +288,8 @@ def _cast_run(kind: str, scene: Scene, origins, directions, tmax, aovs, precisio
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         _run_into(ctx, variant, sizes, rays, out)
         return out.reshape(shape)
-    identity = np.eye(3)
-    camera = camera_struct(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", shape_types, aovs, precision)
-    results = run_kernel(ctx, variant, {"camera": input_buffer(ctx, camera), **rays}, sizes[0], count, aovs, precision,
-                         (count,), local_size=sizes[1])
+    results = run_kernel(ctx, variant, rays, sizes[0], count, aovs, precision, (count,), local_size=sizes[1])
     results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
 
