@@ -159,7 +159,7 @@ class ViewInputs:
         self._lighting = self._eye_parts = None
 
     def eye_parts(self) -> list:
-        """The eye as a sum of two reals, for the position image (kernels/pyclray.cl): made when a
+        """The eye as a sum of two reals, for the position image (kernels/images.h): made when a
         view first asks for that image."""
         if self._eye_parts is None:
             real = REAL[self._made[-1]]
