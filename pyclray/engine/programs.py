@@ -213,7 +213,7 @@ class Variant:
         shading = "shaded" in self.aovs
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
         framed = self.framed and self.kind == "render"
-        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
+        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
