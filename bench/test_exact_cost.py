@@ -24,10 +24,10 @@ inline realv sphere_hit(__global const Sphere* sphere, const RayPacket* ray)
     return disc >= 0 ? s : SPLAT(MISS);
 }
 
-inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+inline vec3v sphere_normal(__global const Sphere* sphere, const RayPacket* ray, const Basis* basis)
 {
     const realv s = sphere_hit(sphere, ray);
-    return world_from_frame(camera, v3_normalize(v3_sub(v3_scale(ray->dir, s), v3_sub(v3_splat(sphere->center), ray->origin))));
+    return world_from_basis(basis, v3_normalize(v3_sub(v3_scale(ray->dir, s), v3_sub(v3_splat(sphere->center), ray->origin))));
 }
 """
 

@@ -48,7 +48,7 @@ class SceneBVH:
         return pack_nodes(self.tree, origin)
 
     def refs(self, shape_types) -> np.ndarray:
-        """refs[q] = index * 16 + kind (kernels/pyclray.cl: KIND_<Type> = 1 + its place among the
+        """refs[q] = index * 16 + kind (kernels/shapes.h: KIND_<Type> = 1 + its place among the
         program's shape types). Each type's entries lie in leaf order, so with one bounded type
         index = q (the render kernel's PYCLRAY_ONE_BOUNDED relies on it)."""
         kinds = np.array([1 + list(shape_types).index(t) for t in self.types], np.int64)

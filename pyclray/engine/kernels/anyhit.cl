@@ -1,6 +1,6 @@
 /* The any-hit query (occluded): whether each ray of a batch given in world coordinates meets any
  * shape up to its limit (pyclray/engine/queries/cast.py). The host puts before this file common.h, lanes.h,
- * the generated struct header, shapes.h, camera.h, the BVH's headers, cast.h, the file of each shape
+ * the generated struct header, shapes.h, the BVH's headers, cast.h, the file of each shape
  * type present and rays.h. */
 
 /* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */

@@ -119,7 +119,7 @@ inline realv box_hit(SHAPE_SPACE const Box* box, const RayPacket* ray)
 }
 /* The outward normal of the face hit: against the ray along the entry slab's axis, with it along
  * the exit slab's; the box's world axes are packed as is, so an unrotated box's normals are exact. */
-inline vec3v box_normal(SHAPE_SPACE const Box* box, const RayPacket* ray, __global const Camera* camera)
+inline vec3v box_normal(SHAPE_SPACE const Box* box, const RayPacket* ray, const Basis* basis)
 {
     const BoxSlabs slabs = box_slabs(box, ray);
     const intv entering = slabs.entry > 0;

@@ -1,9 +1,53 @@
-/* The camera frame: world_from_camera has columns u (left), v (up) and w (forward). */
+/* The pinhole camera of a render (pyclray/model/camera.py; its struct, Camera, from the host): its frame
+ * (origin the eye, axes u (left), v (up) and w (forward): the columns of world_from_camera) and the
+ * rays of a packet of its pixels. */
 
+inline Basis camera_basis(__global const Camera* camera)
+{
+    Basis basis;
+    basis.u = camera->u;
+    basis.v = camera->v;
+    basis.w = camera->w;
+    return basis;
+}
+
+/* a direction of the camera's frame in world coordinates */
 inline vec3v world_from_frame(__global const Camera* camera, const vec3v n)
 {
-    const real4 u = camera->u, v = camera->v, w = camera->w;
-    return v3((n.x * u.x + n.y * v.x) + n.z * w.x,
-              (n.x * u.y + n.y * v.y) + n.z * w.y,
-              (n.x * u.z + n.y * v.z) + n.z * w.z);
+    const Basis basis = camera_basis(camera);
+    return world_from_basis(&basis, n);
+}
+
+/* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and
+ * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera frame. */
+#if PYCLRAY_PACKET_H == 1
+#define PYCLRAY_LANE_COLUMN LANE_INDEX
+#define PYCLRAY_LANE_ROW SPLAT_INT(0)
+#else
+#define PYCLRAY_LANE_COLUMN (LANE_INDEX % SPLAT_INT(PYCLRAY_PACKET_W))
+#define PYCLRAY_LANE_ROW (LANE_INDEX / SPLAT_INT(PYCLRAY_PACKET_W))
+#endif
+inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j0)
+{
+    const int width = camera->width, height = camera->height;
+    const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
+    /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
+     * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
+     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
+     * keeps its relative precision even for a tiny fov or next to the principal point */
+    const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
+                                            / SPLAT((real)width));
+    const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
+                                            / SPLAT((real)height));
+    /* normalized in the camera frame, where each component is divided on its own: the tiny
+     * lateral components of a narrow field of view keep their relative precision */
+    const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
+    RayPacket ray;
+    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
+    ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_SHADOWS
+    ray.from_eye = 1;
+#endif
+    return ray;
 }

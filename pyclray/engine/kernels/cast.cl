@@ -1,7 +1,7 @@
 /* The cast query: the nearest hit of each ray of a batch given in world coordinates (origins,
  * directions and limits in float64), its distance, normal and id (pyclray/engine/queries/cast.py). The host
- * puts before this file common.h, lanes.h, the generated struct header, shapes.h, camera.h, the BVH's
- * headers, cast.h, the file of each shape type present and rays.h. */
+ * puts before this file common.h, lanes.h, the generated struct header, shapes.h, the BVH's headers,
+ * cast.h, the file of each shape type present and rays.h. */
 
 /* the nearest hit so far (float64 distance), on an exact tie the lowest id */
 #ifdef PYCLRAY_TRACK_ID
@@ -44,7 +44,7 @@
 #define PYCLRAY_CAST_NORMAL_ENTRY(Type, type)                                       \
     {                                                                               \
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        normal = PYCLRAY_NORMAL_##type(&framed, &ray, camera, MISS, 1);             \
+        normal = PYCLRAY_NORMAL_##type(&framed, &ray, &world_axes, MISS, 1);        \
     }
 
 /* Each work-item's rays (a group of CAST_GROUP) traverse the BVH together: a step of each in turn
@@ -158,6 +158,8 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
         }
 #endif
         vec3v normal = v3(0, 0, 0);
+        /* each shape is framed on the world's axes (kernels/cast.h): its normal is turned by them */
+        const Basis world_axes = {(real4)(1, 0, 0, 0), (real4)(0, 1, 0, 0), (real4)(0, 0, 1, 0)};
         if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_NORMAL) }
         normal_out[3 * index] = normal.x;
         normal_out[3 * index + 1] = normal.y;

@@ -138,13 +138,13 @@ inline realv cylinder_hit(SHAPE_SPACE const Cylinder* cylinder, const RayPacket*
  * subtracting large nearly equal vectors, as for the sphere: a R = -+sqrt(disc) D_perp - triple (D x A)
  * (near root: -, far root: +), D_perp = A x (D x A); the open tube's inner side has the same
  * outward normal. */
-inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray, __global const Camera* camera)
+inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray, const Basis* basis)
 {
     const CylinderHit hit = cylinder_intersect(cylinder, ray);
     const realv side = hit.kind == SPLAT_INT(1) ? SPLAT(-1) : SPLAT(1);
     const vec3v D_perp = v3_cross(v3_splat(cylinder->axis), hit.DxA);
     const vec3v radial = v3_sub(v3_scale(D_perp, side * v_sqrt(hit.disc)), v3_scale(hit.DxA, hit.triple));
-    const vec3v outward = world_from_frame(camera, v3_normalize(radial));
+    const vec3v outward = world_from_basis(basis, v3_normalize(radial));
     const vec3v axis = v3_splat(cylinder->world_axis);
     const vec3v cap = v3_scale(axis, hit.kind == SPLAT_INT(3) ? SPLAT(-1) : SPLAT(1));
     return v3_select(outward, cap, hit.kind >= SPLAT_INT(3));

@@ -38,7 +38,7 @@ inline realv disk_hit(SHAPE_SPACE const Disk* disk, const RayPacket* ray)
 }
 
 /* The disk's own normalized normal in world space (packed as is), never flipped. */
-inline vec3v disk_normal(SHAPE_SPACE const Disk* disk, const RayPacket* ray, __global const Camera* camera)
+inline vec3v disk_normal(SHAPE_SPACE const Disk* disk, const RayPacket* ray, const Basis* basis)
 {
     return v3_splat(disk->world_normal);
 }

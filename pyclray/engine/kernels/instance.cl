@@ -301,7 +301,7 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
 }
 #define PYCLRAY_HIT_instance(shape, ray, limit) \
     instance_cast_hit(shape, ray, instance_vertices, instance_faces, instance_nodes)
-#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+#define PYCLRAY_NORMAL_instance(shape, ray, basis, best, mine) \
     instance_cast_normal(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #else
 /* how kernels/nearest.h calls an instance's functions: with the shared arrays, the lanes' best so
@@ -309,7 +309,7 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
 #define PYCLRAY_SUBPRIMITIVES 1
 #define PYCLRAY_HIT_instance(shape, ray, limit) \
     instance_search(shape, ray, limit, instance_vertices, instance_faces, instance_nodes, &hit_sub)
-#define PYCLRAY_NORMAL_instance(shape, ray, camera, best, mine) \
+#define PYCLRAY_NORMAL_instance(shape, ray, basis, best, mine) \
     instance_normal(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_vertices, instance_faces)
 #define PYCLRAY_PRIMITIVE_instance(shape, k, best, mine) \
     instance_primitive(shape, (mine) ? best_sub : SPLAT_INT(-1), instance_faces)

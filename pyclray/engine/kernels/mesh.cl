@@ -361,7 +361,7 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
 #endif
 
 /* The unit world normal normalize(cross(b - a, c - a)), computed in float64 on the host. */
-inline vec3v mesh_normal(MESH_SPACE const Triangle* tri, const RayPacket* ray, __global const Camera* camera)
+inline vec3v mesh_normal(MESH_SPACE const Triangle* tri, const RayPacket* ray, const Basis* basis)
 {
     return v3(SPLAT(tri->a.w), SPLAT(tri->b.w), SPLAT(tri->c.w));
 }

@@ -86,8 +86,8 @@
 
 #ifdef PYCLRAY_WINNER_NORMAL
 #define PYCLRAY_NORMAL_OF(type, shape) \
-    normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, camera, best, mine), mine);
-#define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, &basis, best, mine), mine);
+#define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0)); const Basis basis = camera_basis(camera);
 #else
 #define PYCLRAY_NORMAL_OF(type, shape)
 #define PYCLRAY_NORMAL_BEGIN

@@ -34,7 +34,7 @@ inline realv plane_hit(SHAPE_SPACE const Plane* plane, const RayPacket* ray)
 
 /* The plane's own normalized normal in world space (packed as is, not rotated back from the
  * frame, so an axis-aligned floor gives exactly (0, 1, 0)), never flipped toward the viewer. */
-inline vec3v plane_normal(SHAPE_SPACE const Plane* plane, const RayPacket* ray, __global const Camera* camera)
+inline vec3v plane_normal(SHAPE_SPACE const Plane* plane, const RayPacket* ray, const Basis* basis)
 {
     return v3_splat(plane->world_normal);
 }

@@ -39,7 +39,7 @@ inline realv rectangle_hit(SHAPE_SPACE const Rectangle* rectangle, const RayPack
 }
 
 /* normalize(u x v) in world space (packed as is), never flipped. */
-inline vec3v rectangle_normal(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray, __global const Camera* camera)
+inline vec3v rectangle_normal(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray, const Basis* basis)
 {
     return v3_splat(rectangle->world_normal);
 }

@@ -1,50 +1,18 @@
 /* The render query: the nearest hit of each camera ray, a packet of pixels per work-item, written
- * into the images asked for. The host puts before this file common.h, lanes.h, the generated struct
- * header, shapes.h, camera.h, the BVH's headers, the file of each shape type present, shading.h (with
- * the shaded image), entries.h, nearest.h and images.h, and selects what is compiled with #defines
- * (pyclray/engine/launch/programs.py): the precision (PYCLRAY_FP64), the lanes and the packet's shape, the
- * shape types present and where each is read (PYCLRAY_MODE_<type>), tile lists or the BVH
- * (PYCLRAY_BVH), the images asked for (PYCLRAY_AOV_<name>) and shadow rays (PYCLRAY_SHADOWS).
- * Geometry and camera come in buffers, so moving a shape or the camera never recompiles. */
-
-/* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and
- * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera frame. */
-#if PYCLRAY_PACKET_H == 1
-#define PYCLRAY_LANE_COLUMN LANE_INDEX
-#define PYCLRAY_LANE_ROW SPLAT_INT(0)
-#else
-#define PYCLRAY_LANE_COLUMN (LANE_INDEX % SPLAT_INT(PYCLRAY_PACKET_W))
-#define PYCLRAY_LANE_ROW (LANE_INDEX / SPLAT_INT(PYCLRAY_PACKET_W))
-#endif
-inline RayPacket camera_rays(__global const Camera* camera, const int i0, const int j0)
-{
-    const int width = camera->width, height = camera->height;
-    const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
-    /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
-     * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
-     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
-     * keeps its relative precision even for a tiny fov or next to the principal point */
-    const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
-                                            / SPLAT((real)width));
-    const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
-                                            / SPLAT((real)height));
-    /* normalized in the camera frame, where each component is divided on its own: the tiny
-     * lateral components of a narrow field of view keep their relative precision */
-    const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
-    RayPacket ray;
-    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
-    ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
-    ray.a = v3_dot(ray.dir, ray.dir);
-#ifdef PYCLRAY_SHADOWS
-    ray.from_eye = 1;
-#endif
-    return ray;
-}
+ * into the images asked for. The host (pyclray/engine/launch/programs.py) puts before this file common.h,
+ * lanes.h, the generated struct header, shapes.h, camera.h (the packet's rays), the BVH's headers, the
+ * file of each shape type present, shading.h (with the shaded image), entries.h, nearest.h and
+ * images.h; it selects what is compiled with #defines: the precision (PYCLRAY_FP64), the lanes and
+ * the packet's shape, the shape types present and where each is read (PYCLRAY_MODE_<type>), tile
+ * lists or the BVH (PYCLRAY_BVH), the images asked for (PYCLRAY_AOV_<name>) and shadow rays
+ * (PYCLRAY_SHADOWS); and it declares the kernel's parameters, PYCLRAY_PARAMETERS
+ * (pyclray/engine/signatures.py). Geometry and camera come in buffers, so moving a shape or the
+ * camera never recompiles. */
 
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_ONE_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
 /* One bounded type (PYCLRAY_ONE_BOUNDED): leaf position q is entry q of its arrays, so a leaf's
- * entries are asked for at once where the traversal first meets the leaf (kernels/bvh_wide_packet.h): the
- * entries its tests read, in the frame (COPIED), in the world (FRAMED), or its faces (INDEXED: the
+ * entries are asked for at once where the traversal first meets the leaf
+ * (kernels/bvh_wide_packet.h): the entries its tests read, in the frame (COPIED), in the world (FRAMED), or its faces (INDEXED: the
  * vertices they name follow when read). PoCL's CPU device only: elsewhere OpenCL's prefetch is a
  * call, or nothing. */
 #define PYCLRAY_PREFETCH_RANGE(p, bytes) \

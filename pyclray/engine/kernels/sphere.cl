@@ -111,13 +111,13 @@ inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
  * nearly equal vectors, so a far sphere's normal keeps its digits. The sign needs no root: from
  * outside (c > 0) a ray hits the near side, b - sqrt(disc); from inside or on the surface
  * (c <= 0) only the far root is positive, b + sqrt(disc). */
-inline vec3v sphere_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+inline vec3v sphere_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, const Basis* basis)
 {
     const SphereTerms t = sphere_terms(sphere, ray);
     const vec3v D = ray->dir;
     const realv side = t.c > 0 ? SPLAT(-1) : SPLAT(1);
     const vec3v n = v3_sub(v3_scale(D, side * v_sqrt(t.disc)), v3_cross(D, v3_cross(t.F, D)));
-    return world_from_frame(camera, v3_normalize(n));
+    return world_from_basis(basis, v3_normalize(n));
 }
 
 #endif

@@ -16,9 +16,9 @@ inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT 
 
 inline realv spheres_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray) { return sphere_hit(sphere, ray); }
 
-inline vec3v spheres_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, __global const Camera* camera)
+inline vec3v spheres_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, const Basis* basis)
 {
-    return sphere_normal(sphere, ray, camera);
+    return sphere_normal(sphere, ray, basis);
 }
 
 #endif

@@ -182,7 +182,7 @@ class Variant:
                           # a shadow ray (kernels/shading.h): self, the lanes whose winner is this entry
                           f"#define PYCLRAY_SHADOW_HIT_{t}(shape, ray, limit, self) {t}_hit(shape, ray)",
                           f"#define PYCLRAY_SELF_{t}(self) (self)",
-                          f"#define PYCLRAY_NORMAL_{t}(shape, ray, camera, best, mine) {t}_normal(shape, ray, camera)",
+                          f"#define PYCLRAY_NORMAL_{t}(shape, ray, basis, best, mine) {t}_normal(shape, ray, basis)",
                           f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
         return lines
@@ -215,16 +215,16 @@ class Variant:
         shading = "shaded" in self.aovs
         cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
         framed = self.framed and self.kind == "render"
-        structs = _unique([CAMERA, NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
+        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision)]
-        parts += [_read(name) for name in ("shapes.h", "camera.h", "bvh.h")]
+        parts += [_read("shapes.h")]
         if cast:  # one ray at a time through the wide tree; mesh instances' own trees as packets of one
-            parts += [_read(name) for name in ("bvh_ray.h", "bvh_packet.h", "cast.h")]
+            parts += [_read(name) for name in ("bvh.h", "bvh_ray.h", "bvh_packet.h", "cast.h")]
         else:  # camera packets through the wide tree (with the BVH), shadow rays through the binary one
-            parts.append(_read("bvh_packet.h"))
+            parts += [_read(name) for name in ("camera.h", "bvh.h", "bvh_packet.h")]
             if self.bvh and self.bounded_types():
                 parts.append(_read("bvh_wide_packet.h"))
         if framed:  # each framed type's <type>_rebase (the per-view pass's, to the same bits), then its tests

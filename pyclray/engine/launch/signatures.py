@@ -202,7 +202,6 @@ RAYS = (
 )
 
 CAST = (
-    Parameter("camera", "__global const Camera*"),
     *RAYS,
     _image("depth", "__global real*"),
     _image("normal", "__global real*"),

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ...model.cameras.perspective import ImagePlane, packed_frame
 from ...model.errors import DeviceError, PyclrayError
 from ...model.layout import layout
 from ..opencl.device import has_fp64, launch
@@ -107,7 +106,7 @@ def _orders(ctx, scene_bytes: int) -> bool:
     return scene_bytes > ORDER_CACHE_SHARE * ctx.device.global_mem_cache_size
 
 
-# The rays one work-item traces, one after the other, their setups done together (kernels/pyclray.cl's
+# The rays one work-item traces, one after the other, their setups done together (kernels/rays.h's
 # CAST_GROUP, which this must equal), and the work-items of a work-group: 128 rays, so that the
 # device's threads share a batch evenly (left to PoCL, 12,500 work-items made 5 work-groups for 2
 # threads); the global size is rounded up to whole work-groups, whose items past the rays do nothing
@@ -133,7 +132,7 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
     # the largest side of the bounded shapes' box (0 without any): the coarsest cells of the rays' order
     size = float(np.max(tree.tree.hi[0] - tree.tree.lo[0])) if tree.types else 0.0
     # w: 1 where the scene reaches beyond 2^100 from its anchor, too far for the float box tests
-    # (kernels/pyclray.cl: its rays then test every bounded shape)
+    # (kernels/rays.h: its rays then test every bounded shape)
     large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
     anchor = np.append(anchor, 1.0 if large else 0.0)
     args = {}
@@ -188,7 +187,7 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
 def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
     """(N, 4) float32: per leaf position its anchor from the scene's anchor (the float64 difference)
     and its radius, each rounded once to nearest, the bits the kernel's leaf pre-test had made of
-    them itself (kernels/pyclray.cl: cast_may_pass; an overflow is inf there too)."""
+    them itself (kernels/rays.h: cast_may_pass; an overflow is inf there too)."""
     out = np.empty((len(anchors), 4), np.float32)
     with np.errstate(over="ignore", invalid="ignore"):
         out[:, :3] = anchors[:, :3] - scene_anchor[:3]
@@ -198,7 +197,7 @@ def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
 
 def _root_box(nodes: np.ndarray):
     """The box of the wide root's children (float8: lo xyz, hi xyz, 0, 0, around the scene's anchor),
-    which a ray tests before the tree (kernels/pyclray.cl: PYCLRAY_CAST_BOUNDED). An empty slot has
+    which a ray tests before the tree (kernels/rays.h: PYCLRAY_CAST_BOUNDED). An empty slot has
     lo > hi: the minima and maxima pass over it (all empty: lo > hi, a box no ray enters)."""
     root = nodes[0]
     lo = [root[f"lo_{axis}"].min() for axis in "xyz"]
@@ -259,18 +258,16 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
             "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),
             "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
             "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
-    groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/pyclray.cl)
+    groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
     sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
     if kind == "occluded":
         variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         _run_into(ctx, variant, sizes, rays, out)
         return out.reshape(shape)
-    identity = np.eye(3)
-    camera = packed_frame(identity, ImagePlane(0.0, 0.0, 0.0, 0.0), 0, 0, precision)
     variant = Variant("cast", tracer.prepared.types, aovs, precision)
-    results = run_kernel(ctx, variant, {"camera": input_buffer(ctx, camera), **rays}, sizes[0], count, aovs, precision,
-                         (count,), tracer.outputs, local_size=sizes[1])
+    results = run_kernel(ctx, variant, rays, sizes[0], count, aovs, precision, (count,), tracer.outputs,
+                         local_size=sizes[1])
     results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
     return Frame(results, precision=precision, device=ctx.device.name.strip())
 

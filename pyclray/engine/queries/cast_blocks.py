@@ -27,7 +27,7 @@ def leaves(tree) -> tuple[np.ndarray, np.ndarray]:
 
 
 def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
-    """(refs, anchors, per type): cast's refs and anchors (kernels/pyclray.cl's PYCLRAY_BVH_ARGS)
+    """(refs, anchors, per type): cast's refs and anchors (engine/signatures.py: the cast kernel's refs and anchors)
     with each leaf's entries of one shape of a cast_blocks type grouped into one ref; per bounded
     type (by name) its blocks array and number of refs where it is a cast_blocks type, else its
     entries' anchors (in its leaf order); the wide nodes' leaf codes (nodes["child"]) are

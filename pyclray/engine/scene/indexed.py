@@ -1,6 +1,6 @@
 """Meshes as shared vertices and faces (Shape.pack_indexed), on every device with float64: the render
 kernel assembles each triangle it tests from its face and the per-view pass's vertices in the eye's
-frame (kernels/pyclray.cl, INDEXED), and computes the winner's world normal from the float64 vertices.
+frame (kernels/entries.h, INDEXED), and computes the winner's world normal from the float64 vertices.
 
 A closed mesh has about half as many vertices as triangles, so per triangle this holds a face (16
 bytes: three vertex indices and its primitive index, ~index for a zero-area triangle), half a

@@ -4,7 +4,7 @@ space, over one copy of its triangles, shared by all its instances (pyclray/mode
 The prepared scene's top-level BVH holds each instance as one entry (its world box, beside the other
 bounded shapes); the instance's entry says where its mesh's tree and triangles start in the shared
 arrays (``root``, ``first``), each tree's indices relative to those starts (kernels/instance.cl
-traverses it with kernels/bvh.h's packet traversal from nodes + root)."""
+traverses it with kernels/bvh_packet.h's packet traversal from nodes + root)."""
 from __future__ import annotations
 
 import numpy as np

@@ -187,13 +187,13 @@ class PreparedScene:
         self._nodes = self._nodes_host = None  # the binary nodes: made when first asked (see nodes)
         # The BVH's boxes around a fixed anchor, the root box's centre, rounded outward to float once:
         # a view passes the eye relative to the anchor (and a margin over its rounding) instead of
-        # re-expressing every box around the eye (kernels/bvh.h: box_entries).
+        # re-expressing every box around the eye (kernels/bvh_packet.h: box_entries).
         self.anchor = np.zeros(3)
         if self.bvh.types:
             with np.errstate(over="ignore", invalid="ignore"):
                 anchor = 0.5 * self.bvh.tree.lo[0] + 0.5 * self.bvh.tree.hi[0]
             self.anchor = anchor if np.isfinite(anchor).all() else np.zeros(3)
-            # render's camera packets traverse the wide tree (kernels/bvh.h: PYCLRAY_TRAVERSE_PACKET_WIDE)
+            # render's camera packets traverse the wide tree (kernels/bvh_wide_packet.h: PYCLRAY_TRAVERSE_PACKET_WIDE)
             with np.errstate(over="ignore", invalid="ignore"):
                 self._wide_host = aligned(self.bvh.nodes(self.anchor))
             self.wide_nodes = _buffer(ctx, self._wide_host, writable=True)

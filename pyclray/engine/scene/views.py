@@ -134,7 +134,7 @@ class ViewInputs:
         return sum(b.size for b in buffers)
 
     def eye_parts(self) -> list:
-        """The eye as a sum of two reals, for the position image (kernels/pyclray.cl): made when a
+        """The eye as a sum of two reals, for the position image (kernels/images.h): made when a
         view first asks for that image."""
         if self._eye_parts is None:
             real = REAL[self._made[-1]]

@@ -50,7 +50,7 @@ CAMERA = Struct(
         ("v", "real4"),
         ("w", "real4"),
         # the eye in the render BVH's frame (world axes around the scene's anchor), rounded to float,
-        # and (w) a margin over that rounding (kernels/bvh.h: box_entries)
+        # and (w) a margin over that rounding (kernels/bvh_packet.h: box_entries)
         ("box_origin", "float4"),
         # pixel (row j, column i) looks through sx = tan_x (centre_x - 1 - 2 i + centre_x_low) / width,
         # sy = tan_y (centre_y - 1 - 2 j + centre_y_low) / height (ImagePlane):

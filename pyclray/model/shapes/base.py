@@ -135,7 +135,7 @@ class Shape:
     smooth_struct: ClassVar[Struct | None] = None
 
     # cast: True for a type whose kernel file tests a leaf's entries of one shape at once
-    # (PYCLRAY_CAST_TEST_BLOCKS and the rest of that mode, kernels/pyclray.cl); cast_blocks packs them
+    # (PYCLRAY_CAST_TEST_BLOCKS and the rest of that mode, kernels/rays.h); cast_blocks packs them
     cast_blocks: ClassVar[bool] = False
 
     @classmethod
