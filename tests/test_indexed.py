@@ -12,7 +12,7 @@ import pytest
 import pyclray
 from pyclray.engine import api, bvh, bvh_fast, indexed, prepared
 from pyclray.engine.device import context_for, has_fp64
-from pyclray.model.shapes.base import padded_bounds
+from pyclray.model.shapes.device import padded_bounds
 from pyclray.model.shapes.mesh import Mesh
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 

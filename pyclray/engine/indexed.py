@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..model.shapes.base import in_frame
+from ..model.shapes.device import in_frame
 from .buffers import aligned, aligned_empty, device_buffer as _buffer
 
 # entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
@@ -25,7 +25,7 @@ COMPILED_FROM = 16_384
 
 def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F, 2, 3) float64: each face's triangle's box, padded as Shape.bounds_of pads its world entry's
-    (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
+    (device.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
     entries (docs/benchmarks.md, "Why the engine does what it does": bvh_fast's compiled passes)."""
     if len(faces) >= COMPILED_FROM:
         from .bvh_fast import triangle_bounds  # numba: large scenes only
@@ -33,7 +33,7 @@ def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         out = np.empty((len(faces), 2, 3))
         triangle_bounds(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int32), out)
         return out
-    from ..model.shapes.base import padded_bounds
+    from ..model.shapes.device import padded_bounds
 
     a, b, c = (vertices[faces[:, k], :3] for k in range(3))
     return padded_bounds(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c))

@@ -29,7 +29,6 @@ import pyopencl as cl
 
 from ..model.scene import MAX_LENGTH, Scene
 from ..model.shapes import KINDS, REGISTRY
-from ..model.shapes.base import entries
 from . import culling, instances, refit, shading
 from .buffers import aligned, device_buffer as _buffer
 from .device import has_fp64, launch

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..layout import Struct
-from .base import Shape, padded_bounds
+from .base import Shape
+from .device import padded_bounds
 from .mesh import Mesh
 from .mesh_sharing import shared_key
 

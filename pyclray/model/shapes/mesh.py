@@ -18,7 +18,8 @@ from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
 from . import mesh_pack
 from .mesh_keys import faces_of, matrix_of, vertices_of
-from .base import Shape, flag, in_frame, padded_bounds
+from .base import Shape, flag
+from .device import in_frame, padded_bounds
 from .box import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
