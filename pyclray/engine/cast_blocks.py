@@ -1,5 +1,5 @@
 """cast's leaves in blocks: a leaf's entries of one shape of a type that tests them at once
-(Shape.cast_blocks: a mesh's triangles, kernels/mesh.cl) become one ref, one anchor and one block.
+(the capability "cast_blocks": a mesh's triangles, kernels/mesh.cl) become one ref, one anchor and one block.
 
 For 100,000 incoherent rays through a mesh, cast read per triangle it tested a ref, its mesh's
 anchor (32 bytes) and its float64 world entry (96 bytes), each a scattered read, and ran the
@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.errors import PyclrayError
+from ..model.shapes.capabilities import capability
 
 # a ref holds its index shifted by 4 bits in an int: a block's place (64-byte units) below 2^27
 MAX_PLACE = 2**27
@@ -43,7 +44,7 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
     own_anchors = {}
     for t, name in enumerate(bvh.types):
         kind = kinds[name]
-        if not kind.cls.cast_blocks:
+        if not capability(kind.cls, "cast_blocks"):
             continue
         mine = bvh.leaf_type == t
         ids = np.asarray(kind.ids, np.int64)

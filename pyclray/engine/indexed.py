@@ -1,4 +1,4 @@
-"""Meshes as shared vertices and faces (Shape.pack_indexed), on every device with float64: the render
+"""Meshes as shared vertices and faces (the capability "indexed": IndexedTriangles.pack_indexed), on every device with float64: the render
 kernel assembles each triangle it tests from its face and the per-view pass's vertices in the eye's
 frame (kernels/pyclray.cl, INDEXED), and computes the winner's world normal from the float64 vertices.
 
@@ -63,7 +63,7 @@ class IndexedEntries:
         self.faces_buffer = _buffer(ctx, self.faces)
         self.ids_buffer = _buffer(ctx, self.ids)
         self.vertices = _buffer(ctx, self.vertices_host, writable=True)
-        # smooth shading's vertex normals (Shape.pack_indexed_smooth), if a shape shades with them
+        # smooth shading's vertex normals (IndexedTriangles.pack_indexed_smooth), if a shape shades with them
         smooth = cls.pack_indexed_smooth(shapes, prepared.precision)
         self.smooth_host = None if smooth is None else aligned(smooth)
         self.smooth = None if smooth is None else _buffer(ctx, self.smooth_host)

@@ -11,7 +11,9 @@ shape types, is three parts, each the contract of one side, each listing what a 
 - the reference part (``ReferenceShape``, reference.py): its float64 oracle, the error model's terms and
   its Mitsuba counterpart, what pyclray.reference asks.
 
-The hooks of meshes and mesh instances are still on ``Shape`` itself.
+What only meshes and their instances do (shared vertices and faces, cast's blocks, instancing, shading
+normals of their own) is not here: a type opts into those capabilities (capabilities.py), and the
+engine asks for them.
 """
 from __future__ import annotations
 
@@ -23,7 +25,6 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import integer, no_unknown_keys, text
-from ..layout import Struct
 from ..lights import MATERIAL_KEYS, Material
 from .device import DevicePacking
 from .reference import ReferenceShape
@@ -135,59 +136,13 @@ class Shape(SceneShape, DevicePacking, ReferenceShape):
     """Base of the shape dataclasses: the scene, device and reference parts (see the module's
     docstring); a shape module subclasses it and implements each part's ``required_members``."""
 
-    # -- hooks of meshes and mesh instances -----------------------------------------------------
-    # an indexed type's triangles are kept as shared vertices and faces in a framed scene
-    # (pack_indexed, engine/indexed.py; <type>_assemble and <type>_world_normal in its kernel file)
+    # engine/programs.py reads these of every kind: the switches of the capabilities "indexed" and
+    # "cast_blocks" and the "shared" arrays (capabilities.py), off here for the types without them.
+    # The rest of the engine asks capabilities.capability().
     indexed: ClassVar[bool] = False
-
-    @classmethod
-    def pack_indexed(cls, shapes) -> tuple[np.ndarray, np.ndarray]:
-        """(world vertices (V, 4) float64, faces (F, 4) int32: vertex indices, primitive index or
-        ~index where never hit), faces in pack_world's order."""
-        raise NotImplementedError
-
-    @classmethod
-    def pack_indexed_smooth(cls, shapes, precision: str):
-        """An indexed type's (V, 4) vertex shading normals (pack_indexed's vertices), or None."""
-        return None
-
-    # a type whose shapes may shade with their own normals (a smooth mesh's interpolated vertex
-    # normals): the struct of one entry's shading data (a buffer passed to the shaded image only when
-    # a shape of the type asks for it: pack_smooth) and <type>_shading_normal in its kernel file
-    smooth_struct: ClassVar[Struct | None] = None
-
-    # cast: True for a type whose kernel file tests a leaf's entries of one shape at once
-    # (PYCLRAY_CAST_TEST_BLOCKS and the rest of that mode, kernels/pyclray.cl); cast_blocks packs them
     cast_blocks: ClassVar[bool] = False
-
-    @classmethod
-    def pack_cast_blocks(cls, vertices, corners, ids, entries, starts) -> tuple[np.ndarray, np.ndarray]:
-        """(blocks float64, places int64): the blocks of a cast_blocks type, block i of the world
-        entries entries[starts[i]:starts[i + 1]] (all of one shape: ids), each at places[i] (in
-        64-byte units) of the returned array; the entries' corners index vertices (-1: never hit)."""
-        raise NotImplementedError
-
-    # the arrays a type shares among its entries (name, OpenCL C element type), passed to the kernel
-    # after its entries' array (mesh instances: one copy of a mesh's triangles and BVH)
     shared: ClassVar[tuple] = ()
 
-    @classmethod
-    def packed_as(cls, shapes, ids) -> dict:
-        """{kind: (shapes, ids)}: how the prepared scene packs these shapes of this type (a kind of
-        pyclray.model.shapes.KINDS); by default as themselves."""
-        return {cls.type: (shapes, ids)}
-
-    @classmethod
-    def pack_smooth(cls, shapes, precision: str):
-        """The smooth_struct array of these shapes' entries (in pack_world's order), or None where
-        none of them shades with its own normals."""
-        return None
-
-    def oracle_shading_normal(self, points, normals) -> np.ndarray:
-        """The float64 normal the shaded image lights with at these points of the surface, whose
-        geometric normals are ``normals``: the geometric normal (a smooth mesh: its interpolated
-        vertex normal)."""
-        return normals
 
 LABEL_MAX = 2**31 - 1  # labels are int32 in the label image
 
