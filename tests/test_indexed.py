@@ -16,7 +16,7 @@ from pyclray.engine.bvh import passes as bvh_fast
 from pyclray.engine.scene import indexed
 from pyclray.engine.scene import prepared
 from pyclray.engine.opencl.device import context_for, has_fp64
-from pyclray.model.shapes.base import padded_bounds
+from pyclray.model.shapes.device import padded_bounds
 from pyclray.model.shapes.mesh import Mesh
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 

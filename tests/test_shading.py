@@ -29,7 +29,7 @@ EPS = {"fp32": 2.0**-24, "fp64": 2.0**-53}
 def reference(scene, precision="fp32"):
     """The float64 hits, visibility per light and its shadow edges: where the float64 visibility
     changes when the hit point moves by 4 times how far the kernel's shadow ray may start from it,
-    16 eps |p| (engine.shading.shadow_reach; |p| from the eye, whatever the shape's size)."""
+    16 eps |p| (engine.scene.lighting.shadow_reach; |p| from the eye, whatever the shape's size)."""
     ref = error_model.reference(scene)
     O, D = ref["origins"], ref["directions"]
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D

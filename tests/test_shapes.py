@@ -12,8 +12,12 @@ solids, through pyclray.cast in fp32 and fp64. Each asserts that
 - normals are unit and outward as the contract says: against the ray for a ray from outside a
   solid, with it for a ray from inside (never flipped toward the viewer);
 - the packed struct of every type has the device's layout (tests/test_layout.py covers this over
-  the registry).
+  the registry);
+- every type implements each part of the shape interface (scene, device, reference) and each
+  capability it takes, and the base interface holds no capability's member.
 """
+import inspect
+
 import numpy as np
 import pytest
 
@@ -21,6 +25,10 @@ import pyclray
 from pyclray.reference import error_model
 from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.shapes import REGISTRY
+from pyclray.model.shapes.base import SceneShape, Shape
+from pyclray.model.shapes.capabilities import CAPABILITIES
+from pyclray.model.shapes.device import DevicePacking
+from pyclray.model.shapes.reference import ReferenceShape
 
 from oracle_checks import assert_agrees_with_oracle
 
@@ -236,3 +244,72 @@ def test_every_lane_width_gives_the_same_bits(monkeypatch, scenes_dir, precision
     for frames in runs.values():
         for a, b in zip(scalar, frames):
             same(a, b)
+
+
+# -- the interface: three parts and the capabilities ---------------------------------------------
+PARTS = (SceneShape, DevicePacking, ReferenceShape)
+# engine/launch/programs.py reads these of every kind (base.py's Shape): they stay on the base, off, until it
+# asks capabilities.capability() as the rest of the engine does
+READ_BY_PROGRAMS = {"indexed", "cast_blocks", "shared"}
+
+
+def required_of(cls, part) -> tuple[str, ...]:
+    """What a type must define in this part: the part's required_members, and bounds_of where the
+    type is bounded, from_mitsuba where it reads Mitsuba plugins."""
+    extra = {DevicePacking: ("bounds_of",) if cls.bounded else (),
+             SceneShape: ("from_mitsuba",) if cls.mitsuba_plugins else ()}
+    return part.required_members + extra.get(part, ())
+
+
+def members(mixin) -> set[str]:
+    """A capability mixin's members: its methods, its switch and the attributes it only annotates."""
+    return {n for n in (*vars(mixin), *inspect.get_annotations(mixin)) if not n.startswith("__")}
+
+
+def to_define(name: str, mixin) -> set[str]:
+    """What a type taking the capability defines: the mixin's members but the switch it sets on."""
+    return members(mixin) - ({name} & set(vars(mixin)))
+
+
+def defined_below(cls, name: str, interface) -> bool:
+    """Whether one of cls's own classes (not those of the interface) defines name."""
+    owner = next((k for k in cls.__mro__ if name in vars(k)), None)
+    return owner is not None and owner not in interface
+
+
+@pytest.mark.parametrize("kind", TYPES)
+def test_every_type_implements_each_part_and_its_capabilities(kind):
+    """Each part's required members, and each member of the capabilities the type takes (but the
+    switch, the mixin's own), are the type's own, not a part's placeholder: a new type missing one
+    fails here, naming the part and the member."""
+    cls = REGISTRY[kind]
+    interface = (*PARTS, Shape, object)
+    for part in PARTS:
+        missing = [name for name in required_of(cls, part) if not defined_below(cls, name, interface)]
+        assert not missing, f"{cls.__name__} does not define {part.__name__}'s {missing}"
+    for name, mixin in CAPABILITIES.items():
+        if issubclass(cls, mixin):
+            missing = [m for m in to_define(name, mixin) if not defined_below(cls, m, (*interface, mixin))]
+            assert not missing, f"{cls.__name__} takes the capability {name!r} without {missing}"
+
+
+def test_each_part_lists_what_a_type_defines():
+    """Each part's and each capability's docstring names what a type defines there."""
+    for part in PARTS:
+        for name in part.required_members:
+            assert f"``{name}" in part.__doc__, (part.__name__, name)
+    for name, mixin in CAPABILITIES.items():
+        for member in to_define(name, mixin):
+            assert f"``{member}" in mixin.__doc__, (mixin.__name__, member)
+
+
+def test_the_base_shape_carries_no_capability():
+    """What only meshes and mesh instances do stays behind the capabilities: no part of the base
+    interface declares a capability's member, and Shape holds only the switches engine/launch/programs.py
+    reads of every kind, off."""
+    hooks = set().union(*(members(mixin) for mixin in CAPABILITIES.values()))
+    for part in PARTS:
+        assert not hooks & set(dir(part)), part.__name__
+    on_base = {name for name in hooks if hasattr(Shape, name)}
+    assert on_base == READ_BY_PROGRAMS and not any(getattr(Shape, name) for name in on_base)
+

@@ -141,7 +141,7 @@ def test_a_moved_camera_uploads_no_shapes(monkeypatch):
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypatch, precision):
     """A device without float64 rebases on the host (Shape.rebase, numpy float64) what others rebase
-    on the device (kernels/rebase.cl): the same formulas in the same order (pyclray.model.shapes.base.in_frame),
+    on the device (kernels/rebase.cl): the same formulas in the same order (pyclray.model.shapes.device.in_frame),
     so the same images to the last bit."""
     need(precision)
     scene = every_shape((1e4, 0.0, 0.0))

@@ -39,7 +39,7 @@ class Aov:
         return np.empty(self.shape(leading), self.dtype(precision))
 
 
-# the kernel's images in the kernels' order (engine/signatures.py lists each image's buffer in this
+# the kernel's images in the kernels' order (engine/launch/signatures.py lists each image's buffer in this
 # order), then those the host derives from them
 TABLE = {
     aov.name: aov

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.lights import PointLight, effective_lights
+from ..model.shapes.capabilities import capability
 
 
 # -- the float64 reference -----------------------------------------------------------------------
@@ -16,13 +17,13 @@ def facing_normals(normals, directions) -> np.ndarray:
 
 def lighting_normals(scene, hits) -> np.ndarray:
     """The normals that light each hit: the geometric ``hits["normal"]``, or a shape's own shading
-    normal at the hit point (Shape.oracle_shading_normal: a smooth mesh's interpolated vertex
-    normals), float64."""
+    normal at the hit point (the capability "smooth_shading": SmoothShading.oracle_shading_normal, a
+    smooth mesh's interpolated vertex normals), float64."""
     normals = np.array(hits["normal"], np.float64)
     ids, points = hits["id"], hits["points"]
     for index, shape in enumerate(scene.shapes):
         mine = ids == index
-        if mine.any():
+        if mine.any() and capability(type(shape), "smooth_shading"):
             normals[mine] = shape.oracle_shading_normal(points[mine], normals[mine])
     return normals
 

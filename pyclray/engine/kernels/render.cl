@@ -6,7 +6,7 @@
  * the packet's shape, the shape types present and where each is read (PYCLRAY_MODE_<type>), tile
  * lists or the BVH (PYCLRAY_BVH), the images asked for (PYCLRAY_AOV_<name>) and shadow rays
  * (PYCLRAY_SHADOWS); and it declares the kernel's parameters, PYCLRAY_PARAMETERS
- * (pyclray/engine/signatures.py). Geometry and camera come in buffers, so moving a shape or the
+ * (pyclray/engine/launch/signatures.py). Geometry and camera come in buffers, so moving a shape or the
  * camera never recompiles. */
 
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_ONE_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)

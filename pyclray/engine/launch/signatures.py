@@ -216,7 +216,8 @@ SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED}
 
 def _templates(variant, type_: str) -> dict:
     cls = KINDS[type_]
-    smooth = "real4" if variant.mode(type_) == "INDEXED" else getattr(cls.smooth_struct, "name", None)
+    # (a type with the smooth_shading capability has smooth_struct: pyclray.model.shapes.capabilities)
+    smooth = "real4" if variant.mode(type_) == "INDEXED" else getattr(getattr(cls, "smooth_struct", None), "name", None)
     return {"type": type_, "Type": cls.c_type, "World": cls.world.name, "Smooth": smooth}
 
 

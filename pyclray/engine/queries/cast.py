@@ -7,6 +7,7 @@ import pyopencl as cl
 
 from ...model.errors import DeviceError, PyclrayError
 from ...model.layout import layout
+from ...model.shapes.capabilities import capability
 from ..opencl.device import has_fp64, launch
 from ..scene.prepared import PreparedScene
 from ..launch.programs import Variant, kernel_for
@@ -141,11 +142,11 @@ def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tu
     blocks = {}
     if tree.types:
         nodes = tree.nodes(anchor[:3])
-        if any(prepared.kinds[name].cls.cast_blocks for name in tree.types):  # a leaf's triangles of a mesh at once
+        if any(capability(prepared.kinds[name].cls, "cast_blocks") for name in tree.types):  # a leaf's triangles of a mesh at once
             from .cast_blocks import regroup
 
             refs, anchors, per_type = regroup(tree, shape_types, prepared.kinds, worlds, nodes)
-            blocks = {name: v for name, v in per_type.items() if prepared.kinds[name].cls.cast_blocks}
+            blocks = {name: v for name, v in per_type.items() if capability(prepared.kinds[name].cls, "cast_blocks")}
             entry_anchors = {name: v for name, v in per_type.items() if name not in blocks}
         else:
             anchors, refs = tree.anchors(), tree.refs(shape_types)

@@ -1,5 +1,5 @@
 """cast's leaves in blocks: a leaf's entries of one shape of a type that tests them at once
-(Shape.cast_blocks: a mesh's triangles, kernels/mesh.cl) become one ref, one anchor and one block.
+(the capability "cast_blocks": a mesh's triangles, kernels/mesh.cl) become one ref, one anchor and one block.
 
 For 100,000 incoherent rays through a mesh, cast read per triangle it tested a ref, its mesh's
 anchor (32 bytes) and its float64 world entry (96 bytes), each a scattered read, and ran the
@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.errors import PyclrayError
+from ...model.shapes.capabilities import capability
 
 # a ref holds its index shifted by 4 bits in an int: a block's place (64-byte units) below 2^27
 MAX_PLACE = 2**27
@@ -27,7 +28,7 @@ def leaves(tree) -> tuple[np.ndarray, np.ndarray]:
 
 
 def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
-    """(refs, anchors, per type): cast's refs and anchors (engine/signatures.py: the cast kernel's refs and anchors)
+    """(refs, anchors, per type): cast's refs and anchors (engine/launch/signatures.py: the cast kernel's refs and anchors)
     with each leaf's entries of one shape of a cast_blocks type grouped into one ref; per bounded
     type (by name) its blocks array and number of refs where it is a cast_blocks type, else its
     entries' anchors (in its leaf order); the wide nodes' leaf codes (nodes["child"]) are
@@ -43,7 +44,7 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
     own_anchors = {}
     for t, name in enumerate(bvh.types):
         kind = kinds[name]
-        if not kind.cls.cast_blocks:
+        if not capability(kind.cls, "cast_blocks"):
             continue
         mine = bvh.leaf_type == t
         ids = np.asarray(kind.ids, np.int64)

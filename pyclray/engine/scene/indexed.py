@@ -1,4 +1,4 @@
-"""Meshes as shared vertices and faces (Shape.pack_indexed), on every device with float64: the render
+"""Meshes as shared vertices and faces (the capability "indexed": IndexedTriangles.pack_indexed), on every device with float64: the render
 kernel assembles each triangle it tests from its face and the per-view pass's vertices in the eye's
 frame (kernels/entries.h, INDEXED), and computes the winner's world normal from the float64 vertices.
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ...model.shapes.base import in_frame
+from ...model.shapes.device import in_frame
 from ..opencl.buffers import aligned, aligned_empty, device_buffer as _buffer
 
 # entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
@@ -25,7 +25,7 @@ COMPILED_FROM = 16_384
 
 def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F, 2, 3) float64: each face's triangle's box, padded as Shape.bounds_of pads its world entry's
-    (base.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
+    (device.padded_bounds of the corners' min and max): the same bits, without packing the 96-byte world
     entries (docs/benchmarks.md, "Why the engine does what it does": bvh_fast's compiled passes)."""
     if len(faces) >= COMPILED_FROM:
         from ..bvh.passes import triangle_bounds  # numba: large scenes only
@@ -33,7 +33,7 @@ def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         out = np.empty((len(faces), 2, 3))
         triangle_bounds(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int32), out)
         return out
-    from ...model.shapes.base import padded_bounds
+    from ...model.shapes.device import padded_bounds
 
     a, b, c = (vertices[faces[:, k], :3] for k in range(3))
     return padded_bounds(np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c))
@@ -63,7 +63,7 @@ class IndexedEntries:
         self.faces_buffer = _buffer(ctx, self.faces)
         self.ids_buffer = _buffer(ctx, self.ids)
         self.vertices = _buffer(ctx, self.vertices_host, writable=True)
-        # smooth shading's vertex normals (Shape.pack_indexed_smooth), if a shape shades with them
+        # smooth shading's vertex normals (IndexedTriangles.pack_indexed_smooth), if a shape shades with them
         smooth = cls.pack_indexed_smooth(shapes, prepared.precision)
         self.smooth_host = None if smooth is None else aligned(smooth)
         self.smooth = None if smooth is None else _buffer(ctx, self.smooth_host)

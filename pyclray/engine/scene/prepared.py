@@ -29,7 +29,7 @@ import pyopencl as cl
 
 from ...model.scene import MAX_LENGTH, Scene
 from ...model.shapes import KINDS, REGISTRY
-from ...model.shapes.base import entries
+from ...model.shapes.capabilities import capability
 from ..bvh import tiles
 from . import instances
 from . import refit
@@ -59,9 +59,9 @@ class Kind:
     # that buffer's memory on a CPU device (its bytes, elsewhere)
     frame: cl.Buffer | None
     frame_host: np.ndarray | None
-    smooth: cl.Buffer | None = None  # the shading normals of its entries (Shape.pack_smooth), if any
+    smooth: cl.Buffer | None = None  # the shading normals of its entries (SmoothShading.pack_smooth), if any
     smooth_host: np.ndarray | None = None
-    shared: tuple = ()  # the arrays its entries share (Shape.shared: mesh instances' triangles and BVHs)
+    shared: tuple = ()  # the arrays its entries share (SharedArrays.shared: mesh instances' triangles and BVHs)
     shared_host: tuple = ()
     indexed: IndexedEntries | None = None  # a framed scene's triangles: shared vertices and faces
     shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
@@ -96,7 +96,7 @@ class Kind:
 # entries hold a third less memory (docs/benchmarks.md, "Why the engine does what it does": FRAMED_FROM). Meshes do not depend on it (INDEXED below).
 FRAMED_FROM = 524_288
 
-# Meshes (Shape.indexed) are kept as shared vertices and faces on every device with float64 (engine/
+# Meshes (the capability "indexed") are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
 # world entries and the per-view copy (docs/benchmarks.md, "Why the engine does what it does": INDEXED). Tests set it False to compare with the per-view
 # copy (the path of devices without float64, where the winner's normal cannot be computed from
@@ -119,13 +119,13 @@ class PreparedScene:
             by_type.setdefault(shape.type, ([], []))
             by_type[shape.type][0].append(shape)
             by_type[shape.type][1].append(index)
-        # a type may pack some of its shapes as another kind (Shape.packed_as: meshes that share their
-        # arrays as instances, whose kernel needs float64; elsewhere each mesh is its own triangles)
+        # a type may pack some of its shapes as another kind (the capability "instancing": meshes that
+        # share their arrays as instances, whose kernel needs float64; elsewhere each mesh is its own triangles)
         if has_fp64(ctx.device):
             packed: dict = {}
             for t, (mine, ids) in by_type.items():
-                for kind, group in REGISTRY[t].packed_as(mine, ids).items():
-                    packed[kind] = group
+                cls = REGISTRY[t]
+                packed.update(cls.packed_as(mine, ids) if capability(cls, "instancing") else {t: (mine, ids)})
             by_type = packed
         self.types = tuple(t for t in KINDS if t in by_type)
         # Meshes are shared vertices and faces wherever the device has float64 (engine/scene/indexed.py):
@@ -139,7 +139,7 @@ class PreparedScene:
             cls = KINDS[t]
             mine, ids = by_type[t]
             entry_ids, primitives = cls.entries_of(mine, ids)
-            if self.indexed and cls.indexed:
+            if self.indexed and capability(cls, "indexed"):
                 vertices, faces = cls.pack_indexed(mine)
                 worlds[t] = ((vertices, faces, tuple(ids)), entry_ids, primitives, None)
                 with np.errstate(over="ignore", invalid="ignore"):
@@ -147,9 +147,10 @@ class PreparedScene:
                 counts[t] = len(faces)
                 continue
             world = cls.pack_world(mine)
-            worlds[t] = (world, entry_ids, primitives, cls.pack_smooth(mine, precision))
+            smooth = cls.pack_smooth(mine, precision) if capability(cls, "smooth_shading") else None
+            worlds[t] = (world, entry_ids, primitives, smooth)
             counts[t] = len(world)
-            if cls.shared:  # before the entries are reordered: the shared arrays say where each starts
+            if capability(cls, "shared"):  # before the entries are reordered: the shared arrays say where each starts
                 shared[t] = instances.pack_shared(cls, mine, world)
             if cls.bounded:
                 with np.errstate(over="ignore", invalid="ignore"):
@@ -231,7 +232,7 @@ class PreparedScene:
     def update(self, shapes: tuple, changed) -> bool:
         """Become the prepared scene of an animation's frame (see pyclray.engine.scene.refit.update); a
         scene with shared arrays (mesh instances) is built anew."""
-        if any(kind.cls.shared for kind in self.kinds.values()):
+        if any(capability(kind.cls, "shared") for kind in self.kinds.values()):
             return False
         return refit.update(self, shapes, changed)
 

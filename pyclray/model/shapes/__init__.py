@@ -1,6 +1,7 @@
 """The shape types. One shape = one module here (its frozen dataclass and everything about it: keys
-and validation, packed struct, float64 oracle, bounds, error-model terms, Mitsuba counterpart; see
-base.py), one kernel file (kernels/<type>.cl), its tests, and one line in the registry below.
+and validation, packed struct, float64 oracle, bounds, error-model terms, Mitsuba counterpart: the
+scene, device and reference parts of base.py's Shape, and the capabilities of capabilities.py a
+mesh-like type takes), one kernel file (kernels/<type>.cl), its tests, and one line in the registry below.
 """
 from __future__ import annotations
 

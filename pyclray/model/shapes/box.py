@@ -11,7 +11,8 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, in_frame, padded_bounds, to_world, distance
+from .base import Shape, to_world, distance
+from .device import in_frame, padded_bounds
 
 
 def axis_angle(axis, angle) -> tuple:

@@ -10,7 +10,9 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, in_frame, dot_rows, flag, frame_columns, padded_bounds, to_world, distance
+from .base import Shape, flag, frame_columns, to_world, distance
+from .device import in_frame, padded_bounds
+from .reference import dot_rows
 
 
 @dataclass(frozen=True)

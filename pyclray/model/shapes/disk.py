@@ -8,7 +8,9 @@ import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
-from .base import Shape, distance, dot_rows, flat_hits, frame_columns, padded_bounds, rebase_flat, to_world, unit_rows
+from .base import Shape, distance, frame_columns, to_world, unit_rows
+from .device import padded_bounds, rebase_flat
+from .reference import dot_rows, flat_hits
 
 
 @dataclass(frozen=True)

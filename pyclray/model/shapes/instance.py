@@ -25,7 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..layout import Struct
-from .base import Shape, padded_bounds
+from .base import Shape
+from .capabilities import SharedArrays, SmoothShading
+from .device import padded_bounds
 from .mesh import Mesh
 from .mesh_sharing import shared_key
 
@@ -37,8 +39,10 @@ SHARED = (("vertices", "double4"), ("faces", "int4"), ("nodes", "BvhNode"), ("no
 
 
 @dataclass(frozen=True, eq=False)
-class Instances(Shape):
-    """The packing of meshes as instances (never in a scene: see the module's docstring)."""
+class Instances(SharedArrays, SmoothShading, Shape):
+    """The packing of meshes as instances (never in a scene: see the module's docstring): its device
+    part only; what the oracle and the checks ask of a shape is the Mesh's (each instance is the mesh
+    it places)."""
 
     type = "instance"
     c_type = "Instance"
@@ -158,11 +162,6 @@ class Instances(Shape):
         out["box"][:, :3] = box
         out["box"][:, 3] = 2.0**-20 * np.abs(box.astype(np.float64)).sum(axis=1)
         out["root"], out["first"] = world["root"], world["first"]
-
-    # the scene never holds an Instances shape: what the oracle and the checks ask of a shape is the
-    # Mesh's (each instance is the mesh it places)
-    def primitive_count(self) -> int:
-        return 1
 
 
 def _dot3(x, y):

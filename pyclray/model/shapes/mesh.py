@@ -18,7 +18,9 @@ from ..errors import SceneError, _shown, number, vector3
 from ..layout import Struct, layout
 from . import mesh_pack
 from .mesh_keys import faces_of, matrix_of, vertices_of
-from .base import Shape, flag, in_frame, padded_bounds
+from .base import Shape, flag
+from .capabilities import CastBlocks, IndexedTriangles, Instancing, SmoothShading
+from .device import in_frame, padded_bounds
 from .box import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
@@ -29,7 +31,7 @@ PLACEMENT = ("scale", "axis", "angle", "translate")
 
 
 @dataclass(frozen=True, eq=False)
-class Mesh(Shape):
+class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     """A triangle mesh: vertices (V, 3) and faces (F, 3) (0-based vertex indices), placed by scale,
     axis and angle, translate, or a 4x4 matrix; smooth: the shaded image interpolates vertex normals
     (normals (V, 3), else area-weighted). Compared by identity, like a batch of spheres.
@@ -252,8 +254,6 @@ class Mesh(Shape):
             out["a"][rows, 3], out["b"][rows, 3], out["c"][rows, 3] = normal[:, 0], normal[:, 1], normal[:, 2]
             start += len(a)
 
-    indexed = True  # a framed scene's meshes: shared vertices and faces (Shape.indexed)
-
     @classmethod
     def pack_indexed(cls, meshes):
         return mesh_pack.indexed(meshes)
@@ -287,8 +287,6 @@ class Mesh(Shape):
         for name in ("a", "b", "c"):
             out[name][:, :3] = in_frame(world[name][:, :3] - origin, rotation_rows)
             out[name][:, 3] = world[name][:, 3]
-
-    cast_blocks = True  # cast tests a leaf's triangles of one mesh at once (kernels/mesh.cl)
 
     @classmethod
     def pack_cast_blocks(cls, vertices, corners, ids, entries, starts):

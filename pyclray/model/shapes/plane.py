@@ -9,7 +9,8 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, in_frame, frame_columns, to_world
+from .base import Shape, frame_columns, to_world
+from .device import in_frame
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
 # disk's error does not depend on its size; a rectangle's, two float32 triangles, does)

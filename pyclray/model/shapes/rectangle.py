@@ -8,7 +8,9 @@ import numpy as np
 
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
-from .base import Shape, in_frame, distance, flat_hits, padded_bounds, rebase_flat, to_world, unit_rows
+from .base import Shape, distance, to_world, unit_rows
+from .device import in_frame, padded_bounds, rebase_flat
+from .reference import flat_hits
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6

@@ -9,7 +9,8 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, in_frame, distance
+from .base import Shape, distance
+from .device import in_frame
 
 
 def eye_term(F, radius):

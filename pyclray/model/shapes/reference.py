@@ -1,0 +1,119 @@
+"""The reference part of a shape type: its float64 oracle, the terms the error model takes from it,
+and its Mitsuba 3 counterpart (one of the three parts of pyclray.model.shapes.base.Shape).
+
+These are methods of the model's classes, asked by the reference stack (pyclray.reference: the
+oracle, the error model, the checks against Mitsuba) and by the scene's own checks; nothing here
+imports pyclray.reference, which sits above the product.
+"""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+
+class ReferenceShape:
+    """The reference part of the shape interface: the contract a shape type implements for the
+    float64 oracle (pyclray.reference.oracle), the error model (pyclray.reference.error_model) and
+    Mitsuba 3 (pyclray.reference.mitsuba).
+
+    A shape type defines (``required_members``):
+
+    - ``oracle_distance(origins, directions)``: the float64 distance to the nearest crossing;
+    - ``oracle_normal(points)``: the float64 unit world normal (outward, never flipped);
+    - ``surface_distance(points)``: the unsigned distance of points to the surface;
+    - ``anchor(point)``: the point its intersection measures coordinates from (the error model's
+      coordinate size);
+    - ``mitsuba_shapes(scene)``: its Mitsuba counterpart, one or more Mitsuba shapes that all map
+      back to its id.
+
+    Optional, with defaults here: ``oracle_primitives`` (a shape of many primitives: which one a
+    ray hits), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
+    ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
+    ``extent_from`` (from its box), ``mitsuba_error_scale`` (1), ``mitsuba_primitives`` (False)
+    and ``mitsuba_covers`` (everywhere: no stand-in).
+    """
+
+    required_members: ClassVar[tuple[str, ...]] = ("oracle_distance", "oracle_normal", "surface_distance", "anchor",
+                                                   "mitsuba_shapes")
+
+    # -- the float64 oracle --------------------------------------------------------------------
+    def oracle_distance(self, origins, directions) -> np.ndarray:
+        """Distance t > 0 along unit directions (N, 3) to the nearest crossing, inf where none."""
+        raise NotImplementedError
+
+    def oracle_normal(self, points) -> np.ndarray:
+        """Unit world normal (as the contract says: outward, never flipped) at points on the surface."""
+        raise NotImplementedError
+
+    def surface_distance(self, points) -> np.ndarray:
+        """Unsigned distance from points (N, 3) to the surface."""
+        raise NotImplementedError
+
+    def oracle_primitives(self, origins, directions):
+        """The index of the primitive each ray's nearest hit is on (-1 on a miss), float64; None for
+        a shape of one primitive."""
+        return None
+
+    def edge_distance(self, points) -> np.ndarray:
+        """Distance from points on the surface to its nearest edge (a rim, a border, a box's edge),
+        where a ray within rounding may go either way; inf for a shape without edges."""
+        return np.full(np.shape(points)[:-1], np.inf)
+
+    # -- the error model -----------------------------------------------------------------------
+    def anchor(self, point) -> np.ndarray:
+        """The point this shape's intersection measures coordinates from, for rays from ``point``
+        (the sphere's centre, a plane's foot of the point, a cylinder's farther end ...): the error
+        model's coordinate size is max(|point|, |anchor|, |point - anchor|)."""
+        raise NotImplementedError
+
+    # how much larger than the model's K eps (t + L) its Mitsuba counterpart's error may be (the
+    # engine's own formulas are the shape's business: see the cylinder)
+    mitsuba_error_scale: ClassVar[float] = 1.0
+
+    def curvature_radius(self) -> float:
+        """The smallest radius of curvature (inf for flat shapes): a position error e along the
+        surface turns the normal by e / radius."""
+        return np.inf
+
+    def silhouette_radius(self) -> float:
+        """The radius of curvature at its silhouettes, for the silhouette rule's square-root law
+        (error_model.silhouettes): the curvature radius, unless the surface is flat pieces (a mesh),
+        whose silhouettes lie on edges that the edge rule judges."""
+        return self.curvature_radius()
+
+    def extent_from(self, point) -> float:
+        """How far from ``point`` the shape reaches (for Mitsuba's clip range)."""
+        bounds = self.box()
+        corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        return float(np.linalg.norm(corners - np.asarray(point, np.float64), axis=1).max())
+
+    # -- Mitsuba 3 -----------------------------------------------------------------------------
+    def mitsuba_shapes(self, scene) -> list[dict]:
+        """Mitsuba scene dicts of this shape's counterpart (one or more; they all map back to this
+        shape's id). A ``to_world`` value is a 4x4 float64 numpy matrix (the bridge converts it)."""
+        raise NotImplementedError
+
+    # True where the Mitsuba counterpart is one shape numbering its primitives as this type does
+    # (a mesh's triangles: Mitsuba's prim_index is pyclray's primitive), so checks compare them
+    mitsuba_primitives: ClassVar[bool] = False
+
+    def mitsuba_covers(self, scene, points) -> np.ndarray:
+        """Whether Mitsuba's counterpart holds these points of the shape (False where a stand-in
+        ends, such as the plane's disk)."""
+        return np.ones(np.shape(points)[:-1], bool)
+
+
+def flat_hits(center, normal, origins, directions, inside) -> np.ndarray:
+    """A flat shape's float64 oracle: the distance t > 0 at which each ray meets the plane through
+    center with unit normal, where inside(P) holds (P the hit point from the centre), else +inf."""
+    F = np.array(center) - origins
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (F @ normal) / (directions @ normal)
+        P = t[..., None] * directions - F
+        hit = (t > 0) & np.isfinite(t) & inside(P)
+    return np.where(hit, t, np.inf)
+
+
+def dot_rows(a, b) -> np.ndarray:
+    return np.einsum("...k,...k", a, b)
