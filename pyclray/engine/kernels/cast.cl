@@ -61,7 +61,7 @@
 /* the state's parts, (type, name) each, kept as name_ and saved from cast_start's local of that name:
  * the ray's, and (with bounded shapes) its traversal's */
 #define CAST_RAY_STATE(X) \
-    X(RayPacket, ray) X(double, t_max) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, length)
+    X(RayPacket, ray) X(double, t_max) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, ray_length)
 #define CAST_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
     X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
 #define CAST_STATE_FIELD(T, name) T name##_;
@@ -101,7 +101,7 @@ inline void cast_start(CastRay* S, const int r, const CastDirection* direction, 
 /* the names the visit's macros use (PYCLRAY_CAST_VISIT and what it expands to), bound to the state's
  * (none may be a shape type's name, which the macros paste: the box ray is passed as S->box_) */
 #define ray (S->ray_)
-#define length (S->length_)
+#define ray_length (S->ray_length_)
 #define best (S->best_)
 #define best_kind (S->best_kind_)
 #define best_k (S->best_k_)
@@ -121,7 +121,7 @@ inline void cast_step(CastRay* S, PYCLRAY_PARAMETERS)
     PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 1, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
 }
 #undef ray
-#undef length
+#undef ray_length
 #undef best
 #undef best_kind
 #undef best_k

@@ -349,7 +349,7 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
         lane_s.v = mesh_block_hits(block, &moved, &hits);                           \
         for (; hits != 0; hits &= hits - 1) {                                       \
             const int lane = BVH_LOWEST_BIT(hits);                                  \
-            const double t = s0 + (double)lane_s.s[lane] * length;                  \
+            const double t = s0 + (double)lane_s.s[lane] * ray_length;              \
             PYCLRAY_CAST_TAKE(t, as_int2(block[0]).y, KIND_##type, k * 8 + lane, q) \
         }                                                                           \
     }

@@ -39,7 +39,7 @@
     {                                                                               \
         PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
         const real s = PYCLRAY_HIT_##type(&framed, &moved, MISS);                   \
-        const double t = s < MISS ? s0 + (double)s * length : INFINITY;             \
+        const double t = s < MISS ? s0 + (double)s * ray_length : INFINITY;         \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
         PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
     }
@@ -85,7 +85,7 @@
     for (int q = 0; q < n_##type##s; ++q) {                                         \
         PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
         const real s = PYCLRAY_HIT_##type(&framed, &ray, MISS);                     \
-        const double t = s < MISS ? (double)s * length : INFINITY;                  \
+        const double t = s < MISS ? (double)s * ray_length : INFINITY;              \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
 
@@ -171,7 +171,7 @@ inline int cast_leaf_mask(__global const float4* box_anchors, const int first, c
 typedef struct {
     double3 unit;
     vec3v dir;
-    real a, length;
+    real a, ray_length;
 } CastDirection;
 
 /* The square root of each lane of a 4-vector: on PoCL's CPU device one vector instruction of the
@@ -213,12 +213,12 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     const double4 ux = sx / root, uy = sy / root, uz = sz / root;
     const real4 dx = CAST_TO_REAL4(ux), dy = CAST_TO_REAL4(uy), dz = CAST_TO_REAL4(uz);
     const real4 a = (dx * dx + dy * dy) + dz * dz;
-    const real4 length = CAST_REAL_SQRT4(a);  /* |dir|: the shapes' s is along dir, not D */
+    const real4 ray_length = CAST_REAL_SQRT4(a);  /* |dir|: the shapes' s is along dir, not D */
 #define CAST_DIRECTION_LANE(l, s)                                                   \
     out[l].unit = (double3)(ux.s, uy.s, uz.s);                                      \
     out[l].dir = v3(dx.s, dy.s, dz.s);                                              \
     out[l].a = a.s;                                                                 \
-    out[l].length = length.s;
+    out[l].ray_length = ray_length.s;
     CAST_DIRECTION_LANE(0, s0) CAST_DIRECTION_LANE(1, s1) CAST_DIRECTION_LANE(2, s2) CAST_DIRECTION_LANE(3, s3)
 #undef CAST_DIRECTION_LANE
 }
@@ -258,7 +258,7 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     ray.dir = direction->dir;                                                       \
     ray.a = direction->a;                                                           \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
-    const real length = direction->length;                                          \
+    const real ray_length = direction->ray_length;                                  \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
