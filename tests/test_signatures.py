@@ -46,7 +46,7 @@ def reported(variant: Variant) -> list[tuple[str, str, bool]]:
     with warnings.catch_warnings():  # PoCL's notes on a successful build
         warnings.simplefilter("ignore", cl.CompilerWarning)
         program = cl.Program(ctx.context, source).build(options=variant.options() + ["-cl-kernel-arg-info"])
-    kernel = cl.Kernel(program, variant.kind)
+    kernel = cl.Kernel(program, variant.query)
     info = cl.kernel_arg_info
     return [(kernel.get_arg_info(i, info.NAME), kernel.get_arg_info(i, info.TYPE_NAME),
              kernel.get_arg_info(i, info.ADDRESS_QUALIFIER) == GLOBAL) for i in range(kernel.num_args)]
@@ -61,7 +61,7 @@ def declared(variant: Variant) -> list[tuple[str, str, bool]]:
     return out
 
 
-@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: f"{v.kind}-{'-'.join(v.shape_types)}-{v.precision}"
+@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: f"{v.query}-{'-'.join(v.shape_types)}-{v.precision}"
                          f"{'-bvh' if v.bvh else ''}{'-shadows' if v.shadows else ''}{'-framed' if v.framed else ''}"
                          f"{'-indexed' if v.indexed else ''}-{len(v.aovs)}")
 def test_the_declared_parameters_are_the_built_kernels(variant):
@@ -85,7 +85,7 @@ def test_what_each_condition_adds():
     """Shadows add each type's count (tile lists) or the binary tree (BVH); the BVH's buffers only
     with a bounded type; each image its buffer, the position its eye too."""
     def names(**changes):
-        base = dict(kind="render", shape_types=("plane", "sphere"), aovs=("shaded",), precision="fp32", lanes=8)
+        base = dict(query="render", shape_types=("plane", "sphere"), aovs=("shaded",), precision="fp32", lanes=8)
         return [name for _, name in signatures.parameters(Variant(**{**base, **changes}))]
 
     assert set(names(shadows=True)) - set(names()) == {"n_planes", "n_spheres"}

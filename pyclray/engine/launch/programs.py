@@ -95,9 +95,9 @@ def packet_shape(lanes: int) -> tuple[int, int]:
 
 @dataclass(frozen=True)
 class Variant:
-    """What selects a program: kernel kind, shape types present, images asked for, precision, lanes."""
+    """What selects a program: its query (kernel), shape types present, images asked for, precision, lanes."""
 
-    kind: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, traced one
+    query: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, traced one
     # at a time, CAST_GROUP of them per work-item: engine/queries/cast.py), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
     # camera's frame: kernels/rebase.cl)
     shape_types: tuple[str, ...]
@@ -126,7 +126,7 @@ class Variant:
 
         bounded = self.bounded_types()
         lines = [f"#define PYCLRAY_SHAPES(X) {listed(self.shape_types)}", f"#define PYCLRAY_LANES {self.lanes}"]
-        if self.kind == "render":
+        if self.query == "render":
             columns, rows = packet_shape(self.lanes)
             lines += [f"#define PYCLRAY_PACKET_W {columns}", f"#define PYCLRAY_PACKET_H {rows}"]
         lines.append(f"#define PYCLRAY_BOUNDED(X) {listed(bounded)}")
@@ -136,14 +136,14 @@ class Variant:
         if bounded:
             lines.append("#define PYCLRAY_HAS_BOUNDED 1")
         lines += self._shape_calls()
-        if self.bvh and self.kind == "render":
+        if self.bvh and self.query == "render":
             lines.append("#define PYCLRAY_BVH 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if any(aov in WINNER_AOVS for aov in self.aovs):  # the winner matters, not only its distance
             lines.append("#define PYCLRAY_TRACK_ID 1")
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
-        if self.kind in ("cast", "occluded"):
+        if self.query in ("cast", "occluded"):
             lines.append("#define PYCLRAY_CAST 1")
             # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
@@ -152,13 +152,13 @@ class Variant:
             # kernels/cast.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
             if any(REGISTRY[t].cast_blocks for t in self.shape_types):
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
-        if self.kind == "rebase":
+        if self.query == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")
-        if self.framed and self.kind == "render":
+        if self.framed and self.query == "render":
             lines.append("#define PYCLRAY_FRAMED 1")
         if any(self.mode(t) == "INDEXED" for t in self.shape_types):
             lines.append("#define PYCLRAY_INDEXED 1")
-        if self.kind == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
+        if self.query == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
         # where a render reads each type's shapes (kernels/entries.h): framed where tested, or copied
         lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
@@ -167,7 +167,7 @@ class Variant:
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
-        if self.kind in SIGNATURES:  # the kernel's parameters (engine/launch/signatures.py)
+        if self.query in SIGNATURES:  # the kernel's parameters (engine/launch/signatures.py)
             lines += c_defines(self)
         return lines
 
@@ -191,9 +191,9 @@ class Variant:
         """Where a render reads the shapes of type t (kernels/entries.h): framed where tested from their
         world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
         shape = REGISTRY[t]
-        if self.indexed and self.kind == "render" and shape.indexed:
+        if self.indexed and self.query == "render" and shape.indexed:
             return "INDEXED"
-        return "FRAMED" if self.framed and self.kind == "render" and shape.frames_in_render else "COPIED"
+        return "FRAMED" if self.framed and self.query == "render" and shape.frames_in_render else "COPIED"
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
@@ -205,7 +205,7 @@ class Variant:
         function kept out of the kernel, whose body PoCL copies three times (kernels/common.h).
         None of it changes a bit of the results (tests/test_speedups.py)."""
         shapes = [REGISTRY[t] for t in self.shape_types]
-        if self.kind == "rebase":
+        if self.query == "rebase":
             return self._rebase_source(shapes, inline_builtins)
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines)]
@@ -213,8 +213,8 @@ class Variant:
         if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        cast = self.kind in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
-        framed = self.framed and self.kind == "render"
+        cast = self.query in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
+        framed = self.framed and self.query == "render"
         structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
@@ -237,7 +237,7 @@ class Variant:
             if shading:  # materials, lights and shadows: only in the programs that shade
                 parts.append(_read("shading.h"))
             parts += [_read(name) for name in ("entries.h", "nearest.h", "images.h")]
-        parts.append(_read(QUERY_FILES[self.kind]))  # pops the always_inline attribute before its kernels
+        parts.append(_read(QUERY_FILES[self.query]))  # pops the always_inline attribute before its kernels
         return "\n".join(parts)
 
     def _rebase_source(self, shapes, inline_builtins: bool = False) -> str:
@@ -364,7 +364,7 @@ def kernel_for(ctx: DeviceContext, variant: Variant) -> cl.Kernel:
         if kernel is not None:
             stats["from_memory"] += 1
             return kernel
-        kernel = _programs[key] = cl.Kernel(_build(ctx, variant), variant.kind)
+        kernel = _programs[key] = cl.Kernel(_build(ctx, variant), variant.query)
         return kernel
 
 

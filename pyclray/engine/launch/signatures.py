@@ -225,7 +225,7 @@ def _templates(variant, type_: str) -> dict:
 def parameters(variant) -> tuple[tuple[str, str], ...]:
     """The (C type, name) of each parameter of the variant's kernel, in order."""
     out = []
-    for item in SIGNATURES[variant.kind]:
+    for item in SIGNATURES[variant.query]:
         if isinstance(item, EachType):
             for type_ in item.of(variant):
                 names = _templates(variant, type_)
@@ -238,7 +238,7 @@ def parameters(variant) -> tuple[tuple[str, str], ...]:
             out.append((item.c_type, item.name))
     names = [name for _, name in out]
     if len(set(names)) != len(names):
-        raise ValueError(f"the {variant.kind} kernel's signature names a parameter twice for {variant}: {names}")
+        raise ValueError(f"the {variant.query} kernel's signature names a parameter twice for {variant}: {names}")
     return tuple(out)
 
 
@@ -266,7 +266,7 @@ def arguments(variant, values: Mapping) -> list:
     if ordered is None or len(values) != len(names):
         missing = [name for name in names if name not in values]
         extra = [name for name in values if name not in names]
-        raise TypeError(f"the {variant.kind} kernel of {variant}: "
+        raise TypeError(f"the {variant.query} kernel of {variant}: "
                         + "; ".join(([f"missing {', '.join(missing)}"] if missing else [])
                                     + ([f"does not take {', '.join(map(str, extra))}"] if extra else [])))
     return ordered

@@ -214,7 +214,7 @@ def check_cast_device(ctx) -> None:
         )
 
 
-def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
+def run_cast(tracer, query: str, origins, directions, tmax, aovs):
     """The nearest hit of each ray ("cast": a Frame of the aovs) or whether any ("occluded": a bool
     array), on a scene handle (engine/tracer.py) whose request and device were checked."""
     ctx, precision = tracer.ctx, tracer.precision
@@ -243,7 +243,7 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
             "(their distances overflow)"
         )
     if count == 0:
-        if kind == "occluded":
+        if query == "occluded":
             return np.zeros(shape, bool)
         empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
         return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
@@ -261,7 +261,7 @@ def run_cast(tracer, kind: str, origins, directions, tmax, aovs):
             "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
     groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
     sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
-    if kind == "occluded":
+    if query == "occluded":
         variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         _run_into(ctx, variant, sizes, rays, out)
