@@ -242,7 +242,7 @@ def test_breakdown(benchmark, scenes_dir, part):
     tracer = api.tracer_for(scene, ctx, "fp32")
     prepared = tracer.prepared
     inputs = tracer.view_state(scene).inputs_for(ctx, scene, prepared, "tiles")
-    with prepared.lock:  # the frame buffers in this view's frame (the render above left them so)
+    with prepared.lock:  # the view buffers in this view's frame (the render above left them so)
         prepared.rebase(inputs.eye, inputs.rows)
     lanes = programs.lanes_for(ctx.device, "fp32")
     variant = programs.Variant("render", scene.shape_types(), aovs, "fp32", lanes)

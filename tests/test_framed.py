@@ -73,7 +73,7 @@ def test_framed_views_after_other_views_are_the_fresh_views(monkeypatch):
 
 @pytest.mark.parametrize("refit_max", [1.5, 0.0])  # refit in place; every frame rebuilt
 def test_framed_animation_frames_equal_fresh_frames(monkeypatch, refit_max):
-    """An animation's frames update a framed scene's world entries in place (no frame buffer to
+    """An animation's frames update a framed scene's world entries in place (no view buffer to
     bring to the view) and equal the frames' scenes prepared from nothing."""
     monkeypatch.setattr(prepared, "FRAMED_FROM", 0)
     monkeypatch.setattr(prepared.PreparedScene, "REFIT_COST_MAX", refit_max)

@@ -64,7 +64,7 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
         args.update(inputs.lighting(prepared))
         args.update({f"{t}_smooth": prepared.kinds[t].smooth for t in smooth})
     global_size, local_size = launch_size(lanes, col0, row0, cols, rows, ctx.device.max_work_group_size)
-    # the frame buffers hold this view from its pass to its kernel: both enqueued under the lock, on the
+    # the view buffers hold this view from its pass to its kernel: both enqueued under the lock, on the
     # device's one in-order queue, which runs another view's pass only after this kernel
     with prepared.lock:
         uploads = prepared.rebase(inputs.eye, inputs.rows)

@@ -66,7 +66,7 @@ def instance_bytes(prepared) -> dict:
         return {}
     count = kind.count
     entries = len(prepared.bvh.leaf_type) or 1
-    own = kind.world.itemsize + kind.frame_host.itemsize
+    own = kind.world.itemsize + kind.in_view_host.itemsize
     tlas = (prepared._wide_host.nbytes + entries * 4) / entries  # the (wide) tree and refs per entry
     return {"instances": count, "own_bytes_per_instance": own, "tlas_bytes_per_instance": tlas,
             "bytes_per_instance": own + tlas, "shared_bytes": sum(a.nbytes for a in kind.shared_host)}

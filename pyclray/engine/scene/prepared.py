@@ -11,7 +11,7 @@ stay around the scene's anchor (the kernel takes the eye relative to it); a view
 camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
 So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
-with float64 is framed (FRAMED_FROM): its spheres have no frame buffer, the render kernel frames each
+with float64 is framed (FRAMED_FROM): its spheres have no view buffer, the render kernel frames each
 where it tests it from its world entry (the same bits). Meshes on a device with float64 are shared
 vertices and faces whose vertices the per-view pass frames (INDEXED, engine/scene/indexed.py), in any scene.
 
@@ -57,8 +57,8 @@ class Kind:
     primitives_buffer: cl.Buffer | None
     # elsewhere: the entries in the frame of the last view (the render kernel's shape array), and
     # that buffer's memory on a CPU device (its bytes, elsewhere)
-    frame: cl.Buffer | None
-    frame_host: np.ndarray | None
+    in_view: cl.Buffer | None
+    in_view_host: np.ndarray | None
     smooth: cl.Buffer | None = None  # the shading normals of its entries (SmoothShading.pack_smooth), if any
     smooth_host: np.ndarray | None = None
     shared: tuple = ()  # the arrays its entries share (SharedArrays.shared: mesh instances' triangles and BVHs)
@@ -83,8 +83,8 @@ class Kind:
 
     @property
     def framed(self) -> bool:
-        """Whether the render kernel frames its entries where it tests them (no frame buffer)."""
-        return self.frame is None
+        """Whether the render kernel frames its entries where it tests them (no view buffer)."""
+        return self.in_view is None
 
     @property
     def count(self) -> int:
@@ -112,8 +112,8 @@ class PreparedScene:
 
     def __init__(self, ctx, shapes: tuple, precision: str):
         self.ctx, self.shapes, self.precision = ctx, shapes, precision
-        self.lock = threading.RLock()  # one view at a time uses the frame buffers
-        self.view_key = self.view = None  # the camera the frame buffers hold: (eye, rows) bytes, arrays
+        self.lock = threading.RLock()  # one view at a time uses the view buffers
+        self.view_key = self.view = None  # the camera the view buffers hold: (eye, rows) bytes, arrays
         by_type: dict = {}
         for index, shape in enumerate(shapes):
             by_type.setdefault(shape.type, ([], []))
@@ -263,7 +263,7 @@ class PreparedScene:
             elif kind.framed:
                 total += kind.world.nbytes + kind.ids.nbytes + kind.primitives.nbytes
             else:
-                total += kind.world.nbytes + kind.frame_host.nbytes
+                total += kind.world.nbytes + kind.in_view_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
             total += sum(a.nbytes for a in kind.shared_host)
         if self.bvh.types:
@@ -299,7 +299,7 @@ class PreparedScene:
 
     # -- a view ----------------------------------------------------------------------------------
     def rebase(self, eye, rows) -> None:
-        """Bring the frame buffers to this camera (eye: float64 (3,); rows: its axes u, v, w in
+        """Bring the view buffers to this camera (eye: float64 (3,); rows: its axes u, v, w in
         world coordinates). Call with self.lock held, and keep it until the kernels that read the
         buffers are enqueued (the device's in-order queue runs them before a later view's pass).
         Returns the uploads of host arrays it enqueued (pyopencl events that hold the arrays): keep
@@ -324,10 +324,10 @@ class PreparedScene:
             if self.on_device:
                 # its scalars' types declared once (device.launch)
                 launch(self.ctx, kernels[f"rebase_{kind.name}"], *self._groups(kind.count),
-                       [kind.world_buffer, kind.frame, np.int32(kind.count), *frame])
+                       [kind.world_buffer, kind.in_view, np.int32(kind.count), *frame])
             else:  # a device without float64
                 packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
-                uploads.append(cl.enqueue_copy(queue, kind.frame, packed, is_blocking=False))
+                uploads.append(cl.enqueue_copy(queue, kind.in_view, packed, is_blocking=False))
         self.view_key, self.view = key, (eye, rows)
         return uploads
 

@@ -1,6 +1,6 @@
 """An animation's frame on a prepared scene (pyclray.engine.scene.prepared): the shapes it changed written
 in place, the BVH refitted above them (or the scene rebuilt where a refit would degrade the tree),
-and while the camera stays, the frame buffers brought to the view entry by entry (no whole pass).
+and while the camera stays, the view buffers brought to the view entry by entry (no whole pass).
 
 A frame where K of N shapes move costs O(K log N) host work and writes O(K log N) rows: on a CPU
 device the host arrays are the buffers' memory (buffers.device_buffer) and are written in place;
@@ -75,10 +75,10 @@ def update(prepared, shapes: tuple, changed) -> bool:
         if refitted is None:
             return False
     shared = shares_host_memory(prepared.ctx)
-    for kind, i, world in moved:  # (brought to the view the frame buffers hold, if any)
+    for kind, i, world in moved:  # (brought to the view the view buffers hold, if any)
         kind.indexed.move(prepared, i, world, shared)
     # the world entries; on another device, written to it before the next whole pass or render that
-    # reads them (flush_world): while the camera stays, a frame writes only the frame buffers
+    # reads them (flush_world): while the camera stays, a frame writes only the view buffers
     for name, (where, rows) in packed.items():
         kind = prepared.kinds[name]
         kind.world[where] = rows
@@ -108,18 +108,18 @@ def update(prepared, shapes: tuple, changed) -> bool:
         if refitted[0] == 0:  # the root's box (refit returns the nodes sorted): the range check's
             prepared.reach = prepared._reach()
     if prepared.on_device and prepared.view is not None:
-        # the frame buffers hold the last view: bring the changed entries to it in place (the same
+        # the view buffers hold the last view: bring the changed entries to it in place (the same
         # floats as a whole pass: the host's rebase is the device's, bit for bit)
         eye, rows = prepared.view
         for name, (where, _) in packed.items():
             kind = prepared.kinds[name]
-            if kind.framed:  # no frame buffer: its world entries are what the kernel reads
+            if kind.framed:  # no view buffer: its world entries are what the kernel reads
                 continue
             framed = kind.cls.rebase(kind.world[where], eye, rows, prepared.precision, kind.ids[where], kind.primitives[where])
             if shared:
-                kind.frame_host[where] = framed
+                kind.in_view_host[where] = framed
             else:
-                scatter(prepared, kind.frame, where, framed)
+                scatter(prepared, kind.in_view, where, framed)
     # materials (an animated colour or size): the rows of the shapes whose material is another object
     materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
     if materials:

@@ -169,7 +169,7 @@ class ViewInputs:
                 args["nodes"] = prepared.nodes
         for t, kind in prepared.kinds.items():
             # its entries: the faces and vertices (indexed), the world entries, ids and primitive
-            # indices (framed), or the frame buffer; then the arrays its entries share
+            # indices (framed), or the view buffer; then the arrays its entries share
             if kind.indexed is not None:
                 args.update({f"{t}_faces": kind.indexed.faces_buffer, f"{t}_vertices": kind.indexed.vertices,
                              f"{t}_world_vertices": kind.indexed.world_buffer, f"{t}_ids": kind.indexed.ids_buffer})
@@ -177,7 +177,7 @@ class ViewInputs:
                 args.update({f"{t}_worlds": kind.world_buffer, f"{t}_ids": kind.ids_buffer,
                              f"{t}_primitives": kind.primitives_buffer})
             else:
-                args[f"{t}s"] = kind.frame
+                args[f"{t}s"] = kind.in_view
             args.update(shared_arguments(t, kind.shared))
             if acceleration == "bvh" or shadows:
                 args[f"n_{t}s"] = np.int32(kind.count)
