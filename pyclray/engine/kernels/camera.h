@@ -14,8 +14,7 @@ inline Basis camera_basis(__global const Camera* camera)
 /* a direction of the camera's frame in world coordinates */
 inline vec3v world_from_frame(__global const Camera* camera, const vec3v n)
 {
-    const Basis basis = camera_basis(camera);
-    return world_from_basis(&basis, n);
+    return world_from_axes(camera->u, camera->v, camera->w, n);
 }
 
 /* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and

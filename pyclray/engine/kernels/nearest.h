@@ -85,9 +85,14 @@
     }
 
 #ifdef PYCLRAY_WINNER_NORMAL
-#define PYCLRAY_NORMAL_OF(type, shape) \
-    normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, &basis, best, mine), mine);
-#define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0)); const Basis basis = camera_basis(camera);
+/* the winner's normal, turned into the world by the camera's axes (read per winner, where its normal
+ * function uses them, rather than once per packet: a packet without a winner reads none) */
+#define PYCLRAY_NORMAL_OF(type, shape)                                                \
+    {                                                                                 \
+        const Basis basis = camera_basis(camera);                                     \
+        normal = v3_select(normal, PYCLRAY_NORMAL_##type(shape, &ray, &basis, best, mine), mine); \
+    }
+#define PYCLRAY_NORMAL_BEGIN vec3v normal = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #else
 #define PYCLRAY_NORMAL_OF(type, shape)
 #define PYCLRAY_NORMAL_BEGIN

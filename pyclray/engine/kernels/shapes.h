@@ -19,10 +19,12 @@ typedef struct {
     real4 u, v, w;
 } Basis;
 
-inline vec3v world_from_basis(const Basis* basis, const vec3v n)
+/* n (a direction of the frame of axes u, v, w) in world coordinates */
+inline vec3v world_from_axes(const real4 u, const real4 v, const real4 w, const vec3v n)
 {
-    const real4 u = basis->u, v = basis->v, w = basis->w;
     return v3((n.x * u.x + n.y * v.x) + n.z * w.x,
               (n.x * u.y + n.y * v.y) + n.z * w.y,
               (n.x * u.z + n.y * v.z) + n.z * w.z);
 }
+
+inline vec3v world_from_basis(const Basis* basis, const vec3v n) { return world_from_axes(basis->u, basis->v, basis->w, n); }
