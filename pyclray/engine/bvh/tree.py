@@ -2,12 +2,8 @@
 (pyclray.engine.bvh.sah, compiled by numba), a linear BVH in vectorized numpy for small ones.
 
 The binned SAH (from SAH_FROM shapes on): top-down, 32 bins on each axis at every node, leaves of
-at most LEAF_SIZE where the surface area heuristic says so; see bvh_sah. Its tree's SAH cost is
-within 6% of a full binned SAH build's (bench/bvh_build.py's reference, in numpy: 1.02-1.06 on
-sphere fields, tessellated spheres, tori, a grid, the Stanford bunny and the armadillo; 2-6% spent
-on purpose for the LBVH's memory, bvh_sah.TRAVERSAL), where the LBVH's is 4-47% above it. Rendered
-(bench/bvh_render.py, CPU time), camera packets go 1.05x (uniform spheres) to 1.3x (clustered
-spheres, meshes) faster through it, single rays 1.07x to 1.26x.
+at most LEAF_SIZE where the surface area heuristic says so; see sah.py. Its tree's quality and
+render times against the LBVH's: docs/benchmarks.md, "The BVH builder".
 
 The linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees and k-d
 trees", HPG 2012), below SAH_FROM: the shapes are sorted along a Morton curve of their bounds'
@@ -15,12 +11,10 @@ centres; the binary radix tree of the sorted codes is found for every internal n
 node's range and split by binary searches over the codes, vectorized over all nodes); subtrees of
 at most LEAF_SIZE shapes become leaves; nodes are then numbered breadth-first, and bounded bottom-up.
 
-Why two: numba's import and the load of the compiled builder from its disk cache cost a new process
-about 0.4 s, once, where the LBVH of 16,384 shapes takes about 10 ms: a small scene's first render
-(tp02's cold start) never pays it (numba is not even imported). From SAH_FROM on the better tree
-pays for it over a few views. Build times on the shared 2-core machine (bench/bvh_build.py,
-docs/benchmarks.md; at load average 2): 100,000 shapes in 43-60 ms warm, 0.36-0.52 s cold (the
-LBVH 47-85 ms); 1,000,000 in 0.40-0.62 s warm, 0.72-1.4 s cold (the LBVH 0.62-0.70 s).
+Why two: numba's import and the load of the compiled builder cost a new process's first large
+build; a small scene's first render (tp02's cold start) never pays it (numba is not even imported).
+From SAH_FROM on the better tree pays for it over a few views (docs/benchmarks.md, "Why the engine
+does what it does": SAH_FROM).
 
 Flat layout, ready for a kernel: node k has bounds lo[k], hi[k] (float64 here; the packer rounds
 them outward to the kernel's precision) and two integers: ``first`` and ``count``. count > 0: a
@@ -62,11 +56,8 @@ SAH_FROM = 16_384  # shapes from which build() takes the binned SAH (bvh_sah): s
 # binary tree): a packet's visit of a node (two box tests of all its lanes, their reductions, a branch
 # the predictor often misses) costs about as much as four of its shape tests, and a leaf is tested
 # shape after shape against the whole packet, so leaves up to 7 (the most the wide tree's leaf code
-# holds) with a node's cost of 4 shape tests. Measured (CPU time of 512x512 primary rays, one process,
-# variants alternating): against leaves of 4 (7 for meshes) at the builder's cost of 2, 100,000
-# spheres -12%, the 80,000-triangle bunny -8%, 1,000,000 triangles -5%; a cost of 6 or 10 changes
-# little more. Half the nodes, too. Through the wide tree (render_views at 100,000 spheres, one PoCL
-# thread): a cost of 2 (leaves of 2.75 on average, not 5.04) +16% CPU time, 8 the same.
+# holds) with a node's cost of 4 shape tests (docs/benchmarks.md, "Why the engine does what it
+# does": SCENE_LEAF_SIZE).
 SCENE_LEAF_SIZE = 7
 SCENE_TRAVERSAL = 4.0
 
@@ -303,7 +294,7 @@ def widened(bounds: np.ndarray) -> np.ndarray:
     """Shapes' world bounds widened by WIDEN times their size (see WIDEN)."""
     bounds = np.asarray(bounds, np.float64)
     out = np.empty_like(bounds)
-    if len(bounds) >= SAH_FROM:  # one compiled pass (numba is imported for the SAH build anyway): 0.1 s less a million
+    if len(bounds) >= SAH_FROM:  # one compiled pass (numba is imported for the SAH build anyway; docs/benchmarks.md)
         from .passes import widen
 
         widen(np.ascontiguousarray(bounds), WIDEN, out)

@@ -98,8 +98,8 @@ inline realv box_entries(__global const BvhNode* node, const BoxPacket* b, const
 }
 
 /* A leaf some lane of a packet enters has its shapes' entries asked for from memory at once, so that
- * they arrive while the traversal goes on (on 1,000,000 triangles, whose leaves are mostly far apart
- * in memory: -11% CPU time of 512x512 primary rays): PYCLRAY_PACKET_LEAF_PREFETCH(first, count),
+ * they arrive while the traversal goes on (leaves far apart in memory, as a large mesh's; docs/
+ * benchmarks.md, "Why the engine does what it does"): PYCLRAY_PACKET_LEAF_PREFETCH(first, count),
  * defined by the kernel where it knows where a leaf's entries lie (kernels/render.cl), else nothing. */
 #ifndef PYCLRAY_PACKET_LEAF_PREFETCH
 #define PYCLRAY_PACKET_LEAF_PREFETCH(first, count)

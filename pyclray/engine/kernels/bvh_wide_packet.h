@@ -15,13 +15,9 @@
  * This test is loose where a box falls between the lanes' rays (a box smaller than the rays'
  * spacing: sub-pixel triangles), so a child is tested again when popped from the stack, lane by lane
  * as box_entries tests a binary node (each lane against its own best, by then often nearer).
- * Why: through the binary tree a packet of 4x2 rays visited 26 internal nodes and 9 leaves (100,000
- * spheres at 256x256), two box tests of all lanes and two reductions across them per visit, each
- * visit waiting on the last; through the wide tree 9 visits (one float8 test of 8 children each) and
- * the same 9 leaves. CPU time (kernels swapped in one process, one PoCL thread, medians of 4-6
- * rounds): render_views at 100,000 spheres -20% (12.9 -> 10.2 ms a view), the 80,000-triangle bunny
- * at 512x512 -27% (18.3 -> 13.5 ms), 1,000,000 triangles -22% (69 -> 54 ms); without the test at
- * the pop, +24% on 1,000,000 triangles (the loose test alone let 4-8 times the leaves through).
+ * Why: a wide node's visit is one float8 test of its 8 children where the binary tree took three
+ * visits, each waiting on the last; the test at the pop keeps the leaves a packet meets
+ * (docs/benchmarks.md, "Render's packets through the wide tree").
  * The products are in float at either precision, as fp32's box_entries computes them: at fp64 the
  * lanes' bounds are rounded outward to float (the least down, the most up, and the lanes' largest
  * limit up), so that they still bound every lane's. */

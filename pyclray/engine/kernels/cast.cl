@@ -30,7 +30,7 @@
     }
 /* The packed entry of a new nearest hit, asked for from memory: the traversal reads only the
  * world entries, and the id (and the normal's frame) read from it at the end would otherwise miss
- * the cache (that read drew 9% of cast's samples on a mesh of 75k triangles, 5% with this) */
+ * the cache (docs/benchmarks.md: PYCLRAY_CAST_PREFETCH_WINNER) */
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
     if (best_kind == KIND_##type && best_k == (k)) { CAST_PREFETCH(&type##s[k], sizeof(Type)) }
 #else
@@ -53,8 +53,7 @@
  * alone waits for each of its reads in turn (a node, its child, ..., a leaf's ref, its block: on a
  * mesh of 1,000,000 triangles, whose cast data is twice the L3 cache, most of the time). Each ray's
  * own steps are the same, in the same order, as one ray's traversal: no bit of any result depends
- * on the interleaving. CPU time of 100,000 incoherent rays (bench.cast_ab, against rays one after
- * the other): 1M triangles -25%, the 75k-triangle bunny (whose data fits the L3) -4%. A ray's state
+ * on the interleaving (docs/benchmarks.md, "Mesh cast's traversal"). A ray's state
  * (CastRay) lives between its steps in the work-item's memory: cast_start sets it up (the ray, its
  * unbounded shapes, its box ray, the root pushed), cast_step is one step, cast_end writes its
  * results. */
@@ -201,7 +200,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, PYCLRAY_PARAMETERS)
         cast_end(&state[l], PYCLRAY_ARGUMENTS);
 #else
     /* one ray after the other (no block types: spheres' short paths through data that the caches
-     * hold gained nothing from interleaving and lost 7-17% of their CPU time on 16,384 spheres) */
+     * hold lose by interleaving; docs/benchmarks.md, "Mesh cast's traversal") */
     for (int l = 0; l < in_group; ++l) {
         CastRay one;
         cast_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);

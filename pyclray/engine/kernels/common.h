@@ -46,7 +46,7 @@ typedef float4 real4;
 /* Each kernel calls one function per work-item (a packet, or cast's ray). On PoCL's CPU device that
  * function is not inlined into the kernel: PoCL copies a kernel's body into each of the three
  * functions it makes of it (the work-item loops and two launchers), and the compile time of a first
- * render grows with that code (measured: 0.26 s -> 0.12 s for tp02's default images); a call per
+ * render grows with that code (docs/benchmarks.md: PYCLRAY_WORK_ITEM_FUNCTION); a call per
  * work-item costs nothing measurable. Elsewhere it is inlined as usual. */
 #ifdef PYCLRAY_INLINE_BUILTINS
 #define PYCLRAY_WORK_ITEM_FUNCTION __attribute__((noinline))

@@ -152,12 +152,11 @@ inline bool cast_may_pass(const float4 anchor, const float3 o, const float3 d)
 }
 
 /* The shapes of a leaf (positions first .. first + count - 1) the ray may meet, as a mask (bit i:
- * position first + i; kernels/bvh_ray.h's LEAF_MASK), each by cast_may_pass: on the view rays of
- * bench/secondary.py into 16,384 spheres, a ray that enters the field looks at 14 shapes in 2.6
- * leaves and tests 3.5 of them; a branch per shape on its own pre-test went either way at random.
+ * position first + i; kernels/bvh_ray.h's LEAF_MASK), each by cast_may_pass: a ray looks at several
+ * times the shapes it tests, and a branch per shape on its own pre-test went either way at random.
  * A leaf of one ref (a mesh's block of triangles, kernels/mesh.cl, whose anchor is the whole mesh's)
- * is visited as it is: moved_ray's own test of that anchor is all a pre-test would do (on a mesh's
- * blocks it cost 7% of cast's time). */
+ * is visited as it is: moved_ray's own test of that anchor is all a pre-test would do
+ * (docs/benchmarks.md: cast_leaf_mask). */
 inline int cast_leaf_mask(__global const float4* box_anchors, const int first, const int count, const float3 o,
                           const float3 d)
 {

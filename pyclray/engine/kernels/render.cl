@@ -71,15 +71,12 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYC
  * apart). Why: PoCL's CPU device hands its threads runs of consecutive work-groups (64 at a time
  * for a 256x256 image's 256 groups, a quarter of the image); in image order a thread that drew the
  * sky idled while the other traced the ground, and a render kept 1.5 of the 2 cores busy.
- * Scattered, each run samples the whole image: 1.8 cores, a same-camera render of 100,000 spheres
- * at 256x256 15% faster, a view of render_views 12% (medians of alternating runs against image
- * order, quiet machine). Every packet is still traced once, by the same code. Not for cast and
- * occluded: their batches come in ray order, and a thread's consecutive groups reuse what the ones
- * before brought into its caches (scattered, 100,000 view rays over 16,384 spheres took 11.8 ms
- * instead of 8.7, occluded 3.2-4.2 instead of 2.3). Nor for images of SCATTERED_BELOW groups or
- * more (a 512x512 image has 1,024): their 16 runs or more balance the threads well enough, and
- * scattering only costs the caches what neighbouring tiles share (a 998,000-triangle mesh at 512x512: 35-37 ms
- * scattered against 33-34 ms in order). */
+ * Scattered, each run samples the whole image and both cores stay busy. Every packet is still
+ * traced once, by the same code. Not for cast and occluded: their batches come in ray order, and a
+ * thread's consecutive groups reuse what the ones before brought into its caches. Nor for images
+ * of SCATTERED_BELOW groups or more (a 512x512 image has 1,024): their 16 runs or more balance the
+ * threads well enough, and scattering only costs the caches what neighbouring tiles share
+ * (docs/benchmarks.md, "Why the engine does what it does": SCATTERED_BELOW). */
 #define SCATTERED_BELOW 1024
 inline int scattered_group(const int g, const int n)
 {

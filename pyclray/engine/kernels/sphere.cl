@@ -72,7 +72,7 @@ inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 #if !defined(PYCLRAY_FRAMED) && !defined(PYCLRAY_CAST)
     /* From the eye with the per-view pass's entry, c is read, not computed: a packet whose b^2 - a c
      * < -2^-10 (b^2 + |a c|) in every lane misses (five products instead of the cross product's
-     * twelve below: 100,000 spheres at 256x256, -5% CPU time). sphere_terms takes b^2 - a c there (the
+     * twelve below; docs/benchmarks.md, "Why the engine does what it does"). sphere_terms takes b^2 - a c there (the
      * same b and a c, within a few eps (b^2 + |a c|) of a contraction into an fma), or a r^2 - |F x D|^2
      * only where its terms are smaller, a r^2 + |F x D|^2 < b^2 + |a c|: that form differs from b^2 - a c
      * (Lagrange's identity) by the roundings of F, c and its own, a few eps (a |F|^2 + a r^2) = a few

@@ -77,9 +77,8 @@ def lanes_for(device: cl.Device, precision: str) -> int:
     preferred = device.preferred_vector_width_double if precision == "fp64" else device.preferred_vector_width_float
     if device.type & cl.device_type.CPU and int(preferred) <= 1:
         # a CPU runtime that vectorizes across work-items itself reports 1 (Intel's): the traversal's
-        # branches defeat that, and explicit packets are 8x faster there (the 75,408-triangle bunny
-        # at 512x512: 63 ms at 1 lane, 7.3-8.4 at 8, as PoCL's 7.5-8.4; 998,000 triangles 260 ms,
-        # 33-36). Every width gives the same bits.
+        # branches defeat that, and explicit packets are much faster there (docs/benchmarks.md:
+        # lanes_for). Every width gives the same bits.
         return max(widths)
     return max(w for w in widths if w <= max(int(preferred), 1))
 
@@ -87,8 +86,8 @@ def lanes_for(device: cl.Device, precision: str) -> int:
 def packet_shape(lanes: int) -> tuple[int, int]:
     """(columns, rows) of pixels a render work-item's packet covers: two rows where the lanes
     allow (4x2 for 8 lanes, 2x2 for 4), else one. A square packet's rays stay closer together than a
-    row's, so fewer BVH nodes and leaves meet some lane of it (measured, bench.meshes' 512x512 rays:
-    see docs/benchmarks.md); each lane's arithmetic is its pixel's, whatever the packet."""
+    row's, so fewer BVH nodes and leaves meet some lane of it (docs/benchmarks.md, "Render's
+    packets"); each lane's arithmetic is its pixel's, whatever the packet."""
     rows = 2 if lanes >= 4 else 1
     return lanes // rows, rows
 
@@ -246,7 +245,7 @@ class Variant:
         inline_builtins (PoCL's CPU device), as for the render's program: the error-free product
         with the fused multiply-add (kernels/frame.h: the same exact error as Dekker's) and every
         function inlined into the kernels, so that PoCL vectorizes the pass across work-items
-        (measured at 100,000 spheres: 0.48 -> 0.30 ms a view; the same bits, tests/test_views.py)."""
+        (the same bits, tests/test_views.py; docs/benchmarks.md: Variant._rebase_source)."""
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */", "#pragma OPENCL EXTENSION cl_khr_fp64 : enable"] + defines)]
         structs = _unique([NODE] + [s.struct for s in shapes] + [s.world for s in shapes]
