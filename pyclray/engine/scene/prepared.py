@@ -32,7 +32,7 @@ from ...model.shapes import KINDS, REGISTRY
 from ...model.shapes.capabilities import capability
 from ..bvh import tiles
 from . import instances
-from . import refit
+from .refit import Refit
 from . import lighting
 from ..opencl.buffers import aligned, device_buffer as _buffer
 from ..opencl.device import has_fp64, launch
@@ -107,7 +107,7 @@ INDEXED = True
 _CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], bool)  # a box's 8: hi where 1
 
 
-class PreparedScene:
+class PreparedScene(Refit):
     """A scene's shapes on one device at one precision (see the module's docstring)."""
 
     def __init__(self, ctx, shapes: tuple, precision: str):
@@ -230,11 +230,11 @@ class PreparedScene:
     REFIT_COST_MAX = 1.5
 
     def update(self, shapes: tuple, changed) -> bool:
-        """Become the prepared scene of an animation's frame (see pyclray.engine.scene.refit.update); a
+        """Become the prepared scene of an animation's frame (Refit.update_in_place); a
         scene with shared arrays (mesh instances) is built anew."""
         if any(capability(kind.cls, "shared") for kind in self.kinds.values()):
             return False
-        return refit.update(self, shapes, changed)
+        return self.update_in_place(shapes, changed)
 
     def _kind(self, t, world, ids, primitives, shapes, order) -> Kind:
         # a type is present only with a shape of it, and every shape is at least one entry
@@ -307,7 +307,7 @@ class PreparedScene:
         eye = np.asarray(eye, np.float64)
         rows = np.asarray(rows, np.float64)
         key = (eye.tobytes(), rows.tobytes())
-        refit.flush_world(self)  # the world entries animation frames changed (framed types read them)
+        self.flush_world()  # the world entries animation frames changed (framed types read them)
         if key == self.view_key:
             return []
         queue = self.ctx.queue

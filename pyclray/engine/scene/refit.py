@@ -1,6 +1,7 @@
-"""An animation's frame on a prepared scene (pyclray.engine.scene.prepared): the shapes it changed written
-in place, the BVH refitted above them (or the scene rebuilt where a refit would degrade the tree),
-and while the camera stays, the view buffers brought to the view entry by entry (no whole pass).
+"""An animation's frame on a prepared scene, as the prepared scene's own methods (Refit, a base of
+pyclray.engine.scene.prepared.PreparedScene): the shapes it changed written in place, the BVH
+refitted above them (or the scene rebuilt where a refit would degrade the tree), and while the
+camera stays, the view buffers brought to the view entry by entry (no whole pass).
 
 A frame where K of N shapes move costs O(K log N) host work and writes O(K log N) rows: on a CPU
 device the host arrays are the buffers' memory (buffers.device_buffer) and are written in place;
@@ -24,139 +25,142 @@ from ..launch.run import input_buffer
 # PreparedScene.REFIT_COST_MAX (docs/benchmarks.md, "Why the engine does what it does").
 
 
-def update(prepared, shapes: tuple, changed) -> bool:
-    """Become the prepared scene of ``shapes``, a tuple equal to this scene's but for the shapes at
-    ``changed`` (an animation's frame, pyclray.model.animation.derivation): rewrite their world
-    entries, their materials and the BVH's boxes above them (a refit), on the host and the device.
-    O(K log N) host work for K changed shapes. False (and nothing changed) where the changes need a
-    new scene: another type or primitive count, or a refit that would degrade the tree."""
-    indices = sorted(set(changed) | prepared.dirty)  # shapes changed before and no longer: back to theirs
-    if indices and indices[-1] >= min(len(shapes), len(prepared.shapes)):
-        return False
-    new, old = [shapes[i] for i in indices], [prepared.shapes[i] for i in indices]
-    for i, shape, before in zip(indices, new, old):
-        kind = prepared.kinds.get(shape.type)
-        if kind is None or shape.type != before.type or shape.primitive_count() != before.primitive_count() \
-                or kind.smooth is not None:  # its world shading normals: packed anew
+class Refit:
+    """The prepared scene's own methods for an animation's frame (PreparedScene takes this class
+    among its bases): the changed shapes' entries rewritten in place, the tree refitted above them,
+    the world entries brought to the device before the next pass, rows scattered on the device."""
+
+    def update_in_place(self, shapes: tuple, changed) -> bool:
+        """Become the prepared scene of ``shapes``, a tuple equal to this scene's but for the shapes at
+        ``changed`` (an animation's frame, pyclray.model.animation.derivation): rewrite their world
+        entries, their materials and the BVH's boxes above them (a refit), on the host and the device.
+        O(K log N) host work for K changed shapes. False (and nothing changed) where the changes need a
+        new scene: another type or primitive count, or a refit that would degrade the tree."""
+        indices = sorted(set(changed) | self.dirty)  # shapes changed before and no longer: back to theirs
+        if indices and indices[-1] >= min(len(shapes), len(self.shapes)):
             return False
-        if kind.indexed is not None and not kind.indexed.holds(i, shape):  # shared vertices: as many, in place
-            return False
-    if prepared._refit is None:
-        prepared._refit = RefitState(prepared)
-    state = prepared._refit
-    # per type: the changed shapes and their entries' positions in its array, packed in one call
-    # (pack_world gives each shape's entries in primitive order, as state.positions lists them)
-    by_kind: dict[str, tuple[list, list, list]] = {}
-    for i, shape in zip(indices, new):
-        mine = by_kind.setdefault(shape.type, ([], [], []))
-        mine[0].append(shape)
-        mine[1].append(state.positions(prepared.kinds[shape.type], i))
-        mine[2].append(i)
-    packed, positions, bounds_rows, moved = {}, [], [], []
-    for name, (mine, where, at) in by_kind.items():
-        kind = prepared.kinds[name]
-        if kind.indexed is not None:  # shared vertices (engine/scene/indexed.py): each shape's rewritten, its faces' bounds
-            for i, shape, mine_where in zip(at, mine, where):
-                world, bounds = kind.indexed.moved_bounds(i, shape, mine_where)
-                moved.append((kind, i, world))
-                positions.append(state.leaf_positions(kind, mine_where))
-                bounds_rows.append(bounds)
-            continue
-        where = np.concatenate(where)
-        packed[name] = (where, kind.cls.pack_world(mine))
-        if kind.cls.bounded:
-            positions.append(state.leaf_positions(kind, where))
-            bounds_rows.append(kind.cls.bounds_of(packed[name][1]))
-    refitted = None
-    if positions:
-        one = len(positions) == 1  # (one bounded type changed: no copies)
-        refitted = state.refit(positions[0] if one else np.concatenate(positions),
-                               bounds_rows[0] if one else np.concatenate(bounds_rows))
-        if refitted is None:
-            return False
-    shared = shares_host_memory(prepared.ctx)
-    for kind, i, world in moved:  # (brought to the view the view buffers hold, if any)
-        kind.indexed.move(prepared, i, world, shared)
-    # the world entries; on another device, written to it before the next whole pass or render that
-    # reads them (flush_world): while the camera stays, a frame writes only the view buffers
-    for name, (where, rows) in packed.items():
-        kind = prepared.kinds[name]
-        kind.world[where] = rows
-        if not shared and (prepared.on_device or kind.framed):
-            prepared.stale.setdefault(name, set()).update(where.tolist())
-    if refitted is not None and len(refitted):
-        # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view;
-        # the wide tree's nodes that hold a refitted node, and the binary tree's if it was made
-        tree = prepared.bvh.tree
-        rows = state.wide_row[refitted]
-        rows = np.unique(rows[rows >= 0])
-        wide = pack_wide(tree, prepared.bvh.wide, prepared.anchor, rows)
-        prepared._wide_host[rows] = wide
-        written = [(prepared.wide_nodes, prepared._wide_host, rows, wide)]
-        if prepared._nodes_host is not None:
-            nodes = prepared._nodes_host[refitted]
-            nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - prepared.anchor,
-                                                               tree.hi[refitted] - prepared.anchor)
-            prepared._nodes_host[refitted] = nodes
-            written.append((prepared.nodes, prepared._nodes_host, refitted, nodes))
-        if not shared:
-            for buffer, host, index, rows_written in written:
-                if prepared.on_device:
-                    scatter(prepared, buffer, index, rows_written)
-                else:  # no float64 program to scatter with: the whole array (devices without float64 only)
-                    cl.enqueue_copy(prepared.ctx.queue, buffer, host.copy())
-        if refitted[0] == 0:  # the root's box (refit returns the nodes sorted): the range check's
-            prepared.reach = prepared._reach()
-    if prepared.on_device and prepared.view is not None:
-        # the view buffers hold the last view: bring the changed entries to it in place (the same
-        # floats as a whole pass: the host's rebase is the device's, bit for bit)
-        eye, rows = prepared.view
-        for name, (where, _) in packed.items():
-            kind = prepared.kinds[name]
-            if kind.framed:  # no view buffer: its world entries are what the kernel reads
+        new, old = [shapes[i] for i in indices], [self.shapes[i] for i in indices]
+        for i, shape, before in zip(indices, new, old):
+            kind = self.kinds.get(shape.type)
+            if kind is None or shape.type != before.type or shape.primitive_count() != before.primitive_count() \
+                    or kind.smooth is not None:  # its world shading normals: packed anew
+                return False
+            if kind.indexed is not None and not kind.indexed.holds(i, shape):  # shared vertices: as many, in place
+                return False
+        if self._refit is None:
+            self._refit = RefitState(self)
+        state = self._refit
+        # per type: the changed shapes and their entries' positions in its array, packed in one call
+        # (pack_world gives each shape's entries in primitive order, as state.positions lists them)
+        by_kind: dict[str, tuple[list, list, list]] = {}
+        for i, shape in zip(indices, new):
+            mine = by_kind.setdefault(shape.type, ([], [], []))
+            mine[0].append(shape)
+            mine[1].append(state.positions(self.kinds[shape.type], i))
+            mine[2].append(i)
+        packed, positions, bounds_rows, moved = {}, [], [], []
+        for name, (mine, where, at) in by_kind.items():
+            kind = self.kinds[name]
+            if kind.indexed is not None:  # shared vertices (engine/scene/indexed.py): each shape's rewritten, its faces' bounds
+                for i, shape, mine_where in zip(at, mine, where):
+                    world, bounds = kind.indexed.moved_bounds(i, shape, mine_where)
+                    moved.append((kind, i, world))
+                    positions.append(state.leaf_positions(kind, mine_where))
+                    bounds_rows.append(bounds)
                 continue
-            framed = kind.cls.rebase(kind.world[where], eye, rows, prepared.precision, kind.ids[where], kind.primitives[where])
-            if shared:
-                kind.in_view_host[where] = framed
-            else:
-                scatter(prepared, kind.in_view, where, framed)
-    # materials (an animated colour or size): the rows of the shapes whose material is another object
-    materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
-    if materials:
-        rows = lighting.pack_materials([shape for _, shape in materials], prepared.precision)
-        materials = [i for i, _ in materials]
-        if not (rows == prepared._materials_host[materials]).all():
-            prepared._materials_host[materials] = rows
+            where = np.concatenate(where)
+            packed[name] = (where, kind.cls.pack_world(mine))
+            if kind.cls.bounded:
+                positions.append(state.leaf_positions(kind, where))
+                bounds_rows.append(kind.cls.bounds_of(packed[name][1]))
+        refitted = None
+        if positions:
+            one = len(positions) == 1  # (one bounded type changed: no copies)
+            refitted = state.refit(positions[0] if one else np.concatenate(positions),
+                                   bounds_rows[0] if one else np.concatenate(bounds_rows))
+            if refitted is None:
+                return False
+        shared = shares_host_memory(self.ctx)
+        for kind, i, world in moved:  # (brought to the view the view buffers hold, if any)
+            kind.indexed.move(self, i, world, shared)
+        # the world entries; on another device, written to it before the next whole pass or render that
+        # reads them (flush_world): while the camera stays, a frame writes only the view buffers
+        for name, (where, rows) in packed.items():
+            kind = self.kinds[name]
+            kind.world[where] = rows
+            if not shared and (self.on_device or kind.framed):
+                self.stale.setdefault(name, set()).update(where.tolist())
+        if refitted is not None and len(refitted):
+            # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view;
+            # the wide tree's nodes that hold a refitted node, and the binary tree's if it was made
+            tree = self.bvh.tree
+            rows = state.wide_row[refitted]
+            rows = np.unique(rows[rows >= 0])
+            wide = pack_wide(tree, self.bvh.wide, self.anchor, rows)
+            self._wide_host[rows] = wide
+            written = [(self.wide_nodes, self._wide_host, rows, wide)]
+            if self._nodes_host is not None:
+                nodes = self._nodes_host[refitted]
+                nodes["lo"][:, :3], nodes["hi"][:, :3] = outward32(tree.lo[refitted] - self.anchor,
+                                                                   tree.hi[refitted] - self.anchor)
+                self._nodes_host[refitted] = nodes
+                written.append((self.nodes, self._nodes_host, refitted, nodes))
             if not shared:
-                cl.enqueue_copy(prepared.ctx.queue, prepared.materials, prepared._materials_host)
-    prepared.shapes, prepared.dirty = shapes, set(changed)
-    if not (prepared.on_device and prepared.view is not None):
-        prepared.view_key = None  # a whole pass at the next view
-    return True
+                for buffer, host, index, rows_written in written:
+                    if self.on_device:
+                        self.scatter(buffer, index, rows_written)
+                    else:  # no float64 program to scatter with: the whole array (devices without float64 only)
+                        cl.enqueue_copy(self.ctx.queue, buffer, host.copy())
+            if refitted[0] == 0:  # the root's box (refit returns the nodes sorted): the range check's
+                self.reach = self._reach()
+        if self.on_device and self.view is not None:
+            # the view buffers hold the last view: bring the changed entries to it in place (the same
+            # floats as a whole pass: the host's rebase is the device's, bit for bit)
+            eye, rows = self.view
+            for name, (where, _) in packed.items():
+                kind = self.kinds[name]
+                if kind.framed:  # no view buffer: its world entries are what the kernel reads
+                    continue
+                framed = kind.cls.rebase(kind.world[where], eye, rows, self.precision, kind.ids[where], kind.primitives[where])
+                if shared:
+                    kind.in_view_host[where] = framed
+                else:
+                    self.scatter(kind.in_view, where, framed)
+        # materials (an animated colour or size): the rows of the shapes whose material is another object
+        materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
+        if materials:
+            rows = lighting.pack_materials([shape for _, shape in materials], self.precision)
+            materials = [i for i, _ in materials]
+            if not (rows == self._materials_host[materials]).all():
+                self._materials_host[materials] = rows
+                if not shared:
+                    cl.enqueue_copy(self.ctx.queue, self.materials, self._materials_host)
+        self.shapes, self.dirty = shapes, set(changed)
+        if not (self.on_device and self.view is not None):
+            self.view_key = None  # a whole pass at the next view
+        return True
 
+    def flush_world(self) -> None:
+        """Write the world entries that animation frames changed to the device (devices whose buffers
+        are not the host arrays)."""
+        for name, where in self.stale.items():
+            where = np.array(sorted(where), np.int64)
+            kind = self.kinds[name]
+            self.scatter(kind.world_buffer, where, kind.world[where])
+        self.stale = {}
 
-def flush_world(prepared) -> None:
-    """Write the world entries that animation frames changed to the device (devices whose buffers
-    are not the host arrays)."""
-    for name, where in prepared.stale.items():
-        where = np.array(sorted(where), np.int64)
-        kind = prepared.kinds[name]
-        scatter(prepared, kind.world_buffer, where, kind.world[where])
-    prepared.stale = {}
-
-
-def scatter(prepared, buffer, index, rows) -> None:
-    """Write rows (structs of a multiple of 16 bytes) at these indices of a device buffer of such
-    rows (kernels' scatter_rows)."""
-    rows = np.ascontiguousarray(rows)
-    if not len(index):
-        return
-    width = rows.dtype.itemsize // 16
-    kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
-    index = np.ascontiguousarray(index, np.int32)
-    words = rows.view(np.uint8).reshape(-1).view(np.uint32)
-    kernels["scatter_rows"](prepared.ctx.queue, (len(index),), None, buffer, input_buffer(prepared.ctx, index),
-                            input_buffer(prepared.ctx, words), np.int32(len(index)), np.int32(width))
+    def scatter(self, buffer, index, rows) -> None:
+        """Write rows (structs of a multiple of 16 bytes) at these indices of a device buffer of such
+        rows (kernels' scatter_rows)."""
+        rows = np.ascontiguousarray(rows)
+        if not len(index):
+            return
+        width = rows.dtype.itemsize // 16
+        kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
+        index = np.ascontiguousarray(index, np.int32)
+        words = rows.view(np.uint8).reshape(-1).view(np.uint32)
+        kernels["scatter_rows"](self.ctx.queue, (len(index),), None, buffer, input_buffer(self.ctx, index),
+                                input_buffer(self.ctx, words), np.int32(len(index)), np.int32(width))
 
 
 class RefitState:
