@@ -127,7 +127,7 @@ def test_the_scene_tree_is_within_ten_percent_of_a_full_binned_sah_build_at_its_
 @pytest.mark.parametrize("n", [5, 3000, 20000])  # the LBVH and the SAH tree
 def test_one_bounded_type_has_its_entries_at_their_leaf_positions(n):
     """The render kernel reads a leaf's entries without its refs where the program has one bounded
-    type (kernels/pyclray.cl: PYCLRAY_ONE_BOUNDED), and asks for them from memory where the
+    type (kernels/nearest.h: PYCLRAY_ONE_BOUNDED), and asks for them from memory where the
     traversal first meets the leaf: that needs refs[q] to be entry q of the type's array, q * 16 +
     its kind; with two types it is not so."""
     from pyclray.engine.bvh.scene import primitives_bvh

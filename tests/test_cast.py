@@ -2,7 +2,7 @@
 far origins, tmax and occluded, input checks, edge cases.
 
 Error model of cast (pyclray.accuracy: pyclray_tolerances and cast_frames). Each ray is traced
-on its own (kernels/pyclray.cl): a bounded shape of anchor A (its box's centre) and bounding radius
+on its own (kernels/cast.cl, kernels/rays.h): a bounded shape of anchor A (its box's centre) and bounding radius
 R is tested from the point O' = O + s0 D of the ray, s0 = max(0, (A - O).D - R), taken in float64
 with the shape's coordinates relative to A; a plane from the ray's world origin in float64. What is
 rounded to the kernel's precision is then of size L = |O' - A| + R for a bounded shape, 0 for a
@@ -373,7 +373,7 @@ def test_large_batches_cast_in_a_coherent_order_give_the_same_bits():
 def test_origins_beyond_the_float_box_tests_still_hit():
     """fp64 accepts origins far beyond float32's range from the scene (up to sqrt of double's
     largest / 4); the BVH's box tests are in float, so such rays test every bounded shape instead
-    (kernels/pyclray.cl): the same hits, from 1e40 away as from 10."""
+    (kernels/rays.h): the same hits, from 1e40 away as from 10."""
     need_precision("fp64")
     scene = pyclray.Scene(pyclray.Camera((0, 0, 10), (0, 0, 0)), pyclray.Image(4, 4),
                           (pyclray.Sphere((0.0, 0.0, 0.0), 1.0), pyclray.Sphere((0.0, 3.0, 0.0), 1.0)))

@@ -134,7 +134,7 @@ def test_the_plain_built_ins_give_the_same_bits(monkeypatch):
 
 def test_interleaved_rays_give_the_bits_of_a_ray_alone():
     """Where leaves are blocks, a work-item's rays traverse interleaved, a step of each in turn
-    (kernels/pyclray.cl's cast_group): a ray cast alone (its group of one, nothing to interleave)
+    (kernels/cast.cl's cast_group): a ray cast alone (its group of one, nothing to interleave)
     gives the bits it gives among a batch's others, so no step reads or writes another ray's
     state (a stack, a limit, a best hit or a moved origin shared or swapped would change some of
     these 120 rays, many of which meet the ties and the mixed leaves of mixed_scene)."""

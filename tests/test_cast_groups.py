@@ -1,5 +1,5 @@
 """cast and occluded trace CAST_GROUP (8) rays per work-item, their directions set up four at once in
-vector registers, in work-groups of CAST_WORK_GROUP work-items (kernels/pyclray.cl, engine/queries/cast.py).
+vector registers, in work-groups of CAST_WORK_GROUP work-items (kernels/cast.cl, engine/queries/cast.py).
 Each ray's computations are its own, so these hold the results to bits: of directions at the ends
 of float64's range (the power of two that scales a direction before its length is taken is clamped
 there), and of every place of a group and a work-group, batches ending anywhere."""

@@ -1,5 +1,5 @@
 """cast's traversal of the wide BVH (kernels/bvh.h's PYCLRAY_TRAVERSE): a leaf's shapes are pre-tested
-together in float (kernels/pyclray.cl's cast_leaf_mask: is the ray within the widened bounding radius
+together in float (kernels/rays.h's cast_leaf_mask: is the ray within the widened bounding radius
 R of each shape's anchor, its box's centre?) before each is moved to and tested in float64. The
 pre-test may keep a shape it need not, never drop one the ray hits. R is half the box's diagonal (and
 a margin): a box's corners lie at R, so rays through a point 1e-4 of a size inside a box's corner,

@@ -2,7 +2,7 @@
 
 Rays that pass exactly through a shared vertex or along a shared edge hit two or more triangles of
 one mesh at the same s (the watertight test's edge functions of exactly 0, its exact fallback).
-PYCLRAY_CONSIDER (kernels/pyclray.cl) gives such a tie to the lower id, then to the lower key (the
+PYCLRAY_CONSIDER (kernels/nearest.h) gives such a tie to the lower id, then to the lower key (the
 triangle's index): the BVH's order of the visit and the tile lists' (increasing index) then give the
 same depth, normal, id, primitive and barycentric images, bit for bit. And the exact fallback
 (kernels/mesh.cl: mesh_edges_of) recomputes only the lanes whose edge function rounded to 0, so that
@@ -30,7 +30,7 @@ def same_bits(a, b, what):
 
 def kernel_ray(struct, i: int, j: int) -> np.ndarray:
     """Pixel (i, j)'s float32 ray direction in the eye's frame, the render kernel's operations in its
-    order (kernels/pyclray.cl: camera_rays), from the camera struct the kernel gets."""
+    order (kernels/camera.h: camera_rays), from the camera struct the kernel gets."""
     f = np.float32
     sx = struct["tan_x"][0] * ((f(struct["centre_x"][0] - 1 - 2 * i) + struct["centre_x_low"][0]) / f(struct["width"][0]))
     sy = struct["tan_y"][0] * ((f(struct["centre_y"][0] - 1 - 2 * j) + struct["centre_y_low"][0]) / f(struct["height"][0]))
