@@ -54,17 +54,17 @@ def tracer_for(scene: Scene, ctx, precision: str) -> Tracer:
             return tracer
     derived = derivation(shapes)
     if derived is not None:
-        base, changed = derived
+        base = derived[0]
         with _lock:
             candidates = [(k, t) for k, t in _tracers.items()
                           if t.prepared.base is base and k[0] == ctx.device.int_ptr and t.precision == precision]
-        for old_key, candidate in candidates:
-            updated = candidate.shapes is not shapes and candidate.refit(shapes, changed)
+        if candidates:  # refitted in place, or prepared anew where a refit cannot do (Tracer.update)
+            old_key, candidate = candidates[0]
+            candidate.update(scene)
             with _lock:
                 _tracers.pop(old_key, None)
-                if updated:
-                    _tracers[key] = candidate
-                    return candidate
+                _tracers[key] = candidate
+            return candidate
     tracer = Tracer(scene, ctx.device, precision)
     if derived is not None:  # the base its changes are from, for the next frame's update
         tracer.prepared.base, tracer.prepared.dirty = derived[0], set(derived[1])
