@@ -192,7 +192,7 @@ class Tracer:
         with self.lock:
             prepared = self.prepared
             if self._cast_inputs is None:
-                self._cast_inputs = cast_queries.cast_inputs(self.ctx, prepared, self.precision, prepared.types)
+                self._cast_inputs = cast_queries.cast_inputs(prepared)
             return self._cast_inputs
 
     # -- a moved scene ---------------------------------------------------------------------------

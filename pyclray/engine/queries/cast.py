@@ -8,12 +8,13 @@ import pyopencl as cl
 from ...model.errors import DeviceError, PyclrayError
 from ...model.layout import layout
 from ...model.shapes.capabilities import capability
-from ..opencl.device import has_fp64, launch
-from ..scene.prepared import PreparedScene
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer, run_kernel
-from .requests import Frame
 from ..launch.signatures import arguments, shared_arguments
+from ..opencl.device import has_fp64, launch
+from ..scene.prepared import PreparedScene
+from .requests import Frame
+
 
 def _ray_array(name: str, value) -> np.ndarray:
     try:
@@ -84,9 +85,9 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
-# at least this many (pyclray.engine.queries.ray_order): neighbouring work-items then walk the same nodes
-# and shapes, which stay in cache (docs/benchmarks.md, "Why the engine does what it does": COHERENT_FROM). Each ray is traced on its own, so
-# the order changes no bit.
+# at least this many (pyclray.engine.queries.ray_order): neighbouring work-items then walk the same
+# nodes and shapes, which stay in cache (docs/benchmarks.md, "Why the engine does what it does":
+# COHERENT_FROM). Each ray is traced on its own, so the order changes no bit.
 COHERENT_FROM = 4096
 
 # ... on a CPU device, only where the scene's cast data (its tree, anchors and entries) outgrow this
@@ -122,12 +123,13 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
-def cast_inputs(ctx, prepared: PreparedScene, precision: str, shape_types) -> tuple[dict, np.ndarray, float, int]:
+def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
     """(arguments by name, anchor, size, bytes): the BVH around the scene's anchor (its root box's
-    centre), its refs and the entries' anchors, and per shape type its packed buffer (each bounded
-    entry relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
+    centre), its refs and the entries' anchors, and per packed kind its buffer (each bounded entry
+    relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
     They depend on the shapes only, never on the rays: a scene handle makes them at its first cast
     and keeps them until its shapes change."""
+    ctx, precision, shape_types = prepared.ctx, prepared.precision, prepared.types
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
     # the largest side of the bounded shapes' box (0 without any): the coarsest cells of the rays' order

@@ -17,10 +17,11 @@ from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
 
 
-# Render visits the bounded shapes through tile lists (pyclray/engine/tiles.py) or through the
+# Render visits the bounded shapes through tile lists (pyclray/engine/bvh/tiles.py) or through the
 # BVH, whichever costs a packet less. Through tile lists a packet tests every shape of its tile's
 # list; through the BVH it pays its traversal. The two cost the same at about 16 shapes per tile on
-# average; below, tiles win by 2x and more, above, the BVH (docs/benchmarks.md, "Why the engine does what it does": TILE_LIST_MAX).
+# average; below, tiles win by 2x and more, above, the BVH (docs/benchmarks.md, "Why the engine does
+# what it does": TILE_LIST_MAX).
 # Beyond TILES_MAX_SHAPES bounded entries the lists are not even computed: no visible scene of that
 # many shapes has short lists, and computing them costs more than building the tree.
 TILE_LIST_MAX = 16.0
