@@ -22,8 +22,8 @@ from ..model.errors import SceneError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count, checked_time
-from .queries.cast import check_cast_device
 from .opencl.device import context_for
+from .queries.cast import check_cast_device
 from .queries.render import with_camera
 from .queries.requests import Frame, check_precision, check_request
 from .tracer import Tracer

@@ -23,12 +23,12 @@ from ..model.errors import RequestError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
+from .launch.run import OutputBuffers
+from .opencl.device import context_for
 from .queries import cast as cast_queries
 from .queries import render as render_query
-from .opencl.device import context_for
-from .scene.prepared import PreparedScene
-from .launch.run import OutputBuffers
 from .queries.requests import check_precision, check_request
+from .scene.prepared import PreparedScene
 from .scene.views import ViewState
 
 

@@ -10,11 +10,11 @@ from ...model.camera import Camera
 from ...model.errors import PyclrayError, RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
+from ..launch.programs import Variant, lanes_for, packet_shape
+from ..launch.run import enqueue_kernel
 from .labels import with_labels
 from .memory import check_images_fit
-from ..launch.programs import Variant, lanes_for, packet_shape
 from .requests import Frame, check_request
-from ..launch.run import enqueue_kernel
 
 
 def _window(scene: Scene, window) -> tuple[int, int, int, int]:

@@ -31,14 +31,13 @@ from ...model.scene import MAX_LENGTH, Scene
 from ...model.shapes import KINDS, REGISTRY
 from ...model.shapes.capabilities import capability
 from ..bvh import tiles
-from . import instances
-from .refit import Refit
-from . import lighting
+from ..bvh.scene import SceneBVH, primitives_bvh
+from ..launch.programs import Variant, kernels_for
 from ..opencl.buffers import aligned, device_buffer as _buffer
 from ..opencl.device import has_fp64, launch
+from . import instances, lighting
 from .indexed import IndexedEntries, indexed_bounds
-from ..launch.programs import Variant, kernels_for
-from ..bvh.scene import SceneBVH, primitives_bvh
+from .refit import Refit
 
 @dataclass
 class Kind:
@@ -93,12 +92,14 @@ class Kind:
 
 # Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
 # framed so; smaller ones keep the per-view copy, which is faster while it fits the caches; framed
-# entries hold a third less memory (docs/benchmarks.md, "Why the engine does what it does": FRAMED_FROM). Meshes do not depend on it (INDEXED below).
+# entries hold a third less memory (docs/benchmarks.md, "Why the engine does what it does":
+# FRAMED_FROM). Meshes do not depend on it (INDEXED below).
 FRAMED_FROM = 524_288
 
 # Meshes (the capability "indexed") are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
-# world entries and the per-view copy (docs/benchmarks.md, "Why the engine does what it does": INDEXED). Tests set it False to compare with the per-view
+# world entries and the per-view copy (docs/benchmarks.md, "Why the engine does what it does":
+# INDEXED). Tests set it False to compare with the per-view
 # copy (the path of devices without float64, where the winner's normal cannot be computed from
 # float64 vertices).
 INDEXED = True

@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from . import lighting
-from ..opencl.buffers import shares_host_memory
 from ..bvh.tree import outward32, sah_cost, widened
 from ..bvh.wide import pack_wide, row_of
 from ..launch.programs import Variant, kernels_for
 from ..launch.run import input_buffer
+from ..opencl.buffers import shares_host_memory
+from . import lighting
 
 
 # Rebuilding the scene when the SAH cost of the refitted tree exceeds the built tree's by this factor: a

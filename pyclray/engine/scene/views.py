@@ -11,10 +11,10 @@ import pyopencl as cl
 
 from ...model.errors import PyclrayError, SceneError
 from ...model.scene import Scene, check_renderable, check_shape_count
-from . import lighting
-from .prepared import PreparedScene
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
+from . import lighting
+from .prepared import PreparedScene
 
 
 # Render visits the bounded shapes through tile lists (pyclray/engine/bvh/tiles.py) or through the
