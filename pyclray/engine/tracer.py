@@ -49,8 +49,7 @@ class Tracer:
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
         self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
-        # its own lock: a render takes it inside the prepared scene's, and update takes that one inside the handle's
-        self.outputs = OutputBuffers(threading.Lock())
+        self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
     def close(self) -> None:

@@ -3,6 +3,8 @@ arrays (straight into them on a CPU device, through a scene handle's kept buffer
 launch."""
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyopencl as cl
 
@@ -21,12 +23,14 @@ def input_buffer(ctx, array):
 class OutputBuffers:
     """A scene handle's device buffers for the images of its renders on devices other than CPUs,
     kept per image and size and reused by every render: its renders take ``lock`` from the launch to
-    the copies out, so one render's images are read before the next writes them."""
+    the copies out, so one render's images are read before the next writes them. The lock is theirs
+    alone: a render takes it inside the prepared scene's lock, which a handle's update takes inside
+    the handle's."""
 
     MOST = 12
 
-    def __init__(self, lock):
-        self.lock = lock
+    def __init__(self):
+        self.lock = threading.Lock()
         self.buffers: dict = {}
 
     def get(self, ctx, count: int, aovs, precision: str) -> list:
