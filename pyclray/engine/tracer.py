@@ -41,6 +41,7 @@ class Tracer:
     def __init__(self, scene: Scene, device=None, precision: str = "fp32"):
         if not isinstance(scene, Scene):  # (pyclray.prepare also takes a scene file's path)
             raise RequestError(f"scene: expected a pyclray.Scene, got {type(scene).__name__}")
+        check_shape_count(scene)  # before anything is prepared
         ctx = context_for(device)
         check_precision(precision, ctx)
         self.ctx, self.precision = ctx, precision
@@ -174,7 +175,6 @@ class Tracer:
     def cast(self, origins, directions, aovs=AOVS, tmax=None):
         """The nearest hit of each ray: exactly ``pyclray.cast(scene, origins, directions, aovs,
         precision, device, tmax)`` (see there)."""
-        check_shape_count(self._scene)
         aovs = check_request(aovs, self.precision, self.ctx)
         cast_queries.check_cast_device(self.ctx)
         return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs)
@@ -182,7 +182,6 @@ class Tracer:
     def occluded(self, origins, directions, tmax=None):
         """Whether each ray hits any shape up to tmax: exactly ``pyclray.occluded(scene, origins,
         directions, tmax, precision, device)`` (see there)."""
-        check_shape_count(self._scene)
         cast_queries.check_cast_device(self.ctx)
         return cast_queries.run_cast(self, "occluded", origins, directions, tmax, ())
 
@@ -203,6 +202,7 @@ class Tracer:
         primitive count, mesh instances) prepare the scene anew. The results are those of a handle
         prepared for ``scene``, bit for bit. Returns the handle."""
         scene = as_scene(scene)
+        check_shape_count(scene)
         with self.lock:
             prepared = self.prepared
             shapes = scene.shapes
