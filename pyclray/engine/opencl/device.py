@@ -9,7 +9,7 @@ import numpy as np
 import pyopencl as cl
 
 from ...model.errors import DeviceError
-from .pocl_cpu import name_known_cpu
+from .pocl_cpu import is_pocl_cpu, name_known_cpu  # (is_pocl_cpu: the engine asks it here)
 
 INSTALL_HINT = "install an OpenCL driver, e.g. `pip install 'pyopencl[pocl]'` for PoCL on the CPU"
 
@@ -91,11 +91,6 @@ def context_for(device: cl.Device | str | None = None) -> DeviceContext:
             context = cl.Context([device])
             _contexts[key] = DeviceContext(device, context, cl.CommandQueue(context, device))
         return _contexts[key]
-
-
-def is_pocl_cpu(device: cl.Device) -> bool:
-    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/lanes.h)."""
-    return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 
 def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> None:

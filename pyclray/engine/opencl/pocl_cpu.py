@@ -31,7 +31,8 @@ _SCAN_WORDS = 128  # PoCL 3.0's device struct is 1,032 bytes (its field is word 
 _patched: dict = {}  # device pointer -> the replacement name's buffer (kept alive: PoCL reads it)
 
 
-def _is_pocl_cpu(device: cl.Device) -> bool:
+def is_pocl_cpu(device: cl.Device) -> bool:
+    """PoCL's CPU device (its built-ins are not inlined into kernels: see kernels/lanes.h)."""
     return "portable computing language" in device.platform.name.lower() and bool(device.type & cl.device_type.CPU)
 
 
@@ -59,7 +60,7 @@ def named_cpu(device: cl.Device) -> str | None:
 def name_known_cpu(device: cl.Device) -> bool:
     """Give PoCL's CPU device a CPU name its compiler knows where LLVM called the host "generic"
     (see the module's docstring). True if the device was changed (now or before)."""
-    if not _is_pocl_cpu(device):
+    if not is_pocl_cpu(device):
         return False
     key = device.int_ptr
     if key in _patched:
@@ -87,8 +88,6 @@ def name_known_cpu(device: cl.Device) -> bool:
                     continue
                 if text == b"generic\0":
                     found.append(index)
-    except OSError:
-        return False
     finally:
         os.close(fd)
     if len(found) != 1:
