@@ -38,7 +38,7 @@ __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
-    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "closest_points", "distance", "signed_distance", "occupancy", "scene_from_dict", "select_device", "write_exr",
     "write_npz",
 ]
 
@@ -48,6 +48,8 @@ __all__ = [
 # the cluster extra (importing distributed takes a while). name -> (module, attribute)
 _LAZY = {
     "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"),
+    "closest_points": (".engine.api", "closest_points"), "distance": (".engine.api", "distance"),
+    "signed_distance": (".engine.api", "signed_distance"), "occupancy": (".engine.api", "occupancy"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
     "cluster": (".apps.cluster", None),

@@ -108,6 +108,7 @@ class Box(Shape):
         "A box in world coordinates: centre, half sizes and its three unit axes.",
     )
     kernel_files = ("box.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

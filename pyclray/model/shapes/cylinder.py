@@ -53,6 +53,7 @@ class Cylinder(Shape):
         "A cylinder in world coordinates: p0.w = radius, p1.w = length, unit axis.",
     )
     kernel_files = ("cylinder.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         object.__setattr__(self, "p0", vector3("p0", self.p0))

@@ -89,6 +89,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         "A triangle's unit world vertex normals for smooth shading (zero for a flat mesh's triangles).",
     )
     barycentric = True
+    winding_number = True  # inside: its triangles' parity or winding number (the closest-point query)
     mitsuba_primitives = True
 
     def __post_init__(self):
@@ -137,6 +138,17 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.faces)} triangles, {len(self.vertices)} vertices, name={self.name!r})"
+
+    @property
+    def closed(self) -> bool:
+        """Whether the mesh is closed: every edge is shared by exactly two faces, which run along it
+        in opposite directions (consistently oriented, no border, no edge of three faces). A closed
+        mesh has an inside (signed_distance and occupancy with sign="parity"). From its faces alone,
+        found once (its faces are fixed) and kept."""
+        closed = self._cache.get("closed")
+        if closed is None:
+            closed = self._cache["closed"] = edges_closed(self.faces, len(self.vertices))
+        return closed
 
     def describe(self) -> str:
         return f"mesh '{self.name}' ({len(self.faces)} triangles)"
@@ -437,3 +449,19 @@ def _read_mesh(*args):
     from . import mesh_io
 
     return mesh_io.read_mesh(*args)
+
+
+def edges_closed(faces: np.ndarray, vertex_count: int) -> bool:
+    """Whether each directed edge (a, b) of the faces occurs once and its reverse (b, a) once: every
+    edge shared by exactly two faces with opposite orientations."""
+    if not len(faces):
+        return False
+    faces = np.asarray(faces, np.int64)
+    start = faces.reshape(-1)
+    end = faces[:, [1, 2, 0]].reshape(-1)
+    keys = np.sort(start * vertex_count + end)
+    if (keys[1:] == keys[:-1]).any():  # a directed edge of two faces: three or more faces, or flipped ones
+        return False
+    reverse = end * vertex_count + start
+    found = np.searchsorted(keys, reverse)
+    return bool((keys[np.minimum(found, len(keys) - 1)] == reverse).all())

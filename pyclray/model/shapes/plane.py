@@ -47,6 +47,7 @@ class Plane(Shape):
         "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
     )
     kernel_files = ("plane.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)

@@ -49,6 +49,7 @@ class Sphere(Shape):
         "A sphere in world coordinates: center.xyz, center.w = radius.",
     )
     kernel_files = ("sphere.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
     frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
 
     def __post_init__(self):

@@ -48,6 +48,7 @@ class Spheres(Shape):
     struct = Sphere.struct
     world = Sphere.world
     kernel_files = ("sphere.cl", "spheres.cl")
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
     frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
     reads_files = True
 
