@@ -357,6 +357,32 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         points = np.asarray(points, np.float64)
         return self._hierarchy().nearest(points.reshape(-1, 3))[0].reshape(points.shape[:-1])
 
+    def oracle_closest(self, points):
+        """The nearest triangle (the lowest index on an exact tie) and its point nearest each point."""
+        from .mesh_oracle import closest_on_triangles
+
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        distance, which, _ = self._hierarchy().nearest(points)
+        a, b, c = self.corners()
+        position, uv = closest_on_triangles(points, a[which], b[which], c[which])
+        return position, self.face_normals()[which], which, uv, distance
+
+    def oracle_winding(self, points) -> np.ndarray:
+        """The generalized winding number of its triangles at each point (float64, all triangles summed)."""
+        from .mesh_oracle import winding_numbers
+
+        return winding_numbers(np.asarray(points, np.float64).reshape(-1, 3), *self.corners())
+
+    def oracle_inside(self, points, sign: str = "parity"):
+        """sign "winding": its winding number >= 1/2; "parity": a closed mesh's winding number odd
+        (the parity of any ray's crossings; an integer up to rounding away from its surface), an
+        open mesh never."""
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        if sign == "parity" and not self.closed:
+            return np.zeros(len(points), bool)
+        w = self.oracle_winding(points)
+        return w >= 0.5 if sign == "winding" else (np.rint(w).astype(np.int64) % 2 == 1)
+
     def oracle_shading_normal(self, points, normals):
         """Smooth: the vertex normals interpolated at the barycentrics of each point's nearest
         triangle (float64), normalized; the geometric normal where the mesh is flat or the
