@@ -9,7 +9,11 @@ About a slot's centre c (its triangles' area-weighted centroid), g(x) = g(c) + J
 Jacobian I / |d|^3 - 3 d d^T / |d|^5 with d = c - q; summed over the triangles (their centroid x_i,
 area vector a_i = area n, for which the first moment is exact):
     sum_i a_i . g(c) + sum_jk J_jk M_jk,   A = sum_i a_i,   M = sum_i a_i (x_i - c)^T,
-the second order of Barill et al.'s expansion. Its error falls as (radius / |d|)^3.
+and the next order, with the Hessian of g and the triangles' second moments about c,
+    C_jkl = sum_i a_ij (integral over triangle i of (x - c)_k (x - c)_l dA / area_i)
+(a triangle's: (x_i - c)(x_i - c)^T plus its covariance, the sum over its vertices v of
+(v - x_i)(v - x_i)^T / 12), the second order of Barill et al.'s expansion. Its error falls as
+(radius / |d|)^3.
 """
 from __future__ import annotations
 
@@ -23,93 +27,116 @@ WINDING_SLOT = Struct(
     (
         ("center", "double4"),  # the triangles' area-weighted centroid c; w: the radius of the slot's box about c
         ("area", "double4"),  # A, the sum of the area vectors; w: the triangles' total area (0: none, skipped)
-        ("m0", "double4"),  # rows of M = sum_i a_i (x_i - c)^T
+        ("m0", "double4"),  # rows of M = sum_i a_i (x_i - c)^T (w: 0)
         ("m1", "double4"),
         ("m2", "double4"),
+        # C_j = sum_i a_ij (integral over triangle i of (x - c)(x - c)^T dA) for j = x, y, z: each
+        # symmetric 3x3 as (xx, yy, zz, xy, xz, yz), the 18 one after the other (2 spare)
+        ("second0", "double4"),
+        ("second1", "double4"),
+        ("second2", "double4"),
+        ("second3", "double4"),
+        ("second4", "double4"),
     ),
     "A wide BVH child's far-field expansion of its triangles' solid angles (kernels/closest.cl).",
 )
 
 # a slot's expansion stands for its triangles where the point is farther than this many radii from
-# its centre (Barill et al. take 2; 3 keeps the second order's error near 1e-3 of a slot's own term)
+# its centre (Barill et al. take 2; with the second-order term, 3 keeps the sum's error below
+# 1e-3, 2 does not: 3e-4 and 1.8e-3 on the bunny, tests/test_sdf.py)
 WINDING_BETA = 3.0
+
+_SLOT_DOUBLES = 40
 
 
 @numba.njit(cache=True, nogil=True)
-def _aggregate(first, count, lo, hi, area_vectors, centroids):  # pragma: no cover - compiled
+def _aggregate(first, count, lo, hi, a, b, c):  # pragma: no cover - compiled
+    """Per binary node, its triangles' expansion (the rows of WINDING_SLOT, 40 doubles): each node's
+    leaf positions are one range (its subtree's, contiguous in the tree's leaf order), summed about
+    the node's own centroid."""
     nodes = len(first)
-    A = np.zeros((nodes, 3))
-    W = np.zeros(nodes)
-    P = np.zeros((nodes, 3))
-    S = np.zeros((nodes, 3, 3))
-    # post-order without recursion: each node after its children
-    stack = np.empty(max(nodes, 2) + 64, np.int64)
+    start = np.zeros(nodes, np.int64)
+    end = np.zeros(nodes, np.int64)
     done = np.zeros(nodes, np.bool_)
-    top = 0
-    stack[top] = 0
-    top += 1
-    while top > 0:
+    stack = np.empty(max(nodes, 2) + 64, np.int64)
+    top = 1
+    stack[0] = 0
+    while top > 0:  # post-order: each node's range from its children's
         node = stack[top - 1]
         if count[node] > 0:
-            for q in range(first[node], first[node] + count[node]):
-                a = area_vectors[q]
-                x = centroids[q]
-                w = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-                W[node] += w
-                for j in range(3):
-                    A[node, j] += a[j]
-                    P[node, j] += w * x[j]
-                    for k in range(3):
-                        S[node, j, k] += a[j] * x[k]
+            start[node], end[node] = first[node], first[node] + count[node]
             done[node] = True
             top -= 1
         elif done[first[node]] and done[first[node] + 1]:
-            for child in (first[node], first[node] + 1):
-                W[node] += W[child]
-                for j in range(3):
-                    A[node, j] += A[child, j]
-                    P[node, j] += P[child, j]
-                    for k in range(3):
-                        S[node, j, k] += S[child, j, k]
+            left, right = first[node], first[node] + 1
+            if end[left] != start[right]:
+                raise ValueError("a BVH subtree whose leaves are not one range")
+            start[node], end[node] = start[left], end[right]
             done[node] = True
             top -= 1
         else:
             stack[top] = first[node]
             stack[top + 1] = first[node] + 1
             top += 2
-    out = np.zeros((nodes, 5, 4))
+    out = np.zeros((nodes, _SLOT_DOUBLES))
     for node in range(nodes):
-        if W[node] <= 0.0:
+        W = 0.0
+        A = np.zeros(3)
+        P = np.zeros(3)
+        for q in range(start[node], end[node]):
+            n = 0.5 * np.cross(b[q] - a[q], c[q] - a[q])
+            w = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+            W += w
+            A += n
+            P += w * (a[q] + b[q] + c[q]) / 3.0
+        if W <= 0.0:
             continue
-        c = P[node] / W[node]
+        center = P / W
+        M = np.zeros((3, 3))
+        C = np.zeros((3, 6))
+        for q in range(start[node], end[node]):
+            n = 0.5 * np.cross(b[q] - a[q], c[q] - a[q])
+            x = (a[q] + b[q] + c[q]) / 3.0
+            dx = x - center
+            # the triangle's second moment about the centre: (x - c)(x - c)^T plus its own covariance
+            S = np.outer(dx, dx)
+            for v in (a[q], b[q], c[q]):
+                S += np.outer(v - x, v - x) / 12.0
+            for j in range(3):
+                for k in range(3):
+                    M[j, k] += n[j] * dx[k]
+                C[j, 0] += n[j] * S[0, 0]
+                C[j, 1] += n[j] * S[1, 1]
+                C[j, 2] += n[j] * S[2, 2]
+                C[j, 3] += n[j] * S[0, 1]
+                C[j, 4] += n[j] * S[0, 2]
+                C[j, 5] += n[j] * S[1, 2]
         radius = 0.0
         for corner in range(8):
             d2 = 0.0
             for j in range(3):
                 v = hi[node, j] if (corner >> j) & 1 else lo[node, j]
-                d2 += (v - c[j]) * (v - c[j])
+                d2 += (v - center[j]) * (v - center[j])
             radius = max(radius, np.sqrt(d2))
-        out[node, 0, :3] = c
-        out[node, 0, 3] = radius
-        out[node, 1, :3] = A[node]
-        out[node, 1, 3] = W[node]
+        out[node, 0:3] = center
+        out[node, 3] = radius
+        out[node, 4:7] = A
+        out[node, 7] = W
         for j in range(3):
-            for k in range(3):
-                out[node, 2 + j, k] = S[node, j, k] - A[node, j] * c[k]
+            out[node, 8 + 4 * j:11 + 4 * j] = M[j]
+        out[node, 20:38] = C.reshape(-1)
     return out
 
 
 def winding_slots(tree, wide, triangles_by_position: np.ndarray) -> np.ndarray:
-    """(W * 8, 5, 4) float64, WINDING_SLOT's rows per child slot of the wide tree (empty slots and
+    """(W * 8, 40) float64, WINDING_SLOT's fields per child slot of the wide tree (empty slots and
     slots without triangles: area.w = 0). triangles_by_position: (N, 3, 3) per leaf position its
     triangle's vertices a, b, c, all 0 for a position that holds another shape (no solid angle)."""
-    a, b, c = triangles_by_position[:, 0], triangles_by_position[:, 1], triangles_by_position[:, 2]
-    area_vectors = np.ascontiguousarray(0.5 * np.cross(b - a, c - a))
-    centroids = np.ascontiguousarray((a + b + c) / 3.0)
+    a, b, c = (np.ascontiguousarray(triangles_by_position[:, v]) for v in range(3))
     per_node = _aggregate(np.ascontiguousarray(tree.first, np.int64), np.ascontiguousarray(tree.count, np.int64),
-                          np.ascontiguousarray(tree.lo), np.ascontiguousarray(tree.hi), area_vectors, centroids)
+                          np.ascontiguousarray(tree.lo), np.ascontiguousarray(tree.hi), a, b, c)
     binary = wide.binary.reshape(-1)
-    out = np.zeros((len(binary), 5, 4))
+    out = np.zeros((len(binary), _SLOT_DOUBLES))
     held = binary >= 0
     out[held] = per_node[binary[held]]
     return out

@@ -185,12 +185,26 @@ PYCLRAY_WORK_ITEM_FUNCTION void closest_point(const int i, PYCLRAY_PARAMETERS)
                 const double3 d = s->center.xyz - p;
                 const double d2 = closest_norm2(d);
                 const double far = WINDING_BETA * s->center.w;
-                if (d2 > far * far) {  /* the second-order expansion (bvh/winding.py) */
-                    const double inverse = 1.0 / sqrt(d2), inverse3 = inverse * inverse * inverse;
+                if (d2 > far * far) {  /* the expansion to second order (bvh/winding.py) */
+                    const double inverse = 1.0 / sqrt(d2), inverse2 = inverse * inverse;
+                    const double inverse3 = inverse * inverse2, inverse5 = inverse3 * inverse2;
                     const double3 Md = (double3)(closest_dot(s->m0.xyz, d), closest_dot(s->m1.xyz, d), closest_dot(s->m2.xyz, d));
                     const double trace = s->m0.x + s->m1.y + s->m2.z;
-                    omega += closest_dot(s->area.xyz, d) * inverse3 + trace * inverse3
-                             - 3.0 * closest_dot(d, Md) * inverse3 * inverse * inverse;
+                    /* C_j (xx, yy, zz, xy, xz, yz) for j = x, y, z; u = sum_j row j of C_j, v_j = trace C_j */
+                    __global const double* C = (__global const double*)&s->second0;
+                    double dCd = 0.0;
+                    const double3 u = (double3)(C[0], C[3], C[4]) + (double3)(C[9], C[7], C[11]) + (double3)(C[16], C[17], C[14]);
+                    const double3 v = (double3)(C[0] + C[1] + C[2], C[6] + C[7] + C[8], C[12] + C[13] + C[14]);
+                    for (int j = 0; j < 3; ++j) {
+                        __global const double* Cj = C + 6 * j;
+                        const double3 Cd = (double3)(Cj[0] * d.x + Cj[3] * d.y + Cj[4] * d.z,
+                                                     Cj[3] * d.x + Cj[1] * d.y + Cj[5] * d.z,
+                                                     Cj[4] * d.x + Cj[5] * d.y + Cj[2] * d.z);
+                        dCd += (j == 0 ? d.x : (j == 1 ? d.y : d.z)) * closest_dot(d, Cd);
+                    }
+                    omega += closest_dot(s->area.xyz, d) * inverse3 + trace * inverse3 - 3.0 * closest_dot(d, Md) * inverse5
+                             + 0.5 * (-3.0 * inverse5 * (2.0 * closest_dot(u, d) + closest_dot(v, d))
+                                      + 15.0 * inverse5 * inverse2 * dCd);
                     continue;
                 }
                 const int child = nodes[code].child[slot];

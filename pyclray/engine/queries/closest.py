@@ -119,7 +119,7 @@ class ClosestInputs:
                     world = self.worlds[t][tree.leaf_index[mine]]
                     triangles[:count][mine] = np.stack([world[v][:, :3] for v in ("a", "b", "c")], axis=1)
             slots = winding_slots(tree.tree, tree.wide, triangles)
-            self._winding = input_buffer(self.ctx, np.ascontiguousarray(slots.reshape(-1, 20)))
+            self._winding = input_buffer(self.ctx, np.ascontiguousarray(slots))
             self.nbytes += self._winding.size
         return self._winding
 
