@@ -60,7 +60,7 @@
 /* the state's parts, (type, name) each, kept as name_ and saved from cast_start's local of that name:
  * the ray's, and (with bounded shapes) its traversal's */
 #define CAST_RAY_STATE(X) \
-    X(RayPacket, ray) X(double, t_max) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, ray_length)
+    X(RayPacket, ray) X(double, t_max) X(double, t_min) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, ray_length)
 #define CAST_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
     X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
 #define CAST_STATE_FIELD(T, name) T name##_;
@@ -100,6 +100,7 @@ inline void cast_start(CastRay* S, const int r, const CastDirection* direction, 
 /* the names the visit's macros use (PYCLRAY_CAST_VISIT and what it expands to), bound to the state's
  * (none may be a shape type's name, which the macros paste: the box ray is passed as S->box_) */
 #define ray (S->ray_)
+#define t_min (S->t_min_)
 #define ray_length (S->ray_length_)
 #define best (S->best_)
 #define best_kind (S->best_kind_)
@@ -120,6 +121,7 @@ inline void cast_step(CastRay* S, PYCLRAY_PARAMETERS)
     PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 1, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
 }
 #undef ray
+#undef t_min
 #undef ray_length
 #undef best
 #undef best_kind
@@ -153,7 +155,9 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
         if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
             double s0;
             bool near;
-            ray = moved_ray(&ray, anchors[best_q], &s0, &near);
+            ray = moved_ray(&ray, anchors[best_q], S->t_min_, &s0, &near);
+        } else if (hit && S->t_min_ > 0) {  /* an unbounded winner, tested from the ray's start */
+            ray.world = ray.world + S->t_min_ * ray.dir_exact;
         }
 #endif
         vec3v normal = v3(0, 0, 0);
