@@ -46,6 +46,27 @@
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
         normal = PYCLRAY_NORMAL_##type(&framed, &ray, &world_axes, MISS, 1);        \
     }
+/* the winner's index within its shape (PYCLRAY_CAST_PRIMITIVE_OF_<type>: its packed entry's, or a
+ * mesh instance's triangle); in blocks its key, -2 - key, which the host turns into the triangle's
+ * index (engine/queries/cast.py: the block lanes' entries) */
+#define PYCLRAY_CAST_PRIMITIVE(Type, type)                                          \
+    if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_PRIMITIVE_, type)(Type, type) }
+#define PYCLRAY_CAST_PRIMITIVE_ENTRY(Type, type)                                    \
+    {                                                                               \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        primitive = PYCLRAY_CAST_PRIMITIVE_OF_##type(&framed, &ray);                \
+    }
+#define PYCLRAY_CAST_PRIMITIVE_BLOCKS(Type, type) primitive = -2 - best_k;
+/* the winner's barycentrics (a triangle's; 0, 0 for other shapes) */
+#define PYCLRAY_CAST_BARYCENTRIC(Type, type)                                        \
+    if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_BARYCENTRIC_, type)(Type, type) }
+#define PYCLRAY_CAST_BARYCENTRIC_ENTRY(Type, type)                                  \
+    {                                                                               \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        PYCLRAY_CAST_BARYCENTRIC_OF_##type(&framed, &ray, &u, &v);                  \
+    }
+#define PYCLRAY_CAST_BARYCENTRIC_BLOCKS(Type, type)                                 \
+    mesh_block_barycentric(MESH_BLOCKS(type) + 8 * (size_t)(best_k >> 3), best_k & 7, &ray, &u, &v);
 
 /* Each work-item's rays (a group of CAST_GROUP) traverse the BVH together: a step of each in turn
  * (kernels/bvh_ray.h's PYCLRAY_TRAVERSE_STEP: a node's children pushed, or a leaf's shapes tested), so
@@ -149,17 +170,21 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 #ifdef PYCLRAY_AOV_DEPTH
     depth_out[index] = hit ? (real)best : MISS;
 #endif
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE) || defined(PYCLRAY_AOV_BARYCENTRIC)
+    /* the winner's own ray, as it was tested */
+#ifdef PYCLRAY_HAS_BOUNDED
+    if (hit && best_q >= 0) {
+        double s0;
+        bool near;
+        ray = moved_ray(&ray, anchors[best_q], S->t_min_, &s0, &near);
+    } else
+#endif
+    if (hit && S->t_min_ > 0) {  /* an unbounded winner, tested from the ray's start */
+        ray.world = ray.world + S->t_min_ * ray.dir_exact;
+    }
+#endif
 #ifdef PYCLRAY_AOV_NORMAL
     {
-#ifdef PYCLRAY_HAS_BOUNDED
-        if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
-            double s0;
-            bool near;
-            ray = moved_ray(&ray, anchors[best_q], S->t_min_, &s0, &near);
-        } else if (hit && S->t_min_ > 0) {  /* an unbounded winner, tested from the ray's start */
-            ray.world = ray.world + S->t_min_ * ray.dir_exact;
-        }
-#endif
         vec3v normal = v3(0, 0, 0);
         /* each shape is framed on the world's axes (kernels/cast.h): its normal is turned by them */
         const Basis world_axes = {(real4)(1, 0, 0, 0), (real4)(0, 1, 0, 0), (real4)(0, 0, 1, 0)};
@@ -167,6 +192,21 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
         normal_out[3 * index] = normal.x;
         normal_out[3 * index + 1] = normal.y;
         normal_out[3 * index + 2] = normal.z;
+    }
+#endif
+#ifdef PYCLRAY_AOV_PRIMITIVE
+    {
+        int primitive = -1;
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_PRIMITIVE) }
+        primitive_out[index] = primitive;
+    }
+#endif
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+    {
+        real u = 0, v = 0;
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_BARYCENTRIC) }
+        barycentric_out[2 * index] = u;
+        barycentric_out[2 * index + 1] = v;
     }
 #endif
 #ifdef PYCLRAY_AOV_ID

@@ -325,6 +325,26 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
         PYCLRAY_TRAVERSE_PACKET(tree_, box_, reach_, INSTANCE_ALL_VISIT)                              \
     }
 #endif
+/* cast's winner's triangle index in its mesh and its barycentrics (found again, as for its normal) */
+inline int instance_cast_primitive(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                                   __global const int4* faces, __global const BvhNode* nodes)
+{
+    int which;
+    instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
+    return instance_primitive(inst, which, faces);
+}
+
+inline void instance_cast_barycentric(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                                      __global const int4* faces, __global const BvhNode* nodes, real* u, real* v)
+{
+    int which;
+    instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
+    instance_barycentric(inst, ray, which, vertices, faces, u, v);
+}
+#define PYCLRAY_CAST_PRIMITIVE_OF_instance(shape, ray) \
+    instance_cast_primitive(shape, ray, instance_vertices, instance_faces, instance_nodes)
+#define PYCLRAY_CAST_BARYCENTRIC_OF_instance(shape, ray, u, v) \
+    instance_cast_barycentric(shape, ray, instance_vertices, instance_faces, instance_nodes, u, v)
 #define PYCLRAY_HIT_instance(shape, ray, limit) \
     instance_cast_hit(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #define PYCLRAY_NORMAL_instance(shape, ray, basis, best, mine) \

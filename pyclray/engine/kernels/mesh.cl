@@ -470,6 +470,23 @@ inline void mesh_barycentric(MESH_SPACE const Triangle* tri, const RayPacket* ra
     mesh_barycentric_of(tri->a, tri->b, tri->c, ray, u, v);
 }
 
+#ifdef PYCLRAY_CAST
+/* The barycentrics (u, v) of lane's triangle of a block for the ray (cast's winner): its corners
+ * as mesh_block_hits frames them (each vertex minus the moved origin in float64, rounded once) and
+ * mesh_barycentric_of's edge functions over their sum. */
+inline void mesh_block_barycentric(__global const double* block, const int lane, const RayPacket* ray, real* u, real* v)
+{
+    const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
+    __global const double* rows = block + 1;
+    __global const uchar* corner = (__global const uchar*)(rows + 3 * unique) + lane;
+    const double3 o = ray->world;
+#define MESH_BLOCK_CORNER(k) (real4)((real)(rows[corner[(k) * count]] - o.x), (real)(rows[unique + corner[(k) * count]] - o.y), \
+                                     (real)(rows[2 * unique + corner[(k) * count]] - o.z), 1)
+    mesh_barycentric_of(MESH_BLOCK_CORNER(0), MESH_BLOCK_CORNER(1), MESH_BLOCK_CORNER(2), ray, u, v);
+#undef MESH_BLOCK_CORNER
+}
+#endif
+
 #ifdef PYCLRAY_SMOOTH
 /* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,
  * (1 - u - v) n_a + u n_b + v n_c, normalized; (0, 0, 0) (the geometric normal lights) where the

@@ -193,6 +193,10 @@ class Variant:
                           f"#define PYCLRAY_NORMAL_{t}(shape, ray, basis, best, mine) {t}_normal(shape, ray, basis)",
                           f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
+                if self.query == "cast":  # the winner's primitive and barycentrics (kernels/cast.cl)
+                    lines.append(f"#define PYCLRAY_CAST_PRIMITIVE_OF_{t}(shape, ray) ((shape)->primitive)")
+                    lines.append(f"#define PYCLRAY_CAST_BARYCENTRIC_OF_{t}(shape, ray, u, v) "
+                                 + (f"{t}_barycentric(shape, ray, u, v)" if REGISTRY[t].barycentric else "{}"))
                 if self.query in HIT_QUERIES:  # every hit of an entry (kernels/allhits.cl)
                     lines.append(f"#define PYCLRAY_ALL_HITS_{t}(shape, ray, start, kind, k) "
                                  f"ALLHITS_TWO({t}, shape, ray, start, kind, k)")

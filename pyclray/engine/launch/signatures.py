@@ -208,6 +208,8 @@ CAST = (
     _image("depth", "__global real*"),
     _image("normal", "__global real*"),
     _image("id", "__global int*"),
+    _image("primitive", "__global int*"),
+    _image("barycentric", "__global real*"),
 )
 
 OCCLUDED = (*RAYS, Parameter("occluded_out", "__global char*"))

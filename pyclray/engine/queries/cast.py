@@ -313,14 +313,17 @@ def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         _run_into(ctx, variant, batch.sizes, batch.args, out)
         return out.reshape(shape)
-    kernel_aovs = tuple(a for a in ("depth", "normal", "id") if a in aovs or (a == "id" and "label" in aovs)
-                        or (a == "depth" and "position" in aovs))
+    # what the kernel makes (in the table's order): label comes from id, position from depth (on the host)
+    needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
+    kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
     if count == 0:
         results = {k: TABLE[k].empty((0,), precision) for k in kernel_aovs}
     else:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
         results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
                              tracer.outputs, local_size=batch.sizes[1])
+    if "primitive" in results:
+        results["primitive"] = _block_primitives(tracer, batch, results["primitive"])
     out = {}
     for name in aovs:
         if name in results:
@@ -336,6 +339,20 @@ def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
             out[name] = position
     out = {k: v.reshape(shape + v.shape[1:]) for k, v in out.items()}
     return Frame(out, precision=precision, device=ctx.device.name.strip())
+
+
+def _block_primitives(tracer, batch, primitive: np.ndarray) -> np.ndarray:
+    """The kernel's primitives with each block's key (-2 - key: kernels/cast.cl) turned into its
+    triangle's index in its mesh (the block lanes' entries: RayBatch.block_lanes)."""
+    keyed = primitive <= -2
+    if not keyed.any():
+        return primitive
+    (name, (places, first, kept)), = batch.block_lanes.items()  # one type is cast in blocks: meshes
+    key = -2 - primitive[keyed].astype(np.int64)
+    entry = kept[first[np.searchsorted(places, key >> 3)] + (key & 7)]
+    primitive = primitive.copy()
+    primitive[keyed] = np.asarray(tracer.prepared.kinds[name].primitives)[entry]
+    return primitive
 
 
 def label_of(tracer, ids: np.ndarray) -> np.ndarray:
