@@ -30,7 +30,7 @@ class ReferenceShape:
 
     Optional, with defaults here: ``oracle_inside`` (a solid's inside, exact; none by default),
     ``oracle_primitives`` (a shape of many primitives: which one a
-    ray hits), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
+    ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
     ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
     ``extent_from`` (from its box), ``mitsuba_error_scale`` (1), ``mitsuba_primitives`` (False)
     and ``mitsuba_covers`` (everywhere: no stand-in).
@@ -68,6 +68,17 @@ class ReferenceShape:
         """Whether each point lies in the shape's solid (its surface included), decided exactly
         where float64 cannot (exact_at_most): False for a shape without an inside."""
         return np.zeros(np.shape(points)[:-1], bool)
+
+    def oracle_crossings(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
+        """(t, primitive): every crossing t > 0 of each ray (unit directions (N, 3)) as (N, K) float64
+        distances, inf where a ray has fewer than K, and each one's primitive index (the oracle of
+        count_hits and all_hits). A tangent ray crosses nothing; a ray through a shared edge or
+        vertex of a mesh crosses it once (kernels/mesh.cl's tie rule). The default: a flat shape's one
+        crossing, its nearest hit."""
+        t = np.asarray(self.oracle_distance(origins, directions), np.float64).reshape(-1, 1)
+        primitives = self.oracle_primitives(origins, directions)
+        primitives = np.zeros(t.shape, np.int64) if primitives is None else np.asarray(primitives).reshape(-1, 1)
+        return t, primitives
 
     def edge_distance(self, points) -> np.ndarray:
         """Distance from points on the surface to its nearest edge (a rim, a border, a box's edge),
