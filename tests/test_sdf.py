@@ -268,3 +268,28 @@ def test_bad_sign():
     for query in (pyclray.signed_distance, pyclray.occupancy):
         with pytest.raises(ValueError, match=r"sign: expected one of 'parity', 'winding', got 'even'"):
             query(scene, np.zeros((1, 3)), sign="even")
+
+
+def test_closed_meshes_winding_is_the_signed_crossing_count():
+    """A closed mesh's winding number is exact: the signed count of one ray's crossings. Two spheres
+    overlapping as one closed, self-intersecting mesh: winding 2 in their overlap (inside by winding,
+    even and so outside by parity); one turned inside out: winding -1 (outside by winding)."""
+    from pyclray.engine.queries.closest import winding_numbers
+
+    v, f = uv_sphere(16, 24, 1.0)
+    overlapping = pyclray.Mesh(np.vstack([v, v + [1.0, 0, 0]]), np.vstack([f, f + len(v)]))
+    inverted = pyclray.Mesh(v, f[:, ::-1], translate=(0.0, 5.0, 0.0))
+    scene = scene_of([overlapping, inverted])
+    assert overlapping.closed and inverted.closed
+    points = np.array([[0.5, 0.0, 0.1], [-0.5, 0.0, 0.1], [1.5, 0.0, 0.1], [3.0, 0.0, 0.0], [0.1, 5.0, 0.1]])
+    exact = oracle.winding_number(scene, points)
+    assert np.allclose(exact, [2, 1, 1, 0, -1], atol=1e-9)
+    with pyclray.prepare(scene) as tracer:
+        assert winding_numbers(tracer, points).tolist() == [2.0, 1.0, 1.0, 0.0, -1.0]
+    assert pyclray.occupancy(scene, points, sign="winding").tolist() == [1, 1, 1, 0, 0]
+    assert pyclray.occupancy(scene, points, sign="parity").tolist() == [0, 1, 1, 0, 1]
+    rng = np.random.default_rng(12)
+    points = rng.uniform([-1.5, -1.5, -1.5], [2.5, 6.5, 1.5], (3000, 3))
+    exact = oracle.winding_number(scene, points)
+    with pyclray.prepare(scene) as tracer:
+        assert np.array_equal(winding_numbers(tracer, points), np.rint(exact))

@@ -52,9 +52,10 @@ class Tracer:
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
         self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
-        # the closest-point query's inputs, and the handle of the closed meshes alone (parity), made
-        # when first asked for (engine/queries/closest.py)
-        self._closest_inputs = self._closed_meshes = None
+        # the closest-point query's inputs, and the handles of the closed and of the open meshes alone
+        # (sign="parity" and "winding"), made when first asked for (engine/queries/closest.py)
+        self._closest_inputs = None
+        self._mesh_handles: dict = {}
         self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
@@ -110,7 +111,7 @@ class Tracer:
             total = self._prepared.nbytes() + self.outputs.nbytes()
             total += sum(state.nbytes() for state in self._views.values())
             total += 0 if self._closest_inputs is None else self._closest_inputs.nbytes
-            total += 0 if self._closed_meshes in (None, False) else self._closed_meshes.nbytes
+            total += sum(handle.nbytes for handle in self._mesh_handles.values() if handle is not None)
             return total + (0 if self._cast_inputs is None else self._cast_inputs[3])
 
     # -- renders ---------------------------------------------------------------------------------
@@ -249,21 +250,23 @@ class Tracer:
                 self._closest_inputs = closest_queries.ClosestInputs(prepared, prepared.shapes)
             return self._closest_inputs
 
-    def closed_meshes(self):
-        """A handle of this scene's closed meshes alone (sign="parity" counts their crossings), None
-        where it has none; made when first asked for."""
+    def mesh_handle(self, closed: bool):
+        """A handle of this scene's closed meshes alone (closed=True: sign="parity" counts their
+        crossings, "winding" signs them), or of its open ones (their hierarchical winding number);
+        None where it has none; made when first asked for."""
         with self.lock:
             self.prepared
-            if self._closed_meshes is None:
-                scene = closest_queries.closed_meshes_scene(replace(self._scene, shapes=self.prepared.shapes))
-                self._closed_meshes = False if scene is None else Tracer(scene, self.ctx.device, self.precision)
-            return self._closed_meshes or None
+            if closed not in self._mesh_handles:
+                scene = closest_queries.meshes_scene(replace(self._scene, shapes=self.prepared.shapes), closed)
+                self._mesh_handles[closed] = None if scene is None else Tracer(scene, self.ctx.device, self.precision)
+            return self._mesh_handles[closed]
 
     def _drop_closest(self) -> None:
         self._closest_inputs = None
-        if self._closed_meshes:
-            self._closed_meshes.close()
-        self._closed_meshes = None
+        for handle in self._mesh_handles.values():
+            if handle is not None:
+                handle.close()
+        self._mesh_handles = {}
 
     # -- a moved scene ---------------------------------------------------------------------------
     def update(self, scene) -> "Tracer":

@@ -231,7 +231,7 @@ def distance(tracer, points) -> np.ndarray:
 def signed_distance(tracer, points, sign: str = "parity") -> np.ndarray:
     sign = check_sign(sign)
     flat, shape = check_points(points)
-    out = run_closest(tracer, flat, ("distance", "inside") + (("winding",) if sign == "winding" else ()))
+    out = run_closest(tracer, flat, ("distance", "inside"))
     inside = _inside(tracer, flat, out, sign)
     d = out["distance"]
     return np.where(inside & (d > 0), -d, d).reshape(shape)
@@ -241,8 +241,59 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     sign = check_sign(sign)
     flat, shape = check_points(points)
     # only whether a point lies on a surface matters: the search for one at distance 0 (within = 0)
-    out = run_closest(tracer, flat, ("inside",) + (("winding",) if sign == "winding" else ()), within=0.0)
+    out = run_closest(tracer, flat, ("inside",), within=0.0)
     return _inside(tracer, flat, out, sign).astype(np.uint8).reshape(shape)
+
+
+def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
+    """The generalized winding number of all the scene's meshes at each point (float64): the open
+    meshes' summed hierarchically (the kernel's expansions, within 1e-3), the closed meshes' exactly,
+    as the signed count of one ray's crossings (a closed mesh's winding number is the number of times
+    a ray from the point leaves it less the times it enters, for any ray: count_hits' tie rule counts
+    each crossing once)."""
+    total = np.zeros(len(points))
+    if not len(points):
+        return total
+    open_meshes = tracer.mesh_handle(closed=False)
+    if open_meshes is not None:
+        total += run_closest(open_meshes, points, ("winding",))["winding"]
+    closed = tracer.mesh_handle(closed=True)
+    if closed is not None:
+        total += _signed_crossings(closed, points)
+    return total
+
+
+def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
+    """Per point, the crossings of its parity ray out of its closed meshes less those into them: +1
+    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
+    the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
+    directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
+    hits = closed.all_hits(points, directions, aovs=("id", "primitive"))
+    ray, ids, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "id", "primitive"))
+    signs = np.zeros(len(ray))
+    for index, mesh in enumerate(closed.shapes):
+        mine = ids == index
+        if not mine.any():
+            continue
+        a, b, c = (corner[primitive[mine]] for corner in mesh.corners())
+        normal = np.cross(b - a, c - a)
+        along = normal @ PARITY_DIRECTION
+        doubt = np.abs(along) <= 1e-10 * np.abs(normal) @ np.abs(PARITY_DIRECTION)
+        for i in np.flatnonzero(doubt):
+            along[i] = _exact_along(a[i], b[i], c[i])
+        signs[mine] = np.sign(along)
+    return np.bincount(ray, weights=signs, minlength=len(points))
+
+
+def _exact_along(a, b, c) -> float:
+    """The sign of cross(b - a, c - a) . PARITY_DIRECTION in exact rational arithmetic."""
+    from fractions import Fraction
+
+    a, b, c, d = ([Fraction(float(x)) for x in v] for v in (a, b, c, PARITY_DIRECTION))
+    e, f = [y - x for x, y in zip(a, b)], [y - x for x, y in zip(a, c)]
+    n = (e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0])
+    value = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+    return float((value > 0) - (value < 0))
 
 
 def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
@@ -250,8 +301,11 @@ def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
     the winding number (>= 1/2) or by each closed mesh's parity."""
     inside = out["inside"].astype(bool)
     if sign == "winding":
-        return inside | (out["winding"] >= 0.5)
-    closed = tracer.closed_meshes()
+        rest = ~inside
+        if rest.any():
+            inside[rest] = winding_numbers(tracer, points[rest]) >= 0.5
+        return inside
+    closed = tracer.mesh_handle(closed=True)
     if closed is None or not len(points):
         return inside
     directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
@@ -270,10 +324,10 @@ def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
     return inside
 
 
-def closed_meshes_scene(scene):
-    """The scene with only its closed meshes (a type deciding its inside by winding or parity,
-    whose shape says it is closed), or None without any."""
-    shapes = tuple(s for s in scene.shapes if type(s).winding_number and getattr(s, "closed", False))
+def meshes_scene(scene, closed: bool):
+    """The scene with only its closed meshes (closed=True) or its open ones (a type deciding its
+    inside by winding or parity, whose shape says whether it is closed), or None without any."""
+    shapes = tuple(s for s in scene.shapes if type(s).winding_number and bool(s.closed) == closed)
     if not shapes:
         return None
     return replace(scene, shapes=shapes)
