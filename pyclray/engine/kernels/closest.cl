@@ -143,7 +143,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void closest_point(const int i, PYCLRAY_PARAMETERS)
         /* -- inside an analytic solid (any whose box holds the point), or on a surface */
         int inside = best.kind != KIND_NONE && best.point.d2 == 0.0;
         PYCLRAY_UNBOUNDED(CLOSEST_INSIDE_LINEAR)
-#ifdef PYCLRAY_HAS_BOUNDED
+#if defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_HAS_SOLID)  /* (bounded solids present: PYCLRAY_SOLID) */
         int top = 0;
         stack_child[top] = 0;
         stack_entry[top++] = 0.0f;

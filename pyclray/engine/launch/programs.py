@@ -272,6 +272,8 @@ class Variant:
                    f"#define PYCLRAY_SOLID(X) {listed(t for t in bounded if REGISTRY[t].inside_test)}",
                    f"#define PYCLRAY_WINDING_TYPES(X) {listed(t for t in bounded if REGISTRY[t].winding_number)}",
                    f"#define WINDING_BETA {WINDING_BETA!r}"]
+        if any(REGISTRY[t].inside_test for t in bounded):  # the traversal of the boxes holding a point
+            defines.append("#define PYCLRAY_HAS_SOLID 1")
         defines += self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines), _read("common.h")]
         if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
