@@ -13,7 +13,9 @@ medians and their ratios printed:
 - distance: pyclray.Tracer.distance against compute_distance (float32 points for Open3D, its only type);
 - occupancy and signed distance, parity: Tracer.occupancy / signed_distance(sign="parity") against
   compute_occupancy / compute_signed_distance(nsamples=1) (one ray each, as pyclray's parity);
-- the same with sign="winding" (pyclray only: its ratio to the parity form, target within 3x).
+- the same with sign="winding" (pyclray only: its ratio to the parity form, target within 3x): a
+  closed mesh's winding number is exact, its signed crossing count; the hierarchical sum of open
+  meshes is timed on the mesh with every 100th face removed, against the closed mesh's parity.
 Signs next to the surface: 20,000 points at 1e-6 of the size from the surface, on each side of a
 triangle's interior (away from its edges, where the side is known by construction: along the face
 normal is outside), fp64 points for pyclray and their float32 roundings for Open3D (which takes no
@@ -96,6 +98,14 @@ def run_mesh(name, mesh, rounds, block, rng):
                      ms["pyclray occupancy parity"]))
         rows.append((name, label, "signed_distance winding (vs parity)", ms["pyclray signed_distance winding"],
                      ms["pyclray signed_distance parity"]))
+    # the hierarchical winding number (open meshes): the mesh with every 100th face removed
+    holed = pyclray.Mesh(mesh.vertices, mesh.faces[np.arange(len(mesh.faces)) % 100 != 0], name="holed")
+    holed_tracer = pyclray.prepare(pyclray.Scene(scene.camera, scene.image, (holed,)))
+    times = blocks({"pyclray occupancy winding, open": lambda: holed_tracer.occupancy(uniform, sign="winding"),
+                    "pyclray occupancy parity": lambda: tracer.occupancy(uniform, sign="parity")}, rounds, block)
+    rows.append((name, "uniform", "occupancy winding, 1% of faces removed: hierarchical (vs parity, closed)",
+                 times["pyclray occupancy winding, open"]["median"], times["pyclray occupancy parity"]["median"]))
+    holed_tracer.close()
     points, inside = sign_points(mesh, size, rng)
     points32 = points.astype(np.float32)
     errors = {
