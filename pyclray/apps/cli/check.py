@@ -6,6 +6,10 @@ from pathlib import Path
 from .options import BadInput, image_size, load
 
 
+# the rays of the all-hits comparison (at most --rays): Mitsuba's re-casts go one hit at a time
+ALL_HITS_RAYS = 256
+
+
 def add_command(subparsers) -> None:
     from ...reference.check import DEFAULT_RAYS, VARIANTS
 
@@ -14,7 +18,8 @@ def add_command(subparsers) -> None:
         help="cross-check pyclray's images against Mitsuba 3 (exit 1 outside the tolerance)",
         description="Render SCENE with pyclray (fp32) and Mitsuba 3 and print one table per image "
         "(depth, normal, id, misses), the ray-level comparison (Mitsuba's own primary rays cast "
-        "through both), the shaded image against Mitsuba's direct integrator, and closest points of points in and "
+        "through both), every hit along some of those rays (pyclray.all_hits against the float64 oracle, Mitsuba's "
+        "ray_intersect repeated past each hit beside), the shaded image against Mitsuba's direct integrator, and closest points of points in and "
         "around the scene against the float64 oracle (Mitsuba has no closest-point query). Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
@@ -62,11 +67,13 @@ def run(args) -> int:
                                     tolerance_text)
     from ...reference.validation.arbitrate import mitsuba_faults
     from ...reference.validation.closest import closest_check, format_closest_check
+    from ...reference.validation.hits import all_hits_check, format_hits_check
     from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
 
-    with steps(10, desc="pyclray check") as timing:
+    with steps(12, desc="pyclray check") as timing:
         images = cross_check(scene, args.variant, device=args.device)
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+        hits = all_hits_check(scene, args.variant, min(args.rays, ALL_HITS_RAYS), args.seed, device=args.device)
         shaded = None
         if scene.shading.shadows:
             shaded = cross_check_shaded(scene, args.variant, device=args.device, truth=images.truth)
@@ -81,6 +88,8 @@ def run(args) -> int:
     print()
     print(format_ray_check(rays))
     print()
+    print(format_hits_check(hits))
+    print()
     print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
     print()
     print(format_closest_check(closest))
@@ -91,7 +100,7 @@ def run(args) -> int:
         written = save(images, folder, Path(args.scene).stem)
         print()
         print("wrote " + ", ".join(map(str, written)))
-    failures = images.failures + rays.failures + (shaded.failures if shaded else []) + closest.failures
+    failures = images.failures + rays.failures + hits.failures + (shaded.failures if shaded else []) + closest.failures
     verdicts = {f"image {name}": v for name, v in images.verdicts.items()}
     verdicts.update({f"ray-level {name}": v for name, v in rays.verdicts.items()})
     if shaded:

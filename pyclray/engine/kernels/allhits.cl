@@ -9,16 +9,17 @@
  * Every entry a ray may meet is visited (the traversal's limit stays at t_max: no hit ends it), each
  * tested from the ray moved to just before it (kernels/rays.h: moved_ray, never before t_min), and
  * each of its hits s > 0 there with t < t_max counted: a ray's count does not depend on the other
- * rays nor on the order of its visits. all_hits runs after count_hits on the same rays (the host
- * sums the counts into each ray's rows): the same visits find the same hits, written into the ray's
- * rows and sorted there by distance (then kind, entry, triangle: the same order at any batch). */
+ * rays nor on the order of its visits. all_hits counts them too and writes the first hit_capacity
+ * of them into the ray's rows (r * hit_capacity on), sorted there by distance (then kind, entry,
+ * triangle: the same order at any batch); the host casts the rays with more hits again with room
+ * for all (the same visits find the same hits) and gathers the rows. */
 
 /* a hit at distance t (float64, from the ray's origin) of entry k of a kind (its triangle sub in
  * mesh instances, -1 elsewhere): counted, and stored where this is all_hits */
 #ifdef PYCLRAY_STORE_HITS
 #define ALLHITS_STORE(t, kind, k, sub)                                              \
-    if (n_hits < capacity) {                                                        \
-        const size_t row = (size_t)(at + n_hits);                                   \
+    if (n_hits < hits_room) {                                                        \
+        const size_t row = (size_t)(hits_at + n_hits);                                   \
         hit_t[row] = (t);                                                           \
         hit_kind[row] = (kind);                                                     \
         hit_k[row] = (k);                                                           \
@@ -73,45 +74,140 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
 }
 #endif
 
-PYCLRAY_KERNELS_BEGIN
-inline void hits_ray(const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
+/* Each work-item's rays traverse the BVH together where leaves are blocks of triangles, a step of
+ * each in turn (as cast's: kernels/cast.cl, whose reasons hold here, where no hit shortens a ray's
+ * traversal): each ray's own steps are the same, in the same order, as one ray's traversal. A ray's
+ * state (HitsRay) lives between its steps in the work-item's memory: hits_start sets it up (the ray,
+ * its unbounded shapes, its box ray, the root pushed), hits_step is one step, hits_end sorts its rows
+ * and writes its count. */
+#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits)
+#define HITS_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
+    X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
+#define HITS_STATE_FIELD(T, name) T name##_;
+#define HITS_STATE_SAVE(T, name) S->name##_ = name;
+typedef struct {
+    HITS_RAY_STATE(HITS_STATE_FIELD)
+#ifdef PYCLRAY_HAS_BOUNDED
+    HITS_TRAVERSAL_STATE(HITS_STATE_FIELD)
+    int top_;
+    int stack_child_[BVH_STACK];
+    float stack_entry_[BVH_STACK];
+#endif
+} HitsRay;
+
+inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_RAY
     int n_hits = 0;
 #ifdef PYCLRAY_STORE_HITS
-    const long at = hit_offsets[r];
-    const int capacity = (int)(hit_offsets[r + 1] - at);
+    const long hits_at = (long)r * hit_capacity;
+    const int hits_room = hit_capacity;
 #endif
     PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
 #ifdef PYCLRAY_HAS_BOUNDED
     {
         PYCLRAY_CAST_BOX
         float limit = float_above_wide(t_max);
-        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, PYCLRAY_TRAVERSE(nodes, box, limit, 0, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT))
+        S->top_ = 0;
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
+        HITS_TRAVERSAL_STATE(HITS_STATE_SAVE)
     }
 #endif
+    HITS_RAY_STATE(HITS_STATE_SAVE)
+}
+
+#ifdef PYCLRAY_HAS_BOUNDED
+/* the names the visit's macros use, bound to the state's (as in kernels/cast.cl), but for the stack
+ * and its top, locals (a mesh instance's own traversal declares locals of those names in its block) */
+#define ray (S->ray_)
+#define t_max (S->t_max_)
+#define t_min (S->t_min_)
+#define ray_length (S->ray_length_)
+#define n_hits (S->n_hits_)
+#define moved (S->moved_)
+#define moved_anchor (S->moved_anchor_)
+#define s0 (S->s0_)
+#define near (S->near_)
+#define o (S->o_)
+#define box_direction (S->box_direction_)
+#define limit (S->limit_)
+inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
+{
+    int top = S->top_;
+    int* stack_child = S->stack_child_;
+    float* stack_entry = S->stack_entry_;
+#ifdef PYCLRAY_STORE_HITS
+    const long hits_at = (long)S->r_ * hit_capacity;
+    const int hits_room = hit_capacity;
+#endif
+    PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 0, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
+    S->top_ = top;
+}
+#undef ray
+#undef t_max
+#undef t_min
+#undef ray_length
+#undef n_hits
+#undef moved
+#undef moved_anchor
+#undef s0
+#undef near
+#undef o
+#undef box_direction
+#undef limit
+#endif
+
+inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
+{
+    const int r = S->r_, n_hits = S->n_hits_;
 #ifdef PYCLRAY_STORE_HITS
     /* the ray's rows sorted, nearest first (insertion sort: a few hits a ray) */
-    const int n = n_hits < capacity ? n_hits : capacity;
+    const long hits_at = (long)r * hit_capacity;
+    const int n = n_hits < hit_capacity ? n_hits : hit_capacity;
     for (int i = 1; i < n; ++i) {
-        for (int j = i; j > 0 && allhits_before(hit_t, hit_kind, hit_k, hit_sub, (size_t)(at + j), (size_t)(at + j - 1)); --j) {
-            const size_t a = (size_t)(at + j), b = (size_t)(at + j - 1);
+        for (int j = i; j > 0 && allhits_before(hit_t, hit_kind, hit_k, hit_sub, (size_t)(hits_at + j), (size_t)(hits_at + j - 1)); --j) {
+            const size_t a = (size_t)(hits_at + j), b = (size_t)(hits_at + j - 1);
             const double t = hit_t[a]; hit_t[a] = hit_t[b]; hit_t[b] = t;
             const int kind = hit_kind[a]; hit_kind[a] = hit_kind[b]; hit_kind[b] = kind;
             const int k = hit_k[a]; hit_k[a] = hit_k[b]; hit_k[b] = k;
             const int sub = hit_sub[a]; hit_sub[a] = hit_sub[b]; hit_sub[b] = sub;
         }
     }
-#else
-    hit_counts[r] = n_hits;
 #endif
+    hit_counts[r] = n_hits;
 }
 
+PYCLRAY_KERNELS_BEGIN
+/* one work-item per group of CAST_GROUP places of the order, interleaved as cast's (kernels/cast.cl:
+ * cast_group) where leaves are blocks on PoCL's CPU device, else one ray after the other */
 PYCLRAY_WORK_ITEM_FUNCTION void hits_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
+#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
+    HitsRay state[CAST_GROUP];
     for (int l = 0; l < in_group; ++l)
-        hits_ray(rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
+        hits_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
+    for (bool going = true; going;) {
+        going = false;
+        for (int l = 0; l < in_group; ++l) {
+            if (state[l].top_ > 0) {
+                hits_step(&state[l], PYCLRAY_ARGUMENTS);
+                going = true;
+            }
+        }
+    }
+    for (int l = 0; l < in_group; ++l)
+        hits_end(&state[l], PYCLRAY_ARGUMENTS);
+#else
+    for (int l = 0; l < in_group; ++l) {
+        HitsRay one;
+        hits_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
+#ifdef PYCLRAY_HAS_BOUNDED
+        while (one.top_ > 0) hits_step(&one, PYCLRAY_ARGUMENTS);
+#endif
+        hits_end(&one, PYCLRAY_ARGUMENTS);
+    }
+#endif
 }
 
 #ifdef PYCLRAY_STORE_HITS

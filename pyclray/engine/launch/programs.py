@@ -159,7 +159,7 @@ class Variant:
                       for t in self.shape_types]
             # a work-item's rays traverse interleaved where leaves are blocks (a mesh's triangles:
             # kernels/cast.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
-            if self.query == "cast" and any(REGISTRY[t].cast_blocks for t in self.shape_types):
+            if self.query in ("cast",) + HIT_QUERIES and any(REGISTRY[t].cast_blocks for t in self.shape_types):
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
         if self.query == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")

@@ -247,12 +247,13 @@ CLOSEST = (
     Parameter("winding_out", "__global double*", (_asked("winding"),)),
 )
 
-# count_hits: each ray's number of hits; all_hits: each ray's rows (hit_offsets[r] .. hit_offsets[r + 1],
-# from count_hits' counts) of hits: distance (float64), kind, entry and triangle (kernels/allhits.cl)
+# count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
+# (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
 COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
 ALL_HITS = (
     *RAYS,
-    Parameter("hit_offsets", "__global const long*"),
+    Parameter("hit_counts", "__global int*"),
+    Parameter("hit_capacity", "const int"),
     Parameter("hit_t", "__global double*"),
     Parameter("hit_kind", "__global int*"),
     Parameter("hit_k", "__global int*"),

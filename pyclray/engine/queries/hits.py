@@ -14,7 +14,7 @@ import pyopencl as cl
 from ...model.aovs import TABLE
 from ...model.errors import RequestError
 from ..launch.programs import Variant, kernel_for
-from ..launch.run import REAL, input_buffer
+from ..launch.run import REAL
 from ..launch.signatures import arguments
 from ..opencl.device import launch
 from .cast import RayBatch, label_of
@@ -80,21 +80,58 @@ def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     return _counts(tracer, batch).reshape(batch.shape)
 
 
+# all_hits' rows per ray in its one pass: a ray with more hits is cast again with room for all of them
+CAPACITY = 8
+
+
+def _stored(tracer, batch: RayBatch, capacity: int):
+    """(counts, t, kinds, entries, subs): each ray's count and its first `capacity` hits in its rows
+    (ray r's from r * capacity on)."""
+    n = batch.count
+    counts = np.zeros(n, np.int32)
+    t = np.empty(n * capacity, np.float64)
+    kinds, entries, subs = (np.empty(n * capacity, np.int32) for _ in range(3))
+    if n:
+        variant = Variant("all_hits", tracer.prepared.types, (), tracer.precision)
+        _run(tracer.ctx, variant, batch, {"hit_capacity": np.int32(capacity)},
+             {"hit_counts": counts, "hit_t": t, "hit_kind": kinds, "hit_k": entries, "hit_sub": subs})
+    return counts, t, kinds, entries, subs
+
+
+def _gather(counts: np.ndarray, capacity: int) -> np.ndarray:
+    """The rows of each ray's hits (ray r's first counts[r] rows from r * capacity on), in ray order."""
+    starts = np.repeat(np.arange(len(counts), dtype=np.int64) * capacity, counts)
+    within = np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+    return starts + within
+
+
 def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     """Every hit t in (tmin, tmax) of each ray, nearest first: offsets (int64, N + 1), ray (int64 per
-    hit) and the aovs asked for (HIT_AOVS), one row per hit."""
+    hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
+    ray, and a second over the rays that have more, with room for the most of them."""
     ctx, precision = tracer.ctx, tracer.precision
     batch = RayBatch(tracer, origins, directions, tmin, tmax)
-    counts = _counts(tracer, batch)
+    counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
+    rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
+    over = np.flatnonzero(counts > CAPACITY)
+    parts = [np.asarray(x)[rows] for x in (t, kinds, entries, subs)]
+    if len(over):  # those rays again, alone, with room for all their hits (the same hits)
+        again = RayBatch(tracer, batch.origins[over] if len(batch.origins) > 1 else batch.origins[0], batch.directions[over],
+                         batch.tmin[over] if len(batch.tmin) > 1 else batch.tmin,
+                         batch.tmax[over] if len(batch.tmax) > 1 else batch.tmax)
+        capacity = int(counts[over].max())
+        more = _stored(tracer, again, capacity)
+        more_rows = _gather(more[0], capacity)
+        # each ray's rows in ray order: the first pass's where it had room, the second's elsewhere
+        owner = np.concatenate([np.repeat(np.flatnonzero(counts <= CAPACITY), counts[counts <= CAPACITY]),
+                                np.repeat(over, more[0])])
+        order = np.argsort(owner, kind="stable")
+        parts = [np.concatenate([p[np.repeat(counts <= CAPACITY, np.minimum(counts, CAPACITY))], np.asarray(m)[more_rows]])[order]
+                 for p, m in zip(parts, more[1:])]
+    t, kinds, entries, subs = parts
     offsets = np.zeros(batch.count + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
-    t = np.empty(total, np.float64)
-    kinds, entries, subs = (np.empty(total, np.int32) for _ in range(3))
-    if total:
-        variant = Variant("all_hits", tracer.prepared.types, (), precision)
-        _run(ctx, variant, batch, {"hit_offsets": input_buffer(ctx, offsets)},
-             {"hit_t": t, "hit_kind": kinds, "hit_k": entries, "hit_sub": subs})
     rays = np.repeat(np.arange(batch.count, dtype=np.int64), counts)
     out = {"offsets": offsets, "ray": rays}
     if "id" in aovs or "primitive" in aovs or "label" in aovs:
