@@ -240,9 +240,14 @@ def signed_distance(tracer, points, sign: str = "parity") -> np.ndarray:
 def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     sign = check_sign(sign)
     flat, shape = check_points(points)
-    # only whether a point lies on a surface matters: the search for one at distance 0 (within = 0)
-    out = run_closest(tracer, flat, ("inside",), within=0.0)
-    return _inside(tracer, flat, out, sign).astype(np.uint8).reshape(shape)
+    # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
+    # solids and whether the point lies on a surface: only a surface point at distance 0 is looked
+    # for (within = 0), a traversal of the boxes that hold the point
+    inside = _mesh_inside(tracer, flat, sign)
+    rest = ~inside
+    if rest.any():
+        inside[rest] = run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
+    return inside.astype(np.uint8).reshape(shape)
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
@@ -297,31 +302,30 @@ def _exact_along(a, b, c) -> float:
 
 
 def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
-    """Inside any solid: the kernel's analytic solids and surface points, and the meshes' inside by
-    the winding number (>= 1/2) or by each closed mesh's parity."""
+    """Inside any solid: the kernel's analytic solids and surface points (out["inside"]), and for
+    the other points the meshes' inside (_mesh_inside)."""
     inside = out["inside"].astype(bool)
+    rest = ~inside
+    if rest.any():
+        inside[rest] = _mesh_inside(tracer, points[rest], sign)
+    return inside
+
+
+def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
+    """Inside a mesh: by the winding number (>= 1/2), or by each closed mesh's parity."""
     if sign == "winding":
-        rest = ~inside
-        if rest.any():
-            inside[rest] = winding_numbers(tracer, points[rest]) >= 0.5
-        return inside
+        return winding_numbers(tracer, points) >= 0.5
     closed = tracer.mesh_handle(closed=True)
     if closed is None or not len(points):
-        return inside
+        return np.zeros(len(points), bool)
     directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
-    rest = ~inside  # only the points no analytic solid holds
-    if not rest.any():
-        return inside
-    origins = points[rest]
     if len(closed.shapes) == 1:
-        odd = (closed.count_hits(origins, directions[rest]) & 1).astype(bool)
-    else:  # several closed meshes: each one's own parity, from the hits' ids
-        hits = closed.all_hits(origins, directions[rest], aovs=("id",))
-        ray, ids = np.asarray(hits["ray"]), np.asarray(hits["id"]).astype(np.int64)
-        per = np.bincount(ray * len(closed.shapes) + ids, minlength=len(origins) * len(closed.shapes))
-        odd = (per.reshape(len(origins), len(closed.shapes)) & 1).any(axis=1)
-    inside[rest] = odd
-    return inside
+        return (closed.count_hits(points, directions) & 1).astype(bool)
+    # several closed meshes: each one's own parity, from the hits' ids
+    hits = closed.all_hits(points, directions, aovs=("id",))
+    ray, ids = np.asarray(hits["ray"]), np.asarray(hits["id"]).astype(np.int64)
+    per = np.bincount(ray * len(closed.shapes) + ids, minlength=len(points) * len(closed.shapes))
+    return (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
 
 
 def meshes_scene(scene, closed: bool):
