@@ -335,7 +335,9 @@ def test_check_compares_all_hits_with_the_oracle_and_mitsuba(monkeypatch):
     closed mesh and solids, and fails where pyclray's hits are not the oracle's (one dropped)."""
     from pyclray.reference.validation import hits as hits_check
 
-    scene = pyclray.load_scene(pyclray.__path__[0] + "/../scenes/shapes.toml")
+    from conftest import SCENES
+
+    scene = pyclray.load_scene(SCENES / "shapes.toml")
     scene = pyclray.Scene(scene.camera, pyclray.Image(48, 36), scene.shapes + (pyclray.Mesh(*icosphere(1), translate=(0.0, 1.0, -2.0)),))
     result = hits_check.all_hits_check(scene, n_rays=200)
     assert not result.failures, result.failures
@@ -355,3 +357,17 @@ def test_check_compares_all_hits_with_the_oracle_and_mitsuba(monkeypatch):
 
     monkeypatch.setattr(api, "all_hits", dropping)
     assert hits_check.all_hits_check(scene, n_rays=200).failures
+
+
+def test_hits_at_the_same_distance_come_by_id_then_primitive():
+    """Two copies of a sphere and of a mesh (its arrays copied: two meshes) at the same place: each
+    distance twice, the lower id first, as the oracle orders them."""
+    v, f = icosphere(1)
+    shapes = (pyclray.Mesh(v + [0.0, 0.0, -4.0], f), pyclray.Sphere((0.0, 0.0, 0.0), 1.0), pyclray.Sphere((0.0, 0.0, 0.0), 1.0),
+              pyclray.Mesh(np.array(v) + [0.0, 0.0, -4.0], np.array(f)))
+    scene = pyclray.Scene(camera(), pyclray.Image(8, 8), shapes)
+    origins, directions = np.array([[0.1, 0.05, 5.0], [0.0, 0.0, 0.5]]), np.array([[0.0, 0.0, -1.0], [0.01, 0.0, -1.0]])
+    got = pyclray.all_hits(scene, origins, directions)
+    ref = oracle.all_hits(scene, origins, directions)
+    assert list(got["id"][:8]) == [1, 2, 1, 2, 0, 3, 0, 3]
+    assert all(np.array_equal(got[k], ref[k]) for k in ("offsets", "ray", "id", "primitive"))

@@ -134,8 +134,11 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     total = int(offsets[-1])
     rays = np.repeat(np.arange(batch.count, dtype=np.int64), counts)
     out = {"offsets": offsets, "ray": rays}
-    if "id" in aovs or "primitive" in aovs or "label" in aovs:
-        ids, primitives = _identify(tracer, batch, kinds, entries, subs)
+    ids, primitives = _identify(tracer, batch, kinds, entries, subs)
+    tied = (t[1:] == t[:-1]) & (rays[1:] == rays[:-1])
+    if tied.any():  # hits at exactly the same distance (the kernel's order: by kind and entry): by id, primitive
+        order = np.lexsort((primitives, ids, t, rays))
+        t, ids, primitives = t[order], ids[order], primitives[order]
     for name in aovs:
         if name == "depth":
             out[name] = t.astype(REAL[precision])
