@@ -20,6 +20,12 @@ from ..opencl.device import launch
 from .cast import RayBatch, label_of
 from .requests import Frame
 
+# The hit queries trace every large batch in cast's coherent order (engine/queries/ray_order.py), also
+# where cast would not for a scene that fits the cache: each ray traverses the tree to its end, and
+# neighbouring rays then share more of it (docs/benchmarks.md, "Hit counts": 117 against 138 ms on
+# the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order.
+ORDER_ALWAYS = True
+
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
 HIT_AOVS = ("depth", "id", "primitive", "label", "position")
 DEFAULT_HIT_AOVS = ("depth", "id", "primitive")
@@ -76,7 +82,7 @@ def _counts(tracer, batch: RayBatch) -> np.ndarray:
 
 def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax)."""
-    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
 
 
@@ -110,7 +116,7 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
     ray, and a second over the rays that have more, with room for the most of them."""
     ctx, precision = tracer.ctx, tracer.precision
-    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
     rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
     over = np.flatnonzero(counts > CAPACITY)
@@ -118,7 +124,7 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     if len(over):  # those rays again, alone, with room for all their hits (the same hits)
         again = RayBatch(tracer, batch.origins[over] if len(batch.origins) > 1 else batch.origins[0], batch.directions[over],
                          batch.tmin[over] if len(batch.tmin) > 1 else batch.tmin,
-                         batch.tmax[over] if len(batch.tmax) > 1 else batch.tmax)
+                         batch.tmax[over] if len(batch.tmax) > 1 else batch.tmax, ORDER_ALWAYS)
         capacity = int(counts[over].max())
         more = _stored(tracer, again, capacity)
         more_rows = _gather(more[0], capacity)
