@@ -5,7 +5,8 @@ a polygon of k vertices becoming the k - 2 triangles (0, i, i + 1) in its place,
 one mesh with its objects in file order. trimesh reads the binary formats (STL, glTF/GLB) with
 ``process=False, maintain_order=True``; its triangulation of polygons is neither a fan nor in place
 (a quad's second triangles all go after the first ones), so the formats that hold polygons (OBJ, OFF,
-PLY) have their faces read here (PLY through trimesh's own parser of the file's elements) and fanned.
+PLY) have their faces read here (PLY through plyfile: any list types, mixed polygon sizes, ASCII and
+both binary byte orders) and fanned.
 
 Every failure is a SceneError at the key 'file' that says what is wrong with which file. A file is
 read once per (path, size, modification time): scenes that name the same file share its arrays.
@@ -82,16 +83,22 @@ def read_mesh(path, folder=None):
 def fan(polygons) -> np.ndarray:
     """The triangles (0, i, i + 1) of each polygon (a sequence of index sequences), in place."""
     sizes = np.fromiter((len(p) for p in polygons), np.int64, len(polygons))
+    if len(sizes) and (sizes == 3).all():
+        return np.array(polygons, np.int64).reshape(-1, 3)
+    flat = np.concatenate([np.asarray(p, np.int64).reshape(-1) for p in polygons]) if len(sizes) else np.zeros(0, np.int64)
+    return fan_flat(flat, sizes)
+
+
+def fan_flat(flat: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """fan of polygons given as their indices one after another (flat) and their vertex counts."""
     if len(sizes) and (sizes < 3).any():
         index = int(np.argmax(sizes < 3))
         raise _Bad(f"face {index} has {int(sizes[index])} vertices (a face needs at least 3)")
-    if len(sizes) and (sizes == 3).all():
-        return np.array(polygons, np.int64).reshape(-1, 3)
-    out = []
-    for polygon in polygons:
-        first = polygon[0]
-        out.extend((first, polygon[i], polygon[i + 1]) for i in range(1, len(polygon) - 1))
-    return np.array(out, np.int64).reshape(-1, 3)
+    starts = np.cumsum(sizes) - sizes
+    counts = sizes - 2  # triangles per polygon
+    first = np.repeat(starts, counts)
+    step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)  # 0 .. k-3 in each
+    return np.stack([flat[first], flat[first + step + 1], flat[first + step + 2]], axis=1).reshape(-1, 3)
 
 
 def _read_off(path: Path):
@@ -152,34 +159,51 @@ def _read_obj(path: Path):
 
 
 def _read_ply(path: Path):
-    """PLY (ASCII or binary): the elements as trimesh's parser reads them, the faces fanned here."""
-    from trimesh.exchange import ply
+    """PLY (ASCII, binary little- or big-endian) through plyfile: the vertex element's x, y, z (and
+    nx, ny, nz), the face element's index lists of any list types and sizes, fanned here."""
+    import plyfile
 
     with open(path, "rb") as handle:
+        if handle.read(4).rstrip(b"\r\n") != b"ply":
+            raise _Bad("not a PLY file: expected 'ply' on the first line")
+        handle.seek(0)
         try:
-            elements, is_ascii, _ = ply._parse_header(handle)
-        except Exception as error:
-            raise _Bad(f"not a PLY file ({error})") from None
-        (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, handle)
-    if "vertex" not in elements:
+            data = plyfile.PlyData.read(handle)
+        except plyfile.PlyHeaderParseError as error:
+            raise _Bad(f"not a PLY file: {_one_line(error)}") from None
+        except (plyfile.PlyElementParseError, ValueError, EOFError, IndexError) as error:
+            raise _Bad(f"not a readable PLY file ({_one_line(error)})") from None
+    names = [element.name for element in data.elements]
+    if "vertex" not in names:
         raise _Bad("expected a 'vertex' element")
-    data = elements["vertex"]["data"]
-    data = {k: data[k] for k in (data.dtype.names if isinstance(data, np.ndarray) else data)}
-    vertices = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("x", "y", "z")], axis=1)
+    vertex = data["vertex"].data
+    fields = vertex.dtype.names or ()
+    if not all(k in fields for k in ("x", "y", "z")):
+        raise _Bad(f"expected the vertex properties x, y, z, got {', '.join(fields) or 'none'}")
+    vertices = np.stack([np.asarray(vertex[k], np.float64) for k in ("x", "y", "z")], axis=1)
     normals = None
-    if all(k in data for k in ("nx", "ny", "nz")):
-        normals = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("nx", "ny", "nz")], axis=1)
-    faces = elements.get("face", {}).get("data", {})
-    names = faces.dtype.names or () if isinstance(faces, np.ndarray) else tuple(faces)
-    key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
+    if all(k in fields for k in ("nx", "ny", "nz")):
+        normals = np.stack([np.asarray(vertex[k], np.float64) for k in ("nx", "ny", "nz")], axis=1)
+    face = data["face"].data if "face" in names else None
+    key = next((k for k in ("vertex_indices", "vertex_index") if face is not None and k in (face.dtype.names or ())),
+               None)
     if key is None:
         raise _Bad("expected a 'face' element with 'vertex_indices'")
-    lists = np.asarray(faces[key])
-    if lists.dtype.names:  # a binary file whose lists all have one length: (count, indices) records
-        return vertices, fan(np.asarray(lists[lists.dtype.names[1]], np.int64).reshape(len(lists), -1)), normals
-    if lists.dtype != object and lists.ndim == 2:
-        return vertices, fan(lists.astype(np.int64)), normals
-    return vertices, fan([np.asarray(p, np.int64).reshape(-1) for p in lists]), normals
+    lists = face[key]
+    sizes = np.fromiter(map(len, lists), np.int64, len(lists))
+    flat = np.concatenate(lists).astype(np.int64) if len(lists) else np.zeros(0, np.int64)
+    bad = (flat < 0) | (flat >= len(vertices))
+    if bad.any():
+        index = int(np.searchsorted(np.cumsum(sizes), int(np.argmax(bad)), side="right"))
+        polygon = np.asarray(lists[index], np.int64).tolist()
+        raise _Bad(f"face {index} is {polygon}: expected indices 0 .. {len(vertices) - 1} "
+                   f"(the file has {len(vertices)} vertices)")
+    return vertices, fan_flat(flat, sizes), normals
+
+
+def _one_line(error) -> str:
+    """An exception's message on one line (plyfile's name the line and column on a second one)."""
+    return " ".join(str(error).split()) or type(error).__name__
 
 
 def _read_trimesh(path: Path):
