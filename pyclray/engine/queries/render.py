@@ -7,7 +7,7 @@ from dataclasses import replace
 
 from ...model.aovs import RENDER_AOVS, kernel_aovs
 from ...model.camera import Camera
-from ...model.errors import PyclrayError, RequestError
+from ...model.errors import RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
 from ..launch.programs import Variant, lanes_for, packet_shape
@@ -25,9 +25,9 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     try:
         col0, row0, cols, rows = (int(v) for v in window)
     except (TypeError, ValueError):
-        raise PyclrayError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
+        raise RequestError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
     if not (0 <= col0 and 0 <= row0 and cols >= 1 and rows >= 1 and col0 + cols <= width and row0 + rows <= height):
-        raise PyclrayError(
+        raise RequestError(
             f"window: expected (x0, y0, width, height) inside the {width}x{height} image, got {tuple(window)!r}"
         )
     return col0, row0, cols, rows
