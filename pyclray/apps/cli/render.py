@@ -25,6 +25,8 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
     from ...io.bands import output_format
     from ...model.errors import RequestError
 
+    if args.output is None:  # the scene's name as an .exr, here (not beside the scene)
+        args.output = f"{Path(args.scene).stem}.exr"
     out, scene = Path(args.output), Path(args.scene)
 
     def is_scene(target: Path) -> bool:
@@ -174,8 +176,9 @@ def add_command(commands) -> None:
         epilog=EXIT_STATUS_HELP,
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
-    render.add_argument("-o", "--output", required=True, metavar="OUT.exr|OUT.npz|OUT.png",
-                        help="the file to write; its extension decides the format (.exr, .npz or .png)")
+    render.add_argument("-o", "--output", metavar="OUT.exr|OUT.npz|OUT.png",
+                        help="the file to write; its extension decides the format (.exr, .npz or .png); "
+                        "default: SCENE's name with .exr, in the current folder (scenes/tp02.toml: ./tp02.exr)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
         help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,primitive,label "
