@@ -267,7 +267,7 @@ class Camera(CameraModel):
         """The [camera] table: eye, target, up, fov, fov_axis, or intrinsics and pose (scene-format.md,
         "Camera from intrinsics"), never a mix."""
         if not any(key in table for key in TABLE_INTRINSICS_KEYS):
-            no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target", "fov"))
+            no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target"))  # fov: 45 by default, as Camera(...)
             return cls(**table)
         no_unknown_keys(table, TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS)
         for key in TABLE_LOOK_AT_KEYS:
