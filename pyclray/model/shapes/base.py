@@ -44,7 +44,7 @@ class SceneShape:
     - ``type``: its name in scene files;
     - ``keys``: the keys of its scene table besides type, name, label and the material's;
     - ``_from_table(table, name)`` (``(table, name, folder)`` where ``reads_files``): the shape of a
-      scene table;
+      scene table (or a tuple of shapes, where one table makes several: a mesh file's objects);
     - ``random(rng, shift)``: a random shape for the generic tests (tests/test_shapes.py);
     - ``lengths(eye)``: the sizes of what its kernel computes from each key in the camera's frame
       (the range check).
@@ -82,6 +82,12 @@ class SceneShape:
         label = check_label(table.get("label"))
         own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS and k != "label"}
         shape = cls._from_table(own, name, folder) if cls.reads_files else cls._from_table(own, name)
+        if isinstance(shape, tuple):  # a file's objects as shapes of their own (a mesh's split): each alike
+            return tuple(cls._with_common(one, material, label) for one in shape)
+        return cls._with_common(shape, material, label)
+
+    @staticmethod
+    def _with_common(shape, material, label):
         common = {k: v for k, v in (("material", material), ("label", label)) if v != getattr(shape, k)}
         return replace(shape, **common) if common else shape
 

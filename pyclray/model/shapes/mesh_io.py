@@ -34,7 +34,50 @@ class _Bad(Exception):
 
 def read_mesh(path, folder=None):
     """(vertices (V, 3) float64, faces (F, 3) int64, normals (V, 3) float64 or None) of a mesh file,
-    read-only arrays shared by every caller that names the same unchanged file."""
+    its objects one mesh in the file's order; read-only arrays shared by every caller that names the
+    same unchanged file."""
+    return _read(path, folder)[:3]
+
+
+def read_mesh_objects(path, folder=None) -> tuple:
+    """The objects of a mesh file, one (name, vertices, faces, normals) each in the file's order
+    (OBJ's `o` and `g` groups, glTF's nodes with their transforms applied; any other file is one
+    object): each object's own vertices (those its faces use, in the file's order) and its faces
+    fanned in place. Names are the file's (an unnamed object takes the file's stem), made unique
+    with _2, _3 ... Read-only arrays, shared by every caller that names the same unchanged file."""
+    read = _read(path, folder)
+    stem = Path(read[4][0]).stem
+    key = ("objects",) + read[4]
+    with _lock:
+        if key in _cache:
+            _cache.move_to_end(key)
+            return _cache[key]
+    vertices, faces, normals, objects, _ = read
+    out, taken = [], set()
+    for name, start, stop in objects:
+        used = np.unique(faces[start:stop])  # sorted: the file's vertex order kept
+        own = (vertices[used], np.searchsorted(used, faces[start:stop]), None if normals is None else normals[used])
+        for array in own:
+            if array is not None:
+                array.setflags(write=False)
+        out.append((_unique(name or stem, taken), *own))
+    out = tuple(out)
+    with _lock:
+        _cache[key] = out
+    return out
+
+
+def _unique(name: str, taken: set) -> str:
+    unique, k = name, 1
+    while unique in taken:
+        k += 1
+        unique = f"{name}_{k}"
+    taken.add(unique)
+    return unique
+
+
+def _read(path, folder):
+    """(vertices, faces, normals, objects: ((name or None, first face, face stop), ...), cache key)."""
     if not isinstance(path, (str, os.PathLike)) or isinstance(path, bytes):
         raise SceneError(f"expected the path of a mesh file ({', '.join(FORMATS)}), got {_shown(path)}", key="file")
     full = Path(folder or ".") / path
@@ -53,16 +96,19 @@ def read_mesh(path, folder=None):
             _cache.move_to_end(key)
             return _cache[key]
     try:
-        vertices, faces, normals = _READERS[suffix](full)
+        read = _READERS[suffix](full)
     except _Bad as error:
         raise SceneError(f"{path}: {error}", key="file") from None
     except OSError as error:
         raise SceneError(f"cannot read {path}: {(error.strerror or str(error)).lower()}", key="file") from None
     except Exception as error:  # a parser's own failure on a malformed file
-        raise SceneError(f"{path}: not a readable {suffix[1:].upper()} file ({type(error).__name__}: {error})",
-                         key="file") from None
+        raise SceneError(f"{path}: not a readable {suffix[1:].upper()} file ({type(error).__name__}: "
+                         f"{_one_line(error)})", key="file") from None
+    vertices, faces, normals = read[:3]
     vertices = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    objects = tuple(read[3]) if len(read) > 3 else ((None, 0, len(faces)),)
+    objects = tuple(o for o in objects if o[2] > o[1])  # an object without faces is none
     if not len(faces):
         raise SceneError(f"{path}: the file holds no triangles", key="file")
     if normals is not None:
@@ -72,7 +118,7 @@ def read_mesh(path, folder=None):
     for array in (vertices, faces, normals):
         if array is not None:
             array.setflags(write=False)
-    out = (vertices, faces, normals)
+    out = (vertices, faces, normals, objects, key)
     with _lock:
         _cache[key] = out
         while len(_cache) > _CACHE_MAX:
@@ -138,8 +184,8 @@ def _read_off(path: Path):
 
 def _read_obj(path: Path):
     """OBJ: 'v x y z' and 'f a b c ...' (a/t/n forms, negative indices from the end); every object and
-    group of the file, in file order, is one mesh."""
-    vertices, polygons = [], []
+    group of the file (an 'o' or 'g' line starts one) in file order, as one mesh or (split) one each."""
+    vertices, polygons, objects = [], [], [[None, 0]]
     for number, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
         fields = line.split("#", 1)[0].split()
         if not fields:
@@ -153,9 +199,16 @@ def _read_obj(path: Path):
                 count = len(vertices)
                 indices = [int(f.split("/")[0]) for f in fields[1:]]
                 polygons.append([i - 1 if i > 0 else count + i for i in indices])
+            elif fields[0] in ("o", "g"):
+                objects.append([" ".join(fields[1:]) or None, len(polygons)])
         except ValueError as error:
             raise _Bad(f"line {number}: {error}") from None
-    return np.array(vertices, np.float64).reshape(-1, 3), fan(polygons), None
+    triangles = fan(polygons)
+    # each object's polygons become its triangles: (polygon k's first triangle) = sum of sizes - 2 before it
+    first = np.concatenate([[0], np.cumsum([len(p) - 2 for p in polygons])])
+    bounds = [int(first[start]) for _, start in objects] + [len(triangles)]
+    spans = [(name, bounds[k], bounds[k + 1]) for k, (name, _) in enumerate(objects)]
+    return np.array(vertices, np.float64).reshape(-1, 3), triangles, None, spans
 
 
 def _read_ply(path: Path):
@@ -207,26 +260,107 @@ def _one_line(error) -> str:
 
 
 def _read_trimesh(path: Path):
-    """STL, glTF and GLB through trimesh (triangles only): a scene's meshes, in the file's order,
-    with their nodes' transforms, as one mesh."""
+    """STL, glTF and GLB through trimesh (triangles only): a scene's meshes with their nodes'
+    transforms applied, in the order of the file's nodes (a node's primitives together, one object
+    named as its node), one after the other."""
     import trimesh
 
     loaded = trimesh.load(str(path), process=False, maintain_order=True)
-    parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
-    parts = [p for p in (parts if isinstance(parts, (list, tuple, np.ndarray)) else [parts])
-             if isinstance(p, trimesh.Trimesh)]
+    if isinstance(loaded, trimesh.Scene):
+        parts = _scene_parts(loaded, path)
+    else:
+        parts = [(None, loaded, None)]
+    parts = [(name, part, transform) for name, part, transform in parts if isinstance(part, trimesh.Trimesh)]
     if not parts:
         raise _Bad("the file holds no triangle mesh")
-    vertices, faces, normals, offset = [], [], [], 0
-    for part in parts:
-        vertices.append(np.asarray(part.vertices, np.float64))
-        faces.append(np.asarray(part.faces, np.int64) + offset)
-        offset += len(part.vertices)
+    vertices, faces, normals, spans, offset, start = [], [], [], [], 0, 0
+    for name, part, transform in parts:
+        points = np.asarray(part.vertices, np.float64)
         # the file's own vertex normals only (trimesh computes them when asked, into its cache)
         own = part._cache.cache.get("vertex_normals") if hasattr(part._cache, "cache") else None
-        normals.append(None if own is None else np.asarray(own, np.float64))
+        own = None if own is None else np.asarray(own, np.float64)
+        if transform is not None:
+            points = points @ transform[:3, :3].T + transform[:3, 3]
+            if own is not None:  # normals turn with the inverse transpose
+                own = own @ np.linalg.inv(transform[:3, :3])
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    own = own / np.linalg.norm(own, axis=1, keepdims=True)
+        vertices.append(points)
+        faces.append(np.asarray(part.faces, np.int64) + offset)
+        spans.append((name, start, start + len(part.faces)))
+        offset += len(points)
+        start += len(part.faces)
+        normals.append(own)
     normals = None if any(n is None for n in normals) else np.concatenate(normals)
-    return np.concatenate(vertices), np.concatenate(faces), normals
+    return np.concatenate(vertices), np.concatenate(faces), normals, _merged(spans)
+
+
+def _merged(spans):
+    """Adjacent spans of one object (a node's primitives) as one."""
+    out = []
+    for name, start, stop in spans:
+        if out and out[-1][0] == name and name is not None and out[-1][2] == start:
+            out[-1] = (name, out[-1][1], stop)
+        else:
+            out.append((name, start, stop))
+    return out
+
+
+def _scene_parts(scene, path: Path):
+    """(object name, mesh, world transform) of each of a trimesh Scene's geometry nodes, in the
+    order of the glTF file's nodes: trimesh's graph keeps no order of its own. A node's name is the
+    file's (its mesh's, else node<index>, where it has none); a primitive of a node of several is
+    one of trimesh's child frames, ordered and named as its node."""
+    graph = scene.graph
+    header = _gltf_header(path) if path.suffix.lower() in (".gltf", ".glb") else None
+    nodes = header.get("nodes") if isinstance(header, dict) else None
+    nodes = nodes if isinstance(nodes, list) else None
+    index = {}  # trimesh's node name -> the file's node index (trimesh's own naming, repeated)
+    if nodes is not None:
+        from trimesh.util import unique_name
+
+        counts: dict = {}
+        for i, node in enumerate(nodes):
+            index[unique_name(node.get("name", str(i)), index, counts=counts)] = i
+    parents = graph.transforms.parents
+    parts = []
+    for position, node in enumerate(graph.nodes_geometry):
+        transform, geometry = graph[node]
+        frame = node
+        while frame not in index and frame in parents:  # a primitive's frame: its node's
+            frame = parents[frame]
+        i = index.get(frame)
+        if i is None:
+            order, name = (len(index), position), node
+        else:
+            order = (i, position)
+            own = nodes[i]
+            name = own.get("name") or _gltf_mesh_name(header, own) or f"node{i}"
+        parts.append((order, name, scene.geometry[geometry], np.asarray(transform, np.float64)))
+    parts.sort(key=lambda part: part[0])
+    return [(name, mesh, transform) for _, name, mesh, transform in parts]
+
+
+def _gltf_header(path: Path):
+    """A glTF file's JSON (a .gltf's text, a .glb's first chunk), or None."""
+    import json
+    import struct
+
+    try:
+        raw = path.read_bytes()
+        if raw[:4] == b"glTF":
+            length, kind = struct.unpack("<II", raw[12:20])
+            return json.loads(raw[20:20 + length]) if kind == 0x4E4F534A else None
+        return json.loads(raw)
+    except (ValueError, struct.error, OSError):
+        return None
+
+
+def _gltf_mesh_name(header, node) -> str | None:
+    try:
+        return header["meshes"][node["mesh"]].get("name")
+    except (KeyError, IndexError, TypeError):
+        return None
 
 
 _READERS = {".off": _read_off, ".obj": _read_obj, ".ply": _read_ply, ".stl": _read_trimesh,
