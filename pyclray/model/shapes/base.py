@@ -53,7 +53,8 @@ class SceneShape:
     may name files), ``bounded`` (False: no finite bounds, outside the BVH; a bounded type defines
     the device part's ``bounds_of``), ``solid`` (has an inside), ``primitive_count`` (a batch's
     primitives), ``describe``, and for Mitsuba's XML files ``mitsuba_plugins`` with ``from_mitsuba``
-    (required where it names plugins) and ``mitsuba_in_groups``.
+    (required where it names plugins) and ``mitsuba_in_groups`` (what ``pyclray export`` writes as a
+    shapegroup where shapes share their arrays).
     """
 
     required_members: ClassVar[tuple[str, ...]] = ("type", "keys", "_from_table", "random", "lengths")
@@ -125,7 +126,8 @@ class SceneShape:
     # the <shape type=...> plugins of Mitsuba's XML read as this type (pyclray.model.mitsuba_xml),
     # each by from_mitsuba; none for a type Mitsuba has no plugin for
     mitsuba_plugins: ClassVar[tuple[str, ...]] = ()
-    # True where a <shapegroup> may hold it (an <instance> places it anew: ``placed(matrix=...)``)
+    # True where pyclray export writes the shapes that share this type's arrays as one <shapegroup>
+    # and an <instance> each (a mesh); reading, a shapegroup may hold any shape
     mitsuba_in_groups: ClassVar[bool] = False
 
     @classmethod

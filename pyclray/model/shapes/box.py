@@ -223,18 +223,19 @@ class Box(Shape):
     @classmethod
     def from_mitsuba(cls, props, folder):
         """Mitsuba's cube is a 12-triangle mesh of [-1, 1]^3: a box where to_world keeps its faces
-        square to each other (no shear) and does not mirror it (a mirror turns the mesh's
-        triangles, and so its normals, inward)."""
+        square to each other and does not mirror it; under any other affine to_world (a shear, a
+        mirror, which turns the mesh's triangles and so their normals inward) that very mesh
+        (mesh_shapes.MITSUBA_CUBE), as Mitsuba renders it."""
         to_world = props.to_world()
         columns = to_world.columns()
         half = np.linalg.norm(columns, axis=1)
         gram = columns @ columns.T / np.outer(half, half)
-        if np.abs(gram - np.eye(3)).max() > 1e-9:
-            raise props.element.error("to_world shears the cube: pyclray's boxes have square corners")
         R = (columns / half[:, None]).T  # the box's unit axes as columns
-        if np.linalg.det(R) < 0:
-            raise props.element.error("to_world mirrors the cube, which turns its triangles' normals inward; "
-                                      "pyclray's box has outward normals")
+        if np.abs(gram - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0:
+            from .mesh import Mesh
+            from .mesh_shapes import MITSUBA_CUBE
+
+            return partial(Mesh, *MITSUBA_CUBE, matrix=tuple(map(tuple, to_world.matrix.tolist())))
         axis, angle = rotation_axis_angle(R)
         return partial(cls, tuple(to_world.point(np.zeros(3))), tuple(2 * half), axis, angle)
 
