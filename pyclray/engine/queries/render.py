@@ -96,7 +96,9 @@ def _all_missed(images: dict) -> bool:
     """True if the render's images say no pixel hit (False where none of them can tell)."""
     for name, miss in _MISS:
         if name in images:
-            return bool((images[name] == miss).all())
+            image = images[name].reshape(-1)
+            # a sample first: an image that hits anywhere mostly hits in it, without a pass over all
+            return bool((image[::997] == miss).all() and (image == miss).all())
     return False
 
 
