@@ -170,7 +170,7 @@ def add_command(commands) -> None:
         "linear RGB), primitive (UINT, the triangle or batch member hit), bary.u bary.v (barycentric: (u, v) "
         "in the triangle hit) and label (UINT, the shape's label)); OUT.npz (every image as a numpy array under its "
         "name, in its own type, with the camera's intrinsics K (3x3) and pose (4x4 camera-to-world, OpenCV's "
-        "convention)); OUT.png (the preview of the first image of --aov). "
+        "convention), deflated as numpy.savez_compressed writes it); OUT.png (the preview of the first image of --aov). "
         "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
         "float32): OpenEXR has no 64-bit "
         "float channel type (an .npz keeps float64). Large images are rendered and written in bands of rows, so "
