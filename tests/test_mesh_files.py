@@ -222,3 +222,15 @@ def test_a_bad_ply_is_one_clear_line(tmp_path, contents, message):
         pyclray.Mesh.load(path)
     text = str(error.value)
     assert message in text and "\n" not in text and "index out of range" not in text, text
+
+
+@pytest.mark.parametrize("suffix,message", [
+    (".ply", "not a PLY file"), (".off", "expected an OFF header"), (".obj", "holds no triangles"),
+    (".stl", "holds no triangle mesh"), (".glb", "not a GLB file"), (".gltf", "not a glTF file")])
+def test_a_text_file_of_any_mesh_suffix_is_one_clear_line(tmp_path, suffix, message):
+    path = tmp_path / f"notes{suffix}"
+    path.write_text("this is a text file, not a mesh\n")
+    with pytest.raises(pyclray.SceneError) as error:
+        pyclray.Mesh.load(path)
+    text = str(error.value)
+    assert message in text and f"notes{suffix}" in text and "\n" not in text, text

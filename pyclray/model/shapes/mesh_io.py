@@ -265,6 +265,13 @@ def _read_trimesh(path: Path):
     named as its node), one after the other."""
     import trimesh
 
+    suffix = path.suffix.lower()
+    if suffix == ".glb":
+        with open(path, "rb") as handle:
+            if handle.read(4) != b"glTF":
+                raise _Bad("not a GLB file: expected 'glTF' at its start")
+    elif suffix == ".gltf" and not isinstance(_gltf_header(path), dict):
+        raise _Bad("not a glTF file: expected a JSON object")
     loaded = trimesh.load(str(path), process=False, maintain_order=True)
     if isinstance(loaded, trimesh.Scene):
         parts = _scene_parts(loaded, path)
