@@ -45,3 +45,15 @@ def test_the_handle_and_acceleration_say_request_error_too():
             tracer.render(window=(0, 0, 100, 1))
     with pytest.raises(pyclray.RequestError, match="acceleration: expected one of"):
         pyclray.render(SCENE, acceleration="kd-tree")
+
+
+def test_the_clusters_bad_arguments_are_request_errors_before_any_task():
+    """pyclray.cluster's checks run before the client is used (None here: no cluster needed)."""
+    from pyclray import cluster
+
+    with pytest.raises(pyclray.RequestError, match="views: item 0"):
+        next(cluster.render_views(None, SCENE, ["not a camera"]))
+    with pytest.raises(pyclray.RequestError, match="rows: expected"):
+        next(cluster.render_bands(None, SCENE, rows=0))
+    with pytest.raises(pyclray.RequestError, match="device: on a cluster"):
+        next(cluster.render_views(None, SCENE, [SCENE.camera], device=0))
