@@ -21,7 +21,7 @@ from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag
 from .capabilities import CastBlocks, IndexedTriangles, Instancing, SmoothShading
 from .device import in_frame, padded_bounds
-from .box import axis_angle, rotation
+from .rotations import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
 # does")
