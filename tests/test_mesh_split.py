@@ -153,3 +153,12 @@ def test_a_single_object_file_splits_into_one_shape_named_by_the_file(tmp_path):
     path = write(tmp_path / "tri.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
     (part,) = pyclray.Mesh.load(path, split=True)
     assert part.name == "tri" and np.array_equal(part.faces, [[0, 1, 2]])
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_an_obj_face_past_the_vertices_is_one_line_naming_the_file(tmp_path, split):
+    path = write(tmp_path / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\no a\nf 1 2 3\no b\nf 1 2 9\n")
+    with pytest.raises(pyclray.SceneError) as error:
+        pyclray.Mesh.load(path, split=split)
+    text = str(error.value)
+    assert error.value.key == "file" and "bad.obj" in text and "[0, 1, 8]" in text and "0 .. 2" in text, text

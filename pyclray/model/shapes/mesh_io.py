@@ -64,6 +64,8 @@ def read_mesh_objects(path, folder=None) -> tuple:
     out = tuple(out)
     with _lock:
         _cache[key] = out
+        while len(_cache) > _CACHE_MAX:
+            _cache.popitem(last=False)
     return out
 
 
@@ -111,6 +113,11 @@ def _read(path, folder):
     objects = tuple(o for o in objects if o[2] > o[1])  # an object without faces is none
     if not len(faces):
         raise SceneError(f"{path}: the file holds no triangles", key="file")
+    bad = ((faces < 0) | (faces >= len(vertices))).any(axis=1)
+    if bad.any():  # (said here of the file, before its objects are cut out of it)
+        index = int(np.argmax(bad))
+        raise SceneError(f"{path}: triangle {index} is {faces[index].tolist()}: expected vertex indices 0 .. "
+                         f"{len(vertices) - 1} (the file has {len(vertices)} vertices)", key="file")
     if normals is not None:
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != len(vertices) or not np.isfinite(normals).all():
