@@ -162,3 +162,30 @@ def test_an_obj_face_past_the_vertices_is_one_line_naming_the_file(tmp_path, spl
         pyclray.Mesh.load(path, split=split)
     text = str(error.value)
     assert error.value.key == "file" and "bad.obj" in text and "[0, 1, 8]" in text and "0 .. 2" in text, text
+
+
+def test_a_gltf_node_of_several_primitives_is_one_object_and_unnamed_nodes_get_names(tmp_path):
+    """A node's primitives together (one object), nodes in the file's order (a child before a later
+    root), an unnamed node of an unnamed mesh named node<index>; the transforms of its parents applied."""
+    import base64
+    import json
+
+    positions = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    blob = positions.tobytes() + np.array([0, 1, 2], np.uint16).tobytes() + b"\0\0"
+    primitive = {"attributes": {"POSITION": 0}, "indices": 1}
+    gltf = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 6}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
+        "meshes": [{"name": "two parts", "primitives": [primitive, primitive]}, {"primitives": [primitive]}],
+        "nodes": [{"mesh": 1, "translation": [5, 0, 0]}, {"name": "car", "mesh": 0, "translation": [0, 2, 0]},
+                  {"name": "root", "children": [0], "translation": [0, 0, 1]}],
+        "scenes": [{"nodes": [1, 2]}], "scene": 0,
+    }
+    path = write(tmp_path / "parts.gltf", json.dumps(gltf))
+    first, car = pyclray.Mesh.load(path, split=True)
+    assert (first.name, car.name) == ("node0", "car")
+    assert np.array_equal(first.world_vertices(), positions + (5, 0, 1))
+    assert len(car.faces) == 2 and np.array_equal(car.world_vertices()[car.faces[1]], positions + (0, 2, 0))
