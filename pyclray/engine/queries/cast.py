@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ...model.errors import DeviceError, PyclrayError, RequestError
 from ...model.aovs import TABLE
+from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
@@ -195,7 +195,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
         with np.errstate(over="ignore", invalid="ignore"):
             packed = kind.cls.rebase(worlds[name], origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
-            raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
+            raise RequestError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args.update({f"{name}s": input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
