@@ -278,6 +278,50 @@ def test_any_leading_shape_float32_input_and_the_handle():
     assert pyclray.count_hits(scene, np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
 
 
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_normals_and_barycentrics_of_every_hit(precision):
+    """all_hits' normal and barycentric: the first hit's are cast's (a mesh's triangle normal the same
+    bits, an analytic shape's within the error model's angle, barycentrics within rounding); every
+    hit's normal is unit and, for a solid, points out (against the ray where it enters, along it
+    where it leaves); barycentrics give the hit point on the triangle."""
+    need(precision)
+    scene = every_shape_scene()
+    origins, directions = random_rays(6, 2000)
+    aovs = ("depth", "normal", "id", "primitive", "barycentric", "position")
+    hits = pyclray.all_hits(scene, origins, directions, aovs=aovs, precision=precision)
+    real = np.float32 if precision == "fp32" else np.float64
+    assert hits["normal"].dtype == real and hits["normal"].shape == (len(hits["ray"]), 3)
+    assert hits["barycentric"].dtype == real and hits["barycentric"].shape == (len(hits["ray"]), 2)
+    cast = pyclray.cast(scene, origins, directions, aovs=("id", "normal", "primitive", "barycentric"), precision=precision)
+    has = np.diff(hits["offsets"]) > 0
+    first = hits["offsets"][:-1][has]
+    assert np.array_equal(cast["id"][has], hits["id"][first])
+    angle = error_model.angle_between(cast["normal"][has].astype(np.float64), hits["normal"][first].astype(np.float64))
+    assert np.median(angle) < 1e-5 and np.mean(angle < 1e-3) > 0.999
+    mesh = hits["id"][first] == 0  # the torus: the same float64 normal; its instances' differ in rounding
+    assert np.array_equal(cast["normal"][has][mesh], hits["normal"][first][mesh])
+    placed = np.isin(hits["id"][first], [1, 2])
+    assert np.allclose(cast["normal"][has][placed], hits["normal"][first][placed], rtol=0, atol=1e-6)
+    assert np.abs(cast["barycentric"][has].astype(np.float64) - hits["barycentric"][first]).max() < 1e-3
+    assert np.allclose(np.linalg.norm(hits["normal"].astype(np.float64), axis=1), 1.0, atol=1e-6)
+    # a sphere's (id 3) normals point against the ray where it enters, along it where it leaves
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    sphere = hits["id"] == 3
+    facing = np.einsum("ij,ij->i", hits["normal"][sphere].astype(np.float64), unit[hits["ray"][sphere]])
+    inside = np.linalg.norm(origins[hits["ray"][sphere]] - [3.0, 0.0, 0.0], axis=1) < 1.0
+    second = np.zeros(len(hits["ray"]), bool)
+    second[1:] = (hits["ray"][1:] == hits["ray"][:-1]) & (hits["id"][1:] == hits["id"][:-1])
+    leaving = second[sphere] | inside
+    assert (facing[leaving] > 0).all() and (facing[~leaving] < 0).all()
+    triangles = np.isin(hits["id"], [0, 1, 2])
+    for index in (0, 1, 2):
+        rows = hits["id"] == index
+        a, b, c = (x[hits["primitive"][rows]] for x in scene.shapes[index].corners())
+        u, v = (hits["barycentric"][rows, k, None].astype(np.float64) for k in (0, 1))
+        assert np.abs((1 - u - v) * a + u * b + v * c - hits["position"][rows]).max() < 1e-4
+    assert (hits["barycentric"][~triangles] == 0).all()
+
+
 def test_labels_of_hits():
     shapes = (pyclray.Sphere((0.0, 0.0, 0.0), 1.0, label=3), pyclray.Sphere((0.0, 0.0, -3.0), 1.0))
     scene = pyclray.Scene(camera(), pyclray.Image(8, 8), shapes)

@@ -27,7 +27,7 @@ from .requests import Frame
 ORDER_ALWAYS = True
 
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
-HIT_AOVS = ("depth", "id", "primitive", "label", "position")
+HIT_AOVS = ("depth", "normal", "id", "primitive", "barycentric", "label", "position")
 DEFAULT_HIT_AOVS = ("depth", "id", "primitive")
 
 
@@ -156,7 +156,24 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
             out[name] = label_of(tracer, ids)
         elif name == "position":
             out[name] = batch.positions(rays, t).astype(REAL[precision]) if total else TABLE[name].empty((0,), precision)
+        elif name in ("normal", "barycentric"):
+            out[name] = _on_surface(tracer, name, batch.positions(rays, t) if total else np.zeros((0, 3)), ids,
+                                    primitives).astype(REAL[precision])
     return Frame(out, precision=precision, device=ctx.device.name.strip())
+
+
+def _on_surface(tracer, name: str, points, ids, primitives) -> np.ndarray:
+    """Each hit's normal or barycentrics, in float64 from its hit point (the point at its distance)
+    and its primitive, by its shape's hit_normals or hit_barycentrics (a triangle's normal has the
+    bits cast's has; an analytic shape's is its outward normal at the point)."""
+    out = np.zeros((len(ids), 3 if name == "normal" else 2))
+    shapes = tracer.shapes
+    for index in np.unique(ids):
+        rows = np.flatnonzero(ids == index)
+        shape = shapes[index]
+        method = shape.hit_normals if name == "normal" else shape.hit_barycentrics
+        out[rows] = method(points[rows], primitives[rows])
+    return out
 
 
 def _identify(tracer, batch: RayBatch, kinds, entries, subs) -> tuple[np.ndarray, np.ndarray]:

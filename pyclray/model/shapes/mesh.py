@@ -383,6 +383,17 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
             primitives[row, : len(ts)] = which
         return t, primitives
 
+    def hit_normals(self, points, primitives):
+        """Each hit triangle's unit normal (face_normals: the bits cast's normal has)."""
+        return self.face_normals()[primitives]
+
+    def hit_barycentrics(self, points, primitives):
+        """(u, v) of each point on its triangle (mesh_oracle.barycentrics, float64)."""
+        from .mesh_oracle import barycentrics
+
+        a, b, c = (x[primitives] for x in self.corners())
+        return np.stack(barycentrics(np.asarray(points, np.float64), a, b, c), axis=-1)
+
     def oracle_distance(self, origins, directions):
         shape = np.shape(directions)[:-1]
         return self.oracle_hits(origins, directions)[0].reshape(shape)
