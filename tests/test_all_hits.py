@@ -415,3 +415,60 @@ def test_hits_at_the_same_distance_come_by_id_then_primitive():
     ref = oracle.all_hits(scene, origins, directions)
     assert list(got["id"][:8]) == [1, 2, 1, 2, 0, 3, 0, 3]
     assert all(np.array_equal(got[k], ref[k]) for k in ("offsets", "ray", "id", "primitive"))
+
+
+# -- Open3D's cases for these queries (its python/test/t/geometry/test_raycasting_scene.py), ported --------
+def unit_box_scene():
+    """The unit box [0, 1]^3 as 12 triangles: a ray along z through (0.5, 0.5) crosses each z face
+    exactly on the diagonal its two triangles share."""
+    v, f = cube()
+    return pyclray.Scene(camera(), pyclray.Image(8, 8), (pyclray.Mesh((v + 1.0) / 2.0, f),))
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_open3d_box_counts_and_lists(precision):
+    """From below the box: two crossings (t = 1, 2); from its centre: one (t = 0.5); far off: none.
+    Both z faces are crossed on a shared diagonal, where the tie rule must count one triangle."""
+    need(precision)
+    scene = unit_box_scene()
+    origins = np.array([[0.5, 0.5, -1.0], [0.5, 0.5, 0.5], [10.0, 10.0, 10.0]])
+    directions = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    assert list(pyclray.count_hits(scene, origins, directions, precision=precision)) == [2, 1, 0]
+    hits = pyclray.all_hits(scene, origins, directions, precision=precision)
+    assert list(hits["offsets"]) == [0, 2, 3, 3] and list(hits["ray"]) == [0, 0, 1]
+    assert np.allclose(hits["depth"], [1.0, 2.0, 0.5], rtol=1e-6, atol=1e-6)
+
+
+def test_open3d_single_triangle_occlusion_with_tmin_and_tmax():
+    """One triangle (0, 0, 0), (1, 0, 0), (1, 1, 0): the ray from (0.2, 0.1, 1) down hits it at t = 1,
+    the other ray misses; with tmax = 0.5 or tmin = 1.5 neither is occluded nor hits."""
+    scene = pyclray.Scene(camera(), pyclray.Image(8, 8),
+                          (pyclray.Mesh(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]]), np.array([[0, 1, 2]])),))
+    origins = np.array([[0.2, 0.1, 1.0], [10.0, 10.0, 10.0]])
+    directions = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    assert list(pyclray.occluded(scene, origins, directions)) == [True, False]
+    assert not pyclray.occluded(scene, origins, directions, tmax=0.5).any()
+    assert not pyclray.occluded(scene, origins, directions, tmin=1.5).any()
+    assert list(pyclray.count_hits(scene, origins, directions)) == [1, 0]
+    assert list(pyclray.count_hits(scene, origins, directions, tmin=1.5)) == [0, 0]
+    cast = pyclray.cast(scene, origins, directions, tmin=0.5, tmax=2.0, aovs=("depth", "primitive", "barycentric"))
+    assert cast["depth"][0] == 1.0 and np.isinf(cast["depth"][1]) and list(cast["primitive"]) == [0, -1]
+    assert np.allclose(cast["barycentric"][0], [0.1, 0.1])  # (0.2, 0.1, 0) = 0.8 a + 0.1 b + 0.1 c
+
+
+@pytest.mark.parametrize("shape", [[11], [1, 2, 3], [32, 14]])
+def test_open3d_output_shapes(shape):
+    """Rays of any leading shape: count_hits has that shape, all_hits' offsets one more than the rays
+    and one row per hit in every other array."""
+    scene = unit_box_scene()
+    rng = np.random.default_rng(123)
+    rays = rng.uniform(size=shape + [6])
+    count = pyclray.count_hits(scene, rays[..., :3], rays[..., 3:] + 1e-3)
+    assert list(count.shape) == shape
+    hits = pyclray.all_hits(scene, rays[..., :3], rays[..., 3:] + 1e-3, aovs=("depth", "normal", "id", "primitive",
+                                                                               "barycentric", "label", "position"))
+    total = int(count.sum())
+    assert hits["offsets"].shape == (int(np.prod(shape)) + 1,)
+    for name, tail in (("ray", ()), ("depth", ()), ("normal", (3,)), ("id", ()), ("primitive", ()),
+                       ("barycentric", (2,)), ("label", ()), ("position", (3,))):
+        assert hits[name].shape == (total,) + tail, name
