@@ -12,6 +12,7 @@ import numpy as np
 
 from .animation import Animation, FrameShapes, derivation, scene_at
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
+from .cameras import CAMERAS, CameraModel
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
@@ -51,11 +52,15 @@ class Scene:
                     check_label(shape.label)
                 except SceneError as error:
                     raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
-        if not isinstance(self.camera, Camera):
-            raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
-        if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
+        if not isinstance(self.camera, CameraModel):
+            models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())
+            raise SceneError(f"expected a camera ({models}), got {type(self.camera).__name__}", table="[camera]",
+                             file=self.source)
+        # K is in pixels of this scene's image (a camera from intrinsics, a fisheye)
+        if getattr(self.camera, "K", None) is not None and self.camera.size is None:
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
-        check_image_plane(self.camera, self.image, self.source)
+        if isinstance(self.camera, Camera):  # the pinhole's image plane (the lens models' rays are their tables)
+            check_image_plane(self.camera, self.image, self.source)
         if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
             _remember_valid(self.shapes)
         if self.animation is not None:
@@ -76,7 +81,7 @@ class Scene:
         """A length that bounds the scene as seen from the eye (at least 1): the distance to the
         target and the farthest reach of any shape (Mitsuba's clip range and plane stand-in)."""
         eye = np.array(self.camera.eye)
-        target = self.camera.target
+        target = getattr(self.camera, "target", None)
         size = max(1.0, float(np.linalg.norm(np.subtract(target, eye)))) if target is not None else 1.0
         for shape in self.shapes:
             size = max(size, shape.extent_from(eye))

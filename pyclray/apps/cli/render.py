@@ -57,7 +57,8 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
 def _camera(scene):
     """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py) and the
     .npz's K and pose arrays."""
-    return scene.camera.intrinsics(scene.image.width, scene.image.height), scene.camera.pose()
+    K = scene.camera.intrinsics(scene.image.width, scene.image.height)
+    return None if K is None else (K, scene.camera.pose())  # (a model without K: no camera in the files)
 
 
 def _written(kind: str, aovs) -> str:

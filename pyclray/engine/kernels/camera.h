@@ -50,3 +50,43 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 #endif
     return ray;
 }
+
+#ifdef PYCLRAY_CAMERA_TABLE
+/* The rays of a camera model whose pixels do not lie on a pinhole's image plane (a lens's distortion,
+ * a fisheye, a panorama: pyclray/model/cameras/, CameraModel.frame_directions): each pixel's unit
+ * direction in the camera's frame, solved on the host in float64 once per camera and image size and
+ * rounded once, read here. The table is in packet order (engine/scene/views.py: packet_table), so
+ * that a packet's lanes are contiguous: per packet, LANES x, then LANES y, LANES z and LANES flags
+ * (1 where the model reaches the pixel, 0 for a miss: outside its field, beyond its fold). */
+#if LANES == 1
+#define PYCLRAY_TABLE_LANES(p) (*(p))
+#else
+#define PYCLRAY_TABLE_LANES(p) PYCLRAY_CAT(vload, LANES)(0, (p))
+#endif
+inline RayPacket camera_table_rays(__global const Camera* camera, __global const real* table, const int i0,
+                                   const int j0, intv* in_field)
+{
+    const int packets_x = (camera->width + PYCLRAY_PACKET_W - 1) / PYCLRAY_PACKET_W;
+    __global const real* p =
+        table + ((size_t)(j0 / PYCLRAY_PACKET_H) * (size_t)packets_x + (size_t)(i0 / PYCLRAY_PACKET_W)) * (4 * LANES);
+    RayPacket ray;
+    ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
+    ray.dir = v3(PYCLRAY_TABLE_LANES(p), PYCLRAY_TABLE_LANES(p + LANES), PYCLRAY_TABLE_LANES(p + 2 * LANES));
+    ray.a = v3_dot(ray.dir, ray.dir);
+    *in_field = PYCLRAY_TABLE_LANES(p + 3 * LANES) > SPLAT(0);
+#ifdef PYCLRAY_SHADOWS
+    ray.from_eye = 1;
+#endif
+    return ray;
+}
+
+/* A lane outside the model's field is a miss: its nearest hit forgotten before the images are written. */
+#ifdef PYCLRAY_TRACK_ID
+#define PYCLRAY_OUT_OF_FIELD(in_field)                                                \
+    best = (in_field) ? best : SPLAT(MISS);                                           \
+    best_id = (in_field) ? best_id : SPLAT_INT(-1);                                   \
+    best_key = (in_field) ? best_key : SPLAT_INT(0);
+#else
+#define PYCLRAY_OUT_OF_FIELD(in_field) best = (in_field) ? best : SPLAT(MISS);
+#endif
+#endif

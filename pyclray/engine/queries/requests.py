@@ -89,6 +89,7 @@ def frame_camera(camera, width: int, height: int, col0: int = 0, row0: int = 0) 
     """The intrinsics and pose of a Frame (see Frame) of the window of a width x height image from
     column col0 and row row0 on."""
     K = camera.intrinsics(width, height)
-    K[0, 2] -= col0
-    K[1, 2] -= row0
+    if K is not None:  # (None: a model without pinhole intrinsics)
+        K[0, 2] -= col0
+        K[1, 2] -= row0
     return {"intrinsics": K, "pose": camera.pose()}

@@ -11,6 +11,7 @@ import pyopencl as cl
 
 from ...model.errors import PyclrayError, SceneError
 from ...model.scene import Scene, check_renderable, check_shape_count
+from ..launch.programs import lanes_for, packet_shape
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
 from . import lighting
@@ -60,6 +61,28 @@ def check_entry_count(prepared: PreparedScene) -> None:
                              "type (the kernels index one by 16 x its position + its type in 32 bits)")
 
 
+def is_pinhole(scene: Scene) -> bool:
+    """The kernel makes this view's rays from its camera's image plane (no table of directions; a
+    lens's table is solved here, once per camera and size, and kept by the camera)."""
+    return scene.camera.frame_directions(scene.image.width, scene.image.height) is None
+
+
+def packet_table(directions: np.ndarray, valid: np.ndarray, lanes: int, real) -> np.ndarray:
+    """A camera's table of rays (kernels/camera.h: camera_table_rays) for packets of this many lanes:
+    directions (height, width, 3) and valid (height, width) in packet order, each packet's lanes'
+    x, then y, z and in-field flags (1 or 0) contiguous; pixels past the image's edge out of field."""
+    columns, rows = packet_shape(lanes)
+    height, width = valid.shape
+    packets_x, packets_y = -(-width // columns), -(-height // rows)
+    padded = np.zeros((packets_y * rows, packets_x * columns, 4))
+    padded[..., 2] = 1.0  # a ray (forward) for the padding's lanes, which are misses
+    padded[:height, :width, :3] = directions
+    padded[:height, :width, 3] = valid
+    # (py, row, px, column, channel) -> (py, px, channel, row, column): a packet's lane l = row * columns + column
+    table = padded.reshape(packets_y, rows, packets_x, columns, 4).transpose(0, 2, 4, 1, 3)
+    return np.ascontiguousarray(table, dtype=real).reshape(-1)
+
+
 class ViewState:
     """What a scene handle keeps of one view (its camera, image, lights and shading) between renders:
     whether its range check passed, its acceleration choice and its inputs per acceleration."""
@@ -85,7 +108,10 @@ class ViewState:
 
     def acceleration(self, scene: Scene, acceleration: str, prepared: PreparedScene) -> str:
         """"tiles" or "bvh" for a render of this view (see TILE_LIST_MAX)."""
-        if check_acceleration(acceleration) != "auto":
+        check_acceleration(acceleration)
+        if not is_pinhole(scene):  # tile lists are culled by the pinhole's image plane: a lens's rays go through the BVH
+            return "bvh"
+        if acceleration != "auto":
             return acceleration
         if self.choice is None:
             self.choice = cheaper_acceleration(scene, prepared)
@@ -116,10 +142,14 @@ class ViewInputs:
         width, height = scene.image.width, scene.image.height
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
-        plane = scene.camera.image_plane(width, height)
         self.camera = input_buffer(ctx, scene.camera.pack(width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
-        if acceleration == "tiles":
+        self.directions = None  # a lens's or panorama's rays (kernels/camera.h: camera_table_rays)
+        table = scene.camera.frame_directions(width, height)
+        if table is not None:
+            self.directions = input_buffer(ctx, packet_table(*table, lanes_for(ctx.device, precision), REAL[precision]))
+        elif acceleration == "tiles":
+            plane = scene.camera.image_plane(width, height)
             for kind in prepared.kinds.values():
                 start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
@@ -130,6 +160,8 @@ class ViewInputs:
     def nbytes(self) -> int:
         """The bytes of its device buffers (the camera, tile lists, lights)."""
         buffers = [self.camera, *(b for pair in self.tiles.values() for b in pair)]
+        if self.directions is not None:
+            buffers.append(self.directions)
         if self._lighting is not None:
             buffers.append(self._lighting["lights"])
         return sum(b.size for b in buffers)
