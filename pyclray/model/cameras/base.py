@@ -134,6 +134,13 @@ class CameraModel(ABC):
         extrinsic[:3, 3] = -pose[:3, :3].T @ pose[:3, 3]
         return extrinsic
 
+    def mitsuba_ray_starts(self, width: int, height: int, near: float) -> np.ndarray:
+        """How far along each pixel's ray (from its origin here) Mitsuba's sensor starts it, given its
+        near clip (height, width): a pinhole's starts on the near plane, near / cos of the ray's
+        angle to the optical axis."""
+        _, directions = self.rays(width, height)
+        return near / (directions @ self.basis()[2])
+
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """This camera as Mitsuba's sensor of a width x height film; a SceneError where Mitsuba has none."""
         raise SceneError(f"Mitsuba 3 has no sensor of the {self.model} camera model, so this camera cannot be "

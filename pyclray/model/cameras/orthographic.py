@@ -75,10 +75,34 @@ class Orthographic(CameraModel):
 
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """Mitsuba's orthographic sensor maps its film to x in [-1, 1], y in [-1 / aspect, 1 / aspect]
-        of its camera space (orthographic.cpp), so to_world is the look-at scaled by
-        height * aspect / 2 in x and y (1 along z: the distances stay the scene's)."""
-        scale = self.height * (width / height) / 2
-        u, v, w = self.basis()
+        of its camera space (orthographic.cpp), so to_world is the look-at's frame (Mitsuba's camera
+        axes: x left, y up, z forward) scaled by height * aspect / 2 (uniformly: a similarity, which
+        the XML reader takes; Mitsuba's rays then start near_clip times that scale along w)."""
+        scale = self.mitsuba_scale(width, height)
         to_world = np.eye(4)
-        to_world[:3, 0], to_world[:3, 1], to_world[:3, 2], to_world[:3, 3] = u * scale, v * scale, w, self.eye
+        to_world[:3, :3] = self.basis().T * scale
+        to_world[:3, 3] = self.eye
         return MitsubaSensor(self.mitsuba_plugin, {}, width, height, to_world=to_world)
+
+    def mitsuba_scale(self, width: int, height: int) -> float:
+        return self.height * (width / height) / 2
+
+    def mitsuba_ray_starts(self, width: int, height: int, near: float) -> np.ndarray:
+        """How far along each ray (from this camera's origin) Mitsuba's ray starts: its near clip,
+        scaled by to_world along w."""
+        return np.full((height, width), near * self.mitsuba_scale(width, height))
+
+    @classmethod
+    def from_mitsuba(cls, sensor: MitsubaSensor) -> "Orthographic":
+        """The camera of Mitsuba's orthographic sensor (to_world a rotation, translation and uniform
+        scale s): eye the translation, looking along its z, up its y; height 2 s / aspect."""
+        matrix = sensor.to_world
+        columns = matrix[:3, :3].T  # left, up, forward (each of length s)
+        scale = float(np.linalg.norm(columns[0]))
+        left, up, forward = columns / np.linalg.norm(columns, axis=1)[:, None]
+        eye = matrix[:3, 3]
+        if sensor.look_at is not None:
+            origin, target, up_given = (tuple(float(c) for c in v) for v in sensor.look_at)
+            if scale == 1.0:
+                return cls(origin, target, up_given, 2.0 * sensor.height / sensor.width)
+        return cls(tuple(eye), tuple(eye + forward), tuple(up), 2.0 * scale * sensor.height / sensor.width)
