@@ -186,7 +186,7 @@ class Camera(CameraModel):
     is the same camera (mitsuba_sensor, from_mitsuba)."""
 
     model = "perspective"
-    keys = TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS
+    keys = TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS + TABLE_INTRINSICS_OPTIONS
     struct = CAMERA
     mitsuba_plugin = "perspective"
     mitsuba_properties = (("fov", "float", None), ("focal_length", "string", None), ("fov_axis", "string", "x"),
