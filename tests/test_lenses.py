@@ -1,0 +1,315 @@
+"""The lens and panorama camera models against OpenCV's own projection and the float64 oracle.
+
+Hit points a render reports (its float64 position image at fp64, its float32 one near the origin)
+projected back with cv2.projectPoints / cv2.fisheye.projectPoints (the same K, pose and
+coefficients) land within 1e-4 px of their pixel's centre: each pixel's ray is the exact inverse of
+the lens, and pixels the lens cannot reach are misses. The depth, normal and id images meet the
+float64 oracle of the model's own rays within the error model (pyclray.reference.error_model)."""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.model.cameras import lens
+from pyclray.reference import oracle
+
+from oracle_checks import assert_agrees_with_oracle
+
+WIDTH, HEIGHT = 96, 72
+K = np.array([[70.0, 0.0, 47.5], [0.0, 70.0, 35.5], [0.0, 0.0, 1.0]])  # OpenCV's: centred at (W - 1) / 2
+PIXEL = 1e-4  # the contract's bound on a hit point's projection, in pixels
+
+
+def looking_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """A camera-to-world pose in OpenCV's axes (x right, y down, z forward) from eye to target."""
+    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
+    z = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(z, up)  # right = forward x up ... with y down
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, eye
+    return pose
+
+
+def enclosed(offset=(0.0, 0.0, 0.0)):
+    """Shapes all round a point (a room: six walls as boxes, and spheres in it), so that every ray
+    from it hits something at varied depths; offset moves the whole scene (and the cameras)."""
+    o = np.asarray(offset, np.float64)
+    shapes = [pyclray.Sphere(tuple(o + c), r) for c, r in (((0.0, 0.0, 4.0), 1.2), ((2.5, 1.0, 3.0), 0.8),
+                                                            ((-2.0, -1.5, 2.5), 0.7), ((0.0, 0.0, -4.0), 1.0))]
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            center, size = np.zeros(3), np.full(3, 12.0)
+            center[axis], size[axis] = side * 6.5, 1.0
+            shapes.append(pyclray.Box(tuple(o + center), tuple(size)))
+    return tuple(shapes)
+
+
+def projected_offsets(camera, frame, project):
+    """|project(hit) - pixel centre| in pixels over the pixels that hit, and the hit mask."""
+    hit = frame["id"] >= 0
+    points = np.asarray(frame["position"], np.float64)[hit]
+    extrinsic = camera.extrinsic()
+    uv = project(points, extrinsic)
+    j, i = np.nonzero(hit)
+    return np.hypot(uv[:, 0] - i, uv[:, 1] - j), hit
+
+
+def opencv(distortion):
+    def project(points, extrinsic):
+        rvec = cv2.Rodrigues(extrinsic[:3, :3])[0]
+        uv, _ = cv2.projectPoints(points.reshape(-1, 1, 3), rvec, extrinsic[:3, 3], K, np.asarray(distortion, np.float64))
+        return uv.reshape(-1, 2)
+    return project
+
+
+def opencv_fisheye(distortion, camera):
+    """cv2.fisheye.projectPoints for points in front of the camera (z > 0); behind it (a 190-degree
+    lens's rim) OpenCV's fisheye takes atan(r) of x / z, which folds the point to the front, so
+    there the same model is written out here with theta = atan2(|xy|, z), the angle it means."""
+    def project(points, extrinsic):
+        in_camera = points @ extrinsic[:3, :3].T + extrinsic[:3, 3]
+        front = in_camera[:, 2] > 1e-9 * np.linalg.norm(in_camera, axis=1)
+        uv = np.empty((len(points), 2))
+        rvec = cv2.Rodrigues(extrinsic[:3, :3])[0]
+        if front.any():
+            found, _ = cv2.fisheye.projectPoints(points[front].reshape(-1, 1, 3), rvec, extrinsic[:3, 3], K,
+                                                 np.asarray(distortion, np.float64))
+            uv[front] = found.reshape(-1, 2)
+        back = in_camera[~front]
+        r = np.hypot(back[:, 0], back[:, 1])
+        theta_d = lens.fisheye_theta_d(distortion, np.arctan2(r, back[:, 2]))
+        uv[~front, 0] = K[0, 0] * theta_d * back[:, 0] / r + K[0, 2]
+        uv[~front, 1] = K[1, 1] * theta_d * back[:, 1] / r + K[1, 2]
+        return uv
+    return project
+
+
+LENSES = {
+    "barrel k1 = -0.4": [-0.4, 0.0, 0.0, 0.0],
+    "pincushion k1 = +0.3": [0.3, 0.0, 0.0, 0.0],
+    "full model": [-0.28, 0.07, 0.0002, -0.0001, 0.01, 0.05, -0.01, 0.002],
+}
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e5], ids=["origin", "1e5 away"])
+@pytest.mark.parametrize("name", list(LENSES))
+def test_distorted_hits_project_back_onto_their_pixel_centres_with_opencv(name, offset):
+    """fp64 renders (float64 hit points): every hit within 1e-4 px of its pixel's centre, the
+    pixels beyond a barrel's fold misses, and the images those of the oracle of the model's rays."""
+    needs_fp64()
+    shift = (offset, -offset / 2, offset / 3)
+    camera = pyclray.Camera.from_intrinsics(K, looking_at(np.add(shift, (0.5, 0.3, 0.0)), np.add(shift, (0.0, 0.0, 4.0))),
+                                            WIDTH, HEIGHT, distortion=LENSES[name])
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed(shift))
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id", "position"), precision="fp64")
+    off, hit = projected_offsets(camera, frame, opencv(LENSES[name]))
+    _, field = camera.frame_directions(WIDTH, HEIGHT)
+    assert np.array_equal(hit, field)  # the room is closed: every pixel in the field hits, the others miss
+    assert off.max() < PIXEL, f"{name}: a hit {off.max():.3g} px from its pixel's centre"
+    if name.startswith("barrel"):  # its radial map folds at r = 1 / sqrt(1.2): the image's corners are beyond
+        assert 0.1 < (~field).mean() < 0.5 and not field[0, 0] and field[HEIGHT // 2, WIDTH // 2]
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    mine = field.reshape(-1)
+    result = {k: np.asarray(frame[k]).reshape(len(mine), -1).squeeze()[mine] for k in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3)[mine], directions.reshape(-1, 3)[mine], result, "fp64",
+                              reference_point=np.array(camera.eye))
+
+
+@pytest.mark.parametrize("lanes", [None, "1"])
+@pytest.mark.parametrize("name", ["barrel k1 = -0.4", "pincushion k1 = +0.3"])
+def test_fp32_distorted_renders_meet_opencv_and_the_oracle(name, lanes, monkeypatch):
+    """fp32, with the device's lanes and with PYCLRAY_LANES=1: the float32 hit points project within
+    1e-4 px (their rounding is ~1e-7 of their distance), the images meet the oracle."""
+    if lanes:
+        monkeypatch.setenv("PYCLRAY_LANES", lanes)
+        pyclray.clear_cache()
+    camera = pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
+                                            distortion=LENSES[name])
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed())
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id", "position"))
+    off, hit = projected_offsets(camera, frame, opencv(LENSES[name]))
+    assert np.array_equal(hit, camera.frame_directions(WIDTH, HEIGHT)[1]) and off.max() < PIXEL
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    mine = hit.reshape(-1)
+    result = {k: np.asarray(frame[k]).reshape(len(mine), -1).squeeze()[mine] for k in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3)[mine], directions.reshape(-1, 3)[mine], result, "fp32",
+                              reference_point=np.array(camera.eye))
+    if lanes:
+        pyclray.clear_cache()
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_a_190_degree_fisheye_reaches_behind_its_plane_and_no_further(precision):
+    """A circular 190-degree fisheye in the closed room: the pixels within the 95-degree circle hit
+    (also the rim behind the camera's plane), the border misses, every hit projects within 1e-4 px
+    (fp32 hit points: their float32 rounding, 1e-7 of ~6 units, is ~1e-5 px at f = 25)."""
+    if precision == "fp64":
+        needs_fp64()
+    distortion = [0.02, -0.005, 0.001, -0.0002]
+    fisheye_K = np.array([[25.0, 0.0, 47.5], [0.0, 25.0, 35.5], [0.0, 0.0, 1.0]])
+    camera = pyclray.Fisheye.from_intrinsics(fisheye_K, looking_at((0.2, 0.1, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
+                                             distortion=distortion, fov=190.0)
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed())
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id", "position"), precision=precision)
+    global K
+    saved, K = K, fisheye_K
+    try:
+        off, hit = projected_offsets(camera, frame, opencv_fisheye(distortion, camera))
+    finally:
+        K = saved
+    _, field = camera.frame_directions(WIDTH, HEIGHT)
+    assert np.array_equal(hit, field) and off.max() < PIXEL, off.max()
+    # the field's edge: theta_d(95 degrees) from the principal point
+    j, i = np.mgrid[0:HEIGHT, 0:WIDTH]
+    radius = np.hypot(i - 47.5, j - 35.5) / 25.0
+    edge = lens.fisheye_theta_d(distortion, math.radians(95.0))
+    assert np.array_equal(field, radius <= edge) or np.abs(radius[field != (radius <= edge)] - edge).max() < 1e-12
+    in_camera = (np.asarray(frame["position"], np.float64)[hit] - camera.eye) @ camera.pose()[:3, :3]
+    assert (in_camera[:, 2] < 0).sum() > 10  # hits behind the camera's plane: beyond 90 degrees
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    mine = hit.reshape(-1)
+    result = {k: np.asarray(frame[k]).reshape(len(mine), -1).squeeze()[mine] for k in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3)[mine], directions.reshape(-1, 3)[mine], result, precision,
+                              reference_point=np.array(camera.eye))
+
+
+def test_a_lens_without_distortion_is_the_pinhole_on_every_ray_they_share():
+    """Zero coefficients: the lens's rays are the pinhole's to float64 rounding, so the two fp64
+    renders agree on every pixel (ids equal, depths within a few ulps: the two rays differ by the
+    rounding of the pinhole kernel's own arithmetic); the principal point's ray is the optical axis
+    in both, bit for bit, and so is its depth."""
+    needs_fp64()
+    pose = looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0))
+    centred = K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]  # the principal point at pixel (36, 48)'s centre
+    size = (WIDTH + 1, HEIGHT + 1)
+    pinhole = pyclray.Camera.from_intrinsics(centred, pose, *size)
+    lensed = pyclray.Camera.from_intrinsics(centred, pose, *size, distortion=[0.0, 0.0, 0.0, 0.0])
+    assert np.abs(lensed.rays(*size)[1] - pinhole.rays(*size)[1]).max() < 4e-16
+    image = pyclray.Image(*size)
+    a = pyclray.render(pyclray.Scene(pinhole, image, enclosed()), aovs=("depth", "id"), precision="fp64")
+    b = pyclray.render(pyclray.Scene(lensed, image, enclosed()), aovs=("depth", "id"), precision="fp64")
+    assert np.array_equal(a["id"], b["id"]) and np.abs(a["depth"] / b["depth"] - 1).max() < 1e-14
+    assert a["depth"][36, 48] == b["depth"][36, 48]
+    # and a distorted render agrees with the pinhole on the ray they share, the principal point's, bit for bit
+    barrel = pyclray.Camera.from_intrinsics(centred, pose, *size, distortion=[-0.4, 0.0, 0.0, 0.0])
+    c = pyclray.render(pyclray.Scene(barrel, image, enclosed()), aovs=("depth", "id"), precision="fp64")
+    assert c["depth"][36, 48] == a["depth"][36, 48] and c["id"][36, 48] == a["id"][36, 48]
+
+
+def needs_fp64():
+    from pyclray.engine.opencl.device import context_for, has_fp64
+
+    if not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_equirectangular_renders_the_oracles_panorama(precision):
+    """The whole sphere of directions in the closed room: every pixel hits; the images meet the
+    oracle of the model's rays; row 0 looks up, the centre column ahead, longitude grows rightwards."""
+    if precision == "fp64":
+        needs_fp64()
+    camera = pyclray.Equirectangular((0.5, 0.3, 0.0), (0.0, 0.3, 4.0))
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT // 2 * 2), enclosed())
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id"), precision=precision)
+    assert (frame["id"] >= 0).all()
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    # the contract's pixel centres, for a panorama looking along +z with +y up (its right is -x):
+    # longitude -180 + (i + 0.5) 360 / W, latitude 90 - (j + 0.5) 180 / H: row 0 at the top
+    straight = pyclray.Equirectangular((0.5, 0.3, 0.0), (0.5, 0.3, 4.0)).rays(WIDTH, HEIGHT)[1]
+    j, i = np.mgrid[0:HEIGHT, 0:WIDTH]
+    lon, lat = np.radians(-180 + (i + 0.5) * 360 / WIDTH), np.radians(90 - (j + 0.5) * 180 / HEIGHT)
+    expected = np.stack([-np.cos(lat) * np.sin(lon), np.sin(lat), np.cos(lat) * np.cos(lon)], axis=-1)
+    assert np.abs(straight - expected).max() < 1e-15
+    result = {k: np.asarray(frame[k]).reshape(WIDTH * HEIGHT, -1).squeeze() for k in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), result, precision,
+                              reference_point=np.array(camera.eye))
+
+
+def test_orthographic_renders_the_oracles_parallel_rays():
+    """Depth from the plane through the eye, every ray the oracle's."""
+    camera = pyclray.Orthographic((0.5, 0.3, 0.0), (0.0, 0.0, 4.0), height=3.0)
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed())
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id", "zdepth", "position", "label"))
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    result = {k: np.asarray(frame[k]).reshape(WIDTH * HEIGHT, -1).squeeze() for k in ("depth", "normal", "id")}
+    assert_agrees_with_oracle(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), result, "fp32")
+    assert np.array_equal(frame["zdepth"], frame["depth"]) and (frame["label"] == -1).all()
+    assert np.abs(frame["position"] - (origins + frame["depth"][..., None] * directions)).max() < 1e-5
+    with pytest.raises(pyclray.RequestError, match="not shaded"):
+        pyclray.render(scene, aovs=("depth", "shaded"))
+    truth = oracle.trace(scene, origins.reshape(-1, 3), directions.reshape(-1, 3), aovs=("depth",))
+    assert np.isfinite(truth["depth"]).all()
+
+
+@pytest.mark.parametrize("table,key,part", [
+    ({"intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "distortion": [0.1, 0.2, 0.3]}, "distortion", "k1, k2, p1, p2"),
+    ({"intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "distortion": [0.1, "x", 0.0, 0.0]}, "distortion[1]", "number"),
+    ({"intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "pixel_origin": "middle"}, "pixel_origin", "corner"),
+    ({"model": "fisheye", "intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "distortion": [0.1, 0.0]}, "distortion",
+     "k1, k2, k3, k4"),
+    ({"model": "fisheye", "intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "fov": 400.0}, "fov", "0 < fov <= 360"),
+    ({"model": "fisheye", "intrinsics": K.tolist(), "pose": np.eye(4).tolist(), "focal": 1.0}, "focal", "unknown key"),
+    ({"model": "orthographic", "eye": [0, 0, 1], "target": [0, 0, 0], "height": 0.0}, "height", "> 0"),
+    ({"model": "orthographic", "eye": [0, 0, 1], "target": [0, 0, 1]}, "target", "target != eye"),
+    ({"model": "equirectangular", "eye": [0, 0, 1], "latitude": [-100.0, 90.0]}, "latitude", "-90 <= min"),
+    ({"model": "equirectangular", "eye": [0, 0, 1], "longitude": [10.0, 0.0]}, "longitude", "min < max"),
+    ({"model": "equirectangular", "eye": [0, 0, 1], "fov": 90.0}, "fov", "unknown key"),
+])
+def test_bad_keys_and_impossible_lenses_are_one_line_naming_the_key(table, key, part):
+    with pytest.raises(pyclray.SceneError) as caught:
+        pyclray.scene_from_dict({"camera": table})
+    message = str(caught.value)
+    assert caught.value.key == key and part in message and "\n" not in message
+
+
+def test_a_lens_that_folds_before_any_pixel_but_the_centre_still_renders_the_centre():
+    """k1 = -5: the fold at r = 0.26 (normalized), reached 18 px from the principal point: the
+    pixels beyond are misses, the rest hits."""
+    camera = pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
+                                            distortion=[-5.0, 0.0, 0.0, 0.0])
+    frame = pyclray.render(pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed()), aovs=("id",))
+    j, i = np.mgrid[0:HEIGHT, 0:WIDTH]
+    r = np.hypot(i - 47.5, j - 35.5) / 70.0
+    fold = 1 / math.sqrt(15.0)  # d/dr (r - 5 r^3) = 0
+    reach = fold - 5 * fold**3
+    assert np.array_equal(frame["id"] >= 0, r < reach) or np.abs(r[(frame["id"] >= 0) != (r < reach)] - reach).max() < 1e-9
+
+
+def test_poses_and_extrinsics_in_both_conventions():
+    """pose("opengl") is pose() with y and z negated; extrinsic() its inverse; from_intrinsics
+    takes either convention back to the same camera."""
+    pose = looking_at((1.0, 2.0, 3.0), (0.0, 0.5, 0.0))
+    for camera in (pyclray.Camera.from_intrinsics(K, pose, WIDTH, HEIGHT),
+                   pyclray.Fisheye.from_intrinsics(K, pose, WIDTH, HEIGHT),
+                   pyclray.Orthographic((1.0, 2.0, 3.0), (0.0, 0.5, 0.0)),
+                   pyclray.Equirectangular((1.0, 2.0, 3.0), (0.0, 0.5, 0.0)),
+                   pyclray.Camera((1.0, 2.0, 3.0), (0.0, 0.5, 0.0))):
+        assert np.abs(camera.pose() - pose).max() < 1e-15
+        assert np.abs(camera.pose(convention="opengl") - pose * [1, -1, -1, 1]).max() < 1e-15
+        assert np.abs(camera.extrinsic() @ camera.pose() - np.eye(4)).max() < 1e-15
+    gl = pyclray.Camera.from_intrinsics(K, pose * [1, -1, -1, 1], WIDTH, HEIGHT, convention="opengl")
+    assert np.abs(gl.pose() - pose).max() < 1e-15
+    with pytest.raises(pyclray.SceneError, match="key 'convention'"):
+        pyclray.Camera.from_intrinsics(K, pose, convention="blender")
+    with pytest.raises(pyclray.RequestError, match="convention"):
+        gl.pose(convention="blender")
+    assert pyclray.Orthographic((1.0, 2.0, 3.0), (0.0, 0.5, 0.0)).intrinsics(WIDTH, HEIGHT) is None
+
+
+def test_a_scene_file_with_each_model(tmp_path):
+    path = tmp_path / "lens.toml"
+    path.write_text("[camera]\nintrinsics = [[70.0, 0.0, 47.5], [0.0, 70.0, 35.5], [0.0, 0.0, 1.0]]\n"
+                    "pose = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\ndistortion = [-0.28, 0.07, 0.0002, -0.0001, 0.0]\n"
+                    "[image]\nwidth = 96\nheight = 72\n"
+                    "[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 4.0]\nradius = 1.0\n")
+    scene = pyclray.load_scene(path)
+    assert scene.camera.distortion == (-0.28, 0.07, 0.0002, -0.0001, 0.0, 0.0, 0.0, 0.0)
+    frame = pyclray.render(scene, aovs=("depth",))
+    assert np.isfinite(frame["depth"][36, 48]) and np.array_equal(frame.intrinsics, K)
