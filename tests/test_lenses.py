@@ -121,21 +121,27 @@ def test_distorted_hits_project_back_onto_their_pixel_centres_with_opencv(name, 
                               reference_point=np.array(camera.eye))
 
 
-@pytest.mark.parametrize("lanes", [None, "1"])
+@pytest.mark.parametrize("lanes,offset", [(None, 0.0), ("1", 0.0), (None, 1e5)], ids=["lanes", "lanes=1", "1e5 away"])
 @pytest.mark.parametrize("name", ["barrel k1 = -0.4", "pincushion k1 = +0.3"])
-def test_fp32_distorted_renders_meet_opencv_and_the_oracle(name, lanes, monkeypatch):
+def test_fp32_distorted_renders_meet_opencv_and_the_oracle(name, lanes, offset, monkeypatch):
     """fp32, with the device's lanes and with PYCLRAY_LANES=1: the float32 hit points project within
-    1e-4 px (their rounding is ~1e-7 of their distance), the images meet the oracle."""
+    1e-4 px (their rounding is ~1e-7 of their distance), the images meet the oracle. 1e5 away a
+    float32 position is only good to 2^-7 (0.1 px here), so there the hit point is the eye plus the
+    fp32 depth along the model's float64 ray, and the kernel's rays are judged by the oracle."""
     if lanes:
         monkeypatch.setenv("PYCLRAY_LANES", lanes)
         pyclray.clear_cache()
-    camera = pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
-                                            distortion=LENSES[name])
-    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed())
+    shift = (offset, -offset / 2, offset / 3)
+    camera = pyclray.Camera.from_intrinsics(K, looking_at(np.add(shift, (0.5, 0.3, 0.0)), np.add(shift, (0.0, 0.0, 4.0))),
+                                            WIDTH, HEIGHT, distortion=LENSES[name])
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed(shift))
     frame = pyclray.render(scene, aovs=("depth", "normal", "id", "position"))
+    origins, directions = camera.rays(WIDTH, HEIGHT)
+    if offset:
+        frame = dict(frame)
+        frame["position"] = origins + np.where(frame["id"] >= 0, frame["depth"], 0.0)[..., None] * directions
     off, hit = projected_offsets(camera, frame, opencv(LENSES[name]))
     assert np.array_equal(hit, camera.frame_directions(WIDTH, HEIGHT)[1]) and off.max() < PIXEL
-    origins, directions = camera.rays(WIDTH, HEIGHT)
     mine = hit.reshape(-1)
     result = {k: np.asarray(frame[k]).reshape(len(mine), -1).squeeze()[mine] for k in ("depth", "normal", "id")}
     assert_agrees_with_oracle(scene, origins.reshape(-1, 3)[mine], directions.reshape(-1, 3)[mine], result, "fp32",
