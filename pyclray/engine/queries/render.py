@@ -57,14 +57,14 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     shadows = "shaded" in aovs and view.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
-                      framed=prepared.framed, indexed=prepared.indexed, camera_table=inputs.directions is not None)
+                      framed=prepared.framed, indexed=prepared.indexed, camera_table=inputs.table is not None)
     tile = tiles.TILE
     # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
             "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
             "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
-    if inputs.directions is not None:
-        args["camera_directions"] = inputs.directions
+    if inputs.table is not None:  # in this program's packets
+        args["camera_directions"] = inputs.directions_for(lanes)
     if "position" in aovs:
         args["eye_high"], args["eye_low"] = inputs.eye_parts()
     if "shaded" in aovs:

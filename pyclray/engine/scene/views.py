@@ -144,11 +144,11 @@ class ViewInputs:
         self.eye = np.asarray(scene.camera.eye, np.float64)
         self.camera = input_buffer(ctx, scene.camera.pack(width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
-        self.directions = None  # a lens's or panorama's rays (kernels/camera.h: camera_table_rays)
-        table = scene.camera.frame_directions(width, height)
-        if table is not None:
-            self.directions = input_buffer(ctx, packet_table(*table, lanes_for(ctx.device, precision), REAL[precision]))
-        elif acceleration == "tiles":
+        # a lens's or panorama's rays (kernels/camera.h: camera_table_rays): the camera's float64 table,
+        # and its device buffer in the packet order of a lane count (directions_for)
+        self.table = scene.camera.frame_directions(width, height)
+        self.directions = None
+        if self.table is None and acceleration == "tiles":
             plane = scene.camera.image_plane(width, height)
             for kind in prepared.kinds.values():
                 start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
@@ -156,6 +156,19 @@ class ViewInputs:
         # what the lights are packed from, when asked (not the scene, whose shapes may move on)
         self._made = (ctx, scene.camera, scene.lights, scene.shading, precision)
         self._lighting = self._eye_parts = None
+        if self.table is not None:
+            self.directions_for(lanes_for(ctx.device, precision))
+
+    def directions_for(self, lanes: int):
+        """The device buffer of the camera's table of rays in packets of this many lanes (made again
+        only if the lanes change: PYCLRAY_LANES between renders of one handle); None for a pinhole."""
+        if self.table is None:
+            return None
+        if self.directions is None or self.directions_lanes != lanes:
+            ctx, precision = self._made[0], self._made[-1]
+            self.directions = input_buffer(ctx, packet_table(*self.table, lanes, REAL[precision]))
+            self.directions_lanes = lanes
+        return self.directions
 
     def nbytes(self) -> int:
         """The bytes of its device buffers (the camera, tile lists, lights)."""
