@@ -11,6 +11,7 @@ import pyopencl as cl
 
 from ...model.errors import PyclrayError, SceneError
 from ...model.scene import Scene, check_renderable, check_shape_count
+from ..bvh import tiles
 from ..launch.programs import lanes_for, packet_shape
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
@@ -39,13 +40,10 @@ def cheaper_acceleration(scene: Scene, prepared: PreparedScene) -> str:
     """Tile lists while they average at most TILE_LIST_MAX shapes a tile, else the BVH."""
     if prepared.bounded > TILES_MAX_SHAPES:
         return "bvh"
-    width, height = scene.image.width, scene.image.height
-    rows = scene.camera.basis()
-    plane = scene.camera.image_plane(width, height)
     pairs, tiles = 0, 1
     for kind in prepared.kinds.values():
         if kind.cls.bounded:
-            start, _ = prepared.tile_lists(kind, scene.camera.eye, rows, plane, width, height)
+            start, _ = view_tile_lists(prepared, kind, scene)
             pairs += int(start[-1])
             tiles = len(start) - 1
     return "tiles" if pairs <= TILE_LIST_MAX * tiles else "bvh"
@@ -61,10 +59,21 @@ def check_entry_count(prepared: PreparedScene) -> None:
                              "type (the kernels index one by 16 x its position + its type in 32 bits)")
 
 
-def is_pinhole(scene: Scene) -> bool:
-    """The kernel makes this view's rays from its camera's image plane (no table of directions; a
-    lens's table is solved here, once per camera and size, and kept by the camera)."""
-    return scene.camera.frame_directions(scene.image.width, scene.image.height) is None
+def view_tile_lists(prepared: PreparedScene, kind, scene: Scene):
+    """(start, index) of the kind's entries for each tile of this view (engine/bvh/tiles.py): culled
+    by the pinhole's image plane, or for a camera whose rays are a table (a lens, a panorama) by the
+    rectangles its tiles' rays span on that plane (tiles.table_rects, once per camera and size)."""
+    width, height = scene.image.width, scene.image.height
+    camera = scene.camera
+    table = camera.frame_directions(width, height)
+    if table is None:
+        return prepared.tile_lists(kind, camera.eye, camera.basis(), camera.image_plane(width, height), width, height)
+    cached = camera.__dict__.get("_tile_rects")
+    if cached is None or cached[0] != (width, height):
+        cached = ((width, height), tiles.table_rects(*table))
+        object.__setattr__(camera, "_tile_rects", cached)  # (a frozen camera keeps what its rays give, as its table)
+    return prepared.tile_lists_in_rects(kind, camera.eye, camera.basis(), cached[1], -(-width // tiles.TILE),
+                                        -(-height // tiles.TILE))
 
 
 def packet_table(directions: np.ndarray, valid: np.ndarray, lanes: int, real) -> np.ndarray:
@@ -108,10 +117,7 @@ class ViewState:
 
     def acceleration(self, scene: Scene, acceleration: str, prepared: PreparedScene) -> str:
         """"tiles" or "bvh" for a render of this view (see TILE_LIST_MAX)."""
-        check_acceleration(acceleration)
-        if not is_pinhole(scene):  # tile lists are culled by the pinhole's image plane: a lens's rays go through the BVH
-            return "bvh"
-        if acceleration != "auto":
+        if check_acceleration(acceleration) != "auto":
             return acceleration
         if self.choice is None:
             self.choice = cheaper_acceleration(scene, prepared)
@@ -148,10 +154,9 @@ class ViewInputs:
         # and its device buffer in the packet order of a lane count (directions_for)
         self.table = scene.camera.frame_directions(width, height)
         self.directions = None
-        if self.table is None and acceleration == "tiles":
-            plane = scene.camera.image_plane(width, height)
+        if acceleration == "tiles":
             for kind in prepared.kinds.values():
-                start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
+                start, index = view_tile_lists(prepared, kind, scene)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
         # what the lights are packed from, when asked (not the scene, whose shapes may move on)
         self._made = (ctx, scene.camera, scene.lights, scene.shading, precision)

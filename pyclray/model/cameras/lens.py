@@ -29,7 +29,7 @@ PINHOLE_SCAN_FROM = 1e-4
 # (relative to 1 + |x_d|): Newton's last step is then far below 1e-4 pixels for any focal length a
 # float32 ray can resolve
 SOLVED = 1e-12
-BISECTIONS = 64  # halvings of the radial bracket: float64's resolution of any bracket in [0, 1e3]
+BISECTIONS = 64  # halvings of a bracket in [0, 1e3] to float64's resolution: the most steps a solve takes
 NEWTON_STEPS = 8  # the full (tangential) model's steps from the radial solution: quadratic convergence
 
 
@@ -89,19 +89,36 @@ def _first_fold(slope, grid) -> float:
     return lo
 
 
-def _radial_inverse(forward, target, reach):
-    """r in [0, reach] with forward(r) = target (forward increasing there), per element, by
-    bisection (robust) then Newton-free refinement to float64; nan where target > forward(reach)."""
-    lo = np.zeros_like(target)
+def _radial_inverse(forward, slope, target, reach):
+    """r in [0, reach] with forward(r) = target (forward increasing there: one solution), per
+    element, to float64's precision: Newton's steps kept inside the bracket [lo, hi] that each
+    evaluation narrows (a step leaving it bisects instead), each element until its step is down to
+    its last bits (the elements still moving are iterated alone); nan where target > forward(reach),
+    beyond the field."""
     top = reach if math.isfinite(reach) else PINHOLE_SCAN_REACH
-    hi = np.full_like(target, top)
-    reachable = target <= forward(hi)
+    shape = np.shape(target)
+    target = np.ravel(target)
+    reachable = target <= forward(np.full_like(target, top))
+    out = np.full(target.shape, np.nan)
+    active = np.nonzero(reachable)[0]
+    goal = target[active]
+    lo, hi = np.zeros_like(goal), np.full_like(goal, top)
+    r = np.clip(goal, 0.0, top)
     for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        above = forward(mid) > target
-        hi = np.where(above, mid, hi)
-        lo = np.where(above, lo, mid)
-    return np.where(reachable, 0.5 * (lo + hi), np.nan)
+        f = forward(r) - goal
+        hi = np.where(f > 0, r, hi)
+        lo = np.where(f <= 0, r, lo)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            step = r - f / slope(r)
+        # (closed: at the root the step stays at r, which is one end of the bracket)
+        new = np.where((step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
+        moving = np.abs(new - r) > 4 * np.finfo(np.float64).eps * np.abs(new)
+        out[active[~moving]] = new[~moving]
+        active, goal, lo, hi, r = active[moving], goal[moving], lo[moving], hi[moving], new[moving]
+        if not len(active):
+            break
+    out[active] = r
+    return out.reshape(shape)
 
 
 def undistort_pinhole(coefficients, xd, yd):
@@ -115,13 +132,18 @@ def undistort_pinhole(coefficients, xd, yd):
         factor, _, _ = radial_pinhole(coefficients, r * r)
         return r * factor
 
+    def slope(r):
+        factor, d_factor, _ = radial_pinhole(coefficients, r * r)
+        return factor + 2 * r * r * d_factor
+
     # the radial term alone first (monotonic up to the fold: one solution), then the full model's Newton
-    r = _radial_inverse(forward, rd, fold)
+    r = _radial_inverse(forward, slope, rd, fold)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(rd > 0, r / np.where(rd > 0, rd, 1.0), 1.0)
     x, y = xd * scale, yd * scale
     x, y = np.nan_to_num(x), np.nan_to_num(y)
-    for _ in range(NEWTON_STEPS):
+    tangential = coefficients[2] != 0 or coefficients[3] != 0
+    for _ in range(NEWTON_STEPS if tangential else 1):  # (radial alone: solved already, one step checks)
         fx, fy = distort_pinhole(coefficients, x, y)
         dxx, dxy, dyx, dyy = _pinhole_jacobian(coefficients, x, y)
         det = dxx * dyy - dxy * dyx
@@ -159,7 +181,13 @@ def undistort_fisheye(coefficients, xd, yd, max_theta):
     projection is (xd, yd); valid False beyond max_theta (the field limit, the fold or pi)."""
     reach = min(max_theta, fisheye_fold(coefficients), math.pi)
     rd = np.hypot(xd, yd)
-    theta = _radial_inverse(lambda t: fisheye_theta_d(coefficients, t), rd, reach)
+    k1, k2, k3, k4 = coefficients
+
+    def slope(theta):
+        t2 = theta * theta
+        return 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
+
+    theta = _radial_inverse(lambda t: fisheye_theta_d(coefficients, t), slope, rd, reach)
     valid = np.isfinite(theta) & (theta <= reach)
     theta = np.nan_to_num(theta)
     sine = np.sin(theta)
