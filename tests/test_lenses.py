@@ -319,3 +319,26 @@ def test_a_scene_file_with_each_model(tmp_path):
     assert scene.camera.distortion == (-0.28, 0.07, 0.0002, -0.0001, 0.0, 0.0, 0.0, 0.0)
     frame = pyclray.render(scene, aovs=("depth",))
     assert np.isfinite(frame["depth"][36, 48]) and np.array_equal(frame.intrinsics, K)
+
+
+@pytest.mark.parametrize("camera", [
+    pyclray.Fisheye.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
+                                    distortion=[0.02, -0.005, 0.001, 0.0], fov=190.0),
+    pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT, distortion=[-0.3, 0.0, 0.0, 0.0]),
+    pyclray.Orthographic((0.5, 0.3, 0.0), (0.0, 0.0, 4.0), height=3.0),
+    pyclray.Equirectangular((0.5, 0.3, 0.0), (0.0, 0.0, 4.0), longitude=(-90.0, 90.0)),
+], ids=["fisheye", "distorted", "orthographic", "equirectangular"])
+def test_the_views_controls_orbit_every_model_and_copy_it_as_toml(camera):
+    """pyclray view's orbit keeps the model (its lens, K, field) and its copied [camera] table loads
+    as the same camera."""
+    import tomllib
+
+    from pyclray.apps.view.controls import Orbit, camera_toml
+    from pyclray.model.loader import camera_from_table
+
+    moved = Orbit.of(camera).orbit(0.1, 0.05).camera()
+    assert type(moved) is type(camera) and moved.eye != camera.eye
+    assert getattr(moved, "distortion", None) == getattr(camera, "distortion", None)
+    loaded = camera_from_table(tomllib.loads(camera_toml(moved))["camera"])
+    assert type(loaded) is type(camera) and np.abs(loaded.pose() - moved.pose()).max() < 1e-11
+    assert np.abs(loaded.rays(WIDTH, HEIGHT)[1] - moved.rays(WIDTH, HEIGHT)[1]).max() < 1e-11

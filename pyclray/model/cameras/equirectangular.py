@@ -57,6 +57,11 @@ class Equirectangular(CameraModel):
         no_unknown_keys(table, TABLE_KEYS, required=("eye",))
         return cls(**table)
 
+    def table(self) -> dict:
+        """The [camera] table that loads as this camera."""
+        return {"model": self.model, "eye": self.eye, "target": self.target, "up": self.up, "longitude": self.longitude,
+                "latitude": self.latitude}
+
     @property
     def fixed_keys(self) -> tuple[str, ...]:
         return ("longitude", "latitude")

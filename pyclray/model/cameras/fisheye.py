@@ -32,6 +32,7 @@ class Fisheye(CameraModel):
     model = "fisheye"
     keys = TABLE_KEYS
     struct = CAMERA
+    has_zdepth = False  # (the contract's zdepth is the perspective and orthographic cameras')
 
     eye: tuple[float, float, float]
     K: tuple
@@ -83,6 +84,11 @@ class Fisheye(CameraModel):
         no_unknown_keys(table, TABLE_KEYS, required=("intrinsics", "pose"))
         return cls.from_intrinsics(table["intrinsics"], table["pose"], distortion=table.get("distortion", (0, 0, 0, 0)),
                                    fov=table.get("fov"), pixel_origin=text("pixel_origin", table.get("pixel_origin", "center")))
+
+    def table(self) -> dict:
+        """The [camera] table that loads as this camera (its K at its size)."""
+        out = {"model": self.model, "intrinsics": self.K, "pose": self.pose().tolist(), "distortion": self.distortion}
+        return out if self.fov is None else {**out, "fov": self.fov}
 
     @property
     def fixed_keys(self) -> tuple[str, ...]:

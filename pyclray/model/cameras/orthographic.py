@@ -44,6 +44,10 @@ class Orthographic(CameraModel):
         no_unknown_keys(table, TABLE_KEYS, required=("eye", "target"))
         return cls(**table)
 
+    def table(self) -> dict:
+        """The [camera] table that loads as this camera."""
+        return {"model": self.model, "eye": self.eye, "target": self.target, "up": self.up, "height": self.height}
+
     @property
     def fixed_keys(self) -> tuple[str, ...]:
         return ()
