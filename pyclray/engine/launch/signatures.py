@@ -52,7 +52,7 @@ def _framed(variant, _type=None) -> bool:
 
 def _camera_table(variant, _type=None) -> bool:
     """A render whose camera's rays are a table of directions (kernels/camera.h: camera_table_rays)."""
-    return variant.camera_table
+    return bool(variant.camera_table)
 
 
 def _asked(aov: str) -> Callable:
@@ -120,7 +120,7 @@ _FRAMED, _COPIED, _INDEXED = _mode("FRAMED"), _mode("COPIED"), _mode("INDEXED")
 
 RENDER = (
     Parameter("camera", "__global const Camera*"),
-    # a lens's or a panorama's rays: per packet, the lanes' x, y, z and in-field flags (kernels/camera.h)
+    # a lens's or a panorama's rays: per packet, the lanes' coordinates and in-field flags (kernels/camera.h)
     Parameter("camera_directions", "__global const real*", (_camera_table,)),
     # the window (col0, row0, cols, rows) and the tiles: 1 << tile_shift pixels square, tiles_x a row
     Parameter("col0", "const int"),

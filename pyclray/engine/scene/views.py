@@ -76,19 +76,36 @@ def view_tile_lists(prepared: PreparedScene, kind, scene: Scene):
                                         -(-height // tiles.TILE))
 
 
-def packet_table(directions: np.ndarray, valid: np.ndarray, lanes: int, real) -> np.ndarray:
-    """A camera's table of rays (kernels/camera.h: camera_table_rays) for packets of this many lanes:
-    directions (height, width, 3) and valid (height, width) in packet order, each packet's lanes'
-    x, then y, z and in-field flags (1 or 0) contiguous; pixels past the image's edge out of field."""
+def table_format(directions: np.ndarray, valid: np.ndarray) -> str:
+    """"plane" where every ray in the field is ahead of the eye's plane (a lens of a perspective
+    camera: each ray as its image-plane coordinates, two numbers a pixel), else "sphere" (unit
+    directions, three: a fisheye beyond 90 degrees, a panorama)."""
+    return "plane" if np.all(directions[..., 2][valid] > 0) else "sphere"
+
+
+def packet_table(directions: np.ndarray, valid: np.ndarray, lanes: int, real, form: str) -> np.ndarray:
+    """A camera's table of rays (kernels/camera.h: camera_table_rays) for packets of this many lanes,
+    in packet order (a packet's lanes contiguous, lane l = row * columns + column): per packet, the
+    lanes' x / z, then y / z ("plane"; the kernel normalizes (x / z, y / z, 1) as a pinhole's ray),
+    or x, y, z ("sphere"), then one number whose bit l says lane l is in the field (pixels past the
+    image's edge are not). Each coordinate is the float64 ray's, rounded once."""
     columns, rows = packet_shape(lanes)
     height, width = valid.shape
     packets_x, packets_y = -(-width // columns), -(-height // rows)
-    padded = np.zeros((packets_y * rows, packets_x * columns, 4))
-    padded[..., 2] = 1.0  # a ray (forward) for the padding's lanes, which are misses
-    padded[:height, :width, :3] = directions
-    padded[:height, :width, 3] = valid
-    # (py, row, px, column, channel) -> (py, px, channel, row, column): a packet's lane l = row * columns + column
-    table = padded.reshape(packets_y, rows, packets_x, columns, 4).transpose(0, 2, 4, 1, 3)
+    padded = np.zeros((packets_y * rows, packets_x * columns, 3))
+    padded[..., 2] = 1.0  # a ray (forward) for the padding's lanes and the misses
+    inside = np.zeros(padded.shape[:2], bool)
+    padded[:height, :width] = np.where(valid[..., None], directions, [0.0, 0.0, 1.0])
+    inside[:height, :width] = valid
+    if form == "plane":
+        padded = padded[..., :2] / padded[..., 2:]
+    count = padded.shape[-1]
+    # (py, row, px, column, channel) -> (py, px, channel, row, column)
+    values = padded.reshape(packets_y, rows, packets_x, columns, count).transpose(0, 2, 4, 1, 3).reshape(
+        packets_y, packets_x, count * lanes)
+    bits = (inside.reshape(packets_y, rows, packets_x, columns).transpose(0, 2, 1, 3).reshape(packets_y, packets_x, lanes)
+            * (1 << np.arange(lanes))).sum(axis=-1)
+    table = np.concatenate([values, bits[..., None].astype(np.float64)], axis=-1)
     return np.ascontiguousarray(table, dtype=real).reshape(-1)
 
 
@@ -153,6 +170,7 @@ class ViewInputs:
         # a lens's or panorama's rays (kernels/camera.h: camera_table_rays): the camera's float64 table,
         # and its device buffer in the packet order of a lane count (directions_for)
         self.table = scene.camera.frame_directions(width, height)
+        self.table_format = None if self.table is None else table_format(*self.table)
         self.directions = None
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
@@ -171,7 +189,7 @@ class ViewInputs:
             return None
         if self.directions is None or self.directions_lanes != lanes:
             ctx, precision = self._made[0], self._made[-1]
-            self.directions = input_buffer(ctx, packet_table(*self.table, lanes, REAL[precision]))
+            self.directions = input_buffer(ctx, packet_table(*self.table, lanes, REAL[precision], self.table_format))
             self.directions_lanes = lanes
         return self.directions
 
