@@ -342,3 +342,30 @@ def test_the_views_controls_orbit_every_model_and_copy_it_as_toml(camera):
     loaded = camera_from_table(tomllib.loads(camera_toml(moved))["camera"])
     assert type(loaded) is type(camera) and np.abs(loaded.pose() - moved.pose()).max() < 1e-11
     assert np.abs(loaded.rays(WIDTH, HEIGHT)[1] - moved.rays(WIDTH, HEIGHT)[1]).max() < 1e-11
+
+
+@pytest.mark.parametrize("camera", [
+    pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT, distortion=[-0.4, 0.0, 0.0, 0.0]),
+    pyclray.Camera.from_intrinsics(K, looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
+                                   distortion=[0.3, 0.05, 0.002, -0.001, 0.0, 0.1, 0.0, 0.0]),
+    pyclray.Fisheye.from_intrinsics(np.array([[25.0, 0.0, 47.5], [0.0, 25.0, 35.5], [0.0, 0.0, 1.0]]),
+                                    looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT, fov=190.0),
+    pyclray.Equirectangular((0.5, 0.3, 0.0), (0.0, 0.0, 4.0)),
+], ids=["barrel", "pincushion", "fisheye", "equirectangular"])
+def test_tile_lists_of_a_lens_cull_nothing_a_ray_meets(camera):
+    """A lens's tiles are culled by the rectangles their rays span on the image plane (a tile with a
+    ray behind the eye's plane visits everything): the images through tile lists and through the
+    BVH are the same, bit for bit, with many small shapes (so that culling leaves most out)."""
+    rng = np.random.default_rng(3)
+    spheres = pyclray.Spheres(rng.uniform(-5, 5, (400, 3)), rng.uniform(0.05, 0.3, 400))
+    scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed() + (spheres,))
+    tiles = pyclray.render(scene, aovs=("depth", "id"), acceleration="tiles")
+    bvh = pyclray.render(scene, aovs=("depth", "id"), acceleration="bvh")
+    assert np.array_equal(tiles["id"], bvh["id"]) and np.array_equal(tiles["depth"], bvh["depth"])
+    assert (tiles["id"] >= 4).sum() > 100  # the small spheres are seen
+    from pyclray.engine.scene import views
+
+    with pyclray.prepare(scene) as tracer:  # and the lists do leave most of them out of most tiles
+        kind = tracer.prepared.kinds["spheres"]
+        start, _ = views.view_tile_lists(tracer.prepared, kind, scene)
+        assert start[-1] < 0.75 * kind.count * (len(start) - 1)
