@@ -19,9 +19,10 @@ class Frame(dict):
 
     A render's frame also holds its camera as the vision tools take it: ``intrinsics`` (K, 3x3, in
     pixels of these images: a window's principal point is shifted by its corner) and ``pose`` (4x4
-    camera-to-world), OpenCV's convention (x right, y down, z forward), so that
-    pose @ [depth * normalize(K^-1 [i + 0.5, j + 0.5, 1]), 1] is pixel (j, i)'s hit point; None
-    for a cast's.
+    camera-to-world), OpenCV's convention (x right, y down, z forward; pixel centres at integer
+    coordinates), so that pose @ [depth * normalize(K^-1 [i, j, 1]), 1] is pixel (j, i)'s hit point
+    (a pinhole's; a lens's K comes with its distortion, the camera's); None for a cast's, and K None
+    for a camera model without one (orthographic, equirectangular).
     """
 
     def __init__(self, arrays, *, precision: str, device: str, intrinsics=None, pose=None, view=None):

@@ -440,7 +440,8 @@ class Camera(CameraModel):
         Mitsuba's pixels are square, only fx = fy (a SceneError otherwise): fov = 2 atan(width / (2 fx))
         along x, and the principal point through principal_point_offset_x/_y, which Mitsuba adds to
         the film position in [0, 1]^2 before projecting (perspective.cpp's sample_ray): the optical
-        axis meets the film at 0.5 - offset, so offset_x = 0.5 - cx / width and offset_y = 0.5 - cy / height."""
+        axis meets the film at 0.5 - offset, so offset_x = 0.5 - c_x / width and offset_y = 0.5 - c_y / height,
+        c the principal point from the film's corner (ImagePlane's: K's cx + 0.5 in OpenCV's convention)."""
         if self.distortion is not None:
             raise SceneError("Mitsuba 3's perspective sensor has no lens distortion, so this camera cannot be checked "
                              "against Mitsuba or exported for it", key="distortion")
