@@ -215,12 +215,14 @@ def needs_fp64():
         pytest.skip("device lacks cl_khr_fp64")
 
 
-@pytest.mark.parametrize("precision", ["fp32", "fp64"])
-def test_equirectangular_renders_the_oracles_panorama(precision):
+@pytest.mark.parametrize("precision,lanes", [("fp32", None), ("fp64", None), ("fp32", "1")])
+def test_equirectangular_renders_the_oracles_panorama(precision, lanes, monkeypatch):
     """The whole sphere of directions in the closed room: every pixel hits; the images meet the
     oracle of the model's rays; row 0 looks up, the centre column ahead, longitude grows rightwards."""
     if precision == "fp64":
         needs_fp64()
+    if lanes:
+        monkeypatch.setenv("PYCLRAY_LANES", lanes)
     camera = pyclray.Equirectangular((0.5, 0.3, 0.0), (0.0, 0.3, 4.0))
     scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT // 2 * 2), enclosed())
     frame = pyclray.render(scene, aovs=("depth", "normal", "id"), precision=precision)
@@ -369,3 +371,34 @@ def test_tile_lists_of_a_lens_cull_nothing_a_ray_meets(camera):
         kind = tracer.prepared.kinds["spheres"]
         start, _ = views.view_tile_lists(tracer.prepared, kind, scene)
         assert start[-1] < 0.75 * kind.count * (len(start) - 1)
+
+
+def test_pyclray_check_passes_an_orthographic_scene_against_mitsubas_sensor(tmp_path, capsys):
+    """pyclray check: the same rays as Mitsuba's orthographic sensor (its ray origins on the plane
+    through the eye, to float32 rounding), the images and the rays within the error model."""
+    from pyclray.apps import cli
+
+    path = tmp_path / "ortho.toml"
+    path.write_text('[camera]\nmodel = "orthographic"\neye = [0.5, 3.0, 6.0]\ntarget = [0.0, 0.5, 0.0]\nheight = 4.0\n'
+                    "[image]\nwidth = 48\nheight = 36\n"
+                    '[[shapes]]\ntype = "sphere"\ncenter = [0.0, 0.5, 0.0]\nradius = 1.0\n'
+                    '[[shapes]]\ntype = "box"\ncenter = [1.5, 0.0, 0.5]\nsize = [1.0, 1.0, 1.0]\n'
+                    '[[shapes]]\ntype = "plane"\nnormal = [0.0, 1.0, 0.0]\noffset = 0.5\n')
+    status = cli.main(["check", str(path), "--rays", "256"])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "passed: within the tolerance" in out and "both hit the same shape" in out
+    assert "shaded: not compared (the orthographic camera renders no shaded image)" in out
+
+
+def test_a_distorted_camera_cannot_be_checked_against_mitsuba_and_says_why(tmp_path, capsys):
+    from pyclray.apps import cli
+
+    path = tmp_path / "lens.toml"
+    path.write_text("[camera]\nintrinsics = [[70.0, 0.0, 47.5], [0.0, 70.0, 35.5], [0.0, 0.0, 1.0]]\n"
+                    "pose = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\ndistortion = [-0.3, 0.0, 0.0, 0.0]\n"
+                    "[image]\nwidth = 96\nheight = 72\n"
+                    '[[shapes]]\ntype = "sphere"\ncenter = [0.0, 0.0, 4.0]\nradius = 1.0\n')
+    assert cli.main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "key 'distortion'" in err[0] and "no lens distortion" in err[0]
