@@ -58,8 +58,8 @@ class Scene:
                         raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
             object.__setattr__(self, "shapes", CheckedShapes(shapes))
         if not isinstance(self.camera, CameraModel):
-            models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())
-            raise SceneError(f"expected a camera ({models}), got {type(self.camera).__name__}", table="[camera]",
+            models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+            raise SceneError(f"expected a {models}, got {type(self.camera).__name__}", table="[camera]",
                              file=self.source)
         # K is in pixels of this scene's image (a camera from intrinsics, a fisheye)
         if getattr(self.camera, "K", None) is not None and self.camera.size is None:

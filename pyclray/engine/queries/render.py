@@ -145,6 +145,6 @@ def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_grou
 def with_camera(scene: Scene, camera) -> Scene:
     """The scene seen from another camera (its shapes tuple kept: the prepared scene serves it)."""
     if not isinstance(camera, CameraModel):
-        models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())
-        raise RequestError(f"camera: expected a camera ({models}), got {type(camera).__name__}")
+        models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+        raise RequestError(f"camera: expected a {models}, got {type(camera).__name__}")
     return replace(scene, camera=camera)

@@ -68,11 +68,10 @@ def view_tile_lists(prepared: PreparedScene, kind, scene: Scene):
     table = camera.frame_directions(width, height)
     if table is None:
         return prepared.tile_lists(kind, camera.eye, camera.basis(), camera.image_plane(width, height), width, height)
-    cached = camera.__dict__.get("_tile_rects")
-    if cached is None or cached[0] != (width, height):
-        cached = ((width, height), tiles.table_rects(*table))
-        object.__setattr__(camera, "_tile_rects", cached)  # (a frozen camera keeps what its rays give, as its table)
-    return prepared.tile_lists_in_rects(kind, camera.eye, camera.basis(), cached[1], -(-width // tiles.TILE),
+    rects = table.derived.get("tile_rects")
+    if rects is None:  # (kept with the table: every view of the lens at this size shares it)
+        rects = table.derived["tile_rects"] = tiles.table_rects(*table)
+    return prepared.tile_lists_in_rects(kind, camera.eye, camera.basis(), rects, -(-width // tiles.TILE),
                                         -(-height // tiles.TILE))
 
 

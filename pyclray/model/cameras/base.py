@@ -45,6 +45,27 @@ class MitsubaSensor:
     look_at: LookAt | None = None
 
 
+class RayTable:
+    """A camera's rays where they are not a pinhole's image plane (CameraModel.frame_directions):
+    ``directions`` (height, width, 3) unit float64 in the camera's frame (u left, v up, w forward),
+    ``valid`` (height, width): the pixels in the model's field; both read-only. It unpacks as
+    (directions, valid). ``derived`` keeps what the engine makes of it once (its tiles' bounds), for
+    as long as the table is kept."""
+
+    __slots__ = ("directions", "valid", "derived")
+
+    def __init__(self, directions: np.ndarray, valid: np.ndarray):
+        directions.setflags(write=False)
+        valid.setflags(write=False)
+        self.directions, self.valid, self.derived = directions, valid, {}
+
+    def __iter__(self):
+        return iter((self.directions, self.valid))
+
+    def __getitem__(self, index):
+        return (self.directions, self.valid)[index]
+
+
 class CameraModel(ABC):
     """A camera model: a class per model, registered in pyclray.model.cameras.CAMERAS under its
     ``model`` name, with one OpenCL function that makes a pixel's ray from its packed struct.

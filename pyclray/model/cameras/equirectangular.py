@@ -3,11 +3,13 @@ longitude, row j a latitude; the rays in float64 (kernels/camera.h reads them as
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
 from ..errors import SceneError, _shown, no_unknown_keys, number, vector3
-from .base import CameraModel
+from .base import CameraModel, RayTable
+from .lens import TABLES_KEPT
 from .perspective import CAMERA, ImagePlane, look_at_rows, packed_frame
 
 TABLE_KEYS = ("eye", "target", "up", "longitude", "latitude")
@@ -74,23 +76,33 @@ class Equirectangular(CameraModel):
             object.__setattr__(self, "_basis", cached)
         return cached
 
-    def frame_directions(self, width: int, height: int, window=None):
-        """Each pixel's unit direction in the camera's frame (u left, v up, w forward), all valid."""
-        col0, row0, columns, rows = (0, 0, width, height) if window is None else window
-        lon0, lon1 = np.radians(self.longitude)
-        lat0, lat1 = np.radians(self.latitude)
-        lon = lon0 + (np.arange(col0, col0 + columns) + 0.5) / width * (lon1 - lon0)
-        lat = lat1 - (np.arange(row0, row0 + rows) + 0.5) / height * (lat1 - lat0)
-        cos_lat = np.cos(lat)[:, None]
-        d = np.stack(np.broadcast_arrays(-cos_lat * np.sin(lon)[None, :], np.sin(lat)[:, None],
-                                         cos_lat * np.cos(lon)[None, :]), axis=-1)
-        return d, np.ones(d.shape[:2], bool)
+    def frame_directions(self, width: int, height: int):
+        """Each pixel's unit direction in the camera's frame (u left, v up, w forward), all in the
+        field (a RayTable), once per ranges and size."""
+        return panorama_table(self.longitude, self.latitude, width, height)
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
 
     def rays(self, width: int, height: int, window=None):
-        d, _ = self.frame_directions(width, height, window)
+        d, _ = self.frame_directions(width, height)
+        if window is not None:
+            col0, row0, columns, rows = window
+            d = d[row0:row0 + rows, col0:col0 + columns]
         d = d @ self.basis()
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
         return np.broadcast_to(np.array(self.eye), d.shape), d
+
+
+@lru_cache(maxsize=TABLES_KEPT)
+def panorama_table(longitude: tuple, latitude: tuple, width: int, height: int) -> RayTable:
+    """Pixel (row j, column i) looks at longitude lon_min + (i + 0.5) / width (lon_max - lon_min)
+    (to the right of w) and latitude lat_max - (j + 0.5) / height (lat_max - lat_min) (toward v)."""
+    lon0, lon1 = np.radians(longitude)
+    lat0, lat1 = np.radians(latitude)
+    lon = lon0 + (np.arange(width) + 0.5) / width * (lon1 - lon0)
+    lat = lat1 - (np.arange(height) + 0.5) / height * (lat1 - lat0)
+    cos_lat = np.cos(lat)[:, None]
+    d = np.stack(np.broadcast_arrays(-cos_lat * np.sin(lon)[None, :], np.sin(lat)[:, None], cos_lat * np.cos(lon)[None, :]),
+                 axis=-1)
+    return RayTable(np.ascontiguousarray(d), np.ones((height, width), bool))

@@ -92,7 +92,8 @@ class Fisheye(CameraModel):
 
     @property
     def fixed_keys(self) -> tuple[str, ...]:
-        return ("K", "rotation", "size", "distortion", "fov")
+        """An animation keys the eye, the coefficients and the field, not K or the rotation."""
+        return ("K", "rotation", "size")
 
     def basis(self) -> np.ndarray:
         R = np.array(self.rotation)
@@ -109,21 +110,11 @@ class Fisheye(CameraModel):
 
     def frame_directions(self, width: int, height: int):
         """Each pixel's unit direction in the camera's frame and whether the lens reaches it
-        (lens.undistort_fisheye, float64), once per camera and size."""
-        cached = self.__dict__.get("_frame_directions")
-        if cached is None or cached[0] != (width, height):
-            K = self.intrinsics(width, height)
-            xd = (np.arange(width, dtype=np.float64) - K[0, 2]) / K[0, 0]
-            yd = (np.arange(height, dtype=np.float64) - K[1, 2]) / K[1, 1]
-            xd, yd = np.broadcast_to(xd[None, :], (height, width)), np.broadcast_to(yd[:, None], (height, width))
-            max_theta = math.pi if self.fov is None else math.radians(self.fov) / 2
-            d, valid = lens.undistort_fisheye(self.distortion, xd, yd, max_theta)
-            d = np.where(valid[..., None], d, [0.0, 0.0, 1.0]) * [-1.0, -1.0, 1.0]  # OpenCV's x, y: -u, -v
-            d.setflags(write=False)
-            valid.setflags(write=False)
-            cached = ((width, height), d, valid)
-            object.__setattr__(self, "_frame_directions", cached)
-        return cached[1], cached[2]
+        (lens.fisheye_table, float64), solved once per lens and image size."""
+        K = self.intrinsics(width, height)
+        max_theta = math.pi if self.fov is None else math.radians(self.fov) / 2
+        return lens.fisheye_table((float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])), self.distortion,
+                                  max_theta, width, height)
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """The kernel's Camera struct: the frame (the rays come from frame_directions' table)."""

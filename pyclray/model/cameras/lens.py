@@ -15,8 +15,11 @@ rational term's denominator is not), found on a fine grid and refined by bisecti
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
+
+from .base import RayTable
 
 # The radial maps are scanned for their fold up to this radius (normalized image coordinates, about
 # 89.9 degrees off the axis for a pinhole) or angle (a fisheye's, pi)
@@ -31,6 +34,9 @@ PINHOLE_SCAN_FROM = 1e-4
 SOLVED = 1e-12
 BISECTIONS = 64  # halvings of a bracket in [0, 1e3] to float64's resolution: the most steps a solve takes
 NEWTON_STEPS = 8  # the full (tangential) model's steps from the radial solution: quadratic convergence
+# Solved tables kept by value (intrinsics, coefficients, size): a moving camera's frames and a
+# handle's views of one lens share theirs; a 1024x768 table is 19 MB
+TABLES_KEPT = 4
 
 
 def radial_pinhole(coefficients, r2):
@@ -195,3 +201,35 @@ def undistort_fisheye(coefficients, xd, yd, max_theta):
         ux = np.where(rd > 0, xd / np.where(rd > 0, rd, 1.0), 0.0)
         uy = np.where(rd > 0, yd / np.where(rd > 0, rd, 1.0), 0.0)
     return np.stack([sine * ux, sine * uy, np.cos(theta)], axis=-1), valid
+
+
+def _pixel_coordinates(intrinsics, width: int, height: int):
+    """(x_d, y_d): each pixel centre's K^-1 [i, j, 1] (OpenCV's convention), (height, width) float64."""
+    fx, fy, cx, cy = intrinsics
+    xd = (np.arange(width, dtype=np.float64) - cx) / fx
+    yd = (np.arange(height, dtype=np.float64) - cy) / fy
+    return np.broadcast_to(xd[None, :], (height, width)), np.broadcast_to(yd[:, None], (height, width))
+
+
+
+
+@lru_cache(maxsize=TABLES_KEPT)
+def pinhole_table(intrinsics: tuple, coefficients: tuple, width: int, height: int):
+    """The RayTable of a perspective camera with OpenCV's distortion: each pixel's unit direction in
+    the camera's frame (u left, v up, w forward: OpenCV's x and y negated), float64, and whether
+    the lens reaches the pixel (elsewhere the pinhole's ray, a miss)."""
+    xd, yd = _pixel_coordinates(intrinsics, width, height)
+    x, y, valid = undistort_pinhole(coefficients, xd, yd)
+    x, y = np.where(valid, x, xd), np.where(valid, y, yd)
+    d = np.stack([-x, -y, np.ones_like(x)], axis=-1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return RayTable(d, valid)
+
+
+@lru_cache(maxsize=TABLES_KEPT)
+def fisheye_table(intrinsics: tuple, coefficients: tuple, max_theta: float, width: int, height: int):
+    """The RayTable of OpenCV's fisheye camera, as pinhole_table's (misses: the axis)."""
+    xd, yd = _pixel_coordinates(intrinsics, width, height)
+    d, valid = undistort_fisheye(coefficients, xd, yd, max_theta)
+    d = np.where(valid[..., None], d, [0.0, 0.0, 1.0]) * [-1.0, -1.0, 1.0]
+    return RayTable(d, valid)

@@ -311,7 +311,10 @@ class Camera(CameraModel):
     def fixed_keys(self) -> tuple[str, ...]:
         """The fields an animation cannot key (pyclray.model.animation): the other kind's, and the
         size. A camera from intrinsics animates its eye (the pose's translation) only."""
-        return INTRINSICS_KEYS if self.K is None else LOOK_AT_KEYS + INTRINSICS_KEYS
+        if self.K is None:
+            return INTRINSICS_KEYS
+        # a lens's coefficients may be keyed (each frame's lens solved); a pinhole does not become a lens
+        return LOOK_AT_KEYS + ("K", "rotation", "size") + (("distortion",) if self.distortion is None else ())
 
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64 (read-only:
@@ -411,27 +414,14 @@ class Camera(CameraModel):
 
     def frame_directions(self, width: int, height: int):
         """With a distortion, each pixel's undistorted unit direction in the camera's frame and
-        whether the lens reaches it (lens.undistort_pinhole: Newton on OpenCV's forward model in
-        float64), computed once per camera and size (kept on the camera, which is frozen); None
-        for a pinhole."""
+        whether the lens reaches it (lens.pinhole_table: Newton on OpenCV's forward model in
+        float64), solved once per lens and image size (kept by value: a moving camera's frames, or a
+        handle's views, share it); None for a pinhole."""
         if self.distortion is None:
             return None
-        cached = self.__dict__.get("_frame_directions")
-        if cached is None or cached[0] != (width, height):
-            K = self.intrinsics(width, height)
-            xd = (np.arange(width, dtype=np.float64) - K[0, 2]) / K[0, 0]
-            yd = (np.arange(height, dtype=np.float64) - K[1, 2]) / K[1, 1]
-            xd, yd = np.broadcast_to(xd[None, :], (height, width)), np.broadcast_to(yd[:, None], (height, width))
-            x, y, valid = lens.undistort_pinhole(self.distortion, xd, yd)
-            x, y = np.where(valid, x, xd), np.where(valid, y, yd)  # a miss keeps its pinhole ray (any unit ray)
-            # OpenCV's x right, y down: the frame's u (left) and v (up) are their negatives
-            d = np.stack([-x, -y, np.ones_like(x)], axis=-1)
-            d /= np.linalg.norm(d, axis=-1, keepdims=True)
-            d.setflags(write=False)
-            valid.setflags(write=False)
-            cached = ((width, height), d, valid)
-            object.__setattr__(self, "_frame_directions", cached)
-        return cached[1], cached[2]
+        K = self.intrinsics(width, height)
+        return lens.pinhole_table((float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])), self.distortion,
+                                  width, height)
 
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """Mitsuba's perspective sensor of the same rays. A look-at camera is its look_at with its
