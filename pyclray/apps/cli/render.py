@@ -61,7 +61,7 @@ def _camera(scene):
     return None if K is None else (K, scene.camera.pose())  # (a model without K: no camera in the files)
 
 
-def _written(kind: str, aovs) -> str:
+def _written(kind: str, aovs, camera=True) -> str:
     """What the files hold, for the last line: the EXR's channels, the .npz's arrays, the AOV a .png shows."""
     from ...io import exr
     from ...model.aovs import empty_images
@@ -69,7 +69,7 @@ def _written(kind: str, aovs) -> str:
     if kind == "exr":
         return ", ".join(exr.exr_channel_arrays(empty_images(aovs)))
     if kind == "npz":
-        return ", ".join((*aovs, "K", "pose"))
+        return ", ".join((*aovs, "K", "pose") if camera else aovs)  # (no camera: a model without K)
     return f"the {aovs[0]} preview"
 
 
@@ -114,7 +114,7 @@ def run(args) -> int:
     print(
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
-        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs)}]"
+        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs, _camera(scene) is not None)}]"
     )
     return 0
 
@@ -152,7 +152,7 @@ def _render_on_cluster(args, scene, out, aovs, kind) -> int:
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
         f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} "
-        f"[{_written(kind, aovs)}]"
+        f"[{_written(kind, aovs, _camera(scene) is not None)}]"
     )
     return 0
 

@@ -310,7 +310,7 @@ class Camera(CameraModel):
     @property
     def fixed_keys(self) -> tuple[str, ...]:
         """The fields an animation cannot key (pyclray.model.animation): the other kind's, and the
-        size. A camera from intrinsics animates its eye (the pose's translation) only."""
+        size. A camera from intrinsics animates its eye (the pose's translation) and its lens's coefficients."""
         if self.K is None:
             return INTRINSICS_KEYS
         # a lens's coefficients may be keyed (each frame's lens solved); a pinhole does not become a lens
