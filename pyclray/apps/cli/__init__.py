@@ -31,6 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
         import_module(f"{__package__}.{name}").add_command(commands)
+    for command in commands.choices.values():  # every command's help ends with the same exit statuses
+        command.epilog = EXIT_STATUS_HELP
     return parser
 
 
