@@ -402,3 +402,19 @@ def test_a_distorted_camera_cannot_be_checked_against_mitsuba_and_says_why(tmp_p
     assert cli.main(["check", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "key 'distortion'" in err[0] and "no lens distortion" in err[0]
+
+
+def test_files_of_a_model_without_k_hold_its_pose(tmp_path):
+    """An orthographic or panorama render's .npz and EXR hold the pose (no K: the model has none)."""
+    from pyclray.apps import cli
+
+    path = tmp_path / "pano.toml"
+    path.write_text('[camera]\nmodel = "equirectangular"\neye = [0.0, 1.0, 0.0]\n[image]\nwidth = 32\nheight = 16\n'
+                    '[[shapes]]\ntype = "sphere"\ncenter = [0.0, 1.0, -4.0]\nradius = 1.0\n')
+    camera = pyclray.load_scene(path).camera
+    assert cli.main(["render", str(path), "-o", str(tmp_path / "p.npz")]) == 0
+    with np.load(tmp_path / "p.npz") as data:
+        assert "K" not in data.files and np.array_equal(data["pose"], camera.pose())
+    assert cli.main(["render", str(path), "-o", str(tmp_path / "p.exr")]) == 0
+    _, header = pyclray.read_exr(tmp_path / "p.exr", header=True)
+    assert "intrinsics" not in header and np.array_equal(header["pose"], camera.pose())
