@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SceneError, _shown, integer, no_unknown_keys, number, text
+from ..errors import SceneError, _shown, integer, no_unknown_keys, number, text, vector3
 from . import lens
 from .base import MAX_IMAGE_SIDE, CameraModel
 from .perspective import (CAMERA, PIXEL_ORIGINS, ImagePlane, _intrinsics, _matrix, _nested, _rotation, opencv_pose,
@@ -42,7 +42,7 @@ class Fisheye(CameraModel):
     fov: float | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "eye", tuple(float(c) for c in self.eye))
+        object.__setattr__(self, "eye", vector3("eye", self.eye))
         object.__setattr__(self, "K", _nested(_intrinsics("intrinsics", self.K)))
         object.__setattr__(self, "rotation", _nested(_rotation("pose", _matrix("pose", self.rotation, 3, 3))))
         object.__setattr__(self, "distortion", fisheye_coefficients(self.distortion))
