@@ -418,3 +418,37 @@ def test_files_of_a_model_without_k_hold_its_pose(tmp_path):
     assert cli.main(["render", str(path), "-o", str(tmp_path / "p.exr")]) == 0
     _, header = pyclray.read_exr(tmp_path / "p.exr", header=True)
     assert "intrinsics" not in header and np.array_equal(header["pose"], camera.pose())
+
+
+# -- the inverse itself, over random lenses -------------------------------------------------------
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+coefficient = st.floats(-0.6, 0.6, allow_nan=False)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.tuples(coefficient, coefficient, st.floats(-0.01, 0.01), st.floats(-0.01, 0.01), coefficient,
+                 st.floats(0.0, 0.3), st.floats(0.0, 0.1), st.floats(0.0, 0.05)))
+def test_the_inverse_maps_back_and_misses_only_what_the_lens_cannot_reach(coefficients):
+    """For any lens of OpenCV's radial-tangential model: every pixel kept maps back onto itself
+    through cv2.projectPoints (within 1e-7 px), inside the fold; no pixel beyond what the radial map
+    reaches before its fold (plus the tangential terms' reach) is kept, and all well inside it are."""
+    j, i = np.mgrid[0:HEIGHT:5, 0:WIDTH:5].astype(np.float64)
+    xd, yd = (i - K[0, 2]) / K[0, 0], (j - K[1, 2]) / K[1, 1]
+    x, y, valid = lens.undistort_pinhole(coefficients, xd, yd)
+    if valid.any():
+        points = np.stack([x[valid], y[valid], np.ones(valid.sum())], axis=-1)
+        uv, _ = cv2.projectPoints(points.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.array(coefficients))
+        assert np.abs(uv.reshape(-1, 2) - np.stack([i[valid], j[valid]], axis=-1)).max() < 1e-7
+        assert np.all(np.hypot(x[valid], y[valid]) < lens.pinhole_fold(coefficients))
+    fold = lens.pinhole_fold(coefficients)
+    r = np.linspace(0, min(fold, 1e3), 20001)
+    factor, _, _ = lens.radial_pinhole(coefficients, r * r)
+    reach = (r * factor).max()
+    rd = np.hypot(xd, yd)
+    # the tangential terms move a pixel by at most ~3 |p| r^2: beyond that margin of the radial reach, all misses
+    margin = 3 * (abs(coefficients[2]) + abs(coefficients[3])) * min(fold, 1e3) ** 2
+    assert not np.any(valid & (rd > reach * (1 + 1e-9) + margin))
+    if margin < 1e-3:  # and well inside the radial reach, every pixel is kept
+        assert np.all(valid[rd < 0.5 * reach])
