@@ -12,6 +12,8 @@ import math
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import pyclray
 from pyclray.model.cameras import lens
@@ -421,9 +423,6 @@ def test_files_of_a_model_without_k_hold_its_pose(tmp_path):
 
 
 # -- the inverse itself, over random lenses -------------------------------------------------------
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 coefficient = st.floats(-0.6, 0.6, allow_nan=False)
 
 
