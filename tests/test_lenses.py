@@ -7,6 +7,7 @@ the lens, and pixels the lens cannot reach are misses. The depth, normal and id 
 float64 oracle of the model's own rays within the error model (pyclray.reference.error_model)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -152,13 +153,15 @@ def test_fp32_distorted_renders_meet_opencv_and_the_oracle(name, lanes, offset, 
         pyclray.clear_cache()
 
 
-@pytest.mark.parametrize("precision", ["fp32", "fp64"])
-def test_a_190_degree_fisheye_reaches_behind_its_plane_and_no_further(precision):
+@pytest.mark.parametrize("precision,lanes", [("fp32", None), ("fp64", None), ("fp32", "1")])
+def test_a_190_degree_fisheye_reaches_behind_its_plane_and_no_further(precision, lanes, monkeypatch):
     """A circular 190-degree fisheye in the closed room: the pixels within the 95-degree circle hit
     (also the rim behind the camera's plane), the border misses, every hit projects within 1e-4 px
     (fp32 hit points: their float32 rounding, 1e-7 of ~6 units, is ~1e-5 px at f = 25)."""
     if precision == "fp64":
         needs_fp64()
+    if lanes:
+        monkeypatch.setenv("PYCLRAY_LANES", lanes)
     distortion = [0.02, -0.005, 0.001, -0.0002]
     fisheye_K = np.array([[25.0, 0.0, 47.5], [0.0, 25.0, 35.5], [0.0, 0.0, 1.0]])
     camera = pyclray.Fisheye.from_intrinsics(fisheye_K, looking_at((0.2, 0.1, 0.0), (0.0, 0.0, 4.0)), WIDTH, HEIGHT,
@@ -451,3 +454,24 @@ def test_the_inverse_maps_back_and_misses_only_what_the_lens_cannot_reach(coeffi
     assert not np.any(valid & (rd > reach * (1 + 1e-9) + margin))
     if margin < 1e-3:  # and well inside the radial reach, every pixel is kept
         assert np.all(valid[rd < 0.5 * reach])
+
+
+def test_a_moving_lens_camera_solves_its_lens_once(tmp_path):
+    """An animation keying a distorted camera's eye: every frame renders through the same lens,
+    whose table is solved once (kept by value) and each frame's images are its own view's."""
+    lens.pinhole_table.cache_clear()
+    pose = looking_at((0.5, 0.3, 0.0), (0.0, 0.0, 4.0))
+    cameras = [pyclray.Camera.from_intrinsics(K, pose_shifted(pose, 0.1 * k), WIDTH, HEIGHT, distortion=[-0.3, 0.0, 0.0, 0.0])
+               for k in range(4)]
+    scene = pyclray.Scene(cameras[0], pyclray.Image(WIDTH, HEIGHT), enclosed())
+    frames = list(pyclray.render_views(scene, cameras, aovs=("depth",)))
+    assert lens.pinhole_table.cache_info().misses == 1
+    for camera, frame in zip(cameras, frames):
+        alone = pyclray.render(dataclasses.replace(scene, camera=camera), aovs=("depth",))
+        assert np.array_equal(frame["depth"], alone["depth"])
+
+
+def pose_shifted(pose, dx):
+    shifted = pose.copy()
+    shifted[0, 3] += dx
+    return shifted
