@@ -274,6 +274,7 @@ def test_orthographic_renders_the_oracles_parallel_rays():
     ({"model": "equirectangular", "eye": [0, 0, 1], "latitude": [-100.0, 90.0]}, "latitude", "-90 <= min"),
     ({"model": "equirectangular", "eye": [0, 0, 1], "longitude": [10.0, 0.0]}, "longitude", "min < max"),
     ({"model": "equirectangular", "eye": [0, 0, 1], "fov": 90.0}, "fov", "unknown key"),
+    ({"eye": [0, 0, 1], "target": [0, 0, 0], "distortion": [-0.3, 0, 0, 0]}, "distortion", "intrinsics and a pose"),
 ])
 def test_bad_keys_and_impossible_lenses_are_one_line_naming_the_key(table, key, part):
     with pytest.raises(pyclray.SceneError) as caught:

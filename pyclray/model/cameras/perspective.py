@@ -296,6 +296,10 @@ class Camera(CameraModel):
             no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target"))  # fov: 45 by default, as Camera(...)
             return cls(**table)
         no_unknown_keys(table, TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS + TABLE_INTRINSICS_OPTIONS)
+        if not any(key in table for key in TABLE_INTRINSICS_KEYS):  # a look-at with an option of intrinsics
+            key = next(key for key in TABLE_INTRINSICS_OPTIONS if key in table)
+            raise SceneError("only a camera from intrinsics and a pose has it (give intrinsics and pose for a lens, "
+                             "or leave it out)", key=key)
         for key in TABLE_LOOK_AT_KEYS:
             if key in table:
                 raise SceneError("a camera is given either by eye, target, up, fov, fov_axis or by intrinsics and pose, "
