@@ -8,6 +8,8 @@ not ``bounded`` (the plane) is visited in every tile.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-group size)
@@ -111,8 +113,6 @@ def table_rects(directions, valid, tile=TILE) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         sx, sy = cells[..., 0] / z, cells[..., 1] / z
         behind = np.any(z <= 1e-6 * np.linalg.norm(cells, axis=-1), axis=1)  # NaN compares False: padding is ignored
-    import warnings
-
     with warnings.catch_warnings():  # an all-NaN tile (out of the field) gives NaN min and max
         warnings.simplefilter("ignore", RuntimeWarning)
         rects = np.stack([np.nanmin(sx, axis=1), np.nanmax(sx, axis=1), np.nanmin(sy, axis=1), np.nanmax(sy, axis=1)], axis=1)
