@@ -184,3 +184,35 @@ def test_a_port_in_use_is_one_line_and_exit_2():
                                  "--no-browser"], capture_output=True, text=True, cwd=REPO, timeout=60)
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr == f"pyclray view: error: --port {port}: cannot listen on 127.0.0.1:{port}: address already in use\n"
+
+
+def test_a_render_loop_ended_by_an_error_closes_its_page_with_a_word(capsys):
+    """A page's render loop that an error ends (a bug of ours) is said on the terminal and closes its
+    connection, so that the page says the server stopped instead of waiting for images for ever;
+    a loop ended by its connection's close says nothing."""
+    from pyclray.apps.view.server import _ended
+
+    class Connection:
+        closed_with = None
+
+        async def close(self, code, reason):
+            self.closed_with = code
+
+    async def failing():
+        raise RuntimeError("a bug of ours")
+
+    async def closed():
+        raise ConnectionClosed(None, None)
+
+    async def scenario(loop_body):
+        connection = Connection()
+        task = asyncio.create_task(loop_body())
+        task.add_done_callback(lambda task: _ended(task, connection))
+        await asyncio.gather(task, return_exceptions=True)
+        await asyncio.sleep(0.01)  # the close it scheduled
+        return connection.closed_with
+
+    assert asyncio.run(scenario(failing)) == 1011
+    assert capsys.readouterr().err == "pyclray view: warning: a page's images stopped: RuntimeError: a bug of ours\n"
+    assert asyncio.run(scenario(closed)) is None
+    assert capsys.readouterr().err == ""
