@@ -118,10 +118,14 @@ class Session:
         self.changed()
 
     def _time(self, message):
+        # a time is bound by the animation's duration, not by LIMIT (a motion's bound: a clip may be
+        # longer than 100 s)
         animation = self.app.scene.animation
-        t = _number(message, "t") if animation is not None else None
-        if t is None or not 0 <= t <= animation.duration:
+        t = message.get("t")
+        if animation is None or isinstance(t, bool) or not isinstance(t, (int, float)) or \
+                not 0 <= t <= animation.duration:  # (NaN is not)
             raise Ignored
+        t = float(t)
         self.t = t
         self.changed(moving=True)  # a slider dragged or a clip played: coarse frames allowed
 
