@@ -229,6 +229,16 @@ def test_the_view_answers_every_step_of_a_scripted_session(browser, tmp_path):
         steps.run("fix", lambda: scene_file.write_text(saved))
         page.wait_for_function("document.getElementById('error').textContent === ''", timeout=STEP_TIMEOUT)
         assert page.locator("#error").is_hidden()
+
+        # beyond the issue's steps: r with the focus still on the image selector, as a user presses it
+        # after picking an image with the mouse (no image's name starts with r: it picks none there)
+        def reset_from_the_selector():
+            page.locator("#aov").focus()
+            page.keyboard.press("r")
+
+        steps.run("r, the selector focused", reset_from_the_selector)
+        assert close(camera_shown(page)["eye"], file_camera.eye)
+        assert page.locator("#aov").input_value() == "shaded"
         steps.times.append(("quick drags' latency, median and max (s)",
                             (round(sorted(latencies)[10] / 1000, 3), round(max(latencies) / 1000, 3))))
         print("\nthe sequence's steps (seconds to the step's image):", *steps.times, sep="\n  ")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import selectors
+import shutil
 import signal
 import subprocess
 import sys
@@ -58,11 +59,12 @@ def _line_within(stream, seconds: float) -> str:
 
 # -- the page in Debian's chromium (Playwright) ---------------------------------------------------
 
-CHROMIUM = "/usr/bin/chromium"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or "/usr/bin/chromium"
 
 
 def launch_browser(driver):
-    """Headless chromium (the machine's own: Playwright downloads none)."""
+    """Headless chromium, the machine's own (Debian's, or a real one on the PATH: Playwright
+    downloads none)."""
     return driver.chromium.launch(executable_path=CHROMIUM, args=["--headless=new", "--no-sandbox",
                                                                    "--disable-dev-shm-usage"])
 

@@ -37,7 +37,11 @@ export function attachControls(view, send, toggleHelp) {
   }, { passive: false });
   window.addEventListener("keydown", (event) => {
     if (event.ctrlKey || event.metaKey || event.altKey) return;
-    if (event.target instanceof HTMLSelectElement) return;  // typing in the selector picks an image
+    // typing in the image selector picks the image whose name starts with the key: such a key is the
+    // selector's. Any other (r: no image's name starts with it) is the view's, also with the focus
+    // left on the selector after picking an image with the mouse (the key once did nothing there)
+    if (event.target instanceof HTMLSelectElement && [...event.target.options].some(
+      (option) => option.text.toLowerCase().startsWith(event.key.toLowerCase()))) return;
     if (event.key === "r" || event.key === "R") send({ type: "reset" });
     else if (event.key === "h" || event.key === "H" || event.key === "?") toggleHelp();
   });
