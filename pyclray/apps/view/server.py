@@ -139,6 +139,8 @@ class App:
                 await loop
             except (asyncio.CancelledError, ConnectionClosed):
                 pass
+            except Exception:  # the loop's own error: said by _ended, which closed this connection
+                pass
 
     # -- live editing -------------------------------------------------------------------------------
     async def watch(self) -> None:
