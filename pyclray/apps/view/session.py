@@ -130,10 +130,10 @@ class Session:
         self.changed(moving=True)  # a slider dragged or a clip played: coarse frames allowed
 
     def _painted(self, message):
-        """The page painted (or failed to decode) image number `frame`: one frame less in flight.
-        The frame is a count, checked against the frames sent only: it once went through _number,
-        whose LIMIT (a motion's bound) refused every frame past the hundredth, so two frames stayed
-        in flight for ever and the view stopped answering (issue 42, items 12 and 13)."""
+        """The page is done with image number `frame` (painted, or failed to): one frame less in
+        flight. The frame is a count, checked against the frames sent only: through _number, whose
+        LIMIT bounds a motion, every acknowledgement past the hundredth image was refused, two
+        frames stayed in flight for ever and the view stopped answering any input."""
         frame = message.get("frame")
         if isinstance(frame, bool) or not isinstance(frame, int) or not 1 <= frame <= self.sent:
             raise Ignored
