@@ -278,6 +278,50 @@ def test_any_leading_shape_float32_input_and_the_handle():
     assert pyclray.count_hits(scene, np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
 
 
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_normals_and_barycentrics_of_every_hit(precision):
+    """all_hits' normal and barycentric: the first hit's are cast's (a mesh's triangle normal the same
+    bits, an analytic shape's within the error model's angle, barycentrics within rounding); every
+    hit's normal is unit and, for a solid, points out (against the ray where it enters, along it
+    where it leaves); barycentrics give the hit point on the triangle."""
+    need(precision)
+    scene = every_shape_scene()
+    origins, directions = random_rays(6, 2000)
+    aovs = ("depth", "normal", "id", "primitive", "barycentric", "position")
+    hits = pyclray.all_hits(scene, origins, directions, aovs=aovs, precision=precision)
+    real = np.float32 if precision == "fp32" else np.float64
+    assert hits["normal"].dtype == real and hits["normal"].shape == (len(hits["ray"]), 3)
+    assert hits["barycentric"].dtype == real and hits["barycentric"].shape == (len(hits["ray"]), 2)
+    cast = pyclray.cast(scene, origins, directions, aovs=("id", "normal", "primitive", "barycentric"), precision=precision)
+    has = np.diff(hits["offsets"]) > 0
+    first = hits["offsets"][:-1][has]
+    assert np.array_equal(cast["id"][has], hits["id"][first])
+    angle = error_model.angle_between(cast["normal"][has].astype(np.float64), hits["normal"][first].astype(np.float64))
+    assert np.median(angle) < 1e-5 and np.mean(angle < 1e-3) > 0.999
+    mesh = hits["id"][first] == 0  # the torus: the same float64 normal; its instances' differ in rounding
+    assert np.array_equal(cast["normal"][has][mesh], hits["normal"][first][mesh])
+    placed = np.isin(hits["id"][first], [1, 2])
+    assert np.allclose(cast["normal"][has][placed], hits["normal"][first][placed], rtol=0, atol=1e-6)
+    assert np.abs(cast["barycentric"][has].astype(np.float64) - hits["barycentric"][first]).max() < 1e-3
+    assert np.allclose(np.linalg.norm(hits["normal"].astype(np.float64), axis=1), 1.0, atol=1e-6)
+    # a sphere's (id 3) normals point against the ray where it enters, along it where it leaves
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    sphere = hits["id"] == 3
+    facing = np.einsum("ij,ij->i", hits["normal"][sphere].astype(np.float64), unit[hits["ray"][sphere]])
+    inside = np.linalg.norm(origins[hits["ray"][sphere]] - [3.0, 0.0, 0.0], axis=1) < 1.0
+    second = np.zeros(len(hits["ray"]), bool)
+    second[1:] = (hits["ray"][1:] == hits["ray"][:-1]) & (hits["id"][1:] == hits["id"][:-1])
+    leaving = second[sphere] | inside
+    assert (facing[leaving] > 0).all() and (facing[~leaving] < 0).all()
+    triangles = np.isin(hits["id"], [0, 1, 2])
+    for index in (0, 1, 2):
+        rows = hits["id"] == index
+        a, b, c = (x[hits["primitive"][rows]] for x in scene.shapes[index].corners())
+        u, v = (hits["barycentric"][rows, k, None].astype(np.float64) for k in (0, 1))
+        assert np.abs((1 - u - v) * a + u * b + v * c - hits["position"][rows]).max() < 1e-4
+    assert (hits["barycentric"][~triangles] == 0).all()
+
+
 def test_labels_of_hits():
     shapes = (pyclray.Sphere((0.0, 0.0, 0.0), 1.0, label=3), pyclray.Sphere((0.0, 0.0, -3.0), 1.0))
     scene = pyclray.Scene(camera(), pyclray.Image(8, 8), shapes)
@@ -335,7 +379,9 @@ def test_check_compares_all_hits_with_the_oracle_and_mitsuba(monkeypatch):
     closed mesh and solids, and fails where pyclray's hits are not the oracle's (one dropped)."""
     from pyclray.reference.validation import hits as hits_check
 
-    scene = pyclray.load_scene(pyclray.__path__[0] + "/../scenes/shapes.toml")
+    from conftest import SCENES
+
+    scene = pyclray.load_scene(SCENES / "shapes.toml")
     scene = pyclray.Scene(scene.camera, pyclray.Image(48, 36), scene.shapes + (pyclray.Mesh(*icosphere(1), translate=(0.0, 1.0, -2.0)),))
     result = hits_check.all_hits_check(scene, n_rays=200)
     assert not result.failures, result.failures
@@ -355,3 +401,74 @@ def test_check_compares_all_hits_with_the_oracle_and_mitsuba(monkeypatch):
 
     monkeypatch.setattr(api, "all_hits", dropping)
     assert hits_check.all_hits_check(scene, n_rays=200).failures
+
+
+def test_hits_at_the_same_distance_come_by_id_then_primitive():
+    """Two copies of a sphere and of a mesh (its arrays copied: two meshes) at the same place: each
+    distance twice, the lower id first, as the oracle orders them."""
+    v, f = icosphere(1)
+    shapes = (pyclray.Mesh(v + [0.0, 0.0, -4.0], f), pyclray.Sphere((0.0, 0.0, 0.0), 1.0), pyclray.Sphere((0.0, 0.0, 0.0), 1.0),
+              pyclray.Mesh(np.array(v) + [0.0, 0.0, -4.0], np.array(f)))
+    scene = pyclray.Scene(camera(), pyclray.Image(8, 8), shapes)
+    origins, directions = np.array([[0.1, 0.05, 5.0], [0.0, 0.0, 0.5]]), np.array([[0.0, 0.0, -1.0], [0.01, 0.0, -1.0]])
+    got = pyclray.all_hits(scene, origins, directions)
+    ref = oracle.all_hits(scene, origins, directions)
+    assert list(got["id"][:8]) == [1, 2, 1, 2, 0, 3, 0, 3]
+    assert all(np.array_equal(got[k], ref[k]) for k in ("offsets", "ray", "id", "primitive"))
+
+
+# -- Open3D's cases for these queries (its python/test/t/geometry/test_raycasting_scene.py), ported --------
+def unit_box_scene():
+    """The unit box [0, 1]^3 as 12 triangles: a ray along z through (0.5, 0.5) crosses each z face
+    exactly on the diagonal its two triangles share."""
+    v, f = cube()
+    return pyclray.Scene(camera(), pyclray.Image(8, 8), (pyclray.Mesh((v + 1.0) / 2.0, f),))
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_open3d_box_counts_and_lists(precision):
+    """From below the box: two crossings (t = 1, 2); from its centre: one (t = 0.5); far off: none.
+    Both z faces are crossed on a shared diagonal, where the tie rule must count one triangle."""
+    need(precision)
+    scene = unit_box_scene()
+    origins = np.array([[0.5, 0.5, -1.0], [0.5, 0.5, 0.5], [10.0, 10.0, 10.0]])
+    directions = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    assert list(pyclray.count_hits(scene, origins, directions, precision=precision)) == [2, 1, 0]
+    hits = pyclray.all_hits(scene, origins, directions, precision=precision)
+    assert list(hits["offsets"]) == [0, 2, 3, 3] and list(hits["ray"]) == [0, 0, 1]
+    assert np.allclose(hits["depth"], [1.0, 2.0, 0.5], rtol=1e-6, atol=1e-6)
+
+
+def test_open3d_single_triangle_occlusion_with_tmin_and_tmax():
+    """One triangle (0, 0, 0), (1, 0, 0), (1, 1, 0): the ray from (0.2, 0.1, 1) down hits it at t = 1,
+    the other ray misses; with tmax = 0.5 or tmin = 1.5 neither is occluded nor hits."""
+    scene = pyclray.Scene(camera(), pyclray.Image(8, 8),
+                          (pyclray.Mesh(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]]), np.array([[0, 1, 2]])),))
+    origins = np.array([[0.2, 0.1, 1.0], [10.0, 10.0, 10.0]])
+    directions = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    assert list(pyclray.occluded(scene, origins, directions)) == [True, False]
+    assert not pyclray.occluded(scene, origins, directions, tmax=0.5).any()
+    assert not pyclray.occluded(scene, origins, directions, tmin=1.5).any()
+    assert list(pyclray.count_hits(scene, origins, directions)) == [1, 0]
+    assert list(pyclray.count_hits(scene, origins, directions, tmin=1.5)) == [0, 0]
+    cast = pyclray.cast(scene, origins, directions, tmin=0.5, tmax=2.0, aovs=("depth", "primitive", "barycentric"))
+    assert cast["depth"][0] == 1.0 and np.isinf(cast["depth"][1]) and list(cast["primitive"]) == [0, -1]
+    assert np.allclose(cast["barycentric"][0], [0.1, 0.1])  # (0.2, 0.1, 0) = 0.8 a + 0.1 b + 0.1 c
+
+
+@pytest.mark.parametrize("shape", [[11], [1, 2, 3], [32, 14]])
+def test_open3d_output_shapes(shape):
+    """Rays of any leading shape: count_hits has that shape, all_hits' offsets one more than the rays
+    and one row per hit in every other array."""
+    scene = unit_box_scene()
+    rng = np.random.default_rng(123)
+    rays = rng.uniform(size=shape + [6])
+    count = pyclray.count_hits(scene, rays[..., :3], rays[..., 3:] + 1e-3)
+    assert list(count.shape) == shape
+    hits = pyclray.all_hits(scene, rays[..., :3], rays[..., 3:] + 1e-3, aovs=("depth", "normal", "id", "primitive",
+                                                                               "barycentric", "label", "position"))
+    total = int(count.sum())
+    assert hits["offsets"].shape == (int(np.prod(shape)) + 1,)
+    for name, tail in (("ray", ()), ("depth", ()), ("normal", (3,)), ("id", ()), ("primitive", ()),
+                       ("barycentric", (2,)), ("label", ()), ("position", (3,))):
+        assert hits[name].shape == (total,) + tail, name

@@ -157,7 +157,7 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     Each ray is traced on its own, from its float64 origin and direction: its result does not
     depend on the other rays of the batch, bit for bit, and its float32 depth and normal meet the
     render's error model for the ray as given (see kernels/rays.h). Needs cl_khr_fp64.
-    Raises PyclrayError for arrays of other shapes, rows that are not finite, zero directions, a
+    Raises RequestError (a ValueError) for arrays of other shapes, rows that are not finite, zero directions, a
     tmax that is not > 0, and origins so far from the shapes that the precision overflows.
     """
     scene = as_scene(scene)
@@ -213,7 +213,9 @@ def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=None, aovs=("dept
     offsets (int64, N + 1: the hits of ray k, the rays flattened in C order, are rows
     offsets[k]:offsets[k + 1]), ray (int64, the ray of each hit) and one array per AOV asked for,
     one row per hit: depth, id, primitive (the triangle's index in its mesh, the sphere's in its
-    batch, 0 for other shapes), label, position. The hits are count_hits' (see there), each crossing
+    batch, 0 for other shapes), label, position, normal (the outward unit normal, never flipped),
+    barycentric (a triangle's (u, v); 0, 0 for other shapes); position, normal and barycentric in
+    float64 from the hit's point, rounded once. The hits are count_hits' (see there), each crossing
     once."""
     from .queries.hits import check_hit_aovs
 

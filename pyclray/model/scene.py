@@ -13,6 +13,7 @@ import numpy as np
 from .animation import Animation, _find_places, scene_at
 from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
+from .cameras import CAMERAS, CameraModel
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
@@ -33,6 +34,9 @@ class Scene:
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.model.lights); none: the headlight
     shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
+    # the [[shapes]] table of each shape in the file (for messages) where a table made several shapes
+    # (a mesh file's objects, split = true); None: shape k is table k
+    tables: tuple[int, ...] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
@@ -56,11 +60,15 @@ class Scene:
                     except SceneError as error:
                         raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
             object.__setattr__(self, "shapes", CheckedShapes(shapes))
-        if not isinstance(self.camera, Camera):
-            raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
-        if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
+        if not isinstance(self.camera, CameraModel):
+            models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+            raise SceneError(f"expected a {models}, got {type(self.camera).__name__}", table="[camera]",
+                             file=self.source)
+        # K is in pixels of this scene's image (a camera from intrinsics, a fisheye)
+        if getattr(self.camera, "K", None) is not None and self.camera.size is None:
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
-        check_image_plane(self.camera, self.image, self.source)
+        if isinstance(self.camera, Camera):  # the pinhole's image plane (the lens models' rays are their tables)
+            check_image_plane(self.camera, self.image, self.source)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
@@ -93,11 +101,18 @@ class Scene:
         """A length that bounds the scene as seen from the eye (at least 1): the distance to the
         target and the farthest reach of any shape (Mitsuba's clip range and plane stand-in)."""
         eye = np.array(self.camera.eye)
-        target = self.camera.target
+        target = getattr(self.camera, "target", None)
         size = max(1.0, float(np.linalg.norm(np.subtract(target, eye)))) if target is not None else 1.0
         for shape in self.shapes:
             size = max(size, shape.extent_from(eye))
         return size
+
+    def table_of(self, index: int) -> int:
+        """The [[shapes]] table of the file that shape `index` comes from (itself but after a table
+        that made several shapes)."""
+        if self.tables is not None and len(self.tables) == len(self.shapes):
+            return self.tables[index]
+        return index
 
     def shape_types(self) -> tuple[str, ...]:
         """The shape types present, in the registry's order."""
@@ -169,5 +184,5 @@ def check_renderable(scene: Scene, precision: str) -> None:
             raise SceneError(
                 f"{length:.3g} from the eye in the camera's frame, beyond what {precision} can render "
                 f"(at most {limit:.2g}: the kernel squares lengths); {remedy}",
-                file=scene.source, table=f"[[shapes]] #{index} ({shape.type})", key=key,
+                file=scene.source, table=f"[[shapes]] #{scene.table_of(index)} ({shape.type})", key=key,
             )

@@ -161,7 +161,7 @@ inline void cylinder_hits(SHAPE_SPACE const Cylinder* cylinder, const RayPacket*
 {
     const CylinderHit hit = cylinder_intersect(cylinder, ray);
     const vec3v A = v3_splat(cylinder->axis), D = ray->dir;
-    const realv r2 = SPLAT(cylinder->p0.w), c = SPLAT(cylinder->axis.w);
+    const realv c = SPLAT(cylinder->axis.w);
     const realv d0 = SPLAT(cylinder->world_axis.w), d1 = SPLAT(cylinder->d1);
     const realv a = v3_dot(hit.DxA, hit.DxA);
     const realv b = v3_dot(v3_cross(v3_splat(cylinder->p0), A), hit.DxA);
@@ -193,7 +193,6 @@ inline void cylinder_hits(SHAPE_SPACE const Cylinder* cylinder, const RayPacket*
         const intv crosses = hit.disc > 0 && a > 0;
         *first = crosses && near > 0 && z_near >= 0 && z_near <= length ? near : SPLAT(MISS);
         *second = crosses && far > 0 && z_far >= 0 && z_far <= length ? far : SPLAT(MISS);
-        (void)r2;
     }
 }
 #endif

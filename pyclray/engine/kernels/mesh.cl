@@ -401,7 +401,11 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
 #endif
     const blockv det = (e0 + e1) + e2;
 #ifdef PYCLRAY_TIE_RULE
-    const blockmask inside = MESH_TIE_INSIDE(e0, e1, e2, ax_, ay_, bx_, by_, cx_, cy_) && det != (blockv)(0);
+    /* the tie rule where some lane's edge function is 0 (rare), else the strict signs (the same there) */
+    blockmask inside = (e0 > (blockv)(0) && e1 > (blockv)(0) && e2 > (blockv)(0))
+                       || (e0 < (blockv)(0) && e1 < (blockv)(0) && e2 < (blockv)(0));
+    if (mesh_block_bits(e0 == (blockv)(0) || e1 == (blockv)(0) || e2 == (blockv)(0)) & lanes)
+        inside = MESH_TIE_INSIDE(e0, e1, e2, ax_, ay_, bx_, by_, cx_, cy_) && det != (blockv)(0);
 #else
     const blockmask negative = e0 < (blockv)(0) || e1 < (blockv)(0) || e2 < (blockv)(0);
     const blockmask positive = e0 > (blockv)(0) || e1 > (blockv)(0) || e2 > (blockv)(0);

@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
+import sys
 import tempfile
 import threading
 import warnings
@@ -118,6 +120,10 @@ class Variant:
     # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
     # float64, engine/scene/indexed.py), framed or not
     indexed: bool = False
+    # render: the camera's rays read from a table (a lens or a panorama: kernels/camera.h,
+    # camera_table_rays) instead of the pinhole's image plane: "plane" (each ray's image-plane
+    # coordinates: every ray ahead of the eye's plane) or "sphere" (unit directions); None: a pinhole
+    camera_table: str | None = None
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -173,6 +179,10 @@ class Variant:
         lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
+        if self.camera_table and self.query == "render":
+            lines.append("#define PYCLRAY_CAMERA_TABLE 1")
+            if self.camera_table == "plane":
+                lines.append("#define PYCLRAY_CAMERA_PLANE 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
@@ -360,10 +370,45 @@ def _quiet_compiler():
     """pyopencl warns (CompilerWarning) whenever a successful build left a log, as PoCL's often does
     (e.g. notes on vector arguments): a user can do nothing about it, and a warnings filter that
     makes warnings errors would turn it into an exception inside the build, after the driver made
-    the program (PoCL then crashes at its release). A failed build still raises with its log."""
-    with warnings.catch_warnings():
+    the program (PoCL then crashes at its release). A failed build still raises with its log.
+    PoCL's clang also prints its count ("4 warnings generated.") straight to the process's stderr
+    (file descriptor 2): that goes to a temporary file for the build's length, and whatever else
+    was printed there meanwhile (another thread's lines) is passed on afterwards."""
+    with warnings.catch_warnings(), _stderr_without_compiler_counts():
         warnings.simplefilter("ignore", cl.CompilerWarning)
         yield
+
+
+# clang's summary line, the one thing the compiler prints itself on a successful build
+_COMPILER_COUNT = re.compile(rb"\d+ (warning|error)s? generated\.")
+
+
+@contextlib.contextmanager
+def _stderr_without_compiler_counts():
+    """File descriptor 2 into a temporary file while the block runs (the C compiler writes there
+    directly, past Python's sys.stderr), then back; the captured bytes less clang's counts are
+    written to the real stderr."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no stderr to guard (a closed descriptor 2)
+        yield
+        return
+    with _stderr_lock, tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            lines = captured.read().splitlines(keepends=True)
+            rest = b"".join(line for line in lines if not _COMPILER_COUNT.fullmatch(line.rstrip(b"\r\n")))
+            if rest:
+                os.write(2, rest)
+
+
+_stderr_lock = threading.Lock()
 
 
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:

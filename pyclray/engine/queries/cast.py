@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ...model.errors import DeviceError, PyclrayError, RequestError
 from ...model.aovs import TABLE
+from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
@@ -195,7 +195,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
         with np.errstate(over="ignore", invalid="ignore"):
             packed = kind.cls.rebase(worlds[name], origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
-            raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
+            raise RequestError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args.update({f"{name}s": input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
@@ -236,15 +236,19 @@ def check_cast_device(ctx) -> None:
 class RayBatch:
     """A batch of rays checked and set up for a kernel of kernels/rays.h on a scene handle: args (the
     kernel's arguments by name but for its results: engine/launch/signatures.py's RAYS and the
-    scene's cast inputs), shape (the rays' leading shape), count, sizes (global, local)."""
+    scene's cast inputs), shape (the rays' leading shape), count, sizes (global, local). Batches of
+    COHERENT_FROM rays or more are traced in a coherent order where _orders says so, or always with
+    order_always."""
 
-    def __init__(self, tracer, origins, directions, tmin, tmax):
+    def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False):
         ctx, precision = tracer.ctx, tracer.precision
         real = REAL[precision]
         inputs = tracer.cast_inputs()
         args, anchor, scene_size, scene_bytes = inputs[:4]
         self.block_lanes = inputs[4]
-        orders = _orders(ctx, scene_bytes)  # the scan of a large batch makes its codes only then
+        # the scan of a large batch makes its codes only where it is ordered (order_always: every large
+        # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
+        orders = order_always or _orders(ctx, scene_bytes)
         origins, directions, tmin, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders, tmin=tmin)
         count = len(directions)
         ordered = orders and count >= COHERENT_FROM

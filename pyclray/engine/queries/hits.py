@@ -20,8 +20,14 @@ from ..opencl.device import launch
 from .cast import RayBatch, label_of
 from .requests import Frame
 
+# The hit queries trace every large batch in cast's coherent order (engine/queries/ray_order.py), also
+# where cast would not for a scene that fits the cache: each ray traverses the tree to its end, and
+# neighbouring rays then share more of it (docs/benchmarks.md, "Hit counts": 117 against 138 ms on
+# the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order.
+ORDER_ALWAYS = True
+
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
-HIT_AOVS = ("depth", "id", "primitive", "label", "position")
+HIT_AOVS = ("depth", "normal", "id", "primitive", "barycentric", "label", "position")
 DEFAULT_HIT_AOVS = ("depth", "id", "primitive")
 
 
@@ -76,7 +82,7 @@ def _counts(tracer, batch: RayBatch) -> np.ndarray:
 
 def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax)."""
-    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
 
 
@@ -110,7 +116,7 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
     ray, and a second over the rays that have more, with room for the most of them."""
     ctx, precision = tracer.ctx, tracer.precision
-    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
     rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
     over = np.flatnonzero(counts > CAPACITY)
@@ -118,7 +124,7 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     if len(over):  # those rays again, alone, with room for all their hits (the same hits)
         again = RayBatch(tracer, batch.origins[over] if len(batch.origins) > 1 else batch.origins[0], batch.directions[over],
                          batch.tmin[over] if len(batch.tmin) > 1 else batch.tmin,
-                         batch.tmax[over] if len(batch.tmax) > 1 else batch.tmax)
+                         batch.tmax[over] if len(batch.tmax) > 1 else batch.tmax, ORDER_ALWAYS)
         capacity = int(counts[over].max())
         more = _stored(tracer, again, capacity)
         more_rows = _gather(more[0], capacity)
@@ -134,8 +140,11 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
     total = int(offsets[-1])
     rays = np.repeat(np.arange(batch.count, dtype=np.int64), counts)
     out = {"offsets": offsets, "ray": rays}
-    if "id" in aovs or "primitive" in aovs or "label" in aovs:
-        ids, primitives = _identify(tracer, batch, kinds, entries, subs)
+    ids, primitives = _identify(tracer, batch, kinds, entries, subs)
+    tied = (t[1:] == t[:-1]) & (rays[1:] == rays[:-1])
+    if tied.any():  # hits at exactly the same distance (the kernel's order: by kind and entry): by id, primitive
+        order = np.lexsort((primitives, ids, t, rays))
+        t, ids, primitives = t[order], ids[order], primitives[order]
     for name in aovs:
         if name == "depth":
             out[name] = t.astype(REAL[precision])
@@ -147,7 +156,24 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
             out[name] = label_of(tracer, ids)
         elif name == "position":
             out[name] = batch.positions(rays, t).astype(REAL[precision]) if total else TABLE[name].empty((0,), precision)
+        elif name in ("normal", "barycentric"):
+            out[name] = _on_surface(tracer, name, batch.positions(rays, t) if total else np.zeros((0, 3)), ids,
+                                    primitives).astype(REAL[precision])
     return Frame(out, precision=precision, device=ctx.device.name.strip())
+
+
+def _on_surface(tracer, name: str, points, ids, primitives) -> np.ndarray:
+    """Each hit's normal or barycentrics, in float64 from its hit point (the point at its distance)
+    and its primitive, by its shape's hit_normals or hit_barycentrics (a triangle's normal has the
+    bits cast's has; an analytic shape's is its outward normal at the point)."""
+    out = np.zeros((len(ids), 3 if name == "normal" else 2))
+    shapes = tracer.shapes
+    for index in np.unique(ids):
+        rows = np.flatnonzero(ids == index)
+        shape = shapes[index]
+        method = shape.hit_normals if name == "normal" else shape.hit_barycentrics
+        out[rows] = method(points[rows], primitives[rows])
+    return out
 
 
 def _identify(tracer, batch: RayBatch, kinds, entries, subs) -> tuple[np.ndarray, np.ndarray]:

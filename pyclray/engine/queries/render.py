@@ -1,13 +1,14 @@
 """A render on a scene handle: one ray per pixel centre of the view's camera, the images asked for."""
 from __future__ import annotations
 
-import numpy as np
-
+import warnings
 from dataclasses import replace
 
+import numpy as np
+
 from ...model.aovs import RENDER_AOVS, kernel_aovs
-from ...model.camera import Camera
-from ...model.errors import PyclrayError, RequestError
+from ...model.cameras import CAMERAS, CameraModel
+from ...model.errors import PyclrayWarning, RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
 from ..launch.programs import Variant, lanes_for, packet_shape
@@ -25,9 +26,9 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     try:
         col0, row0, cols, rows = (int(v) for v in window)
     except (TypeError, ValueError):
-        raise PyclrayError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
+        raise RequestError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
     if not (0 <= col0 and 0 <= row0 and cols >= 1 and rows >= 1 and col0 + cols <= width and row0 + rows <= height):
-        raise PyclrayError(
+        raise RequestError(
             f"window: expected (x0, y0, width, height) inside the {width}x{height} image, got {tuple(window)!r}"
         )
     return col0, row0, cols, rows
@@ -40,6 +41,11 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     callable that waits for this view's kernel and returns its Frame."""
     ctx, precision = tracer.ctx, tracer.precision
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    if "zdepth" in asked and not view.camera.has_zdepth:
+        raise RequestError(f"aovs: zdepth is the depth along the optical axis, which the {view.camera.model} camera "
+                           "model has not; ask for depth")
+    if not view.camera.rays_from_eye:  # rays from many origins (orthographic): cast, not the camera packets
+        return start_cast_view(tracer, view, asked, window)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     prepared = tracer.prepared
     state = tracer.view_state(view)
@@ -52,12 +58,14 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     shadows = "shaded" in aovs and view.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
-                      framed=prepared.framed, indexed=prepared.indexed)
+                      framed=prepared.framed, indexed=prepared.indexed, camera_table=inputs.table_format)
     tile = tiles.TILE
     # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
             "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
             "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
+    if inputs.table is not None:  # in this program's packets
+        args["camera_directions"] = inputs.directions_for(lanes)
     if "position" in aovs:
         args["eye_high"], args["eye_low"] = inputs.eye_parts()
     if "shaded" in aovs:
@@ -75,10 +83,85 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     pending.keep = (pending.keep, uploads, prepared, inputs, args)
 
     def frame() -> Frame:
-        return Frame(with_labels(view, pending.result(), asked), precision=precision, device=ctx.device.name.strip(),
+        images = pending.result()
+        if _all_missed(images) and _behind_the_camera(view.camera, prepared):
+            warnings.warn(LOOKS_AWAY, PyclrayWarning, stacklevel=2)
+        return Frame(with_labels(view, images, asked), precision=precision, device=ctx.device.name.strip(),
                      view=(view.camera, view.image.width, view.image.height, col0, row0))
 
     return frame
+
+
+LOOKS_AWAY = ("every pixel is a miss and every shape lies behind the camera: is the pose in OpenGL's convention "
+              "(y up, z backwards)? pyclray's pose is OpenCV's (x right, y down, z forward): "
+              "flip its y and z axes (pose @ diag(1, -1, -1, 1))")
+# the images that tell a miss apart from a hit, and the value a miss holds (model/aovs.py's TABLE)
+_MISS = (("id", -1), ("depth", np.inf), ("zdepth", np.inf), ("primitive", -1))
+
+
+def _all_missed(images: dict) -> bool:
+    """True if the render's images say no pixel hit (False where none of them can tell)."""
+    for name, miss in _MISS:
+        if name in images:
+            image = images[name].reshape(-1)
+            # a sample first: an image that hits anywhere mostly hits in it, without a pass over all
+            return bool((image[::997] == miss).all() and (image == miss).all())
+    return False
+
+
+def _behind_the_camera(camera, prepared) -> bool:
+    """True if the scene has bounded shapes and every corner of every one's box has camera z <= 0
+    (OpenCV's pose: z forward), where no pixel's ray can reach it. Asked only of an all-miss image."""
+    bounds = prepared.bvh.given_bounds
+    if not len(bounds):
+        return False  # planes only: no bounds to be behind
+    pose = camera.pose()
+    forward, eye = pose[:3, 2], pose[:3, 3]
+    with np.errstate(over="ignore", invalid="ignore"):
+        # a box's most forward corner: per axis the larger of its two faces' terms
+        terms = np.maximum((bounds[:, 0] - eye) * forward, (bounds[:, 1] - eye) * forward)
+        return bool((terms.sum(axis=1) <= 0).all())
+
+
+# the images a render by casting (a camera whose rays start apart) makes: cast's own, and those
+# derived from them on the host
+CAST_VIEW_AOVS = ("depth", "normal", "id", "zdepth", "position", "label")
+
+
+def start_cast_view(tracer, view: Scene, asked, window):
+    """A render of a camera whose rays do not share the eye (orthographic): its float64 pixel-centre
+    rays (CameraModel.rays) cast on the handle (the same exact tests as any cast ray), the images
+    assembled: depth, normal, id from cast; zdepth (depth along the view direction: the same, the
+    rays being parallel to it), position (origin + depth dir, float64) and label on the host."""
+    other = [aov for aov in asked if aov not in CAST_VIEW_AOVS]
+    if other:
+        raise RequestError(f"aovs: the {view.camera.model} camera model renders {', '.join(CAST_VIEW_AOVS)}; "
+                           f"not {', '.join(other)}")
+    col0, row0, cols, rows = _window(view, window)
+    state = tracer.view_state(view)
+    state.check_renderable(view, tracer.precision, tracer.prepared)
+    check_images_fit(asked, tracer.precision, cols, rows)
+    origins, directions = view.camera.rays(view.image.width, view.image.height, (col0, row0, cols, rows))
+    cast_aovs = tuple(dict.fromkeys(("depth",) + tuple("id" if a == "label" else a for a in asked
+                                                       if a in ("normal", "id", "label"))))
+    hits = tracer.cast(origins.reshape(-1, 3), directions.reshape(-1, 3), aovs=cast_aovs)
+    images = {}
+    depth = hits["depth"].reshape(rows, cols)
+    for aov in asked:
+        if aov in ("depth", "zdepth"):
+            images[aov] = depth.copy() if aov == "zdepth" else depth
+        elif aov in ("normal", "id"):
+            images[aov] = hits[aov].reshape((rows, cols) + hits[aov].shape[1:])
+        elif aov == "position":
+            hit = np.isfinite(depth)[..., None]
+            points = origins + np.where(hit, depth[..., None], 0.0) * directions
+            images[aov] = np.where(hit, points, 0.0).astype(depth.dtype)
+    if "label" in asked and "id" not in asked:
+        images["id"] = hits["id"].reshape(rows, cols)
+    images = with_labels(view, images, asked)
+    frame = Frame(images, precision=tracer.precision, device=tracer.ctx.device.name.strip(),
+                  view=(view.camera, view.image.width, view.image.height, col0, row0))
+    return lambda: frame
 
 
 def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):
@@ -96,6 +179,7 @@ def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_grou
 
 def with_camera(scene: Scene, camera) -> Scene:
     """The scene seen from another camera (its shapes tuple kept: the prepared scene serves it)."""
-    if not isinstance(camera, Camera):
-        raise RequestError(f"camera: expected a pyclray.Camera, got {type(camera).__name__}")
+    if not isinstance(camera, CameraModel):
+        models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+        raise RequestError(f"camera: expected a {models}, got {type(camera).__name__}")
     return replace(scene, camera=camera)

@@ -30,7 +30,8 @@ class ReferenceShape:
 
     Optional, with defaults here: ``oracle_inside`` (a solid's inside, exact; none by default),
     ``oracle_primitives`` (a shape of many primitives: which one a
-    ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
+    ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``hit_normals`` and
+    ``hit_barycentrics`` (all_hits' per-hit normal and barycentrics: oracle_normal, and 0, 0), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
     ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
     ``extent_from`` (from its box), ``mitsuba_error_scale`` (1), ``mitsuba_primitives`` (False)
     and ``mitsuba_covers`` (everywhere: no stand-in).
@@ -79,6 +80,16 @@ class ReferenceShape:
         primitives = self.oracle_primitives(origins, directions)
         primitives = np.zeros(t.shape, np.int64) if primitives is None else np.asarray(primitives).reshape(-1, 1)
         return t, primitives
+
+    def hit_normals(self, points, primitives) -> np.ndarray:
+        """(N, 3) float64 unit world normals (outward, never flipped) at hit points on the surface,
+        each on its primitive (all_hits' normal, engine/queries/hits.py). The default: oracle_normal."""
+        return self.oracle_normal(np.asarray(points, np.float64))
+
+    def hit_barycentrics(self, points, primitives) -> np.ndarray:
+        """(N, 2) float64 (u, v) of hit points on their triangles (all_hits' barycentric); 0, 0 for a
+        shape without triangles (the default)."""
+        return np.zeros((len(points), 2))
 
     def edge_distance(self, points) -> np.ndarray:
         """Distance from points on the surface to its nearest edge (a rim, a border, a box's edge),

@@ -154,6 +154,11 @@ class Spheres(Shape):
             primitives.append(np.full(t.shape, index, np.int64))
         return np.concatenate(ts, axis=1), np.concatenate(primitives, axis=1)
 
+    def hit_normals(self, points, primitives):
+        """The outward normal of each point's own sphere of the batch (its primitive)."""
+        n = np.asarray(points, np.float64) - self.centers[primitives]
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
     def oracle_hits(self, origins, directions):
         """(distance, primitive index) of the nearest sphere of the batch per ray (inf, -1 on a miss)."""
         best = np.full(np.shape(directions)[:-1], np.inf)
