@@ -273,8 +273,10 @@ def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
     where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
     the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
     directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
-    hits = closed.all_hits(points, directions, aovs=("id", "primitive"))
-    ray, ids, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "id", "primitive"))
+    one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
+    hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
+    ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
+    ids = np.zeros_like(ray) if one else np.asarray(hits["id"]).astype(np.int64)
     signs = np.zeros(len(ray))
     for index, mesh in enumerate(closed.shapes):
         mine = ids == index
