@@ -27,6 +27,7 @@ from .launch.run import OutputBuffers
 from .opencl.device import context_for
 from .queries import cast as cast_queries
 from .queries import render as render_query
+from .queries import scan as scan_query
 from .queries.requests import check_precision, check_request
 from .scene.prepared import PreparedScene
 from .scene.views import ViewState
@@ -184,6 +185,18 @@ class Tracer:
         directions, tmax, precision, device)`` (see there)."""
         cast_queries.check_cast_device(self.ctx)
         return cast_queries.run_cast(self, "occluded", origins, directions, tmax, ())
+
+    def scan(self, lidar=None, time=None):
+        """A LiDAR scan of the handle's scene: exactly ``pyclray.scan(scene, lidar, time, precision,
+        device)`` (see there). On an animated scene the handle is updated to each time the scan
+        needs, and back to the scene's own shapes after it."""
+        cast_queries.check_cast_device(self.ctx)
+        animated = self._scene if self._scene.animation is not None else None
+        try:
+            return scan_query.run_scan(self, self._scene, lidar, time)
+        finally:
+            if animated is not None and not self.closed:
+                self.update(animated)
 
     def cast_inputs(self):
         """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""

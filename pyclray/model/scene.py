@@ -13,6 +13,7 @@ import numpy as np
 from .animation import Animation, FrameShapes, derivation, scene_at
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
+from .lidar import Lidar
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
 from .shapes.base import Shape, check_label
@@ -32,6 +33,7 @@ class Scene:
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.model.lights); none: the headlight
     shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
+    lidars: tuple = ()  # pyclray.Lidar sensors (pyclray/model/lidar/), each named ("lidar<index>" by default)
 
     def __post_init__(self):
         if not isinstance(self.shapes, FrameShapes):  # (an animation's frame as render_animation renders it)
@@ -56,6 +58,7 @@ class Scene:
         if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
         check_image_plane(self.camera, self.image, self.source)
+        object.__setattr__(self, "lidars", check_lidars(self.lidars, self.source))
         if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
             _remember_valid(self.shapes)
         if self.animation is not None:
@@ -86,6 +89,28 @@ class Scene:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
         return tuple(t for t in REGISTRY if t in present)
+
+
+def check_lidars(lidars, source=None) -> tuple:
+    """The scene's sensors as a tuple of Lidars, each named (an unnamed one "lidar<index>"), the
+    names unique; a SceneError naming the sensor otherwise."""
+    if isinstance(lidars, Lidar):
+        lidars = (lidars,)
+    if isinstance(lidars, (str, bytes, dict)) or not hasattr(lidars, "__iter__"):
+        raise SceneError(f"expected a tuple of pyclray.Lidar, got {type(lidars).__name__}", table="[[lidars]]", file=source)
+    named, seen = [], {}
+    for index, lidar in enumerate(lidars):
+        if not isinstance(lidar, Lidar):
+            raise SceneError(f"expected a pyclray.Lidar, got {type(lidar).__name__}", table=f"[[lidars]] #{index}",
+                             file=source)
+        if lidar.name is None:
+            lidar = replace(lidar, name=f"lidar{index}")
+        if lidar.name in seen:
+            raise SceneError(f"the name {lidar.name!r} is already used by [[lidars]] #{seen[lidar.name]}",
+                             table=f"[[lidars]] #{index}", key="name", file=source)
+        seen[lidar.name] = index
+        named.append(lidar)
+    return tuple(named)
 
 
 def checked_time(t) -> float:

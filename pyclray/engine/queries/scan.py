@@ -1,0 +1,178 @@
+"""A LiDAR scan (pyclray.scan, Tracer.scan): every beam of every column cast as a float64 ray from
+the sensor's origin through the cast query (engine/queries/cast.py), so that each range is held to
+the error model as any cast's depth; returns outside the sensor's range limits made misses; the
+range image and the point cloud assembled on the host.
+
+A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time: the
+columns whose times see the same shapes (the shapes' animated values equal) are cast together after
+one ``Tracer.update`` to the scene at that time; a moving sensor only moves the rays (each column's
+origin and directions from the sensor's pose at its time), so a scan with a moving sensor among
+still shapes is one cast.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ...model.animation import scene_at, tracks_in
+from ...model.errors import RequestError
+from ...model.lidar import Lidar
+from ...model.scene import checked_time
+from ...model.shapes.base import labels_of
+
+# the range image's arrays, (beams, columns, ...), and the point cloud's, one row per hit
+IMAGE_KEYS = ("range", "id", "label", "normal", "position")
+POINT_KEYS = ("points", "points_world", "ring", "column", "point_range")
+
+
+class Scan(dict):
+    """A LiDAR scan: name -> numpy array (docs/lidar.md).
+
+    The range image, (beams, columns): ``range`` (distance from the sensor along the beam, +inf on a
+    miss; float32, float64 with precision "fp64"), ``id`` and ``label`` (int32, -1 on a miss),
+    ``normal`` ((beams, columns, 3) unit world normal, 0 on a miss) and ``position`` ((beams, columns,
+    3) float64 world hit point, 0 on a miss). The point cloud, one row per hit in row-major order
+    (ring, then column): ``points`` ((M, 3) float64, in the sensor's frame at the column's firing
+    time: x forward, y left, z up), ``points_world`` ((M, 3) float64, the world's), ``ring`` and
+    ``column`` (int32: the hit's row and column), ``point_range`` (M,). Per row and column:
+    ``elevation`` (beams,) and ``azimuth`` (columns,) in degrees, ``time`` (columns,) float64, each
+    column's firing time in seconds.
+
+    Attributes: ``lidar`` (the sensor, at the scan's time t), ``pose`` (its 4x4 sensor-to-world at
+    t), ``t``, ``precision``, ``device``."""
+
+    def __init__(self, arrays, *, lidar: Lidar, pose, t: float, precision: str, device: str):
+        super().__init__(arrays)
+        self.lidar, self.pose, self.t = lidar, pose, t
+        self.precision, self.device = precision, device
+
+    def __repr__(self) -> str:
+        shapes = ", ".join(f"{k}: {v.dtype}{list(v.shape)}" for k, v in self.items())
+        return f"Scan({shapes}; {self.precision} on {self.device})"
+
+
+def scene_lidar(scene, lidar) -> tuple[Lidar, int | None]:
+    """(the sensor, its index in scene.lidars or None): ``lidar`` a Lidar (one of the scene's, by
+    value, is that one: its animation applies), the name of one of the scene's, or None (the scene's
+    first); anything else is a RequestError."""
+    if lidar is None:
+        if not scene.lidars:
+            raise RequestError("lidar: the scene has no [lidar] or [[lidars]]; give a pyclray.Lidar")
+        return scene.lidars[0], 0
+    if isinstance(lidar, str):
+        for index, mine in enumerate(scene.lidars):
+            if mine.name == lidar:
+                return mine, index
+        names = ", ".join(repr(mine.name) for mine in scene.lidars) or "none"
+        raise RequestError(f"lidar: no sensor named {lidar!r} in the scene (its lidars: {names})")
+    if not isinstance(lidar, Lidar):
+        raise RequestError(f"lidar: expected a pyclray.Lidar, the name of one of the scene's or None, got "
+                           f"{type(lidar).__name__}")
+    for index, mine in enumerate(scene.lidars):
+        if mine is lidar or mine == lidar:
+            return mine, index
+    return lidar, None
+
+
+def scan_time(scene, t) -> float:
+    """The time a scan starts at: t (seconds, >= 0) of an animated scene, or 0 for None; a time for a
+    static scene is a RequestError (a mistake, not ignored)."""
+    if t is None:
+        return 0.0
+    if scene.animation is None:
+        raise RequestError("time: the scene has no [animation]; a time scans an animated scene")
+    try:
+        return checked_time(t)
+    except RequestError as error:
+        raise RequestError(f"time: {str(error).removeprefix('t: ')}") from None
+
+
+def _lidar_at(lidar: Lidar, tracks, t: float, interpolation: str) -> Lidar:
+    """The sensor with its animated keys at time t (its tracks' values; a SceneError names the key)."""
+    if not tracks:
+        return lidar
+    return dataclasses.replace(lidar, **{track.key: track.value_at(t, interpolation) for track in tracks})
+
+
+def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
+    """The scan of ``lidar`` (see scene_lidar) in ``scene`` (its shapes are the handle's, or an
+    animated scene whose static shapes or frames are) at time t (an animated scene's; None: 0), on a
+    handle whose device can cast (engine/tracer.py). The handle ends prepared for the scene at the
+    last time it cast (a frame of an animated scene)."""
+    lidar, index = scene_lidar(scene, lidar)
+    t = scan_time(scene, t)
+    animation = scene.animation
+    interpolation = animation.interpolation if animation is not None else "linear"
+    lidar_tracks = [track for i, track in tracks_in(scene, "lidars") if i == index] if index is not None else []
+    shape_tracks = [track for _, track in tracks_in(scene, "shapes")]
+    beams, columns = lidar.beams, lidar.columns
+    sensor_directions = lidar.directions()  # (beams, columns, 3), the sensor's frame
+    if animation is not None and lidar.sweep:
+        step_times = lidar.step_times(t)
+        column_step = lidar.column_steps()
+    else:
+        step_times = np.array([t])
+        column_step = np.zeros(columns, np.int64)
+    # the sensor at each step's time: each column's origin and world directions
+    poses = np.empty((len(step_times), 4, 4))
+    first = None
+    for k, when in enumerate(step_times):
+        moved = _lidar_at(lidar, lidar_tracks, float(when), interpolation)
+        first = moved if first is None else first
+        poses[k] = moved.world_from_sensor
+        if not lidar_tracks:  # a sensor that does not move: the same pose at every step
+            poses[:] = poses[0]
+            break
+    # the runs of steps whose shapes are the same (their animated values equal): one update and one cast each
+    if shape_tracks and len(step_times) > 1:
+        states = [tuple(track.value_at(float(when), interpolation) for track in shape_tracks) for when in step_times]
+        starts = [k for k in range(len(states)) if k == 0 or states[k] != states[k - 1]]
+    else:
+        starts = [0]
+    runs = list(zip(starts, starts[1:] + [len(step_times)]))
+    range_min, range_max = lidar.range
+    real = None
+    depth = normal = ids = None
+    origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
+    for start, stop in runs:
+        if animation is not None:
+            tracer.update(scene_at(scene, float(step_times[start]), lazy=True))
+        columns_of_run = np.flatnonzero((column_step >= start) & (column_step < stop))
+        rotations = poses[column_step[columns_of_run], :3, :3]  # (n, 3, 3) world_from_sensor per column
+        directions = np.einsum("cij,bcj->bci", rotations, sensor_directions[:, columns_of_run])
+        if len(runs) == 1 and not lidar_tracks:
+            origins = poses[0, :3, 3]
+        else:
+            origins = np.broadcast_to(origins_per_column[columns_of_run], directions.shape)
+        hits = tracer.cast(origins, directions, aovs=("depth", "normal", "id"),
+                           tmax=None if math.isinf(range_max) else range_max)
+        if real is None:
+            real = hits["depth"].dtype
+            depth = np.full((beams, columns), np.inf, real)
+            normal = np.zeros((beams, columns, 3), real)
+            ids = np.full((beams, columns), -1, np.int32)
+        depth[:, columns_of_run] = hits["depth"]
+        normal[:, columns_of_run] = hits["normal"]
+        ids[:, columns_of_run] = hits["id"]
+    # returns outside [min, max] are misses (a return nearer than min hides what is behind it, as a
+    # real sensor's blind zone does)
+    outside = (ids >= 0) & ~((depth >= range_min) & (depth <= range_max))
+    depth[outside], ids[outside], normal[outside] = np.inf, -1, 0
+    hit = ids >= 0
+    labels = np.append(labels_of(scene.shapes), np.int32(-1))[ids]
+    world_directions = np.einsum("cij,bcj->bci", poses[column_step, :3, :3], sensor_directions)
+    range64 = np.where(hit, depth.astype(np.float64), 0.0)
+    position = np.where(hit[..., None], origins_per_column[None] + range64[..., None] * world_directions, 0.0)
+    ring, column = np.nonzero(hit)
+    arrays = {
+        "range": depth, "id": ids, "label": labels, "normal": normal, "position": position,
+        "points": range64[ring, column, None] * sensor_directions[ring, column],
+        "points_world": position[ring, column], "ring": ring.astype(np.int32), "column": column.astype(np.int32),
+        "point_range": depth[ring, column],
+        "elevation": lidar.elevation_angles.copy(), "azimuth": lidar.azimuth_angles,
+        "time": step_times[column_step].astype(np.float64),
+    }
+    return Scan(arrays, lidar=first, pose=poses[0].copy(), t=t, precision=tracer.precision,
+                device=tracer.ctx.device.name.strip())
