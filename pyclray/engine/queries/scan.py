@@ -19,6 +19,7 @@ import numpy as np
 from ...model.animation import scene_at, tracks_in
 from ...model.errors import RequestError
 from ...model.lidar import Lidar
+from ...model.lidar.sensor import rotated
 from ...model.scene import checked_time
 from ...model.shapes.base import labels_of
 
@@ -141,7 +142,7 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
             tracer.update(scene_at(scene, float(step_times[start]), lazy=True))
         columns_of_run = np.flatnonzero((column_step >= start) & (column_step < stop))
         rotations = poses[column_step[columns_of_run], :3, :3]  # (n, 3, 3) world_from_sensor per column
-        directions = np.einsum("cij,bcj->bci", rotations, sensor_directions[:, columns_of_run])
+        directions = rotated(rotations, sensor_directions[:, columns_of_run])
         if len(runs) == 1 and not lidar_tracks:
             origins = poses[0, :3, 3]
         else:
@@ -162,7 +163,7 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     depth[outside], ids[outside], normal[outside] = np.inf, -1, 0
     hit = ids >= 0
     labels = np.append(labels_of(scene.shapes), np.int32(-1))[ids]
-    world_directions = np.einsum("cij,bcj->bci", poses[column_step, :3, :3], sensor_directions)
+    world_directions = rotated(poses[column_step, :3, :3], sensor_directions)
     range64 = np.where(hit, depth.astype(np.float64), 0.0)
     position = np.where(hit[..., None], origins_per_column[None] + range64[..., None] * world_directions, 0.0)
     ring, column = np.nonzero(hit)

@@ -39,6 +39,15 @@ RIGID_TOLERANCE = 1e-6
 _FIXED = {"animatable": False}
 
 
+def rotated(rotations: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """(beams, n, 3): each column's directions (beams, n, 3) turned by its rotation (n or 1, 3, 3),
+    R d, in float64 with the same three products and two sums in the same order whatever the batch
+    (so that a column's rays are the same bits in a sweep's run and in a static scan)."""
+    R = rotations[None]
+    d = directions[..., None, :]
+    return (R[..., 0] * d[..., 0] + R[..., 1] * d[..., 1]) + R[..., 2] * d[..., 2]
+
+
 def _pose_matrix(value) -> tuple:
     """A rigid 4x4 sensor-to-world matrix, as nested tuples of floats."""
     try:
@@ -212,9 +221,10 @@ class Lidar:
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """(origin (3,), directions (beams, columns, 3)): the beams in the world, float64 (the
-        rotation applied to each unit direction in float64; the kernel normalizes them again)."""
+        rotation applied to each unit direction in float64, rotated(); the kernel normalizes them
+        again): the rays a scan casts."""
         pose = self.world_from_sensor
-        return pose[:3, 3].copy(), self.directions() @ pose[:3, :3].T
+        return pose[:3, 3].copy(), rotated(pose[None, :3, :3], self.directions())
 
     # -- when each column fires ----------------------------------------------------------------------
     @property
