@@ -97,6 +97,44 @@ def _lidar_at(lidar: Lidar, tracks, t: float, interpolation: str) -> Lidar:
     return dataclasses.replace(lidar, **{track.key: track.value_at(t, interpolation) for track in tracks})
 
 
+def _moving_box(scene, shape_places, times, interpolation):
+    """(2, 3) float64 [lo, hi] holding every animated shape at each of these times (the starts of
+    the runs: between them the shapes hold still), or None where one has no bounds (a plane)."""
+    tracks_of: dict[int, list] = {}
+    for index, track in shape_places:
+        tracks_of.setdefault(index, []).append(track)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for index, tracks in tracks_of.items():
+        shape = scene.shapes[index]
+        if not shape.bounded:
+            return None
+        moved = [dataclasses.replace(shape, **{track.key: track.value_at(when, interpolation) for track in tracks})
+                 for when in times]
+        bounds = type(shape).world_bounds(moved)  # every time's primitives at once
+        lo, hi = np.minimum(lo, bounds[:, 0].min(axis=0)), np.maximum(hi, bounds[:, 1].max(axis=0))
+    return np.stack([lo, hi])
+
+
+def _beams_meet_box(origins, directions, box) -> np.ndarray:
+    """(columns,) bool: whether any beam of a column (origins (columns, 3), directions (beams,
+    columns, 3)) meets the box, grown by a margin far beyond the rounding of the casts' hits (a
+    slab test in float64; a column it keeps is only cast more often, never wrongly)."""
+    size = float(np.max(np.abs(box))) + float(np.max(np.abs(origins)))
+    margin = 1e-6 * size + 1e-9
+    lo, hi = box[0] - margin, box[1] + margin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = 1.0 / directions
+        near = (lo - origins[None]) * inverse
+        far = (hi - origins[None]) * inverse
+    # a zero component: the beam is within the slab for every t, or for none
+    inside = (origins[None] >= lo) & (origins[None] <= hi)
+    entry = np.where(directions == 0, np.where(inside, -np.inf, np.inf), np.fmin(near, far))
+    leave = np.where(directions == 0, np.where(inside, np.inf, -np.inf), np.fmax(near, far))
+    meets = entry.max(axis=-1) <= np.maximum(leave.min(axis=-1), 0.0)
+    meets &= leave.min(axis=-1) >= 0.0
+    return meets.any(axis=0)
+
+
 def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     """The scan of ``lidar`` (see scene_lidar) in ``scene`` (its shapes are the handle's, or an
     animated scene whose static shapes or frames are) at time t (an animated scene's; None: 0), on a
@@ -107,7 +145,8 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     animation = scene.animation
     interpolation = animation.interpolation if animation is not None else "linear"
     lidar_tracks = [track for i, track in tracks_in(scene, "lidars") if i == index] if index is not None else []
-    shape_tracks = [track for _, track in tracks_in(scene, "shapes")]
+    shape_places = tracks_in(scene, "shapes")  # ((shape index, track), ...)
+    shape_tracks = [track for _, track in shape_places]
     beams, columns = lidar.beams, lidar.columns
     sensor_directions = lidar.directions()  # (beams, columns, 3), the sensor's frame
     if animation is not None and lidar.sweep:
@@ -133,26 +172,37 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     else:
         starts = [0]
     runs = list(zip(starts, starts[1:] + [len(step_times)]))
-    range_min, range_max = lidar.range
-    real = None
-    depth = normal = ids = None
     origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
-    for start, stop in runs:
+    world_directions = rotated(poses[column_step, :3, :3], sensor_directions)  # (beams, columns, 3)
+    # the columns whose beams cannot meet a moving shape at any of the revolution's times see the same
+    # shapes at every step: they are cast once, in the first run's scene (a ray's result depends only
+    # on the ray and the shapes it may hit)
+    moving = np.ones(columns, bool)
+    if len(runs) > 1:
+        box = _moving_box(scene, shape_places, [float(step_times[start]) for start, _ in runs], interpolation)
+        if box is not None:
+            moving = _beams_meet_box(origins_per_column, world_directions, box)
+    range_min, range_max = lidar.range
+    depth = normal = ids = None
+    for number, (start, stop) in enumerate(runs):
+        in_run = (column_step >= start) & (column_step < stop)
+        # the first run also casts the columns that no moving shape can reach; the others, their own
+        # columns that one may
+        columns_of_run = np.flatnonzero(in_run | ~moving if number == 0 else in_run & moving)
+        if not len(columns_of_run):
+            continue
         if animation is not None:
             tracer.update(scene_at(scene, float(step_times[start]), lazy=True))
-        columns_of_run = np.flatnonzero((column_step >= start) & (column_step < stop))
-        rotations = poses[column_step[columns_of_run], :3, :3]  # (n, 3, 3) world_from_sensor per column
-        directions = rotated(rotations, sensor_directions[:, columns_of_run])
-        if len(runs) == 1 and not lidar_tracks:
+        directions = world_directions[:, columns_of_run]
+        if not lidar_tracks:
             origins = poses[0, :3, 3]
         else:
             origins = np.broadcast_to(origins_per_column[columns_of_run], directions.shape)
         hits = tracer.cast(origins, directions, aovs=("depth", "normal", "id"),
                            tmax=None if math.isinf(range_max) else range_max)
-        if real is None:
-            real = hits["depth"].dtype
-            depth = np.full((beams, columns), np.inf, real)
-            normal = np.zeros((beams, columns, 3), real)
+        if depth is None:
+            depth = np.full((beams, columns), np.inf, hits["depth"].dtype)
+            normal = np.zeros((beams, columns, 3), hits["depth"].dtype)
             ids = np.full((beams, columns), -1, np.int32)
         depth[:, columns_of_run] = hits["depth"]
         normal[:, columns_of_run] = hits["normal"]
@@ -163,7 +213,6 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     depth[outside], ids[outside], normal[outside] = np.inf, -1, 0
     hit = ids >= 0
     labels = np.append(labels_of(scene.shapes), np.int32(-1))[ids]
-    world_directions = rotated(poses[column_step, :3, :3], sensor_directions)
     range64 = np.where(hit, depth.astype(np.float64), 0.0)
     position = np.where(hit[..., None], origins_per_column[None] + range64[..., None] * world_directions, 0.0)
     ring, column = np.nonzero(hit)

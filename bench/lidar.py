@@ -1,0 +1,161 @@
+"""LiDAR scans (issue 39's targets): a VLP-16 scan of a 1,000,000-triangle scene, and sweeping scans
+of an animated scene.
+
+    python -m bench.lidar [--rounds 3] [--block 5] [--sweeps 100]
+
+Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_compare.blocks):
+- "scan": pyclray.scan of a VLP-16 (16 x 1800 beams) at the centre of a closed 998,000-triangle
+  mesh (a perturbed UV sphere of radius 20: every beam returns), against its baselines in the same
+  process: pyclray.cast of the same 28,800 float64 rays (depth, normal, id: what a scan adds beyond
+  the cast is the rays, the range limits, the labels and the point cloud) and Open3D's
+  RaycastingScene.cast_rays of the same rays (float32, Embree) where Open3D is installed;
+- "sweeps": scans/s of `--sweeps` sweeping VLP-16 scans (sweep = true, 10 Hz) of an animated scene
+  (a ground plane, 20 still boxes and a car driving past: one moving shape), each starting at
+  the next 1/10 s, with the revolution cut into steps time slices: every column at its own time
+  (steps = 1800, the default) and coarser (360, 36); and with the car still and the sensor
+  moving (one cast per scan: the rays move, not the shapes).
+Prints medians (ms), the ratios, scans/s and the machine's load (uptime): the machine is shared.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+
+import numpy as np
+
+import pyclray
+from pyclray.model.shapes.mesh_shapes import perturbed_sphere
+
+from .open3d_compare import blocks
+
+
+def million_triangle_scene():
+    vertices, faces = perturbed_sphere(500, 1000, 20.0, 0.02, np.random.default_rng(0))
+    mesh = pyclray.Mesh(vertices, faces, name="sphere")
+    lidar = pyclray.Lidar(preset="VLP-16", name="vlp16")
+    return pyclray.Scene(pyclray.Camera((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)), pyclray.Image(8, 8),
+                         (mesh,), lidars=(lidar,)), mesh, lidar
+
+
+def scan_case(rounds: int, block: int) -> dict:
+    scene, mesh, lidar = million_triangle_scene()
+    origin, directions = lidar.rays()
+    directions = directions.reshape(-1, 3)
+    systems = {
+        "pyclray.scan": lambda: pyclray.scan(scene, lidar),
+        "pyclray.cast (same rays)": lambda: pyclray.cast(scene, origin, directions),
+    }
+    try:
+        import open3d as o3d
+
+        o3d_scene = o3d.t.geometry.RaycastingScene()
+        o3d_scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                                o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+        rays = o3d.core.Tensor(np.hstack([np.tile(origin, (len(directions), 1)), directions]).astype(np.float32))
+        systems["Open3D cast_rays (same rays)"] = lambda: o3d_scene.cast_rays(rays)
+    except ImportError:
+        pass
+    scan = pyclray.scan(scene, lidar)
+    print(f"scan: {len(scan['ring'])} of {lidar.beams * lidar.columns} beams return, "
+          f"{sum(int(np.asarray(s.faces).shape[0]) for s in scene.shapes)} triangles")
+    return blocks(systems, rounds, block)
+
+
+SWEEP_SCENE = """
+[[shapes]]
+type = "plane"
+normal = [0.0, 0.0, 1.0]
+offset = 1.8
+{boxes}
+[[shapes]]
+type = "box"
+name = "car"
+center = [8.0, -20.0, -1.0]
+size = [4.5, 1.8, 1.5]
+
+[lidar]
+name = "roof"
+preset = "VLP-16"
+sweep = true
+range = [0.5, 100.0]
+{sensor}
+
+[animation]
+fps = 10.0
+duration = 11.0
+
+[[animation.keys]]
+target = "car"
+time = 0.0
+center = [8.0, -20.0, -1.0]
+
+[[animation.keys]]
+target = "car"
+time = 10.0
+center = [8.0, 20.0, -1.0]
+{keys}
+"""
+
+
+def sweep_scene(folder, steps: int | None, moving: str):
+    rng = np.random.default_rng(1)
+    boxes = "".join(f'\n[[shapes]]\ntype = "box"\ncenter = [{x:.3f}, {y:.3f}, -1.0]\nsize = [1.0, 1.0, 1.5]\n'
+                    for x, y in rng.uniform(-30, 30, (20, 2)))
+    sensor = "" if steps is None else f"steps = {steps}"
+    keys = ""
+    if moving == "sensor":
+        sensor += "\nposition = [0.0, 0.0, 0.0]"
+        keys = ('\n[[animation.keys]]\ntarget = "roof"\ntime = 0.0\nposition = [0.0, 0.0, 0.0]\n'
+                '\n[[animation.keys]]\ntarget = "roof"\ntime = 10.0\nposition = [100.0, 0.0, 0.0]\n')
+    text = SWEEP_SCENE.format(boxes=boxes, sensor=sensor, keys=keys)
+    if moving == "sensor":  # the car parked: its keys removed
+        text = text.split('[[animation.keys]]\ntarget = "car"')[0] + keys
+    path = os.path.join(folder, f"sweep-{steps}-{moving}.toml")
+    with open(path, "w") as file:
+        file.write(text)
+    return pyclray.load_scene(path)
+
+
+def sweeps_case(count: int) -> list[tuple[str, float, float]]:
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        for label, steps, moving in (("car moving, steps = 1800 (every column its own time)", None, "car"),
+                                     ("car moving, steps = 360", 360, "car"),
+                                     ("car moving, steps = 36", 36, "car"),
+                                     ("sensor moving, steps = 1800", None, "sensor")):
+            scene = sweep_scene(folder, steps, moving)
+            pyclray.scan(scene, time=0.0)  # the handle and its programs
+            start = time.perf_counter()
+            for k in range(count):
+                pyclray.scan(scene, time=k / 10.0)
+            elapsed = time.perf_counter() - start
+            rows.append((label, count / elapsed, elapsed / count * 1e3))
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--block", type=int, default=5)
+    parser.add_argument("--sweeps", type=int, default=100)
+    args = parser.parse_args()
+    print("load before:", os.getloadavg())
+    results = scan_case(args.rounds, args.block)
+    base = results["pyclray.scan"]["median"]
+    print("| VLP-16 scan, 998,000 triangles | median ms | q1-q3 | scan / this |")
+    print("|---|---|---|---|")
+    for name, r in results.items():
+        print(f"| {name} | {r['median']:.2f} | {r['q1']:.2f}-{r['q3']:.2f} | {base / r['median']:.2f} |")
+    print("\n| 100 sweeping VLP-16 scans | scans/s | ms per scan |")
+    print("|---|---|---|")
+    for label, rate, ms in sweeps_case(args.sweeps):
+        print(f"| {label} | {rate:.1f} | {ms:.1f} |")
+    print("load after:", os.getloadavg())
+
+
+if __name__ == "__main__":
+    main()
