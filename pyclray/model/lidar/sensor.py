@@ -138,6 +138,8 @@ class Lidar:
                 raise SceneError("expected the number of columns (firings per revolution) beside elevations",
                                  key="columns")
             put("columns", preset.columns)
+        if isinstance(self.columns, np.integer):  # (a numpy whole number, as from an array)
+            put("columns", int(self.columns))
         put("columns", integer("columns", self.columns, minimum=1, maximum=MAX_COLUMNS))
         if self.pose is not None and (self.position is not None or self.axis is not None or self.angle != 0):
             key = "position" if self.position is not None else ("axis" if self.axis is not None else "angle")
@@ -156,6 +158,8 @@ class Lidar:
             raise SceneError(f"expected true or false, got {_shown(self.sweep)}", key="sweep")
         put("rate", number("rate", self.rate, positive=True))
         if self.steps is not None:
+            if isinstance(self.steps, np.integer):
+                put("steps", int(self.steps))
             put("steps", integer("steps", self.steps, minimum=1, maximum=self.columns))
         # the beams in range-image order (a preset's from the top down) and the maker's laser numbers
         if preset is not None:
