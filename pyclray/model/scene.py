@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, FrameShapes, derivation, scene_at
+from .animation import Animation, _find_places, scene_at
+from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lidar import Lidar
@@ -36,33 +37,49 @@ class Scene:
     lidars: tuple = ()  # pyclray.Lidar sensors (pyclray/model/lidar/), each named ("lidar<index>" by default)
 
     def __post_init__(self):
-        if not isinstance(self.shapes, FrameShapes):  # (an animation's frame as render_animation renders it)
-            object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
         if not isinstance(self.shading, Shading):
             raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
-        for index, shape in enumerate(() if _validated(self.shapes) else self.shapes):
-            if not isinstance(shape, Shape):
-                raise SceneError(
-                    f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
-                    table=f"[[shapes]] #{index}",
-                    file=self.source,
-                )
-            if shape.label is not None:  # (a scene file's labels are checked as they are read)
-                try:
-                    check_label(shape.label)
-                except SceneError as error:
-                    raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
+        # the shapes, each looked at once: a CheckedShapes (this scene's camera replaced, an animation's
+        # frame made from a checked tuple by dataclasses.replace of a few shapes, which checks them) or
+        # an animation's FrameShapes needs no look
+        if not isinstance(self.shapes, (CheckedShapes, FrameShapes)):
+            shapes = tuple(self.shapes)
+            for index, shape in enumerate(shapes):
+                if not isinstance(shape, Shape):
+                    raise SceneError(
+                        f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
+                        table=f"[[shapes]] #{index}",
+                        file=self.source,
+                    )
+                if shape.label is not None:  # (a scene file's labels are checked as they are read)
+                    try:
+                        check_label(shape.label)
+                    except SceneError as error:
+                        raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
+            object.__setattr__(self, "shapes", CheckedShapes(shapes))
         if not isinstance(self.camera, Camera):
             raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
         if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
         check_image_plane(self.camera, self.image, self.source)
         object.__setattr__(self, "lidars", check_lidars(self.lidars, self.source))
-        if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
-            _remember_valid(self.shapes)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
+
+    # What an animated scene keeps for its frames (found once, dropped with the scene; not pickled)
+    @cached_property
+    def animation_places(self) -> dict:
+        """Target name -> where things of that name sit (pyclray.model.animation)."""
+        return _find_places(self)
+
+    @cached_property
+    def frame_work(self) -> FrameWork:
+        """The frames' working copies of the animated collections (pyclray.model.frames.FrameWork)."""
+        return FrameWork()
+
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work")}
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
@@ -119,29 +136,6 @@ def checked_time(t) -> float:
         raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
                            f"past the last key every track holds its last value), got {t!r}")
     return t
-
-
-# Shapes tuples already checked, the most recent first: a view from another camera
-# (dataclasses.replace(scene, camera=...)) keeps the tuple and need not walk a million shapes again.
-_VALID_MAX = 32
-_valid: OrderedDict = OrderedDict()
-
-
-def _validated(shapes: tuple) -> bool:
-    """Whether this tuple was checked, or was made by an animation from a checked one by changing
-    shapes through dataclasses.replace (which checks them): no item needs a look then."""
-    entry = _valid.get(id(shapes))
-    if entry is not None and entry is shapes:
-        return True
-    derived = derivation(shapes)
-    return derived is not None and _validated(derived[0])
-
-
-def _remember_valid(shapes: tuple) -> None:
-    _valid[id(shapes)] = shapes  # holds the tuple: its id() cannot be reused while remembered
-    _valid.move_to_end(id(shapes))
-    while len(_valid) > _VALID_MAX:
-        _valid.popitem(last=False)
 
 
 def check_image_plane(camera: Camera, image: Image, source=None) -> None:

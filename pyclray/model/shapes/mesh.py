@@ -49,6 +49,11 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     smooth: bool = field(default=False, metadata=FIXED)
     normals: np.ndarray | None = field(default=None, metadata=FIXED)
     name: str = "mesh"
+    # The arrays whose checks this mesh passed (vertices, faces, normals), which dataclasses.replace
+    # carries to its copies: a mesh placed again (Mesh.placed, 10,000 instances, an animation's
+    # frame) is not checked again (docs/benchmarks.md, "Why the engine does what it does"); compared
+    # by identity, so a copy given other arrays checks those.
+    _checked: tuple | None = field(default=None, repr=False, compare=False, metadata=FIXED)
 
     type = "mesh"
     c_type = "Triangle"
@@ -92,9 +97,12 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     mitsuba_primitives = True
 
     def __post_init__(self):
-        vertices = vertices_of(self.vertices)
+        arrays = (self.vertices, self.faces, self.normals)
+        known = self._checked is not None and all(a is b for a, b in zip(self._checked, arrays))
+        vertices = self.vertices if known else vertices_of(self.vertices)
         object.__setattr__(self, "vertices", vertices)
-        object.__setattr__(self, "faces", faces_of(self.faces, len(vertices)))
+        if not known:
+            object.__setattr__(self, "faces", faces_of(self.faces, len(vertices)))
         scale = self.scale
         if np.ndim(scale) == 0:
             scale = number("scale", scale)
@@ -117,10 +125,11 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
                                  key="matrix")
             object.__setattr__(self, "matrix", matrix_of(self.matrix))
         object.__setattr__(self, "smooth", flag("smooth", self.smooth))
-        if self.normals is not None:
+        if self.normals is not None and not known:
             object.__setattr__(self, "normals", vertices_of(self.normals, "normals"))
             if len(self.normals) != len(vertices):
                 raise SceneError(f"expected {len(vertices)} normals, one per vertex, got {len(self.normals)}", key="normals")
+        object.__setattr__(self, "_checked", (self.vertices, self.faces, self.normals))
         object.__setattr__(self, "_cache", {})
 
     def __eq__(self, other) -> bool:
@@ -130,7 +139,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
             return NotImplemented
         same = all(getattr(self, k) is getattr(other, k) for k in ("vertices", "faces", "normals"))
         return same and all(getattr(self, f.name) == getattr(other, f.name) for f in fields(self)
-                            if f.name not in ("vertices", "faces", "normals"))
+                            if f.compare and f.name not in ("vertices", "faces", "normals"))
 
     def __hash__(self) -> int:
         return hash((id(self.vertices), id(self.faces), self.scale, self.axis, self.angle, self.translate, self.name))
