@@ -463,3 +463,23 @@ def test_a_scene_without_a_lidar_or_animation_is_bad_input_for_scan(tmp_path):
     bad.write_text('[lidar]\npreset = "VLP-16"\n')
     status, _, err = run_cli("scan", bad, "-o", tmp_path / "scan.npz", "--time", "1")
     assert status == 2 and "no [animation]" in err and not (tmp_path / "scan.npz").exists()
+
+
+def test_an_animated_sensor_placed_by_a_pose_cannot_key_its_position(tmp_path):
+    """A sensor given by a pose moves by position keys only if placed by position: the frame's sensor
+    names the key, as every frame's scene is checked at load."""
+    text = ('[lidar]\nname = "a"\npreset = "VLP-16"\npose = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n'
+            '[animation]\nfps = 10.0\nduration = 1.0\n[[animation.keys]]\ntarget = "a"\ntime = 0.0\n'
+            'position = [1.0, 0.0, 0.0]\n')
+    with pytest.raises(pyclray.SceneError) as caught:
+        load_text(tmp_path, text)
+    assert "'position'" in str(caught.value) and "not both" in str(caught.value)
+
+
+def test_numpy_inputs_and_a_frame_without_positions(tmp_path):
+    lidar = pyclray.Lidar(elevations=np.array([1.0, -1.0]), columns=np.int64(8), pose=np.eye(4), steps=np.int32(4))
+    assert (lidar.beams, lidar.columns, lidar.steps) == (2, 8, 4) and lidar.pose[0] == (1.0, 0.0, 0.0, 0.0)
+    frame = pyclray.render(scene_of(four_balls()), aovs=("depth", "id"))
+    with pytest.raises(pyclray.RequestError, match="position image"):
+        pyclray.write_ply(tmp_path / "cloud.ply", frame)
+    assert not list(tmp_path.iterdir())
