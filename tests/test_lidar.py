@@ -483,3 +483,13 @@ def test_numpy_inputs_and_a_frame_without_positions(tmp_path):
     with pytest.raises(pyclray.RequestError, match="position image"):
         pyclray.write_ply(tmp_path / "cloud.ply", frame)
     assert not list(tmp_path.iterdir())
+
+
+def test_render_ply_refuses_previews_and_clusters(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text('[camera]\neye = [0.0, 0.0, 5.0]\ntarget = [0.0, 0.0, 0.0]\nfov = 40.0\n[[shapes]]\ntype = "sphere"\n'
+                    'center = [0.0, 0.0, 0.0]\nradius = 1.0\n')
+    for extra, words in ((["--png"], "--png"), (["--workers", "2"], "--workers")):
+        status, _, err = run_cli("render", path, "-o", tmp_path / "cloud.ply", *extra)
+        assert status == 2 and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "cloud.ply").exists()
