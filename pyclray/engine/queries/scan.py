@@ -120,7 +120,7 @@ def _beams_meet_box(origins, directions, box) -> np.ndarray:
     columns, 3)) meets the box, grown by a margin far beyond the rounding of the casts' hits (a
     slab test in float64; a column it keeps is only cast more often, never wrongly)."""
     size = float(np.max(np.abs(box))) + float(np.max(np.abs(origins)))
-    margin = 1e-6 * size + 1e-9
+    margin = 1e-5 * size + 1e-9  # float32 rounds at 6e-8 of these sizes: a hundred times that
     lo, hi = box[0] - margin, box[1] + margin
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse = 1.0 / directions
