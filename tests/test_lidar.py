@@ -44,6 +44,8 @@ def test_vlp16_is_the_manuals_table():
     assert (lidar.beams, lidar.columns) == (16, 1800)
     assert PRESETS["VLP-16"].elevations == tuple(float(v) for pair in zip(range(-15, 0, 2), range(1, 16, 2)) for v in pair)
     assert np.array_equal(lidar.elevation_angles, np.arange(15.0, -16.0, -2.0))
+    assert lidar.elevations == tuple(np.arange(15.0, -16.0, -2.0))  # the preset's table, as rows
+    assert dataclasses.replace(lidar, position=(1.0, 0.0, 0.0)).elevations == lidar.elevations
     # each row's maker's laser number: its angle in the maker's table
     assert np.array_equal(np.array(PRESETS["VLP-16"].elevations)[lidar.lasers], lidar.elevation_angles)
     assert lidar.lasers[0] == 15 and lidar.lasers[-1] == 0

@@ -100,7 +100,8 @@ def _range(value) -> tuple[float, float]:
 class Lidar:
     """A spinning LiDAR: ``Lidar(preset="VLP-16")`` or ``Lidar(elevations=[...], columns=1800)``, placed by
     ``pose`` (4x4 sensor-to-world, rigid) or by ``position`` with an optional rotation ``axis`` and
-    ``angle`` (degrees, right-handed; animatable), never both; ``range`` = (min, max): returns nearer
+    ``angle`` (degrees, right-handed; animatable), never both; a preset's ``elevations`` and ``columns``
+    are its table's (from the top beam down) and its default; ``range`` = (min, max): returns nearer
     than min or farther than max are misses; ``sweep``: in an animated scene each column fires at its
     own time across the revolution (``rate`` revolutions per second, ``steps`` time slices per
     revolution). The module's docstring states the axes and the azimuth convention."""
@@ -131,8 +132,16 @@ class Lidar:
         if preset is None and self.elevations is None:
             raise SceneError(f"expected a preset ({', '.join(PRESETS)}) or elevations (degrees, one per beam)",
                              key="preset")
-        if preset is not None and self.elevations is not None:
-            raise SceneError("expected a preset or elevations, not both", key="elevations")
+        if preset is not None:
+            # a preset's beams from the top down, and the maker's laser number of each row
+            order = sorted(range(len(preset.elevations)), key=lambda k: (-preset.elevations[k], k))
+            table = tuple(preset.elevations[k] for k in order)
+            # (given beside the preset, its own table in that order is no conflict: dataclasses.replace passes both)
+            if self.elevations is not None and self.elevations != table:
+                raise SceneError("expected a preset or elevations, not both", key="elevations")
+            put("elevations", table)
+        else:
+            order = list(range(len(self.elevations)))
         if self.columns is None:
             if preset is None:
                 raise SceneError("expected the number of columns (firings per revolution) beside elevations",
@@ -161,13 +170,8 @@ class Lidar:
             if isinstance(self.steps, np.integer):
                 put("steps", int(self.steps))
             put("steps", integer("steps", self.steps, minimum=1, maximum=self.columns))
-        # the beams in range-image order (a preset's from the top down) and the maker's laser numbers
-        if preset is not None:
-            order = sorted(range(len(preset.elevations)), key=lambda k: (-preset.elevations[k], k))
-            elevations = np.array([preset.elevations[k] for k in order], np.float64)
-        else:
-            order = list(range(len(self.elevations)))
-            elevations = np.array(self.elevations, np.float64)
+        # the beams in range-image order and the maker's laser numbers, as arrays
+        elevations = np.array(self.elevations, np.float64)
         elevations.setflags(write=False)
         lasers = np.array(order, np.int32)
         lasers.setflags(write=False)
