@@ -262,6 +262,10 @@ def test_a_sweep_shows_a_moving_object_skewed_and_each_column_is_the_scene_at_it
     scan = pyclray.scan(scene)
     lidar = scene.lidars[0]
     assert np.array_equal(scan["time"], np.arange(120) / (120 * 10.0))  # one revolution in 1 / rate
+    assert lidar.rate == 10.0
+    faster = dataclasses.replace(lidar, frequency=20.0)  # frequency: another name of rate
+    assert faster.rate == 20.0 and pyclray.scan(scene, faster)["time"][60] == 60 / (120 * 20.0)
+    assert dataclasses.replace(lidar, rate=5.0).rate == 5.0
     # the car drives left (+y) at 60 units/s while the beams turn right: it shows in fewer columns, earlier
     still = pyclray.scan(scene.at(0.0), dataclasses.replace(lidar, sweep=False))
     swept, static = car_columns(scan), car_columns(still)
@@ -362,7 +366,8 @@ columns = 4
     ('preset = "VLP-16"\nsweep = 1', "sweep", "true or false"),
     ('preset = "VLP-16"\nsteps = 5000', "steps", "<= 1800"),
     ('preset = "VLP-16"\nangle = 10.0', "angle", "axis"),
-    ('preset = "VLP-16"\nfrequency = 10.0', "frequency", "unknown key"),
+    ('preset = "VLP-16"\nrate = 10.0\nhz = 10.0', "hz", "unknown key"),
+    ('preset = "VLP-16"\nrate = 5.0\nfrequency = 20.0', "frequency", "not both"),
 ])
 def test_bad_lidar_keys_are_one_line_naming_the_key(tmp_path, table, key, words):
     with pytest.raises(pyclray.SceneError) as caught:

@@ -29,7 +29,7 @@ from ..shapes.box import axis_angle, rotation
 from .presets import PRESETS
 
 KEYS = ("name", "preset", "elevations", "columns", "pose", "position", "axis", "angle", "range", "sweep", "rate",
-        "steps")
+        "frequency", "steps")
 DEFAULT_RATE = 10.0  # Hz: revolutions per second (the presets' sensors' default)
 MAX_BEAMS = 1024
 MAX_COLUMNS = 1 << 20
@@ -118,6 +118,7 @@ class Lidar:
     sweep: bool = field(default=False, metadata=_FIXED)
     rate: float = field(default=DEFAULT_RATE, metadata=_FIXED)
     steps: int | None = field(default=None, metadata=_FIXED)
+    frequency: float | None = field(default=None, metadata=_FIXED)  # another name of rate (Hz): given, it is the rate
 
     def __post_init__(self):
         put = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731 (a frozen dataclass)
@@ -166,6 +167,13 @@ class Lidar:
         if not isinstance(self.sweep, bool):
             raise SceneError(f"expected true or false, got {_shown(self.sweep)}", key="sweep")
         put("rate", number("rate", self.rate, positive=True))
+        if self.frequency is not None:
+            frequency = number("frequency", self.frequency, positive=True)
+            if self.rate not in (DEFAULT_RATE, frequency):
+                raise SceneError(f"expected rate or frequency (the same: revolutions per second), not both, got "
+                                 f"rate {self.rate!r} and frequency {frequency!r}", key="frequency")
+            put("rate", frequency)
+            put("frequency", frequency)
         if self.steps is not None:
             if isinstance(self.steps, np.integer):
                 put("steps", int(self.steps))
