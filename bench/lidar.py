@@ -19,7 +19,6 @@ Prints medians (ms), the ratios, scans/s and the machine's load (uptime): the ma
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import time
 

@@ -23,11 +23,6 @@ from ...model.lidar.sensor import rotated
 from ...model.scene import checked_time
 from ...model.shapes.base import labels_of
 
-# the range image's arrays, (beams, columns, ...), and the point cloud's, one row per hit
-IMAGE_KEYS = ("range", "id", "label", "normal", "position")
-POINT_KEYS = ("points", "points_world", "ring", "column", "point_range")
-
-
 class Scan(dict):
     """A LiDAR scan: name -> numpy array (docs/lidar.md).
 
@@ -97,41 +92,42 @@ def _lidar_at(lidar: Lidar, tracks, t: float, interpolation: str) -> Lidar:
     return dataclasses.replace(lidar, **{track.key: track.value_at(t, interpolation) for track in tracks})
 
 
-def _moving_box(scene, shape_places, times, interpolation):
-    """(2, 3) float64 [lo, hi] holding every animated shape at each of these times (the starts of
-    the runs: between them the shapes hold still), or None where one has no bounds (a plane)."""
+def _moving_boxes(scene, shape_places, times, interpolation):
+    """(len(times), 2, 3) float64 [lo, hi] holding every animated shape at each of these times (the
+    starts of the runs: between them the shapes hold still), or None where one has no bounds (a
+    plane)."""
     tracks_of: dict[int, list] = {}
     for index, track in shape_places:
         tracks_of.setdefault(index, []).append(track)
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    lo, hi = np.full((len(times), 3), np.inf), np.full((len(times), 3), -np.inf)
     for index, tracks in tracks_of.items():
         shape = scene.shapes[index]
         if not shape.bounded:
             return None
         moved = [dataclasses.replace(shape, **{track.key: track.value_at(when, interpolation) for track in tracks})
                  for when in times]
-        bounds = type(shape).world_bounds(moved)  # every time's primitives at once
-        lo, hi = np.minimum(lo, bounds[:, 0].min(axis=0)), np.maximum(hi, bounds[:, 1].max(axis=0))
-    return np.stack([lo, hi])
+        bounds = type(shape).world_bounds(moved).reshape(len(times), -1, 2, 3)  # every time's primitives at once
+        lo, hi = np.minimum(lo, bounds[:, :, 0].min(axis=1)), np.maximum(hi, bounds[:, :, 1].max(axis=1))
+    return np.stack([lo, hi], axis=1)
 
 
-def _beams_meet_box(origins, directions, box) -> np.ndarray:
+def _beams_meet_box(origins, directions, boxes) -> np.ndarray:
     """(columns,) bool: whether any beam of a column (origins (columns, 3), directions (beams,
-    columns, 3)) meets the box, grown by a margin far beyond the rounding of the casts' hits (a
-    slab test in float64; a column it keeps is only cast more often, never wrongly)."""
-    size = float(np.max(np.abs(box))) + float(np.max(np.abs(origins)))
+    columns, 3)) meets its box (boxes (columns, 2, 3)), grown by a margin far beyond the rounding of
+    the casts' hits (a slab test in float64; a column it keeps is only cast more often, never
+    wrongly)."""
+    size = float(np.max(np.abs(boxes))) + float(np.max(np.abs(origins)))
     margin = 1e-5 * size + 1e-9  # float32 rounds at 6e-8 of these sizes: a hundred times that
-    lo, hi = box[0] - margin, box[1] + margin
+    lo, hi = boxes[:, 0] - margin, boxes[:, 1] + margin
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse = 1.0 / directions
-        near = (lo - origins[None]) * inverse
-        far = (hi - origins[None]) * inverse
+        near = (lo - origins)[None] * inverse
+        far = (hi - origins)[None] * inverse
     # a zero component: the beam is within the slab for every t, or for none
-    inside = (origins[None] >= lo) & (origins[None] <= hi)
+    inside = ((origins >= lo) & (origins <= hi))[None]
     entry = np.where(directions == 0, np.where(inside, -np.inf, np.inf), np.fmin(near, far))
     leave = np.where(directions == 0, np.where(inside, np.inf, -np.inf), np.fmax(near, far))
-    meets = entry.max(axis=-1) <= np.maximum(leave.min(axis=-1), 0.0)
-    meets &= leave.min(axis=-1) >= 0.0
+    meets = (entry.max(axis=-1) <= leave.min(axis=-1)) & (leave.min(axis=-1) >= 0.0)
     return meets.any(axis=0)
 
 
@@ -174,14 +170,17 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     runs = list(zip(starts, starts[1:] + [len(step_times)]))
     origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
     world_directions = rotated(poses[column_step, :3, :3], sensor_directions)  # (beams, columns, 3)
-    # the columns whose beams cannot meet a moving shape at any of the revolution's times see the same
-    # shapes at every step: they are cast once, in the first run's scene (a ray's result depends only
-    # on the ray and the shapes it may hit)
+    # a column whose beams meet no moving shape at its own time nor at the first run's is cast with the
+    # first run's columns, in its scene: a ray's result depends only on the ray and the shapes it may
+    # hit, so it is that of the scene at the column's time (only the moving shapes differ)
     moving = np.ones(columns, bool)
     if len(runs) > 1:
-        box = _moving_box(scene, shape_places, [float(step_times[start]) for start, _ in runs], interpolation)
-        if box is not None:
-            moving = _beams_meet_box(origins_per_column, world_directions, box)
+        boxes = _moving_boxes(scene, shape_places, [float(step_times[start]) for start, _ in runs], interpolation)
+        if boxes is not None:
+            run_of_step = np.repeat(np.arange(len(runs)), [stop - start for start, stop in runs])
+            own = boxes[run_of_step[column_step]]  # (columns, 2, 3): the moving shapes at the column's time
+            both = np.stack([np.minimum(own[:, 0], boxes[0, 0]), np.maximum(own[:, 1], boxes[0, 1])], axis=1)
+            moving = _beams_meet_box(origins_per_column, world_directions, both)
     range_min, range_max = lidar.range
     depth = normal = ids = None
     for number, (start, stop) in enumerate(runs):
