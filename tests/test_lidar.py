@@ -500,3 +500,21 @@ def test_render_ply_refuses_previews_and_clusters(tmp_path):
         status, _, err = run_cli("render", path, "-o", tmp_path / "cloud.ply", *extra)
         assert status == 2 and words in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "cloud.ply").exists()
+
+
+def test_a_sweep_through_an_axis_of_zero_names_the_key_and_time(tmp_path):
+    """Every frame (k / fps) is checked at load; a sweep's times between them are checked as they are met."""
+    keys = """
+[[animation.keys]]
+target = "roof"
+time = 0.0
+axis = [0.0, 0.0, 1.0]
+
+[[animation.keys]]
+target = "roof"
+time = 0.1
+axis = [0.0, 0.0, -1.0]
+"""
+    scene = sweep_scene(tmp_path, extra="position = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\nangle = 30.0", keys=keys)
+    with pytest.raises(pyclray.SceneError, match=r"key 'axis': at t = 0.05 s the animated axis is \[0, 0, 0\]"):
+        pyclray.scan(scene)

@@ -152,15 +152,8 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
         step_times = np.array([t])
         column_step = np.zeros(columns, np.int64)
     # the sensor at each step's time: each column's origin and world directions
-    poses = np.empty((len(step_times), 4, 4))
-    first = None
-    for k, when in enumerate(step_times):
-        moved = _lidar_at(lidar, lidar_tracks, float(when), interpolation)
-        first = moved if first is None else first
-        poses[k] = moved.world_from_sensor
-        if not lidar_tracks:  # a sensor that does not move: the same pose at every step
-            poses[:] = poses[0]
-            break
+    poses = lidar.poses_at(lidar_tracks, step_times, interpolation)
+    first = _lidar_at(lidar, lidar_tracks, t, interpolation)  # the sensor at the scan's start
     # the runs of steps whose shapes are the same (their animated values equal): one update and one cast each
     if shape_tracks and len(step_times) > 1:
         states = [tuple(track.value_at(float(when), interpolation) for track in shape_tracks) for when in step_times]

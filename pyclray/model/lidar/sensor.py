@@ -48,6 +48,16 @@ def rotated(rotations: np.ndarray, directions: np.ndarray) -> np.ndarray:
     return (R[..., 0] * d[..., 0] + R[..., 1] * d[..., 1]) + R[..., 2] * d[..., 2]
 
 
+def placed(position, axis, angle, fixed_rotation=None) -> np.ndarray:
+    """The 4x4 float64 sensor-to-world pose of a sensor placed by position, axis and angle (its
+    rotation, where given, instead of axis and angle's)."""
+    m = np.eye(4)
+    m[:3, :3] = rotation(axis, angle) if fixed_rotation is None else fixed_rotation
+    if position is not None:
+        m[:3, 3] = position
+    return m
+
+
 def _pose_matrix(value) -> tuple:
     """A rigid 4x4 sensor-to-world matrix, as nested tuples of floats."""
     try:
@@ -100,7 +110,7 @@ def _range(value) -> tuple[float, float]:
 class Lidar:
     """A spinning LiDAR: ``Lidar(preset="VLP-16")`` or ``Lidar(elevations=[...], columns=1800)``, placed by
     ``pose`` (4x4 sensor-to-world, rigid) or by ``position`` with an optional rotation ``axis`` and
-    ``angle`` (degrees, right-handed; animatable), never both; a preset's ``elevations`` and ``columns``
+    ``angle`` (degrees, right-handed; the keys an animation may move), never both; a preset's ``elevations`` and ``columns``
     are its table's (from the top beam down) and its default; ``range`` = (min, max): returns nearer
     than min or farther than max are misses; ``sweep``: in an animated scene each column fires at its
     own time across the revolution (``rate`` revolutions per second, ``steps`` time slices per
@@ -110,7 +120,7 @@ class Lidar:
     elevations: tuple | None = field(default=None, metadata=_FIXED)
     columns: int | None = field(default=None, metadata=_FIXED)
     pose: tuple | None = field(default=None, metadata=_FIXED)
-    range: tuple = (0.0, math.inf)
+    range: tuple = field(default=(0.0, math.inf), metadata=_FIXED)
     name: str | None = field(default=None, metadata=_FIXED)
     position: tuple | None = None
     axis: tuple | None = None
@@ -229,11 +239,27 @@ class Lidar:
         """The 4x4 float64 sensor-to-world pose: ``pose``, or from position, axis and angle."""
         if self.pose is not None:
             return np.array(self.pose, np.float64)
-        m = np.eye(4)
-        m[:3, :3] = rotation(self.axis, self.angle)
-        if self.position is not None:
-            m[:3, 3] = self.position
-        return m
+        return placed(self.position, self.axis, self.angle)
+
+    def poses_at(self, tracks, times, interpolation: str = "linear") -> np.ndarray:
+        """(len(times), 4, 4): the pose at each time of an animation whose tracks (of this sensor's
+        position, axis and angle) move it; each exactly the world_from_sensor of the sensor at that
+        time (the same function of the same values), without making a Lidar per time. An axis that
+        passes through zero between two keys is a SceneError naming it and the time."""
+        poses = np.empty((len(times), 4, 4))
+        if not tracks:
+            poses[:] = self.world_from_sensor
+            return poses
+        keys = {track.key for track in tracks}
+        fixed_rotation = None if keys & {"axis", "angle"} else rotation(self.axis, self.angle)
+        for k, when in enumerate(times):
+            values = {"position": self.position, "axis": self.axis, "angle": self.angle}
+            values.update((track.key, track.value_at(float(when), interpolation)) for track in tracks)
+            if fixed_rotation is None and values["axis"] is not None and not any(values["axis"]):
+                raise SceneError(f"at t = {float(when):g} s the animated axis is [0, 0, 0]: expected a non-zero "
+                                 "rotation axis", key="axis")
+            poses[k] = placed(values["position"], values["axis"], values["angle"], fixed_rotation)
+        return poses
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """(origin (3,), directions (beams, columns, 3)): the beams in the world, float64 (the
