@@ -162,7 +162,8 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
         starts = [0]
     runs = list(zip(starts, starts[1:] + [len(step_times)]))
     origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
-    world_directions = rotated(poses[column_step, :3, :3], sensor_directions)  # (beams, columns, 3)
+    # (beams, columns, 3); a sensor that does not move: its one rotation for every column (the same bits)
+    world_directions = rotated(poses[column_step, :3, :3] if lidar_tracks else poses[:1, :3, :3], sensor_directions)
     # a column whose beams meet no moving shape at its own time nor at the first run's is cast with the
     # first run's columns, in its scene: a ray's result depends only on the ray and the shapes it may
     # hit, so it is that of the scene at the column's time (only the moving shapes differ)
@@ -185,7 +186,7 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
             continue
         if animation is not None:
             tracer.update(scene_at(scene, float(step_times[start]), lazy=True))
-        directions = world_directions[:, columns_of_run]
+        directions = world_directions if len(columns_of_run) == columns else world_directions[:, columns_of_run]
         if not lidar_tracks:
             origins = poses[0, :3, 3]
         else:
@@ -196,6 +197,9 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
             depth = np.full((beams, columns), np.inf, hits["depth"].dtype)
             normal = np.zeros((beams, columns, 3), hits["depth"].dtype)
             ids = np.full((beams, columns), -1, np.int32)
+        if len(columns_of_run) == columns:  # (one cast of every column: its arrays are the image's)
+            depth, normal, ids = hits["depth"], hits["normal"], hits["id"]
+            continue
         depth[:, columns_of_run] = hits["depth"]
         normal[:, columns_of_run] = hits["normal"]
         ids[:, columns_of_run] = hits["id"]

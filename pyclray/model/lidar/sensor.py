@@ -228,10 +228,15 @@ class Lidar:
 
     def directions(self) -> np.ndarray:
         """(beams, columns, 3) float64 unit directions of the beams in the sensor's frame (x forward,
-        y left, z up): (cos e cos a, cos e sin a, sin e)."""
-        e = np.radians(self.elevation_angles)[:, None]
-        a = np.radians(self.azimuth_angles)[None, :]
-        return np.stack(np.broadcast_arrays(np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)), axis=-1)
+        y left, z up): (cos e cos a, cos e sin a, sin e). Read-only, made once per sensor."""
+        made = self.__dict__.get("_directions")
+        if made is None:
+            e = np.radians(self.elevation_angles)[:, None]
+            a = np.radians(self.azimuth_angles)[None, :]
+            made = np.stack(np.broadcast_arrays(np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)), axis=-1)
+            made.setflags(write=False)
+            object.__setattr__(self, "_directions", made)
+        return made
 
     # -- where it is ---------------------------------------------------------------------------------
     @property
