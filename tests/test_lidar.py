@@ -518,3 +518,13 @@ axis = [0.0, 0.0, -1.0]
     scene = sweep_scene(tmp_path, extra="position = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\nangle = 30.0", keys=keys)
     with pytest.raises(pyclray.SceneError, match=r"key 'axis': at t = 0.05 s the animated axis is \[0, 0, 0\]"):
         pyclray.scan(scene)
+
+
+def test_a_scene_file_path_and_a_closed_handle(tmp_path):
+    sweep_scene(tmp_path)
+    path = tmp_path / "sweep.toml"
+    assert pyclray.scan(str(path), "roof", time=0.0)["range"].shape == (4, 120)
+    tracer = pyclray.prepare(path)
+    tracer.close()
+    with pytest.raises(pyclray.RequestError, match="closed"):
+        tracer.scan()
