@@ -248,11 +248,12 @@ def car_columns(scan):
 
 def assert_columns_are_static_scans(scene, scan, columns):
     """Each column of a sweeping scan equals, bit for bit, that column of a static scan of the scene (and
-    the sensor) at the column's time."""
+    the sensor) at the column's time, on a handle prepared for that scene alone (not one updated to it)."""
     for c in columns:
         at = scene.at(float(scan["time"][c]))
         lidar = dataclasses.replace(at.lidars[0], sweep=False)
-        static = pyclray.scan(at, lidar)
+        with pyclray.prepare(at) as tracer:
+            static = tracer.scan(lidar)
         for key in ("range", "id", "normal", "position"):
             assert np.array_equal(static[key][:, c], scan[key][:, c]), (key, c)
 
@@ -528,3 +529,24 @@ def test_a_scene_file_path_and_a_closed_handle(tmp_path):
     tracer.close()
     with pytest.raises(pyclray.RequestError, match="closed"):
         tracer.scan()
+
+
+def test_a_sweep_of_a_moving_mesh_a_moving_sphere_and_a_batch_of_spheres(tmp_path):
+    """Meshes keep shared vertices on the device: a handle updated to a frame casts the moved triangles."""
+    ico = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    mesh = pyclray.Mesh(ico.vertices, ico.faces, translate=(5.0, -3.0, 0.0), name="ball")
+    balls = pyclray.Spheres(np.array([[4.0, 4.0, 0.0], [-4.0, 3.0, 0.5]]), np.array([0.8, 0.6]), name="batch")
+    lidar = pyclray.Lidar(elevations=[3.0, 0.0, -3.0], columns=90, sweep=True, name="s", position=(0.0, 0.0, 0.0))
+    animation = pyclray.Animation(10.0, 1.0, (
+        {"target": "ball", "time": 0.0, "translate": [5.0, -3.0, 0.0]},
+        {"target": "ball", "time": 0.1, "translate": [5.0, 3.0, 0.0]},
+        {"target": "bead", "time": 0.0, "center": [-3.0, 3.0, 0.0]},
+        {"target": "bead", "time": 0.1, "center": [-3.0, -3.0, 0.0]},
+        {"target": "s", "time": 0.0, "position": [0.0, 0.0, 0.0]},
+        {"target": "s", "time": 0.1, "position": [0.5, 0.0, 0.0]},
+    ))
+    bead = pyclray.Sphere((-3.0, 3.0, 0.0), 0.7, name="bead")
+    scene = scene_of([mesh, balls, pyclray.Plane((0.0, 0.0, 1.0), 1.0), bead], [lidar], animation)
+    scan = pyclray.scan(scene)
+    assert (scan["id"] == 0).sum() > 5 and (scan["id"] == 1).sum() > 5 and (scan["id"] == 3).sum() > 3
+    assert_columns_are_static_scans(scene, scan, range(0, 90, 2))
