@@ -5,9 +5,10 @@ range image and the point cloud assembled on the host.
 
 A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time: the
 columns whose times see the same shapes (the shapes' animated values equal) are cast together after
-one ``Tracer.update`` to the scene at that time; a moving sensor only moves the rays (each column's
-origin and directions from the sensor's pose at its time), so a scan with a moving sensor among
-still shapes is one cast.
+one ``Tracer.update`` to the scene at that time, and the columns whose beams meet no moving shape's
+box at their own time nor at the start with the first of them; a moving sensor only moves the rays
+(each column's origin and directions from the sensor's pose at its time), so a scan with a moving
+sensor among still shapes is one cast.
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from ...model.lidar import Lidar
 from ...model.lidar.sensor import rotated
 from ...model.scene import checked_time
 from ...model.shapes.base import labels_of
+
 
 class Scan(dict):
     """A LiDAR scan: name -> numpy array (docs/lidar.md).
