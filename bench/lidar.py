@@ -9,6 +9,7 @@ Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_c
   process: pyclray.cast of the same 28,800 float64 rays (depth, normal, id: what a scan adds beyond
   the cast is the rays, the range limits, the labels and the point cloud) and Open3D's
   RaycastingScene.cast_rays of the same rays (float32, Embree) where Open3D is installed;
+  the scan's PLY file is read back with Open3D's read_point_cloud (points and normals);
 - "sweeps": scans/s of `--sweeps` sweeping VLP-16 scans (sweep = true, 10 Hz) of an animated scene
   (a ground plane, 20 still boxes and a car driving past: one moving shape), each starting at
   the next 1/10 s, with the revolution cut into steps time slices: every column at its own time
@@ -60,6 +61,16 @@ def scan_case(rounds: int, block: int) -> dict:
     scan = pyclray.scan(scene, lidar)
     print(f"scan: {len(scan['ring'])} of {lidar.beams * lidar.columns} beams return, "
           f"{sum(int(np.asarray(s.faces).shape[0]) for s in scene.shapes)} triangles")
+    if "Open3D cast_rays (same rays)" in systems:  # the PLY file read back by Open3D (docs/lidar.md)
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "scan.ply")
+            pyclray.write_ply(path, scan)
+            cloud = o3d.io.read_point_cloud(path)
+            same = np.array_equal(np.asarray(cloud.points), scan["points_world"])
+            print(f"Open3D read the scan's PLY: {len(cloud.points)} points, normals {cloud.has_normals()}, "
+                  f"points equal to points_world: {same}")
     timed, cpu = with_cpu(systems)
     results = blocks(timed, rounds, block)
     for name, values in cpu.items():  # each call's process CPU time (all threads), ms
