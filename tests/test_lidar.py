@@ -357,6 +357,7 @@ columns = 4
     ("elevations = [0.0, 95.0]\ncolumns = 4", "elevations", "beam 1"),
     ('preset = "VLP-16"\ncolumns = 0', "columns", ">= 1"),
     ('preset = "VLP-16"\ncolumns = 10.5', "columns", "whole number"),
+    ('preset = "OS1-64"\ncolumns = 1048576', "columns", "rays per scan"),
     ('preset = "VLP-16"\nrange = [5.0, 1.0]', "range", "min < max"),
     ('preset = "VLP-16"\nrange = [-1.0, 1.0]', "range", "0 <= min"),
     ('preset = "VLP-16"\nrange = 3.0', "range", "[min, max]"),

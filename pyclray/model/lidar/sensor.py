@@ -33,6 +33,8 @@ KEYS = ("name", "preset", "elevations", "columns", "pose", "position", "axis", "
 DEFAULT_RATE = 10.0  # Hz: revolutions per second (the presets' sensors' default)
 MAX_BEAMS = 1024
 MAX_COLUMNS = 1 << 20
+# beams x columns at most: a scan holds a float64 direction and a position per beam (48 bytes), 1.6 GB here
+MAX_BEAMS_X_COLUMNS = 1 << 25
 # a pose's rotation must be orthonormal (det +1) within this, as a camera's (cameras/perspective.py)
 RIGID_TOLERANCE = 1e-6
 
@@ -161,6 +163,9 @@ class Lidar:
         if isinstance(self.columns, np.integer):  # (a numpy whole number, as from an array)
             put("columns", int(self.columns))
         put("columns", integer("columns", self.columns, minimum=1, maximum=MAX_COLUMNS))
+        if len(self.elevations) * self.columns > MAX_BEAMS_X_COLUMNS:
+            raise SceneError(f"{len(self.elevations)} beams x {self.columns} columns is more than {MAX_BEAMS_X_COLUMNS:,} "
+                             "rays per scan", key="columns")
         if self.pose is not None and (self.position is not None or self.axis is not None or self.angle != 0):
             key = "position" if self.position is not None else ("axis" if self.axis is not None else "angle")
             raise SceneError("expected a pose, or a position with an optional axis and angle, not both", key=key)
