@@ -180,12 +180,12 @@ def scan(scene: Scene, lidar=None, time=None, precision: str = "fp32", device=No
     ctx = context_for(device)
     check_precision(precision, ctx)
     check_cast_device(ctx)
-    from .queries.scan import run_scan, scan_time
+    from .queries.scan import run_scan
 
-    start = scan_time(scene, time)
-    # an animated scene's handle: that of its frame at the start (an earlier frame's handle, updated)
-    tracer = tracer_for(scene if scene.animation is None else scene_at(scene, start, lazy=True), ctx, precision)
-    return run_scan(tracer, scene, lidar, time)
+    # the handles: cached ones (an animated scene's at its frame, an earlier frame's handle updated; a
+    # sweep's still shapes'), and a new one for a sweep's moving shapes
+    handles = (lambda shapes: tracer_for(shapes, ctx, precision), lambda shapes: Tracer(shapes, ctx.device, precision))
+    return run_scan(None, scene, lidar, time, handles)
 
 
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None) -> np.ndarray:

@@ -10,7 +10,7 @@ from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, _find_places, scene_at
+from .animation import Animation, _find_places, scene_at, tracks_in
 from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
@@ -81,8 +81,16 @@ class Scene:
         """The frames' working copies of the animated collections (pyclray.model.frames.FrameWork)."""
         return FrameWork()
 
+    @cached_property
+    def still_shapes(self) -> tuple[tuple[int, ...], CheckedShapes]:
+        """(the indices of the shapes its animation moves, the other shapes as one kept tuple): a
+        sweeping scan prepares the still shapes once (engine/queries/scan.py)."""
+        moving = tuple(sorted({index for index, _ in tracks_in(self, "shapes")}))
+        skip = set(moving)
+        return moving, CheckedShapes(shape for index, shape in enumerate(self.shapes) if index not in skip)
+
     def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work", "still_shapes")}
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has

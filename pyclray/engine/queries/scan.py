@@ -94,6 +94,61 @@ def _lidar_at(lidar: Lidar, tracks, t: float, interpolation: str) -> Lidar:
     return dataclasses.replace(lidar, **{track.key: track.value_at(t, interpolation) for track in tracks})
 
 
+def _split_sweep(scene, handles, runs, step_times, column_step, origins_per_column, world_directions, poses,
+                 lidar_tracks, range_max, interpolation):
+    """(depth, normal, ids) of a sweep cast as run_scan's handles say: the still shapes once, the
+    moving ones per time slice, the nearer hit of each beam."""
+    from ...model.scene import Scene
+
+    kept, new = handles
+    moving_ids, still_shapes = scene.still_shapes
+    still_ids = np.array([i for i in range(len(scene.shapes)) if i not in set(moving_ids)], np.int64)
+    moving_ids = np.array(moving_ids, np.int64)
+    tmax = None if math.isinf(range_max) else range_max
+    beams, columns = world_directions.shape[:2]
+    origins_all = poses[0, :3, 3] if not lidar_tracks else np.broadcast_to(origins_per_column, world_directions.shape)
+    # every column at the still shapes, once (their handle kept: the still scene is prepared once)
+    still_handle = kept(Scene(scene.camera, scene.image, still_shapes))
+    still = still_handle.cast(origins_all, world_directions, aovs=("depth", "normal", "id"), tmax=tmax)
+    depth, normal = still["depth"], still["normal"]
+    ids = np.where(still["id"] >= 0, np.append(still_ids, -1)[still["id"]], -1).astype(np.int32)
+    # the columns whose beams may meet a moving shape at their own time (no other time matters now)
+    boxes = _moving_boxes(scene, tracks_in(scene, "shapes"), [float(step_times[start]) for start, _ in runs],
+                          interpolation)
+    if boxes is None:
+        moving = np.ones(columns, bool)
+    else:
+        run_of_step = np.repeat(np.arange(len(runs)), [stop - start for start, stop in runs])
+        moving = _beams_meet_box(origins_per_column, world_directions, boxes[run_of_step[column_step]])
+    handle = None
+    try:
+        for start, stop in runs:
+            columns_of_run = np.flatnonzero((column_step >= start) & (column_step < stop) & moving)
+            if not len(columns_of_run):
+                continue
+            frame = scene_at(scene, float(step_times[start]), lazy=True)
+            view = Scene(scene.camera, scene.image, tuple(frame.shapes[i] for i in moving_ids))
+            if handle is None:
+                handle = new(view)
+            else:
+                handle.update(view)  # the moving shapes moved in place
+            directions = world_directions[:, columns_of_run]
+            origins = poses[0, :3, 3] if not lidar_tracks else \
+                np.broadcast_to(origins_per_column[columns_of_run], directions.shape)
+            hits = handle.cast(origins, directions, aovs=("depth", "normal", "id"), tmax=tmax)
+            hit_ids = np.where(hits["id"] >= 0, np.append(moving_ids, -1)[hits["id"]], -1)
+            # the nearer of the two hits; on a tie the lower id (one cast of every shape keeps that one)
+            before, before_ids = depth[:, columns_of_run], ids[:, columns_of_run]
+            nearer = (hit_ids >= 0) & ((hits["depth"] < before) | ((hits["depth"] == before) & (hit_ids < before_ids)))
+            depth[:, columns_of_run] = np.where(nearer, hits["depth"], before)
+            ids[:, columns_of_run] = np.where(nearer, hit_ids, before_ids)
+            normal[:, columns_of_run] = np.where(nearer[..., None], hits["normal"], normal[:, columns_of_run])
+    finally:
+        if handle is not None:
+            handle.close()
+    return depth, normal, ids, still_handle
+
+
 def _moving_boxes(scene, shape_places, times, interpolation):
     """(len(times), 2, 3) float64 [lo, hi] holding every animated shape at each of these times (the
     starts of the runs: between them the shapes hold still), or None where one has no bounds (a
@@ -133,11 +188,20 @@ def _beams_meet_box(origins, directions, boxes) -> np.ndarray:
     return meets.any(axis=0)
 
 
-def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
+def run_scan(tracer, scene, lidar=None, t=None, handles=None) -> Scan:
     """The scan of ``lidar`` (see scene_lidar) in ``scene`` (its shapes are the handle's, or an
     animated scene whose static shapes or frames are) at time t (an animated scene's; None: 0), on a
     handle whose device can cast (engine/tracer.py). The handle ends prepared for the scene at the
-    last time it cast (a frame of an animated scene)."""
+    last time it cast (a frame of an animated scene).
+
+    tracer: the handle, or None where handles give it (kept(the scene at t)). handles: None, or
+    (kept, new): kept(scene) a handle of these shapes kept between calls (the module-level
+    functions' cache), new(scene) a new handle, closed after the scan; given, a sweep
+    whose shapes move casts every column once at the shapes no animation moves (a kept handle: a
+    large still scene is prepared once) and the columns that may meet a moving shape at the moving
+    shapes alone, updated from time slice to time slice (a handle of a few shapes: each update and
+    cast costs what those shapes cost), each beam's nearer hit kept (the lower id on a tie, as one
+    cast of every shape keeps)."""
     lidar, index = scene_lidar(scene, lidar)
     t = scan_time(scene, t)
     animation = scene.animation
@@ -166,6 +230,13 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
     origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
     # (beams, columns, 3); a sensor that does not move: its one rotation for every column (the same bits)
     world_directions = rotated(poses[column_step, :3, :3] if lidar_tracks else poses[:1, :3, :3], sensor_directions)
+    if handles is not None and len(runs) > 1:
+        depth, normal, ids, still = _split_sweep(scene, handles, runs, step_times, column_step, origins_per_column,
+                                                 world_directions, poses, lidar_tracks, lidar.range[1], interpolation)
+        return _assembled(scene, lidar, first, t, still, depth, normal, ids, step_times, column_step, poses,
+                          origins_per_column, world_directions, sensor_directions)
+    if tracer is None:  # the kept handle of the whole scene (at the scan's start)
+        tracer = handles[0](scene if animation is None else scene_at(scene, t, lazy=True))
     # a column whose beams meet no moving shape at its own time nor at the first run's is cast with the
     # first run's columns, in its scene: a ray's result depends only on the ray and the shapes it may
     # hit, so it is that of the scene at the column's time (only the moving shapes differ)
@@ -205,6 +276,15 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
         depth[:, columns_of_run] = hits["depth"]
         normal[:, columns_of_run] = hits["normal"]
         ids[:, columns_of_run] = hits["id"]
+    return _assembled(scene, lidar, first, t, tracer, depth, normal, ids, step_times, column_step, poses,
+                      origins_per_column, world_directions, sensor_directions)
+
+
+def _assembled(scene, lidar, first, t, handle, depth, normal, ids, step_times, column_step, poses, origins_per_column,
+               world_directions, sensor_directions) -> Scan:
+    """The Scan of the casts' range image: the range limits applied, the labels, the positions and
+    the point cloud."""
+    range_min, range_max = lidar.range
     # returns outside [min, max] are misses (a return nearer than min hides what is behind it, as a
     # real sensor's blind zone does)
     outside = (ids >= 0) & ~((depth >= range_min) & (depth <= range_max))
@@ -222,5 +302,5 @@ def run_scan(tracer, scene, lidar=None, t=None) -> Scan:
         "elevation": lidar.elevation_angles.copy(), "azimuth": lidar.azimuth_angles,
         "time": step_times[column_step].astype(np.float64),
     }
-    return Scan(arrays, lidar=first, pose=poses[0].copy(), t=t, precision=tracer.precision,
-                device=tracer.ctx.device.name.strip())
+    return Scan(arrays, lidar=first, pose=poses[0].copy(), t=t, precision=handle.precision,
+                device=handle.ctx.device.name.strip())
