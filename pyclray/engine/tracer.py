@@ -51,6 +51,7 @@ class Tracer:
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
         self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
+        self._scan_still = None  # (shapes, Tracer): a sweeping scan's still shapes, prepared once (see scan)
         self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
@@ -61,6 +62,9 @@ class Tracer:
             self._prepared = None
             self._views.clear()
             self._cast_inputs = None
+            if self._scan_still is not None:
+                self._scan_still[1].close()
+                self._scan_still = None
             self.outputs.buffers.clear()
 
     @property
@@ -103,6 +107,7 @@ class Tracer:
             if self._prepared is None:
                 return 0
             total = self._prepared.nbytes() + self.outputs.nbytes()
+            total += 0 if self._scan_still is None else self._scan_still[1].nbytes
             total += sum(state.nbytes() for state in self._views.values())
             return total + (0 if self._cast_inputs is None else self._cast_inputs[3])
 
@@ -189,11 +194,23 @@ class Tracer:
     def scan(self, lidar=None, time=None):
         """A LiDAR scan of the handle's scene: exactly ``pyclray.scan(scene, lidar, time, precision,
         device)`` (see there). On an animated scene the handle is updated to each time the scan
-        needs, and back to the scene's own shapes after it."""
+        needs, and back to the scene's own shapes after it; a sweep among moving shapes keeps a handle
+        of the still shapes (in ``nbytes``, freed by ``close``) and updates one of the moving shapes."""
         cast_queries.check_cast_device(self.ctx)
+        self.prepared  # closed: the error, before anything is cast
         animated = self._scene if self._scene.animation is not None else None
+
+        def still(view):  # a sweep's still shapes: a handle of this one's, kept until they change
+            with self.lock:
+                if self._scan_still is None or self._scan_still[0] is not view.shapes:
+                    if self._scan_still is not None:
+                        self._scan_still[1].close()
+                    self._scan_still = (view.shapes, Tracer(view, self.ctx.device, self.precision))
+                return self._scan_still[1]
+
+        handles = (still, lambda view: Tracer(view, self.ctx.device, self.precision))
         try:
-            return scan_query.run_scan(self, self._scene, lidar, time)
+            return scan_query.run_scan(self, self._scene, lidar, time, handles)
         finally:
             if animated is not None and not self.closed:
                 self.update(animated)
