@@ -3,12 +3,16 @@ the sensor's origin through the cast query (engine/queries/cast.py), so that eac
 the error model as any cast's depth; returns outside the sensor's range limits made misses; the
 range image and the point cloud assembled on the host.
 
-A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time: the
-columns whose times see the same shapes (the shapes' animated values equal) are cast together after
-one ``Tracer.update`` to the scene at that time, and the columns whose beams meet no moving shape's
-box at their own time nor at the start with the first of them; a moving sensor only moves the rays
-(each column's origin and directions from the sensor's pose at its time), so a scan with a moving
-sensor among still shapes is one cast.
+A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time. Given
+the handles of the module-level functions or of Tracer.scan (run_scan's handles), every column is
+cast once at the shapes no animation moves (their handle kept: prepared once) and, for each time
+slice in which a column's beams may meet a moving shape's box, those columns at the moving shapes
+alone (a small handle updated from slice to slice), each beam keeping the nearer hit. Without them,
+the columns whose times see the same shapes are cast at every shape after one ``Tracer.update`` to
+the scene at that time (and those whose beams meet no moving shape's box, at their own time nor at
+the first slice's, with the first slice's). A moving sensor only moves the rays (each column's origin
+and directions from the sensor's pose at its time): a scan with a moving sensor among still shapes
+is one cast.
 """
 from __future__ import annotations
 
