@@ -3,16 +3,12 @@ the sensor's origin through the cast query (engine/queries/cast.py), so that eac
 the error model as any cast's depth; returns outside the sensor's range limits made misses; the
 range image and the point cloud assembled on the host.
 
-A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time. Given
-the handles of the module-level functions or of Tracer.scan (run_scan's handles), every column is
-cast once at the shapes no animation moves (their handle kept: prepared once) and, for each time
-slice in which a column's beams may meet a moving shape's box, those columns at the moving shapes
-alone (a small handle updated from slice to slice), each beam keeping the nearer hit. Without them,
-the columns whose times see the same shapes are cast at every shape after one ``Tracer.update`` to
-the scene at that time (and those whose beams meet no moving shape's box, at their own time nor at
-the first slice's, with the first slice's). A moving sensor only moves the rays (each column's origin
-and directions from the sensor's pose at its time): a scan with a moving sensor among still shapes
-is one cast.
+A sweeping scan (``sweep = true`` in an animated scene) fires each column at its own time: every
+column is cast once at the shapes no animation moves (their handle kept: prepared once) and, for each
+time slice in which a column's beams may meet a moving shape's box, those columns at the moving
+shapes alone (a small handle updated from slice to slice), each beam keeping the nearer hit. A moving
+sensor only moves the rays (each column's origin and directions from the sensor's pose at its time):
+a scan with a moving sensor among still shapes is one cast.
 """
 from __future__ import annotations
 
@@ -106,10 +102,11 @@ def _split_sweep(scene, handles, runs, step_times, column_step, origins_per_colu
 
     kept, new = handles
     moving_ids, still_shapes = scene.still_shapes
-    still_ids = np.array([i for i in range(len(scene.shapes)) if i not in set(moving_ids)], np.int64)
+    skip = set(moving_ids)
+    still_ids = np.array([i for i in range(len(scene.shapes)) if i not in skip], np.int64)
     moving_ids = np.array(moving_ids, np.int64)
     tmax = None if math.isinf(range_max) else range_max
-    beams, columns = world_directions.shape[:2]
+    columns = world_directions.shape[1]
     origins_all = poses[0, :3, 3] if not lidar_tracks else np.broadcast_to(origins_per_column, world_directions.shape)
     # every column at the still shapes, once (their handle kept: the still scene is prepared once)
     still_handle = kept(Scene(scene.camera, scene.image, still_shapes))
@@ -192,15 +189,16 @@ def _beams_meet_box(origins, directions, boxes) -> np.ndarray:
     return meets.any(axis=0)
 
 
-def run_scan(tracer, scene, lidar=None, t=None, handles=None) -> Scan:
+def run_scan(tracer, scene, lidar, t, handles) -> Scan:
     """The scan of ``lidar`` (see scene_lidar) in ``scene`` (its shapes are the handle's, or an
     animated scene whose static shapes or frames are) at time t (an animated scene's; None: 0), on a
-    handle whose device can cast (engine/tracer.py). The handle ends prepared for the scene at the
-    last time it cast (a frame of an animated scene).
+    handle whose device can cast (engine/tracer.py). A scan in one time slice leaves the handle
+    prepared for the scene at t (a frame of an animated scene); a sweep among moving shapes leaves it
+    as it was.
 
-    tracer: the handle, or None where handles give it (kept(the scene at t)). handles: None, or
-    (kept, new): kept(scene) a handle of these shapes kept between calls (the module-level
-    functions' cache), new(scene) a new handle, closed after the scan; given, a sweep
+    tracer: the handle, or None where handles give it (kept(the scene at t)). handles: (kept, new):
+    kept(scene) a handle of these shapes kept between calls (the module-level functions' cache, or
+    Tracer.scan's handle of its still shapes), new(scene) a new handle, closed after the scan: a sweep
     whose shapes move casts every column once at the shapes no animation moves (a kept handle: a
     large still scene is prepared once) and the columns that may meet a moving shape at the moving
     shapes alone, updated from time slice to time slice (a handle of a few shapes: each update and
@@ -213,7 +211,7 @@ def run_scan(tracer, scene, lidar=None, t=None, handles=None) -> Scan:
     lidar_tracks = [track for i, track in tracks_in(scene, "lidars") if i == index] if index is not None else []
     shape_places = tracks_in(scene, "shapes")  # ((shape index, track), ...)
     shape_tracks = [track for _, track in shape_places]
-    beams, columns = lidar.beams, lidar.columns
+    columns = lidar.columns
     sensor_directions = lidar.directions()  # (beams, columns, 3), the sensor's frame
     if animation is not None and lidar.sweep:
         step_times = lidar.step_times(t)
@@ -234,54 +232,23 @@ def run_scan(tracer, scene, lidar=None, t=None, handles=None) -> Scan:
     origins_per_column = poses[column_step, :3, 3]  # (columns, 3)
     # (beams, columns, 3); a sensor that does not move: its one rotation for every column (the same bits)
     world_directions = rotated(poses[column_step, :3, :3] if lidar_tracks else poses[:1, :3, :3], sensor_directions)
-    if handles is not None and len(runs) > 1:
+    if len(runs) > 1:  # shapes move during the revolution: the still ones once, the moving ones per slice
         depth, normal, ids, still = _split_sweep(scene, handles, runs, step_times, column_step, origins_per_column,
                                                  world_directions, poses, lidar_tracks, lidar.range[1], interpolation)
         return _assembled(scene, lidar, first, t, still, depth, normal, ids, step_times, column_step, poses,
                           origins_per_column, world_directions, sensor_directions)
-    if tracer is None:  # the kept handle of the whole scene (at the scan's start)
-        tracer = handles[0](scene if animation is None else scene_at(scene, t, lazy=True))
-    # a column whose beams meet no moving shape at its own time nor at the first run's is cast with the
-    # first run's columns, in its scene: a ray's result depends only on the ray and the shapes it may
-    # hit, so it is that of the scene at the column's time (only the moving shapes differ)
-    moving = np.ones(columns, bool)
-    if len(runs) > 1:
-        boxes = _moving_boxes(scene, shape_places, [float(step_times[start]) for start, _ in runs], interpolation)
-        if boxes is not None:
-            run_of_step = np.repeat(np.arange(len(runs)), [stop - start for start, stop in runs])
-            own = boxes[run_of_step[column_step]]  # (columns, 2, 3): the moving shapes at the column's time
-            both = np.stack([np.minimum(own[:, 0], boxes[0, 0]), np.maximum(own[:, 1], boxes[0, 1])], axis=1)
-            moving = _beams_meet_box(origins_per_column, world_directions, both)
-    range_min, range_max = lidar.range
-    depth = normal = ids = None
-    for number, (start, stop) in enumerate(runs):
-        in_run = (column_step >= start) & (column_step < stop)
-        # the first run also casts the columns that no moving shape can reach; the others, their own
-        # columns that one may
-        columns_of_run = np.flatnonzero(in_run | ~moving if number == 0 else in_run & moving)
-        if not len(columns_of_run):
-            continue
-        if animation is not None:
-            tracer.update(scene_at(scene, float(step_times[start]), lazy=True))
-        directions = world_directions if len(columns_of_run) == columns else world_directions[:, columns_of_run]
-        if not lidar_tracks:
-            origins = poses[0, :3, 3]
-        else:
-            origins = np.broadcast_to(origins_per_column[columns_of_run], directions.shape)
-        hits = tracer.cast(origins, directions, aovs=("depth", "normal", "id"),
-                           tmax=None if math.isinf(range_max) else range_max)
-        if depth is None:
-            depth = np.full((beams, columns), np.inf, hits["depth"].dtype)
-            normal = np.zeros((beams, columns, 3), hits["depth"].dtype)
-            ids = np.full((beams, columns), -1, np.int32)
-        if len(columns_of_run) == columns:  # (one cast of every column: its arrays are the image's)
-            depth, normal, ids = hits["depth"], hits["normal"], hits["id"]
-            continue
-        depth[:, columns_of_run] = hits["depth"]
-        normal[:, columns_of_run] = hits["normal"]
-        ids[:, columns_of_run] = hits["id"]
-    return _assembled(scene, lidar, first, t, tracer, depth, normal, ids, step_times, column_step, poses,
-                      origins_per_column, world_directions, sensor_directions)
+    # one cast of every column at the scene at t (its frame, for an animated scene)
+    frame = scene if animation is None else scene_at(scene, t, lazy=True)
+    if tracer is None:  # the kept handle of the whole scene (an earlier frame's, updated)
+        tracer = handles[0](frame)
+    elif animation is not None:
+        tracer.update(frame)
+    range_max = lidar.range[1]
+    origins = poses[0, :3, 3] if not lidar_tracks else np.broadcast_to(origins_per_column, world_directions.shape)
+    hits = tracer.cast(origins, world_directions, aovs=("depth", "normal", "id"),
+                       tmax=None if math.isinf(range_max) else range_max)
+    return _assembled(scene, lidar, first, t, tracer, hits["depth"], hits["normal"], hits["id"], step_times,
+                      column_step, poses, origins_per_column, world_directions, sensor_directions)
 
 
 def _assembled(scene, lidar, first, t, handle, depth, normal, ids, step_times, column_step, poses, origins_per_column,
