@@ -26,6 +26,7 @@ from .engine.tracer import Tracer, prepare
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
+from .model.cameras import Equirectangular, Fisheye, Orthographic
 from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .model.lidar import Lidar
 from .model.lights import DirectionalLight, Material, PointLight, Shading
@@ -38,9 +39,9 @@ from .version import __version__
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Lidar", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
+    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "all_hits", "cast", "count_hits", "list_devices", "load_scene", "render",
     "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "Scan", "scan", "scene_from_dict", "select_device", "write_exr",
-    "write_npz", "write_ply",
+    "write_npz", "write_ply", "Equirectangular", "Fisheye", "Orthographic",
 ]
 
 
@@ -50,6 +51,7 @@ __all__ = [
 _LAZY = {
     "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"), "scan": (".engine.api", "scan"),
     "Scan": (".engine.queries.scan", "Scan"), "write_ply": (".io.ply", "write_ply"),
+    "count_hits": (".engine.api", "count_hits"), "all_hits": (".engine.api", "all_hits"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
     "cluster": (".apps.cluster", None),
