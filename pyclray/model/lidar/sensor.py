@@ -25,7 +25,7 @@ from numbers import Real
 import numpy as np
 
 from ..errors import SceneError, _shown, integer, no_unknown_keys, number, text, vector3
-from ..shapes.box import axis_angle, rotation
+from ..shapes.rotations import axis_angle, rotation
 from .presets import PRESETS
 
 KEYS = ("name", "preset", "elevations", "columns", "pose", "position", "axis", "angle", "range", "sweep", "rate",
