@@ -29,6 +29,7 @@ from .queries import cast as cast_queries
 from .queries import closest as closest_queries
 from .queries import hits as hit_queries
 from .queries import render as render_query
+from .queries import scan as scan_query
 from .queries.requests import check_precision, check_request
 from .scene.prepared import PreparedScene
 from .scene.views import ViewState
@@ -56,6 +57,7 @@ class Tracer:
         # (sign="parity" and "winding"), made when first asked for (engine/queries/closest.py)
         self._closest_inputs = None
         self._mesh_handles: dict = {}
+        self._scan_still = None  # (shapes, Tracer): a sweeping scan's still shapes, prepared once (see scan)
         self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
@@ -67,6 +69,9 @@ class Tracer:
             self._views.clear()
             self._cast_inputs = None
             self._drop_closest()
+            if self._scan_still is not None:
+                self._scan_still[1].close()
+                self._scan_still = None
             self.outputs.buffers.clear()
 
     @property
@@ -109,6 +114,7 @@ class Tracer:
             if self._prepared is None:
                 return 0
             total = self._prepared.nbytes() + self.outputs.nbytes()
+            total += 0 if self._scan_still is None else self._scan_still[1].nbytes
             total += sum(state.nbytes() for state in self._views.values())
             total += 0 if self._closest_inputs is None else self._closest_inputs.nbytes
             total += sum(handle.nbytes for handle in self._mesh_handles.values() if handle is not None)
@@ -207,6 +213,30 @@ class Tracer:
         aovs = hit_queries.check_hit_aovs(aovs)
         cast_queries.check_cast_device(self.ctx)
         return hit_queries.run_all_hits(self, origins, directions, tmin, tmax, aovs)
+
+    def scan(self, lidar=None, time=None):
+        """A LiDAR scan of the handle's scene: exactly ``pyclray.scan(scene, lidar, time, precision,
+        device)`` (see there). On an animated scene the handle is updated to each time the scan
+        needs, and back to the scene's own shapes after it; a sweep among moving shapes keeps a handle
+        of the still shapes (in ``nbytes``, freed by ``close``) and updates one of the moving shapes."""
+        cast_queries.check_cast_device(self.ctx)
+        self.prepared  # closed: the error, before anything is cast
+        animated = self._scene if self._scene.animation is not None else None
+
+        def still(view):  # a sweep's still shapes: a handle of this one's, kept until they change
+            with self.lock:
+                if self._scan_still is None or self._scan_still[0] is not view.shapes:
+                    if self._scan_still is not None:
+                        self._scan_still[1].close()
+                    self._scan_still = (view.shapes, Tracer(view, self.ctx.device, self.precision))
+                return self._scan_still[1]
+
+        handles = (still, lambda view: Tracer(view, self.ctx.device, self.precision))
+        try:
+            return scan_query.run_scan(self, self._scene, lidar, time, handles)
+        finally:
+            if animated is not None and not self.closed:
+                self.update(animated)
 
     def cast_inputs(self):
         """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""
