@@ -36,9 +36,15 @@ CLOSEST_OUTPUTS = ("position", "normal", "id", "primitive", "barycentric")
 # point is computed on its own, so the order changes no bit.
 COHERENT_FROM = 4096
 
-# the direction of the parity rays: any direction is exact (count_hits' tie rule); one along no axis
-# and no simple diagonal meets a mesh's axis-aligned edges and faces edge-on less often
+# the direction of the parity rays: any direction is exact (count_hits' tie rule), so each point's
+# ray goes toward the nearest face of its meshes' box (the shortest way out: fewer boxes and
+# triangles on it; the rays of one face, ordered, are coherent), tilted off the axis by a little of
+# a direction along no axis and no simple diagonal (a ray exactly along an axis meets a mesh's
+# axis-aligned edges and faces edge-on, and the float box tests' infinite slopes cost far more)
 PARITY_DIRECTION = np.array([0.5773502691896258, 0.6172133998483676, 0.5345224838248488])
+PARITY_TILT = 1e-2
+# per face of the box (-x, -y, -z, +x, +y, +z): its ray's direction
+PARITY_FACES = np.concatenate([-np.eye(3), np.eye(3)]) + PARITY_TILT * PARITY_DIRECTION * (1 - np.concatenate([np.eye(3)] * 2))
 
 WORK_GROUP = 64
 
@@ -154,23 +160,6 @@ def _own_entries(shapes: tuple):
     return types, bvh, worlds, ids, primitives
 
 
-def coherent_order(points: np.ndarray) -> np.ndarray:
-    """int32 positions of the points in the order of a 30-bit Morton code of their coordinates in
-    their box (10 bits per axis)."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    scale = np.where(hi > lo, 1023.0 / np.where(hi > lo, hi - lo, 1.0), 0.0)
-    cells = np.minimum((points - lo) * scale, 1023.0).astype(np.uint32)
-    code = np.zeros(len(points), np.uint32)
-    for axis in range(3):
-        v = cells[:, axis]
-        v = (v | (v << 16)) & np.uint32(0x030000FF)
-        v = (v | (v << 8)) & np.uint32(0x0300F00F)
-        v = (v | (v << 4)) & np.uint32(0x030C30C3)
-        v = (v | (v << 2)) & np.uint32(0x09249249)
-        code |= v << np.uint32(axis)
-    return np.argsort(code, kind="stable").astype(np.int32)
-
-
 def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.inf) -> dict:
     """The kernel's outputs for the checked points (N, 3): "distance" (float64, inf where no shape),
     with it CLOSEST_OUTPUTS, "inside" (uint8: an analytic solid's inside, or on a surface; with
@@ -191,7 +180,12 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
             return results
     variant = Variant("closest", inputs.types, tuple(outputs), precision)
     ordered = count >= COHERENT_FROM
-    order = coherent_order(points) if ordered else np.zeros(1, np.int32)
+    if ordered:  # numba's code, imported for large batches only
+        from .point_passes import coherent_order
+
+        order = coherent_order(points)
+    else:
+        order = np.zeros(1, np.int32)
     args = {"n_points": np.int32(count), "order": input_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
             "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
     if "winding" in outputs:
@@ -268,35 +262,53 @@ def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
     return total
 
 
+def parity_directions(closed, points: np.ndarray) -> np.ndarray:
+    """(N, 3): each point's parity ray's direction (PARITY_FACES), toward the nearest face of the
+    box of the closed meshes' handle (its BVH's root)."""
+    tree = closed.prepared.bvh.tree
+    lo, hi = (tree.lo[0], tree.hi[0]) if len(tree.lo) else (np.zeros(3), np.zeros(3))
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return np.broadcast_to(PARITY_DIRECTION, points.shape)
+    if len(points) < COHERENT_FROM:
+        gaps = np.concatenate([points - lo, hi - points], axis=1)
+        return PARITY_FACES[np.argmin(gaps, axis=1)]
+    from .point_passes import nearest_face_directions  # numba's code, for large batches only
+
+    return nearest_face_directions(points, lo, hi, PARITY_FACES)
+
+
 def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
     """Per point, the crossings of its parity ray out of its closed meshes less those into them: +1
     where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
     the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
-    directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
+    directions = parity_directions(closed, points)
     one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
     hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
     ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
     ids = np.zeros_like(ray) if one else np.asarray(hits["id"]).astype(np.int64)
     signs = np.zeros(len(ray))
     for index, mesh in enumerate(closed.shapes):
-        mine = ids == index
-        if not mine.any():
+        mine = np.flatnonzero(ids == index) if not one else slice(None)
+        if not len(ray[mine]):
             continue
-        a, b, c = (corner[primitive[mine]] for corner in mesh.corners())
+        # the corners of the triangles hit alone (not the mesh's every triangle's)
+        world, faces = mesh.world_vertices(), mesh.faces[primitive[mine]]
+        a, b, c = world[faces[:, 0]], world[faces[:, 1]], world[faces[:, 2]]
         normal = np.cross(b - a, c - a)
-        along = normal @ PARITY_DIRECTION
-        doubt = np.abs(along) <= 1e-10 * np.abs(normal) @ np.abs(PARITY_DIRECTION)
+        d = directions[ray[mine]]
+        along = np.einsum("ij,ij->i", normal, d)
+        doubt = np.abs(along) <= 1e-10 * np.einsum("ij,ij->i", np.abs(normal), np.abs(d))
         for i in np.flatnonzero(doubt):
-            along[i] = _exact_along(a[i], b[i], c[i])
+            along[i] = _exact_along(a[i], b[i], c[i], d[i])
         signs[mine] = np.sign(along)
     return np.bincount(ray, weights=signs, minlength=len(points))
 
 
-def _exact_along(a, b, c) -> float:
-    """The sign of cross(b - a, c - a) . PARITY_DIRECTION in exact rational arithmetic."""
+def _exact_along(a, b, c, direction) -> float:
+    """The sign of cross(b - a, c - a) . direction in exact rational arithmetic."""
     from fractions import Fraction
 
-    a, b, c, d = ([Fraction(float(x)) for x in v] for v in (a, b, c, PARITY_DIRECTION))
+    a, b, c, d = ([Fraction(float(x)) for x in v] for v in (a, b, c, direction))
     e, f = [y - x for x, y in zip(a, b)], [y - x for x, y in zip(a, c)]
     n = (e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0])
     value = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
@@ -320,7 +332,7 @@ def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
     closed = tracer.mesh_handle(closed=True)
     if closed is None or not len(points):
         return np.zeros(len(points), bool)
-    directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
+    directions = parity_directions(closed, points)
     if len(closed.shapes) == 1:
         return (closed.count_hits(points, directions) & 1).astype(bool)
     # several closed meshes: each one's own parity, from the hits' ids
