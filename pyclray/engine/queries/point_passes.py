@@ -8,34 +8,58 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .ray_order import _counting_sort, morton_tables
 
-# points in 32 cells per axis of their box: 15 bits, the counting sort's range (ray_order.CODES)
-POINT_CELLS = 32
-POINT_TABLES = morton_tables((5, 5, 5))
+# points in 1024 cells per axis of their box: a 30-bit Morton code (near-surface points fill few
+# cells of a coarser grid, and the order within a cell is the order given)
+POINT_BITS = 10
 
 
 @numba.njit(cache=True, nogil=True)
-def _point_codes(points, lo, scale, tables):
+def _spread10(v):
+    """v's 10 bits at every third place (bit i at bit 3 i)."""
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
+
+
+@numba.njit(cache=True, nogil=True)
+def _point_order(points, lo, scale):
+    """The stable order of the points' 30-bit codes: the codes in one pass, then a radix sort of two
+    15-bit digits (a counting sort each)."""
     count = points.shape[0]
-    codes = np.empty(count, np.uint16)
-    top = POINT_CELLS - 1
+    top = (1 << POINT_BITS) - 1
+    codes = np.empty(count, np.uint32)
     for i in range(count):
-        code = np.uint16(0)
+        code = 0
         for axis in range(3):
-            value = min(max((points[i, axis] - lo[axis]) * scale[axis], 0.0), top)
-            code |= tables[axis, int(value)]
+            cell = min(max((points[i, axis] - lo[axis]) * scale[axis], 0.0), top)
+            code |= _spread10(np.int64(cell)) << axis
         codes[i] = code
-    return codes
+    order = np.arange(count).astype(np.int32)
+    for shift in (0, 15):
+        starts = np.zeros((1 << 15) + 1, np.int64)
+        for i in range(count):
+            starts[((codes[order[i]] >> shift) & 0x7FFF) + 1] += 1
+        for digit in range(1 << 15):
+            starts[digit + 1] += starts[digit]
+        placed = np.empty(count, np.int32)
+        for i in range(count):
+            digit = (codes[order[i]] >> shift) & 0x7FFF
+            placed[starts[digit]] = order[i]
+            starts[digit] += 1
+        order = placed
+    return order
 
 
 def coherent_order(points: np.ndarray) -> np.ndarray:
-    """int32 order[i]: the place of the i-th point along a 15-bit Morton curve of the points' box
-    (one pass to code, a counting sort: numpy's 30-bit codes and argsort took 5 to 10 times as long)."""
+    """int32 order[i]: the place of the i-th point along a 30-bit Morton curve of the points' box (in
+    compiled passes: numpy's codes and argsort took 5 to 10 times as long)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     extent = hi - lo
-    scale = np.where(extent > 0, POINT_CELLS / np.where(extent > 0, extent, 1.0), 0.0)
-    return _counting_sort(_point_codes(points, lo, scale, POINT_TABLES))
+    cells = float((1 << POINT_BITS) - 1)  # the box's far faces in the last cell
+    scale = np.where(extent > 0, cells / np.where(extent > 0, extent, 1.0), 0.0)
+    return _point_order(np.ascontiguousarray(points, np.float64), lo.astype(np.float64), scale.astype(np.float64))
 
 
 @numba.njit(cache=True, nogil=True)
