@@ -179,14 +179,16 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         if not outputs:
             return results
     variant = Variant("closest", inputs.types, tuple(outputs), precision)
-    ordered = count >= COHERENT_FROM
-    if ordered:  # numba's code, imported for large batches only
+    order = None
+    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
         from .point_passes import coherent_order
 
+        # the points gathered in that order, their results scattered back below: the kernel then
+        # also writes its outputs in order (written through the order, neighbouring work-items'
+        # rows were scattered: slower where each point's search is short, near and far from the surface)
         order = coherent_order(points)
-    else:
-        order = np.zeros(1, np.int32)
-    args = {"n_points": np.int32(count), "order": input_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
+        points = points[order]
+    args = {"n_points": np.int32(count), "order": input_buffer(ctx, np.zeros(1, np.int32)), "ordered": np.int32(0),
             "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
     if "winding" in outputs:
         args["winding_slots"] = inputs.winding()
@@ -206,6 +208,11 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         else:
             cl.enqueue_copy(ctx.queue, results[k], buffers[k])
     ctx.queue.finish()
+    if order is not None:  # each point's results at its place in the batch given
+        for k in outputs:
+            placed = np.empty_like(results[k])
+            placed[order] = results[k]
+            results[k] = placed
     return results
 
 
