@@ -34,17 +34,43 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
      * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
      * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
      * keeps its relative precision even for a tiny fov or next to the principal point */
+#ifdef PYCLRAY_PIXEL_EXACT
+    /* fp32: sx = (tan_x / width) N with N = 2 cx - 1 - 2 i, and alike in y, as float pairs: N's integer
+     * part is exact and its fraction's rounding is kept (two-sum); tan_x / width comes from the host
+     * as a float pair (pixel_step, from float64), and its product with N is split error-free. sx and
+     * sy are then the float64 ray's to about eps^2, which the flat shapes' pixel_dot needs (one
+     * rounding of sx is a direction error of eps |sx|: eps / |n . d| relative in a grazing n . d) */
+    const real4 step = camera->pixel_step;
+    RayPacket ray;
+    {
+        const realv whole = TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i), fraction = SPLAT(camera->centre_x_low);
+        const realv n = whole + fraction, n_low = pixel_sum_error(whole, fraction, n);
+        ray.x = SPLAT(step.x) * n;
+        ray.x_low = pixel_product_error(SPLAT(step.x), n, ray.x) + (SPLAT(step.x) * n_low + SPLAT(step.y) * n);
+    }
+    {
+        const realv whole = TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j), fraction = SPLAT(camera->centre_y_low);
+        const realv n = whole + fraction, n_low = pixel_sum_error(whole, fraction, n);
+        ray.y = SPLAT(step.z) * n;
+        ray.y_low = pixel_product_error(SPLAT(step.z), n, ray.y) + (SPLAT(step.z) * n_low + SPLAT(step.w) * n);
+    }
+    const realv sx = ray.x, sy = ray.y;
+#else
     const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
                                             / SPLAT((real)width));
     const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
                                             / SPLAT((real)height));
+    RayPacket ray;
+#endif
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
-    RayPacket ray;
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
     ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_PIXEL_EXACT
+    ray.length = length;
+#endif
 #ifdef PYCLRAY_SHADOWS
     ray.from_eye = 1;
 #endif

@@ -20,6 +20,12 @@
 #endif
 #define LANES PYCLRAY_LANES
 
+/* A render's fp32 camera rays carry their image-plane point as float pairs, for the flat shapes'
+ * n . d (pixel_dot below); cast traces the caller's rays, and fp64 has the digits without it. */
+#if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST)
+#define PYCLRAY_PIXEL_EXACT 1
+#endif
+
 #define PYCLRAY_CAT_(a, b) a##b
 #define PYCLRAY_CAT(a, b) PYCLRAY_CAT_(a, b)
 
@@ -232,7 +238,59 @@ typedef struct {
 #ifdef PYCLRAY_SHADOWS
     int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
 #endif
+#ifdef PYCLRAY_PIXEL_EXACT
+    /* a camera ray's point (sx, sy, 1) on the image plane, sx = x + x_low and sy = y + y_low as
+     * float pairs (exact to about float's precision squared: kernels/camera.h), and its length
+     * |(sx, sy, 1)| (dir is that point over it): pixel_dot's inputs */
+    realv x, x_low, y, y_low, length;
+#endif
 } RayPacket;
+
+#ifdef PYCLRAY_PIXEL_EXACT
+/* Error-free float arithmetic (Dekker 1971, Knuth): a b = p + e and a + b = s + e exactly, with
+ * float operations only (contraction is off: each rounding is the one written). The split of a
+ * into two halves of 12 bits each (Veltkamp's, with 2^12 + 1) makes their products exact. */
+inline realv pixel_split_high(const realv a)
+{
+    const realv t = SPLAT(4097.0f) * a;
+    return t - (t - a);
+}
+
+inline realv pixel_product_error(const realv a, const realv b, const realv p)
+{
+    const realv a_high = pixel_split_high(a), b_high = pixel_split_high(b);
+    const realv a_low = a - a_high, b_low = b - b_high;
+    return ((a_high * b_high - p) + a_high * b_low + a_low * b_high) + a_low * b_low;
+}
+
+inline realv pixel_sum_error(const realv a, const realv b, const realv s)
+{
+    const realv z = s - a;
+    return (a - (s - z)) + (b - z);
+}
+
+/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame, as a
+ * float pair from float64: kernels/frame.h's to_frame and to_frame_low): the two products and two
+ * sums of n . (sx, sy, 1) error-free, their errors and the low parts' terms added, then divided by
+ * the ray's length. It is within a few float roundings of the exact n . d relative to itself, also
+ * where the terms cancel (a grazing ray: n . d near 0), where the float dot product of the rounded
+ * n and dir errs by about eps / |n . d| relative: that error, times the distance, is the depth error
+ * of a flat shape seen at a grazing angle. */
+inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
+{
+    const realv nx = SPLAT(high.x), ny = SPLAT(high.y), nz = SPLAT(high.z);
+    const realv px = nx * ray->x, py = ny * ray->y;
+    const realv ex = pixel_product_error(nx, ray->x, px), ey = pixel_product_error(ny, ray->y, py);
+    const realv s1 = px + py, s2 = s1 + nz;
+    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, nz, s2);
+    const realv tail = ((ex + ey) + (e1 + e2))
+                       + ((nx * ray->x_low + ny * ray->y_low) + ((SPLAT(low.x) * ray->x + SPLAT(low.y) * ray->y) + SPLAT(low.z)));
+    return (s2 + tail) / ray->length;
+}
+#define PIXEL_DOT(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
+#else
+#define PIXEL_DOT(ray, high, low, plain) (plain)
+#endif
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
  * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the

@@ -32,6 +32,7 @@ class Rectangle(Shape):
         (
             ("center", "real4"),  # centre in the frame
             ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
+            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("u_dual", "real4"),  # (P - centre) . u_dual = a: the dual basis of (u, v) in the plane
             ("v_dual", "real4"),  # (P - centre) . v_dual = b
             ("world_normal", "real4"),  # normalize(u x v) in world space
