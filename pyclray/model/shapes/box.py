@@ -111,6 +111,7 @@ class Box(Shape):
         "A box in world coordinates: centre, half sizes and its three unit axes.",
     )
     kernel_files = ("box.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

@@ -45,6 +45,7 @@ class Disk(Shape):
         "A disk in world coordinates: center.xyz, center.w = radius, normal.xyz unit.",
     )
     kernel_files = ("disk.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

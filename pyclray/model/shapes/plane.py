@@ -48,6 +48,7 @@ class Plane(Shape):
         "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
     )
     kernel_files = ("plane.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)

@@ -54,6 +54,7 @@ class Rectangle(Shape):
         "A rectangle in world coordinates: centre, unit normal, the dual vectors of u and v, u and v.",
     )
     kernel_files = ("rectangle.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
