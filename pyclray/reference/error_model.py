@@ -22,9 +22,9 @@ seen from a centre of curvature of radius r it turns the normal by that error ov
   shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
 - the flat law: where a render's camera ray hits a shape of flat faces whose distance the kernel
   takes as the host's exact offset over an error-free n . d (``Shape.flat_camera_depth``: plane,
-  disk, rectangle, box), the ray is not moved sideways: the engine's own term is k eps (t + L)
-  along the ray, not over cos (the oracle's term keeps its 1 / cos). A grazing ground then holds a
-  few ulps of t, as cast of an axis-aligned plane does;
+  disk, rectangle, box; the kernel's pixel_dot, below |n . d| = 1/4), the ray is not moved
+  sideways: the engine's own term is k eps (t + L) / max(cos, FLAT_COS) (the oracle's term keeps
+  its 1 / cos). A grazing ground then holds a few ulps of t, as cast of an axis-aligned plane does;
 - k: K_ORACLE = 4 against the oracle (measured <= 2.4 for depths over random scenes of every
   shape, tests/test_cast.py and tests/test_shapes.py), K_MITSUBA = 6 against Mitsuba (measured
   <= 2.8 over 75 random scenes moved up to 1000 units off the origin).
@@ -52,6 +52,9 @@ EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}  # unit roundoff: half an ulp of 
 ORACLE_EPSILON = EPSILON["fp64"]
 SILHOUETTE_COS = 0.02
 K_ORACLE = 4.0
+# the flat law's floor of cos: above it a render's flat shapes follow the sideways law, below it
+# their depth error stops growing as 1 / cos (kernels/lanes.h: PIXEL_EXACT_COS, a half of it)
+FLAT_COS = 0.5
 K_MITSUBA = 6.0
 CAMERA_K = 3.0  # Mitsuba's camera rays: angle <= CAMERA_K eps (1 + S)
 ORIGIN_K = 2.0  # Mitsuba's camera rays: origin off our ray <= ORIGIN_K eps max(|eye|, 1)
@@ -109,7 +112,7 @@ def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach
     docstring. t, cos, radius, scale (L), oracle_scale (W) and camera_reach are per ray; travelled:
     how far the engine moved the ray's origin along it (in float64) before intersecting (cast), so
     that its own rounding, and the normal's angle, grow with t - travelled only; flat: the rays
-    the flat law holds for (per ray), whose own depth term is not divided by cos."""
+    the flat law holds for (per ray), whose own depth term is divided by max(cos, FLAT_COS), not cos."""
     t = np.where(np.isfinite(t), t, 0.0)
     local = t if travelled is None else np.maximum(t - travelled, 0.0)
     reach = k * eps * (t + scale)
@@ -126,7 +129,7 @@ def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach
         normal = angle + reach_local / cos / radius
         if flat is not None:
             own = k * eps * (t + scale)
-            depth = np.where(flat, own + (reach - own) / cos, depth)
+            depth = np.where(flat, own / np.maximum(cos, FLAT_COS) + (reach - own) / cos, depth)
     return depth, normal
 
 

@@ -35,26 +35,24 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
      * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
      * keeps its relative precision even for a tiny fov or next to the principal point */
 #ifdef PYCLRAY_PIXEL_EXACT
-    /* fp32: sx = (tan_x / width) N with N = 2 cx - 1 - 2 i, and alike in y, as float pairs: N's integer
-     * part is exact and its fraction's rounding is kept (two-sum); tan_x / width comes from the host
-     * as a float pair (pixel_step, from float64), and its product with N is split error-free. sx and
-     * sy are then the float64 ray's to about eps^2, which the flat shapes' pixel_dot needs (one
-     * rounding of sx is a direction error of eps |sx|: eps / |n . d| relative in a grazing n . d) */
+    /* fp32: sx = (tan_x / width) N as a float pair, N = 2 cx - 1 - 2 i = whole + fraction: tan_x / width
+     * from the host as a high part of 11 bits and the rest (pixel_step), so that high x whole is
+     * exact (|whole| < 2^13: an image up to 8192 pixels across about its principal point), and the
+     * rest's product and the fraction's term (a camera constant, below a pixel's width) are small
+     * numbers whose rounding is far below what n . d needs; alike in y. sx and sy are then the
+     * float64 ray's to about eps^2 relative, as kernels/lanes.h's pixel_dot needs (a rounding of sx is
+     * a direction error of eps |sx|: eps / |n . d| relative in a grazing n . d) */
     const real4 step = camera->pixel_step;
     RayPacket ray;
-    {
-        const realv whole = TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i), fraction = SPLAT(camera->centre_x_low);
-        const realv n = whole + fraction, n_low = pixel_sum_error(whole, fraction, n);
-        ray.x = SPLAT(step.x) * n;
-        ray.x_low = pixel_product_error(SPLAT(step.x), n, ray.x) + (SPLAT(step.x) * n_low + SPLAT(step.y) * n);
-    }
-    {
-        const realv whole = TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j), fraction = SPLAT(camera->centre_y_low);
-        const realv n = whole + fraction, n_low = pixel_sum_error(whole, fraction, n);
-        ray.y = SPLAT(step.z) * n;
-        ray.y_low = pixel_product_error(SPLAT(step.z), n, ray.y) + (SPLAT(step.z) * n_low + SPLAT(step.w) * n);
-    }
-    const realv sx = ray.x, sy = ray.y;
+    const realv whole_x = TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i);
+    const realv whole_y = TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j);
+    ray.x = SPLAT(step.x) * whole_x;
+    ray.x_low = SPLAT(step.y) * whole_x + SPLAT((step.x + step.y) * camera->centre_x_low);
+    ray.x_high = pixel_split_high_v(ray.x);
+    ray.y = SPLAT(step.z) * whole_y;
+    ray.y_low = SPLAT(step.w) * whole_y + SPLAT((step.z + step.w) * camera->centre_y_low);
+    ray.y_high = pixel_split_high_v(ray.y);
+    const realv sx = ray.x + ray.x_low, sy = ray.y + ray.y_low;
 #else
     const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
                                             / SPLAT((real)width));

@@ -239,58 +239,14 @@ typedef struct {
     int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
 #endif
 #ifdef PYCLRAY_PIXEL_EXACT
-    /* a camera ray's point (sx, sy, 1) on the image plane, sx = x + x_low and sy = y + y_low as
-     * float pairs (exact to about float's precision squared: kernels/camera.h), and its length
-     * |(sx, sy, 1)| (dir is that point over it): pixel_dot's inputs */
-    realv x, x_low, y, y_low, length;
+    /* a camera ray's point (sx, sy, 1) on the image plane as float pairs, sx = x + x_low (x an exact
+     * product, x_low its rest: kernels/camera.h), x_high the upper half of x's bits (Veltkamp's
+     * split, for pixel_dot's error-free products), the same in y; and the point's length |(sx, sy, 1)|
+     * (dir is the point over it) */
+    realv x, x_high, x_low, y, y_high, y_low, length;
 #endif
 } RayPacket;
 
-#ifdef PYCLRAY_PIXEL_EXACT
-/* Error-free float arithmetic (Dekker 1971, Knuth): a b = p + e and a + b = s + e exactly, with
- * float operations only (contraction is off: each rounding is the one written). The split of a
- * into two halves of 12 bits each (Veltkamp's, with 2^12 + 1) makes their products exact. */
-inline realv pixel_split_high(const realv a)
-{
-    const realv t = SPLAT(4097.0f) * a;
-    return t - (t - a);
-}
-
-inline realv pixel_product_error(const realv a, const realv b, const realv p)
-{
-    const realv a_high = pixel_split_high(a), b_high = pixel_split_high(b);
-    const realv a_low = a - a_high, b_low = b - b_high;
-    return ((a_high * b_high - p) + a_high * b_low + a_low * b_high) + a_low * b_low;
-}
-
-inline realv pixel_sum_error(const realv a, const realv b, const realv s)
-{
-    const realv z = s - a;
-    return (a - (s - z)) + (b - z);
-}
-
-/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame, as a
- * float pair from float64: kernels/frame.h's to_frame and to_frame_low): the two products and two
- * sums of n . (sx, sy, 1) error-free, their errors and the low parts' terms added, then divided by
- * the ray's length. It is within a few float roundings of the exact n . d relative to itself, also
- * where the terms cancel (a grazing ray: n . d near 0), where the float dot product of the rounded
- * n and dir errs by about eps / |n . d| relative: that error, times the distance, is the depth error
- * of a flat shape seen at a grazing angle. */
-inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
-{
-    const realv nx = SPLAT(high.x), ny = SPLAT(high.y), nz = SPLAT(high.z);
-    const realv px = nx * ray->x, py = ny * ray->y;
-    const realv ex = pixel_product_error(nx, ray->x, px), ey = pixel_product_error(ny, ray->y, py);
-    const realv s1 = px + py, s2 = s1 + nz;
-    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, nz, s2);
-    const realv tail = ((ex + ey) + (e1 + e2))
-                       + ((nx * ray->x_low + ny * ray->y_low) + ((SPLAT(low.x) * ray->x + SPLAT(low.y) * ray->y) + SPLAT(low.z)));
-    return (s2 + tail) / ray->length;
-}
-#define PIXEL_DOT(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
-#else
-#define PIXEL_DOT(ray, high, low, plain) (plain)
-#endif
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
  * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the
@@ -312,4 +268,73 @@ inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
 #define FROM_EYE(ray) ((ray)->from_eye)
 #else
 #define FROM_EYE(ray) 1
+#endif
+
+#ifdef PYCLRAY_PIXEL_EXACT
+/* Error-free float arithmetic (Dekker 1971, Knuth): a b = p + e and a + b = s + e exactly, in float
+ * operations only (contraction is off: each rounding is the one written). Veltkamp's split of a
+ * float into halves of 12 bits (with 2^12 + 1) makes the halves' products exact. */
+inline float pixel_split_high(const float a)
+{
+    const float t = 4097.0f * a;
+    return t - (t - a);
+}
+
+inline realv pixel_split_high_v(const realv a)
+{
+    const realv t = SPLAT(4097.0f) * a;
+    return t - (t - a);
+}
+
+/* a b - p for p = a b rounded, a a shape's constant and b split by the camera (b_high) */
+inline realv pixel_product_error(const float a, const realv b, const realv b_high, const realv p)
+{
+    const float a_high = pixel_split_high(a), a_low = a - a_high;
+    const realv b_low = b - b_high;
+    return ((SPLAT(a_high) * b_high - p) + SPLAT(a_high) * b_low + SPLAT(a_low) * b_high) + SPLAT(a_low) * b_low;
+}
+
+inline realv pixel_sum_error(const realv a, const realv b, const realv s)
+{
+    const realv z = s - a;
+    return (a - (s - z)) + (b - z);
+}
+
+/* Below this |n . d| the fp32 dot product of the rounded frame normal and pixel direction, whose
+ * error is about eps / |n . d| relative, gives way to pixel_dot's (a packet takes the exact form
+ * where any of its lanes is below it); above it that error is within the error model's flat law
+ * (pyclray/reference/error_model.py: FLAT_COS). */
+#define PIXEL_EXACT_COS 0.25f
+
+/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame as a float
+ * pair from float64: kernels/frame.h's to_frame and to_frame_low): n . (sx, sy, 1) with its two
+ * products and two sums error-free, their errors and the low parts' terms added, over the point's
+ * length. Within a few roundings of the exact n . d relative to itself, also where the terms cancel
+ * (a grazing ray: n . d near 0); that relative error, times the distance, is a flat shape's depth
+ * error, where the plain dot product's eps / |n . d| is one of a sideways move. */
+inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
+{
+    const realv px = SPLAT(high.x) * ray->x, py = SPLAT(high.y) * ray->y, nz = SPLAT(high.z);
+    const realv ex = pixel_product_error(high.x, ray->x, ray->x_high, px);
+    const realv ey = pixel_product_error(high.y, ray->y, ray->y_high, py);
+    const realv s1 = px + py, s2 = s1 + nz;
+    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, nz, s2);
+    const realv rest = (SPLAT(high.x) * ray->x_low + SPLAT(high.y) * ray->y_low)
+                       + ((SPLAT(low.x) * ray->x + SPLAT(low.y) * ray->y) + SPLAT(low.z));
+    return (s2 + (((ex + ey) + (e1 + e2)) + rest)) / ray->length;
+}
+
+/* n . dir: the plain dot product, or pixel_dot for a packet of camera rays with a lane below
+ * PIXEL_EXACT_COS */
+inline realv pixel_along(const RayPacket* ray, const real4 high, const real4 low, const realv plain)
+{
+    return FROM_EYE(ray) && ANY(v_abs(plain) < SPLAT(PIXEL_EXACT_COS)) ? pixel_dot(ray, high, low) : plain;
+}
+#define PIXEL_DOT(ray, high, low, plain) pixel_along((ray), (high), (low), (plain))
+/* pixel_dot for every packet of camera rays (a direction's every component, not a cosine: an
+ * instance's object-space direction, kernels/instance.cl) */
+#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
+#else
+#define PIXEL_DOT(ray, high, low, plain) (plain)
+#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (plain)
 #endif
