@@ -16,6 +16,7 @@ from pyclray.engine.scene import refit
 from pyclray.engine.bvh.tree import sah_cost
 from pyclray.model import animation
 from pyclray.model.animation import Animation, FrameShapes
+from pyclray.model.frames import FrameWork
 
 from test_views import ALL, fresh, need, same
 
@@ -132,7 +133,7 @@ def test_render_animation_walks_no_shapes_after_its_first_frame(monkeypatch):
         raise AssertionError("a frame walked the N shapes")
 
     monkeypatch.setattr(FrameShapes, "__iter__", walked)
-    monkeypatch.setattr(animation, "_frame_tuple", walked)
+    monkeypatch.setattr(FrameWork, "frame_tuple", walked)
     assert len(list(sequence)) == scene.animation.frame_count() - 1
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from numbers import Real
 
 from .errors import SceneError, _shown, no_unknown_keys, number, text
-from .frames import FrameShapes, _frame_tuple, _remember, derivation, derived_from  # noqa: F401 (derivation, derived_from: used from here)
+from .frames import FrameShapes, derivation, derived, derived_from  # noqa: F401 (derivation, derived_from: used from here)
 
 INTERPOLATIONS = ("linear", "step")
 CAMERA = "camera"  # the camera's target name; the other targets are named by their "name" key
@@ -232,23 +232,13 @@ class Animation:
             scene_at(scene, t, frame=k)
 
 
-_PLACES_MAX = 4
-_places_of: dict = {}
-
-
 def _places(scene) -> dict[str, list[tuple[str, int | None]]]:
     """Target name -> where things of that name sit: ("camera", None), or (collection field, index)
-    for each named dataclass in any tuple field of the scene (shapes, lights, ...). Kept for the last
-    few scenes (a frozen scene's places do not change): a frame of an animation of a million shapes
-    must not walk them."""
-    entry = _places_of.get(id(scene))
-    if entry is not None and entry[0] is scene:
-        return entry[1]
-    places = _find_places(scene)
-    _places_of[id(scene)] = (scene, places)  # holds the scene: its id() cannot be reused meanwhile
-    while len(_places_of) > _PLACES_MAX:
-        del _places_of[next(iter(_places_of))]
-    return places
+    for each named dataclass in any tuple field of the scene (shapes, lights, ...). Found once per
+    scene and kept by it (Scene.animation_places: a frozen scene's places do not change): a frame of
+    an animation of a million shapes must not walk them."""
+    places = getattr(scene, "animation_places", None)
+    return places if places is not None else _find_places(scene)
 
 
 def _find_places(scene) -> dict[str, list[tuple[str, int | None]]]:
@@ -309,9 +299,9 @@ def scene_at(scene, t: float, *, frame: int | None = None, lazy: bool = False):
             raise _frame_error(scene, error, targets[place], values, when) from None
     for collection, mine in items.items():
         replaced[collection] = FrameShapes(scene.shapes, mine) if lazy and collection == "shapes" \
-            else _frame_tuple(scene, collection, mine)
+            else scene.frame_work.frame_tuple(getattr(scene, collection), collection, mine)
     if "shapes" in replaced:  # before the Scene checks it: only the changed shapes need a look
-        _remember(replaced["shapes"], scene.shapes, tuple(sorted(items["shapes"])))
+        derived(replaced["shapes"], scene.shapes, sorted(items["shapes"]))
     try:
         return dataclasses.replace(scene, animation=None, **replaced)
     except SceneError as error:  # a scene-wide check (e.g. the fov against the image size)

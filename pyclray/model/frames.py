@@ -1,7 +1,9 @@
-"""An animation's frames as collections (pyclray.model.animation.scene_at): which shapes tuple was
-made from which by changing which shapes (derivation: the engine updates a prepared scene in place
-for those only), the frame's tuple made in one pass, and FrameShapes, a frame's shapes held as the
-animated scene's tuple and the changed ones (render_animation's frames)."""
+"""An animation's frames as collections (pyclray.model.animation.scene_at): a scene's shapes tuple once
+checked, and which tuple it was made from by changing which shapes (its derivation: the engine
+updates a prepared scene in place for those only); the frame's tuple made in one pass; and
+FrameShapes, a frame's shapes held as the animated scene's tuple and the changed ones
+(render_animation's frames). What is known of a tuple is held by the tuple itself, not in a table
+keyed by its id()."""
 from __future__ import annotations
 
 import operator
@@ -9,35 +11,41 @@ import threading
 from collections.abc import Sequence
 
 
-# What an animation's static scenes share with the animated one: new shapes tuple -> (the tuple,
-# the animated scene's tuple, the indices of the shapes whose values differ). The engine reads it to
-# update a prepared scene in place (only those shapes, and a refit of its BVH) rather than prepare a
-# frame's scene from nothing; an entry holds both tuples, so their id()s cannot be reused meanwhile.
-_DERIVED_MAX = 8
-_derived: dict = {}
+class CheckedShapes(tuple):
+    """A scene's shapes, checked (pyclray.model.scene.Scene keeps its shapes as this once it has
+    looked at each: a view from another camera, ``dataclasses.replace(scene, camera=...)``, does not
+    walk a million shapes again), and ``derived``: None, or (the base CheckedShapes, the indices of
+    the shapes that differ) where an animation's frame (or an edited file's reload) made it from
+    another tuple by replacing a few shapes. Equal to, and hashed as, the plain tuple."""
+
+    derived = None
+
+    def __reduce__(self):  # pickled (a Dask worker's scene) without its derivation: a base is not sent
+        return (CheckedShapes, (tuple(self),))
 
 
-def derivation(shapes: tuple):
+def derivation(shapes):
     """(base shapes tuple, changed indices) if this tuple was made by scene_at from another, else None."""
-    entry = _derived.get(id(shapes))
-    return entry[1:] if entry is not None and entry[0] is shapes else None
+    return getattr(shapes, "derived", None)
 
 
-def _remember(shapes: tuple, base: tuple, changed: tuple) -> None:
-    _derived[id(shapes)] = (shapes, base, changed)
-    while len(_derived) > _DERIVED_MAX:
-        del _derived[next(iter(_derived))]
+def derived(shapes, base: tuple, changed) -> CheckedShapes:
+    """``shapes`` (a sequence) as a CheckedShapes made from ``base`` by changing ``changed``."""
+    if not isinstance(shapes, (CheckedShapes, FrameShapes)):
+        shapes = CheckedShapes(shapes)
+    shapes.derived = (base, tuple(changed))
+    return shapes
 
 
-def derived_from(shapes: tuple, base: tuple) -> tuple:
+def derived_from(shapes: tuple, base: tuple):
     """``shapes``, recorded as ``base`` but for the shapes that are not base's own objects (as an
     animation's frame is): the scene prepared for ``base`` is then updated in place for it. For a
     scene file loaded again after an edit (``pyclray view``), whose unchanged shapes are the old
     objects; a tuple of another length is returned as it is."""
     shapes = tuple(shapes)
-    if len(shapes) == len(base):
-        _remember(shapes, base, tuple(i for i, (a, b) in enumerate(zip(shapes, base)) if a is not b))
-    return shapes
+    if len(shapes) != len(base):
+        return shapes
+    return derived(shapes, base, (i for i, (a, b) in enumerate(zip(shapes, base)) if a is not b))
 
 
 class FrameShapes(Sequence):
@@ -47,10 +55,10 @@ class FrameShapes(Sequence):
     does what it does"). Read-only and equal to the tuple it stands for; iterating it walks the N shapes
     (nothing on a frame's render path does)."""
 
-    __slots__ = ("base", "replaced")
+    __slots__ = ("base", "replaced", "derived")
 
     def __init__(self, base: tuple, replaced: dict[int, object]):
-        self.base, self.replaced = base, replaced
+        self.base, self.replaced, self.derived = base, replaced, None
 
     def __len__(self) -> int:
         return len(self.base)
@@ -78,30 +86,30 @@ class FrameShapes(Sequence):
         return f"FrameShapes({len(self.base)} shapes, {len(self.replaced)} replaced)"
 
 
-# A frame's copy of each animated collection of a scene (shapes, lights), kept from frame to frame with
-# the items the last frame replaced: a frame puts those back and replaces its own, then makes its tuple
-# in one pass (the collection's pointers copied once, O(K) Python work for K changes) where copying the
-# collection to a list, changing it and making a tuple of that walked it three times
-# (docs/benchmarks.md, "Why the engine does what it does"). Kept for the last few animated scenes.
-_WORKING_MAX = 4
-_working: dict = {}
-_working_lock = threading.Lock()
+class FrameWork:
+    """A frame's copy of each animated collection of one animated scene (shapes, lights), kept from
+    frame to frame with the items the last frame replaced: a frame puts those back and replaces its
+    own, then makes its tuple in one pass (the collection's pointers copied once, O(K) Python work
+    for K changes) where copying the collection to a list, changing it and making a tuple of that
+    walked it three times (docs/benchmarks.md, "Why the engine does what it does"). The animated
+    scene holds it (Scene.frame_work)."""
 
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.collections: dict[str, tuple[list, set]] = {}
 
-def _frame_tuple(scene, collection: str, replaced: dict[int, object]) -> tuple:
-    """The scene's collection with the items at replaced's indices replaced."""
-    base = getattr(scene, collection)
-    with _working_lock:
-        entry = _working.get((id(scene), collection))
-        if entry is None or entry[0] is not scene:
-            entry = _working[(id(scene), collection)] = (scene, list(base), set())  # holds the scene: its id() is not reused meanwhile
-            while len(_working) > _WORKING_MAX:
-                del _working[next(iter(_working))]
-        _, items, last = entry
-        for index in last - replaced.keys():  # the last frame's, back to the animated scene's
-            items[index] = base[index]
-        for index, item in replaced.items():
-            items[index] = item
-        last.clear()
-        last.update(replaced)
-        return tuple(items)
+    def frame_tuple(self, base: tuple, collection: str, replaced: dict[int, object]) -> tuple:
+        """The collection ``base`` with the items at replaced's indices replaced (the shapes as a
+        CheckedShapes: their derivation is recorded on it)."""
+        with self.lock:
+            entry = self.collections.get(collection)
+            if entry is None:
+                entry = self.collections[collection] = (list(base), set())
+            items, last = entry
+            for index in last - replaced.keys():  # the last frame's, back to the animated scene's
+                items[index] = base[index]
+            for index, item in replaced.items():
+                items[index] = item
+            last.clear()
+            last.update(replaced)
+            return (CheckedShapes if collection == "shapes" else tuple)(items)

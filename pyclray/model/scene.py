@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, FrameShapes, derivation, scene_at
+from .animation import Animation, _find_places, scene_at
+from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
@@ -32,34 +33,53 @@ class Scene:
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.model.lights); none: the headlight
     shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
+    # the [[shapes]] table of each shape in the file (for messages) where a table made several shapes
+    # (a mesh file's objects, split = true); None: shape k is table k
+    tables: tuple[int, ...] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
-        if not isinstance(self.shapes, FrameShapes):  # (an animation's frame as render_animation renders it)
-            object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
         if not isinstance(self.shading, Shading):
             raise SceneError(f"expected a pyclray.Shading, got {type(self.shading).__name__}", table="[shading]", file=self.source)
-        for index, shape in enumerate(() if _validated(self.shapes) else self.shapes):
-            if not isinstance(shape, Shape):
-                raise SceneError(
-                    f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
-                    table=f"[[shapes]] #{index}",
-                    file=self.source,
-                )
-            if shape.label is not None:  # (a scene file's labels are checked as they are read)
-                try:
-                    check_label(shape.label)
-                except SceneError as error:
-                    raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
+        # the shapes, each looked at once: a CheckedShapes (this scene's camera replaced, an animation's
+        # frame made from a checked tuple by dataclasses.replace of a few shapes, which checks them) or
+        # an animation's FrameShapes needs no look
+        if not isinstance(self.shapes, (CheckedShapes, FrameShapes)):
+            shapes = tuple(self.shapes)
+            for index, shape in enumerate(shapes):
+                if not isinstance(shape, Shape):
+                    raise SceneError(
+                        f"expected a shape ({', '.join(REGISTRY)}), got {type(shape).__name__}",
+                        table=f"[[shapes]] #{index}",
+                        file=self.source,
+                    )
+                if shape.label is not None:  # (a scene file's labels are checked as they are read)
+                    try:
+                        check_label(shape.label)
+                    except SceneError as error:
+                        raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
+            object.__setattr__(self, "shapes", CheckedShapes(shapes))
         if not isinstance(self.camera, Camera):
             raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
         if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
         check_image_plane(self.camera, self.image, self.source)
-        if derivation(self.shapes) is None:  # a frame's tuple is known valid through its animated scene's
-            _remember_valid(self.shapes)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
+
+    # What an animated scene keeps for its frames (found once, dropped with the scene; not pickled)
+    @cached_property
+    def animation_places(self) -> dict:
+        """Target name -> where things of that name sit (pyclray.model.animation)."""
+        return _find_places(self)
+
+    @cached_property
+    def frame_work(self) -> FrameWork:
+        """The frames' working copies of the animated collections (pyclray.model.frames.FrameWork)."""
+        return FrameWork()
+
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work")}
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
@@ -82,6 +102,13 @@ class Scene:
             size = max(size, shape.extent_from(eye))
         return size
 
+    def table_of(self, index: int) -> int:
+        """The [[shapes]] table of the file that shape `index` comes from (itself but after a table
+        that made several shapes)."""
+        if self.tables is not None and len(self.tables) == len(self.shapes):
+            return self.tables[index]
+        return index
+
     def shape_types(self) -> tuple[str, ...]:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
@@ -94,29 +121,6 @@ def checked_time(t) -> float:
         raise RequestError(f"t: expected a time in seconds >= 0 (frame k of an animation is at k / fps; "
                            f"past the last key every track holds its last value), got {t!r}")
     return t
-
-
-# Shapes tuples already checked, the most recent first: a view from another camera
-# (dataclasses.replace(scene, camera=...)) keeps the tuple and need not walk a million shapes again.
-_VALID_MAX = 32
-_valid: OrderedDict = OrderedDict()
-
-
-def _validated(shapes: tuple) -> bool:
-    """Whether this tuple was checked, or was made by an animation from a checked one by changing
-    shapes through dataclasses.replace (which checks them): no item needs a look then."""
-    entry = _valid.get(id(shapes))
-    if entry is not None and entry is shapes:
-        return True
-    derived = derivation(shapes)
-    return derived is not None and _validated(derived[0])
-
-
-def _remember_valid(shapes: tuple) -> None:
-    _valid[id(shapes)] = shapes  # holds the tuple: its id() cannot be reused while remembered
-    _valid.move_to_end(id(shapes))
-    while len(_valid) > _VALID_MAX:
-        _valid.popitem(last=False)
 
 
 def check_image_plane(camera: Camera, image: Image, source=None) -> None:
@@ -175,5 +179,5 @@ def check_renderable(scene: Scene, precision: str) -> None:
             raise SceneError(
                 f"{length:.3g} from the eye in the camera's frame, beyond what {precision} can render "
                 f"(at most {limit:.2g}: the kernel squares lengths); {remedy}",
-                file=scene.source, table=f"[[shapes]] #{index} ({shape.type})", key=key,
+                file=scene.source, table=f"[[shapes]] #{scene.table_of(index)} ({shape.type})", key=key,
             )

@@ -21,7 +21,7 @@ from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag
 from .capabilities import CastBlocks, IndexedTriangles, Instancing, SmoothShading
 from .device import in_frame, padded_bounds
-from .box import axis_angle, rotation
+from .rotations import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
 # does")
@@ -49,10 +49,15 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     smooth: bool = field(default=False, metadata=FIXED)
     normals: np.ndarray | None = field(default=None, metadata=FIXED)
     name: str = "mesh"
+    # The arrays whose checks this mesh passed (vertices, faces, normals), which dataclasses.replace
+    # carries to its copies: a mesh placed again (Mesh.placed, 10,000 instances, an animation's
+    # frame) is not checked again (docs/benchmarks.md, "Why the engine does what it does"); compared
+    # by identity, so a copy given other arrays checks those.
+    _checked: tuple | None = field(default=None, repr=False, compare=False, metadata=FIXED)
 
     type = "mesh"
     c_type = "Triangle"
-    keys = ("file", "vertices", "faces", "scale", "axis", "angle", "translate", "matrix", "smooth")
+    keys = ("file", "split", "vertices", "faces", "scale", "axis", "angle", "translate", "matrix", "smooth")
     reads_files = True
     struct = Struct(
         "Triangle",
@@ -92,9 +97,12 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     mitsuba_primitives = True
 
     def __post_init__(self):
-        vertices = vertices_of(self.vertices)
+        arrays = (self.vertices, self.faces, self.normals)
+        known = self._checked is not None and all(a is b for a, b in zip(self._checked, arrays))
+        vertices = self.vertices if known else vertices_of(self.vertices)
         object.__setattr__(self, "vertices", vertices)
-        object.__setattr__(self, "faces", faces_of(self.faces, len(vertices)))
+        if not known:
+            object.__setattr__(self, "faces", faces_of(self.faces, len(vertices)))
         scale = self.scale
         if np.ndim(scale) == 0:
             scale = number("scale", scale)
@@ -117,10 +125,11 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
                                  key="matrix")
             object.__setattr__(self, "matrix", matrix_of(self.matrix))
         object.__setattr__(self, "smooth", flag("smooth", self.smooth))
-        if self.normals is not None:
+        if self.normals is not None and not known:
             object.__setattr__(self, "normals", vertices_of(self.normals, "normals"))
             if len(self.normals) != len(vertices):
                 raise SceneError(f"expected {len(vertices)} normals, one per vertex, got {len(self.normals)}", key="normals")
+        object.__setattr__(self, "_checked", (self.vertices, self.faces, self.normals))
         object.__setattr__(self, "_cache", {})
 
     def __eq__(self, other) -> bool:
@@ -130,7 +139,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
             return NotImplemented
         same = all(getattr(self, k) is getattr(other, k) for k in ("vertices", "faces", "normals"))
         return same and all(getattr(self, f.name) == getattr(other, f.name) for f in fields(self)
-                            if f.name not in ("vertices", "faces", "normals"))
+                            if f.compare and f.name not in ("vertices", "faces", "normals"))
 
     def __hash__(self) -> int:
         return hash((id(self.vertices), id(self.faces), self.scale, self.axis, self.angle, self.translate, self.name))
@@ -143,11 +152,26 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     # -- files and placement -------------------------------------------------------------------
     @classmethod
-    def load(cls, path, **keys) -> "Mesh":
+    def load(cls, path, split: bool = False, **keys) -> "Mesh | tuple[Mesh, ...]":
         """The mesh of a file (OBJ, PLY, STL, OFF, glTF/GLB; read once per unchanged file), with
-        these keys (scale, axis, angle, translate, matrix, smooth, name, material, label)."""
-        vertices, faces, normals = _read_mesh(path)
-        return cls(vertices, faces, normals=normals, **keys)
+        these keys (scale, axis, angle, translate, matrix, smooth, name, material, label).
+
+        split=True: a tuple of one mesh per object of the file, in its order (OBJ's `o` and `g`
+        groups, glTF's nodes with their transforms applied; another file is one object), each with
+        the keys given and named as its object (made unique), after ``name.`` where a name is given."""
+        if split is not True:
+            if split is not False:
+                raise SceneError(f"expected True or False, got {_shown(split)}", key="split")
+            vertices, faces, normals = _read_mesh(path)
+            return cls(vertices, faces, normals=normals, **keys)
+        return cls._split(_read_mesh_objects(path), keys.pop("name", None), keys)
+
+    @classmethod
+    def _split(cls, objects, name, keys) -> tuple:
+        """One mesh per (object name, vertices, faces, normals), named name.object (object alone
+        without a name), the other keys alike."""
+        return tuple(cls(vertices, faces, normals=normals, name=own if name is None else f"{name}.{own}", **keys)
+                     for own, vertices, faces, normals in objects)
 
     def placed(self, **keys) -> "Mesh":
         """The same triangles (shared arrays) placed anew: scale, axis, angle, translate or matrix
@@ -159,6 +183,15 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     @classmethod
     def _from_table(cls, table, name, folder=None):
         keys = {k: table[k] for k in ("scale", "axis", "angle", "translate", "matrix", "smooth") if k in table}
+        split = flag("split", table.get("split", False))
+        if split and "file" not in table:
+            raise SceneError("expected 'file' with split = true (a file's objects as shapes of their own)", key="split")
+        if split:  # one shape per object of the file: named after the table's name where it has one
+            inline = [k for k in ("vertices", "faces") if k in table]
+            if inline:
+                raise SceneError(f"expected 'file' or inline 'vertices' and 'faces', not both (got 'file' and "
+                                 f"'{inline[0]}')", key="file")
+            return cls._split(_read_mesh_objects(table["file"], folder), table.get("name"), keys)
         if "file" in table:
             inline = [k for k in ("vertices", "faces") if k in table]
             if inline:
@@ -437,3 +470,9 @@ def _read_mesh(*args):
     from . import mesh_io
 
     return mesh_io.read_mesh(*args)
+
+
+def _read_mesh_objects(*args):
+    from . import mesh_io
+
+    return mesh_io.read_mesh_objects(*args)

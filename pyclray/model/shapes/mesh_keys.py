@@ -2,16 +2,12 @@
 SceneError naming the key (scene-format.md, "Triangle meshes")."""
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 
 from ..errors import SceneError, _shown
 
 
 def vertices_of(value, key="vertices") -> np.ndarray:
-    if _checked_before(value, np.float64, key):
-        return value
     try:
         array = value if _ready(value, np.float64) else np.array(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -24,13 +20,10 @@ def vertices_of(value, key="vertices") -> np.ndarray:
         raise SceneError(f"expected finite numbers, got {array[index].tolist()!r} at index {index}", key=key)
     if array.flags.writeable:
         array.setflags(write=False)
-    _remember(array, key)
     return array
 
 
 def faces_of(value, count: int) -> np.ndarray:
-    if _checked_before(value, np.int64, ("faces", count)):
-        return value
     try:
         array = value if _ready(value, np.int64) else np.array(value)
     except (TypeError, ValueError):
@@ -50,7 +43,6 @@ def faces_of(value, count: int) -> np.ndarray:
         raise SceneError(f"face {index} is {array[index].tolist()}: expected indices 0 .. {count - 1} "
                          f"(the mesh has {count} vertices)", key="faces")
     array.setflags(write=False)
-    _remember(array, ("faces", count))
     return array
 
 
@@ -71,19 +63,3 @@ def matrix_of(value) -> tuple:
 def _ready(array, dtype) -> bool:
     """A read-only array of this type (a file's, or another Mesh's): checked and shared, not copied."""
     return isinstance(array, np.ndarray) and array.dtype == dtype and not array.flags.writeable
-
-
-# The read-only arrays already checked (id -> (weak reference, what they were checked as)): a mesh
-# placed again (Mesh.placed, a file's meshes, 10,000 instances) is not checked again
-# (docs/benchmarks.md, "Why the engine does what it does"); an entry leaves with its array.
-_checked: dict = {}
-
-
-def _checked_before(array, dtype, what) -> bool:
-    entry = _checked.get(id(array)) if _ready(array, dtype) else None
-    return entry is not None and entry[0]() is array and entry[1] == what
-
-
-def _remember(array, what) -> None:
-    key = id(array)
-    _checked[key] = (weakref.ref(array, lambda _, key=key: _checked.pop(key, None)), what)
