@@ -22,7 +22,7 @@ seen from a centre of curvature of radius r it turns the normal by that error ov
   shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
 - the flat law: where a render's camera ray hits a shape of flat faces whose distance the kernel
   takes as the host's exact offset over an error-free n . d (``Shape.flat_camera_depth``: plane,
-  disk, rectangle, box; the kernel's pixel_dot, below |n . d| = 1/4), the ray is not moved
+  disk, rectangle, box; the kernel's pixel_dot, below |n . d| = 1/8), the ray is not moved
   sideways: the engine's own term is k eps (t + L) / max(cos, FLAT_COS) (the oracle's term keeps
   its 1 / cos). A grazing ground then holds a few ulps of t, as cast of an axis-aligned plane does;
 - k: K_ORACLE = 4 against the oracle (measured <= 2.4 for depths over random scenes of every
@@ -54,7 +54,7 @@ SILHOUETTE_COS = 0.02
 K_ORACLE = 4.0
 # the flat law's floor of cos: above it a render's flat shapes follow the sideways law, below it
 # their depth error stops growing as 1 / cos (kernels/lanes.h: PIXEL_EXACT_COS, a half of it)
-FLAT_COS = 0.5
+FLAT_COS = 0.25
 K_MITSUBA = 6.0
 CAMERA_K = 3.0  # Mitsuba's camera rays: angle <= CAMERA_K eps (1 + S)
 ORIGIN_K = 2.0  # Mitsuba's camera rays: origin off our ray <= ORIGIN_K eps max(|eye|, 1)

@@ -304,7 +304,7 @@ inline realv pixel_sum_error(const realv a, const realv b, const realv s)
  * error is about eps / |n . d| relative, gives way to pixel_dot's (a packet takes the exact form
  * where any of its lanes is below it); above it that error is within the error model's flat law
  * (pyclray/reference/error_model.py: FLAT_COS). */
-#define PIXEL_EXACT_COS 0.25f
+#define PIXEL_EXACT_COS 0.125f
 
 /* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame as a float
  * pair from float64: kernels/frame.h's to_frame and to_frame_low): n . (sx, sy, 1) with its two
