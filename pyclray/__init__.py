@@ -26,6 +26,7 @@ from .engine.tracer import Tracer, prepare
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
+from .model.cameras import Equirectangular, Fisheye, Orthographic
 from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .model.lights import DirectionalLight, Material, PointLight, Shading
 from .model.loader import load_scene, scene_from_dict
@@ -39,7 +40,7 @@ __all__ = [
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
     "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
-    "write_npz",
+    "write_npz", "Equirectangular", "Fisheye", "Orthographic",
 ]
 
 

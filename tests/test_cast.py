@@ -210,6 +210,12 @@ def test_camera_rays_match_render(scene):
     explained = (error_model.silhouettes(truth["id"], cos, depth_tolerance, radius) | next_to_id_change(truth["id"]) | edge
                  | error_model.near_ties(dict(truth, cos=cos), lambda t, ids, c: both(t, ids, c)[0])).ravel()
     ids = image["id"].ravel()
+    # a lens's pixels outside its field (a camera of the sensors issue: scenes/lens.toml) are render's
+    # misses whatever their stand-in ray meets: only the field's rays are the same in both
+    table = scene.camera.frame_directions(scene.image.width, scene.image.height)
+    field = np.ones(ids.shape, bool) if table is None else table[1].ravel()
+    assert np.all(ids[~field] == -1)
+    explained |= ~field
     assert not ((result["id"] != ids) & ~explained).any()
     judged = (result["id"] == ids) & (ids >= 0) & ~explained
     assert judged.any()
@@ -218,7 +224,7 @@ def test_camera_rays_match_render(scene):
     assert np.all(depth_error[judged] <= depth_tolerance.ravel()[judged])
     angle = error_model.angle_between(result["normal"], image["normal"].reshape(-1, 3))
     assert np.all(angle[judged] <= normal_tolerance.ravel()[judged])
-    misses = (ids < 0) & (result["id"] < 0)
+    misses = (ids < 0) & (result["id"] < 0) & field
     assert np.all(np.isinf(result["depth"][misses])) and np.all(np.isinf(image["depth"].ravel()[misses]))
 
 

@@ -114,6 +114,10 @@ class Variant:
     # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
     # float64, engine/scene/indexed.py), framed or not
     indexed: bool = False
+    # render: the camera's rays read from a table (a lens or a panorama: kernels/camera.h,
+    # camera_table_rays) instead of the pinhole's image plane: "plane" (each ray's image-plane
+    # coordinates: every ray ahead of the eye's plane) or "sphere" (unit directions); None: a pinhole
+    camera_table: str | None = None
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -165,6 +169,10 @@ class Variant:
         lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
+        if self.camera_table and self.query == "render":
+            lines.append("#define PYCLRAY_CAMERA_TABLE 1")
+            if self.camera_table == "plane":
+                lines.append("#define PYCLRAY_CAMERA_PLANE 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")

@@ -50,6 +50,11 @@ def _framed(variant, _type=None) -> bool:
     return variant.framed
 
 
+def _camera_table(variant, _type=None) -> bool:
+    """A render whose camera's rays are a table of directions (kernels/camera.h: camera_table_rays)."""
+    return bool(variant.camera_table)
+
+
 def _asked(aov: str) -> Callable:
     """The condition: the image aov is asked for."""
     return lambda variant, _type=None: aov in variant.aovs
@@ -115,6 +120,8 @@ _FRAMED, _COPIED, _INDEXED = _mode("FRAMED"), _mode("COPIED"), _mode("INDEXED")
 
 RENDER = (
     Parameter("camera", "__global const Camera*"),
+    # a lens's or a panorama's rays: per packet, the lanes' coordinates and in-field flags (kernels/camera.h)
+    Parameter("camera_directions", "__global const real*", (_camera_table,)),
     # the window (col0, row0, cols, rows) and the tiles: 1 << tile_shift pixels square, tiles_x a row
     Parameter("col0", "const int"),
     Parameter("row0", "const int"),
