@@ -159,8 +159,12 @@ def cast_frames(scene: Scene, origins, directions, ids):
 
 
 def flat_camera_depths(scene: Scene) -> np.ndarray:
-    """Per shape id: whether the flat law holds for a render's camera rays (Shape.flat_camera_depth)."""
-    return np.array([shape.flat_camera_depth for shape in scene.shapes] or [False], bool)
+    """Per shape id: whether the flat law holds for a render's camera rays (Shape.flat_camera_depth),
+    which the kernel computes from the pinhole's image plane itself (a camera whose rays come as a
+    table, a lens or a panorama, or start off the eye, has the sideways law everywhere)."""
+    camera = scene.camera
+    pinhole = camera.rays_from_eye and camera.frame_directions(scene.image.width, scene.image.height) is None
+    return np.array([pinhole and shape.flat_camera_depth for shape in scene.shapes] or [False], bool)
 
 
 def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None,
