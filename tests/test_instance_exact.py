@@ -111,8 +111,8 @@ def edges_faces(mesh, edge):
 def test_rays_swept_across_an_instances_shared_edges_all_hit_it(precision, lanes, monkeypatch):
     """A narrow camera (fx 5e7: pixels 1e-7 apart at 4.5 units, the size of float32's rounding
     there) centred on a shared edge of two front-facing triangles of the 0.7 bunny, face on or
-    grazing: every ray of its 24 x 24 pixels hits the instance (no leak between the two triangles)
-    with the oracle's depth within the error model."""
+    grazing: every ray of its 24 x 24 pixels hits one of the two triangles (no leak between them)
+    with the oracle's depth within the error model (by the more grazing triangle's |cos|)."""
     if lanes is not None:
         monkeypatch.setenv("PYCLRAY_LANES", str(lanes))
     shapes = issue_shapes()
@@ -134,7 +134,9 @@ def test_rays_swept_across_an_instances_shared_edges_all_hit_it(precision, lanes
             frame = pyclray.render(scene, aovs=("depth", "normal", "id", "primitive"), precision=precision)
             # a ray let through between the two triangles would hit the bunny's far side (the same id)
             assert (frame["id"] == 2).all() and np.isin(frame["primitive"], pair).all(), f"a ray leaked at edge {edge}"
-            cos = oracle.incidence_cosine(scene, D, truth["id"], truth["normal"])
+            # a ray within rounding of the edge may meet either triangle: the depth law of the more
+            # grazing one (a sideways error moves its hit by that over its |cos|)
+            cos = np.abs(D @ instance.face_normals()[pair].T).min(axis=1)
             tolerance, _ = error_model.pyclray_tolerances(scene, truth, cos, O, precision, camera.eye)
             assert (np.abs(frame["depth"].reshape(-1).astype(np.float64) - truth["depth"]) <= tolerance).all()
             swept += 1
