@@ -2,10 +2,11 @@
 Mesh.placed (0.7 scale: a mesh instance, its triangles tested in object space) on a ground plane
 beside other shapes, seen from OpenCV poses on a circle 4.5 away, holds the float64 oracle on
 every pixel (pyclray.reference.error_model through tests/oracle_checks.py: a ray within rounding
-of an edge or a silhouette may go either way, nothing else), and rays swept densely across the
-shared edges of its front-facing triangles all hit it: watertight in object space, no ray leaks
-to the surface behind (the issue saw 2.742310 where the oracle and a copy give 2.69438, a ray let
-through next to an edge). fp32, and fp32 with one lane (PYCLRAY_LANES=1)."""
+of an edge or a silhouette may go either way, nothing else); and rays swept 1e-7 apart across the
+shared edges of its front-facing triangles all meet one of the edge's two triangles: watertight in
+object space, no ray let through to the surface behind (the issue's symptom: 2.742310 where the
+oracle and a copy give 2.69438). A vertex framed differently by its two triangles fails it. fp32,
+and fp32 with one lane (PYCLRAY_LANES=1)."""
 from __future__ import annotations
 
 import math
