@@ -38,7 +38,7 @@ from .version import __version__
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
+    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "all_hits", "cast", "count_hits", "list_devices", "load_scene", "render",
     "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
     "write_npz", "Equirectangular", "Fisheye", "Orthographic",
 ]
@@ -49,6 +49,7 @@ __all__ = [
 # the cluster extra (importing distributed takes a while). name -> (module, attribute)
 _LAZY = {
     "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"),
+    "count_hits": (".engine.api", "count_hits"), "all_hits": (".engine.api", "all_hits"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
     "cluster": (".apps.cluster", None),

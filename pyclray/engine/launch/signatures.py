@@ -194,6 +194,8 @@ RAYS = (
     Parameter("directions", "__global const double*"),
     Parameter("limits", "__global const double*"),
     Parameter("limit_stride", "const int"),
+    Parameter("starts", "__global const double*"),  # tmin: hits beyond it (one for every ray where start_stride is 0)
+    Parameter("start_stride", "const int"),
     Parameter("scene_anchor", "const double4"),
     Parameter("nodes", "__global const WideNode*", (_bounded,)),
     Parameter("refs", "__global const int*", (_bounded,)),
@@ -213,12 +215,27 @@ CAST = (
     _image("depth", "__global real*"),
     _image("normal", "__global real*"),
     _image("id", "__global int*"),
+    _image("primitive", "__global int*"),
+    _image("barycentric", "__global real*"),
 )
 
 OCCLUDED = (*RAYS, Parameter("occluded_out", "__global char*"))
 
+# count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
+# (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
+COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
+ALL_HITS = (
+    *RAYS,
+    Parameter("hit_counts", "__global int*"),
+    Parameter("hit_capacity", "const int"),
+    Parameter("hit_t", "__global double*"),
+    Parameter("hit_kind", "__global int*"),
+    Parameter("hit_k", "__global int*"),
+    Parameter("hit_sub", "__global int*"),
+)
+
 # each query's kernel (programs.QUERY_FILES) and its signature
-SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED}
+SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED, "count_hits": COUNT_HITS, "all_hits": ALL_HITS}
 
 
 def _templates(variant, type_: str) -> dict:
