@@ -32,8 +32,9 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
     /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
      * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
-     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
-     * keeps its relative precision even for a tiny fov or next to the principal point */
+     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings (fp64;
+     * fp32's is exact, below) and keeps its relative precision even for a tiny fov or next to the
+     * principal point */
 #ifdef PYCLRAY_PIXEL_EXACT
     /* fp32: sx = (tan_x / width) N as a float pair, N = 2 cx - 1 - 2 i = whole + fraction: tan_x / width
      * from the host as a high part of 11 bits and the rest (pixel_step), so that high x whole is

@@ -248,7 +248,6 @@ typedef struct {
 #endif
 } RayPacket;
 
-
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
  * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the
  * eye (kernels/entries.h) */
@@ -302,8 +301,8 @@ inline realv pixel_sum_error(const realv a, const realv b, const realv s)
 }
 
 /* Below this |n . d| the fp32 dot product of the rounded frame normal and pixel direction, whose
- * error is about eps / |n . d| relative, gives way to pixel_dot's (a packet takes the exact form
- * where any of its lanes is below it); above it that error is within the error model's flat law
+ * error is about eps / |n . d| relative, gives way to pixel_dot's (lane by lane); above it that
+ * error is within the error model's flat law
  * (pyclray/reference/error_model.py: FLAT_COS). */
 #define PIXEL_EXACT_COS 0.125f
 
@@ -325,11 +324,13 @@ inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
     return (s2 + (((ex + ey) + (e1 + e2)) + rest)) / ray->length;
 }
 
-/* n . dir: the plain dot product, or pixel_dot for a packet of camera rays with a lane below
- * PIXEL_EXACT_COS */
+/* n . dir: the plain dot product, or pixel_dot in the lanes of camera rays below PIXEL_EXACT_COS
+ * (computed where a packet has any: a lane's bits never depend on the other lanes' rays) */
 inline realv pixel_along(const RayPacket* ray, const real4 high, const real4 low, const realv plain)
 {
-    return FROM_EYE(ray) && ANY(v_abs(plain) < SPLAT(PIXEL_EXACT_COS)) ? pixel_dot(ray, high, low) : plain;
+    if (!FROM_EYE(ray)) return plain;
+    const intv grazing = v_abs(plain) < SPLAT(PIXEL_EXACT_COS);
+    return ANY(grazing) ? (grazing ? pixel_dot(ray, high, low) : plain) : plain;
 }
 #define PIXEL_DOT(ray, high, low, plain) pixel_along((ray), (high), (low), (plain))
 /* pixel_dot for every packet of camera rays (a direction's every component, not a cosine: an
