@@ -181,6 +181,34 @@ class Job(WorkerPlugin):
         return self._out(self._render(self.scene, window))
 
 
+class Work(WorkerPlugin):
+    """A job of any picklable work object (a data set's views: pyclray.io.dataset.DatasetViews): it
+    travels once per worker, where work.prepare() builds its scene handles before the first task;
+    a task is work(argument); work.close() at the end."""
+
+    idempotent = False
+
+    def __init__(self, work):
+        self.name = f"pyclray-{uuid.uuid4().hex[:12]}"
+        self.work = work
+
+    async def setup(self, worker=None):
+        await asyncio.get_running_loop().run_in_executor(None, self.work.prepare)
+
+    def teardown(self, worker=None):
+        self.work.close()
+
+    def call(self, argument):
+        return self.work(argument)
+
+
+def map_work(client: Client, work, arguments, progress=None, what: str = "task"):
+    """Yield work(argument) for each argument, in order, from the cluster's workers, each of which
+    prepares the work once (Work)."""
+    for _, result in run(client, Work(work), "call", arguments, progress, what=what):
+        yield result
+
+
 def _task(job: str, method: str, argument):
     """A task: the job's method on this worker (Job registered under the name `job`)."""
     return getattr(get_worker().plugins[job], method)(argument)

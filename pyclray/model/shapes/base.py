@@ -115,6 +115,18 @@ class SceneShape:
         bounds = self.world_bounds([self])
         return np.stack([bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)])
 
+    # -- its own frame (data sets: object poses, models, object coordinates) -----------------
+    def object_frame(self) -> np.ndarray | None:
+        """The 4x4 float64 affine matrix world_from_object of the shape's own frame (a mesh's file
+        coordinates), or None for a type without one (the default)."""
+        return None
+
+    def object_model(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(vertices (V, 3) float64, faces (F, 3) int64): the shape as triangles in its own frame
+        (object_frame), the model a data set's object poses refer to; None (the default) where the
+        type has no triangle model."""
+        return None
+
     # -- Mitsuba's XML files -------------------------------------------------------------------
     # the <shape type=...> plugins of Mitsuba's XML read as this type (pyclray.model.mitsuba_xml),
     # each by from_mitsuba; none for a type Mitsuba has no plugin for
