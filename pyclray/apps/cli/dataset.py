@@ -87,13 +87,21 @@ def add_command(commands) -> None:
     parser.add_argument("--unit", type=positive, default=1.0, metavar="M", help="bop: metres per scene unit (default 1)")
     parser.add_argument("--depth-scale", type=positive, default=1.0, metavar="S",
                         help="bop: mm per level of the depth PNGs (default 1: depths up to 65.535 m)")
-    parser.add_argument("--time", type=time_value, metavar="T", help="render the scene at time T (seconds) of its [animation]")
+    parser.add_argument("--time", type=time_value, metavar="T", help="render the scene at time T (seconds) of its "
+                        "[animation] (default 0 for an animated scene); flow goes to T + 1/fps")
     parser.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")
     parser.add_argument("--precision", choices=("fp32", "fp64"), default="fp32", help="kernel precision (default fp32)")
     parser.add_argument("--device", metavar="DEV", help="OpenCL device (as for pyclray render)")
     parser.add_argument("--writers", type=count, metavar="N", help="threads encoding and writing files (default: cores, 2 to 8)")
     add_cluster_options(parser, "the views")
     parser.set_defaults(run=run)
+
+
+def _digest(path) -> str:
+    """The scene file's SHA-256: a resumed run must render the same scene."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def _placement(args):
@@ -108,6 +116,7 @@ def _placement(args):
 
 
 def run(args) -> int:
+    from ...engine.queries.motion import Motion
     from ...io.dataset import make_format, read_poses, view_cameras, write_dataset
     from ...io.progress import progress, seconds
     from ...model.errors import RequestError
@@ -128,11 +137,19 @@ def run(args) -> int:
         views = args.views
         if views is None:
             views = len(read_poses(placement.poses))
-        scene = load(args.scene, args.size, args.time)
+        moving = load(args.scene, args.size)
+        t = args.time if args.time is not None or moving.animation is None else 0.0
+        if t is not None and moving.animation is None:
+            raise BadInput(f"--time: {args.scene} has no [animation] table; --time renders a time of an animated scene")
+        scene = moving if t is None else moving.at(t)
+        motion = None
+        if t is not None and "flow" in (args.aov or ()):  # the next frame's shapes; each view keeps its camera
+            motion = Motion(moving.at(t + 1.0 / moving.animation.fps).shapes, None)
         cameras = view_cameras(scene, placement, views)
     except RequestError as error:
         raise BadInput(str(error)) from None
-    settings = {"scene": str(Path(args.scene).resolve()), "placement": placement.describe(), "time": args.time,
+    settings = {"scene": str(Path(args.scene).resolve()), "scene_sha256": _digest(args.scene),
+                "placement": placement.describe(), "time": t,
                 "size": list(args.size) if args.size else None}
     start = time.perf_counter()
     where = "here"
@@ -142,11 +159,11 @@ def run(args) -> int:
                 with cluster.connect(args.workers, args.scheduler) as client:
                     where = cluster.describe(client)
                     written = write_dataset(scene, out, cameras, fmt, settings=settings, precision=args.precision,
-                                            device=args.device, writers=args.writers, progress=bar,
+                                            device=args.device, writers=args.writers, progress=bar, motion=motion,
                                             remote=lambda work, todo: cluster.map_work(client, work, todo, what="view"))
             else:
                 written = write_dataset(scene, out, cameras, fmt, settings=settings, precision=args.precision,
-                                        device=args.device, writers=args.writers, progress=bar)
+                                        device=args.device, writers=args.writers, progress=bar, motion=motion)
     except RequestError as error:
         raise BadInput(str(error)) from None
     except Exception as error:

@@ -13,6 +13,7 @@ from ..bvh import tiles
 from ..launch.programs import Variant, lanes_for, packet_shape
 from ..launch.run import enqueue_kernel
 from .labels import with_labels
+from .motion import MOTION_AOVS, Motion, with_motion
 from .memory import check_images_fit
 from .requests import Frame, check_request
 
@@ -33,11 +34,12 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
-def start(tracer, view: Scene, aovs, window, acceleration: str):
+def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion | None = None):
     """A render's work up to the kernel's launch on a scene handle (engine/tracer.py), for a view of
     its shapes (view: a Scene with the handle's shapes and the camera, image, lights and shading to
     render; the checks, the per-view pass, the kernel, enqueued on the device's in-order queue): a
-    callable that waits for this view's kernel and returns its Frame."""
+    callable that waits for this view's kernel and returns its Frame. motion: the next frame, for
+    flow (engine/queries/motion.py; its camera None: the view's)."""
     ctx, precision = tracer.ctx, tracer.precision
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
@@ -74,8 +76,15 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     # closed or a cache cleared between two frames of render_views would otherwise free)
     pending.keep = (pending.keep, uploads, prepared, inputs, args)
 
+    if motion is not None and motion.camera is None:
+        motion = Motion(motion.shapes, view.camera)
+
     def frame() -> Frame:
-        return Frame(with_labels(view, pending.result(), asked), precision=precision, device=ctx.device.name.strip(),
+        images = pending.result()
+        if any(name in MOTION_AOVS for name in asked):  # derived on the host, then only what was asked
+            images = with_motion(view, images, motion, asked)
+            images = images if "label" in asked else {name: images[name] for name in asked}
+        return Frame(with_labels(view, images, asked), precision=precision, device=ctx.device.name.strip(),
                      view=(view.camera, view.image.width, view.image.height, col0, row0))
 
     return frame

@@ -64,14 +64,16 @@ def default_writers() -> int:
 
 
 def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, precision: str = "fp32", device=None,
-                  writers: int | None = None, progress=None, remote=None) -> Written:
+                  writers: int | None = None, progress=None, remote=None, motion=None) -> Written:
     """Render every camera's view of `scene` and write it into the folder `out` in format `fmt`
     (make_format), resuming a run there: complete views are kept, the others rendered.
 
     settings: what a resumed run must share (JSON-ready; the format's own and the views' are
     added). progress: something with update(n) (a tqdm bar), advanced per view written. remote:
     None to render here, or a callable (work: DatasetViews, indices) -> iterator of EncodedView in
-    order, which renders elsewhere (a Dask cluster: pyclray.apps.cluster.map_work)."""
+    order, which renders elsewhere (a Dask cluster: pyclray.apps.cluster.map_work). motion: for the
+    flow AOV, the next frame's shapes (pyclray.engine.queries.motion.Motion(shapes, None): each view
+    keeps its camera); None: the scene does not move."""
     out = Path(out)
     cameras = list(cameras)
     settings = {**(settings or {}), "format": fmt.name, **fmt.settings(), "views": len(cameras),
@@ -84,7 +86,7 @@ def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, pre
     start_output(out, settings, fmt, scene)
     done = complete_views(out, len(cameras))
     todo = [k for k in range(len(cameras)) if k not in done]
-    work = DatasetViews(scene, cameras, fmt, precision, device)
+    work = DatasetViews(scene, cameras, fmt, precision, device, motion)
     pool = ViewWriters(writers or default_writers(), on_done=(lambda: progress.update(1)) if progress else None)
     render_seconds = 0.0
     try:

@@ -40,11 +40,12 @@ class EncodedView:
 
 class DatasetViews:
     """The work of one data set run: the scene, the views' cameras, the format (it says which images
-    it needs and whether it needs each object alone), precision and device."""
+    it needs and whether it needs each object alone), precision and device, and for flow the next
+    frame's shapes (motion: engine/queries/motion.py's Motion, its camera None: each view's own)."""
 
-    def __init__(self, scene, cameras, fmt, precision: str = "fp32", device=None):
+    def __init__(self, scene, cameras, fmt, precision: str = "fp32", device=None, motion=None):
         self.scene, self.cameras, self.format = scene, list(cameras), fmt
-        self.precision, self.device = precision, device
+        self.precision, self.device, self.motion = precision, device, motion
         self._tracers = None
 
     def __getstate__(self):
@@ -82,7 +83,7 @@ class DatasetViews:
         self.prepare()
         indices = list(indices)
         cameras = [self.cameras[k] for k in indices]
-        streams = [self._tracers[0].render_views(cameras, aovs=self.format.aovs)]
+        streams = [self._tracers[0].render_views(cameras, aovs=self.format.aovs, motion=self.motion)]
         streams += [tracer.render_views(cameras, aovs=("id",)) for tracer in self._tracers[1:]]
         try:
             for k, camera, frames in zip(indices, cameras, zip(*streams)):

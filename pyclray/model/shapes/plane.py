@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, frame_columns, to_world
+from .base import Shape, frame_columns, object_matrix, to_world
 from .device import in_frame
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
@@ -47,6 +47,12 @@ class Plane(Shape):
         "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
     )
     kernel_files = ("plane.cl",)
+
+    def object_frame(self) -> np.ndarray:
+        """The plane's own frame: the point nearest the world's origin at 0, z along its normal."""
+        n = np.asarray(self.normal, np.float64)
+        length = np.linalg.norm(n)
+        return object_matrix(frame_columns(n / length), -self.offset * n / length**2)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)
