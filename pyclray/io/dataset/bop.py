@@ -158,11 +158,14 @@ class BopFormat:
         gts, infos, annotations = [], [], []
         shapes = scene.shapes
         object_ids = self.object_ids(scene)
+        cached = getattr(self, "_poses", None)
+        if cached is None or cached[0] is not shapes:  # the objects' rigid poses, once per scene
+            cached = self._poses = (shapes, {i: model_pose(shapes[i])[0] for i in object_ids})
         for gt_id, (shape_id, (alone, outside_count, outside_box)) in enumerate(zip(object_ids, rendered.alone)):
             shape = shapes[shape_id]
             visible = ids == shape_id
             mask = alone | visible  # (the object alone covers what it shows among the others)
-            world_from_model, _ = model_pose(shape)
+            world_from_model = cached[1][shape_id]
             R_m2c = R_w2c @ world_from_model[:3, :3]
             t_m2c = (R_w2c @ world_from_model[:3, 3] + t_w2c) * mm
             gts.append({"cam_R_m2c": R_m2c.ravel().tolist(), "cam_t_m2c": t_m2c.tolist(), "obj_id": shape.label})

@@ -80,9 +80,9 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def ply_bytes(model: ObjectModel) -> bytes:
-    """The model as an ASCII PLY (BOP's models are ASCII): x y z nx ny nz per vertex (float), faces as
-    `property list uchar int vertex_indices`; numbers in their shortest round-trip form (exact for
-    the float64 model in mm)."""
+    """The model as an ASCII PLY (BOP's models are ASCII, with vertex normals): x y z nx ny nz per
+    vertex as `property float` (9 significant digits: each float32 exactly), faces as `property list
+    uchar int vertex_indices`."""
     normals = vertex_normals(model.vertices, model.faces)
     header = (
         "ply\nformat ascii 1.0\ncomment pyclray data set model, mm\n"
@@ -91,34 +91,47 @@ def ply_bytes(model: ObjectModel) -> bytes:
         "property float nx\nproperty float ny\nproperty float nz\n"
         f"element face {len(model.faces)}\nproperty list uchar int vertex_indices\nend_header\n"
     )
-    rows = np.hstack([model.vertices, normals])
-    vertex_lines = "\n".join(" ".join(repr(float(x)) for x in row) for row in rows)
-    face_lines = "\n".join(f"3 {a} {b} {c}" for a, b, c in model.faces.tolist())
-    return (header + vertex_lines + "\n" + face_lines + "\n").encode()
+    rows = np.hstack([model.vertices, normals]).astype(np.float32).astype(np.float64)
+    vertex_lines = ("%.9g %.9g %.9g %.9g %.9g %.9g\n" * len(rows)) % tuple(rows.ravel().tolist())
+    face_lines = ("3 %d %d %d\n" * len(model.faces)) % tuple(model.faces.ravel().tolist())
+    return (header + vertex_lines + face_lines).encode()
 
 
 def diameter(points: np.ndarray) -> float:
-    """The largest distance between two of the points, exactly (no sampling): points that cannot
-    reach the best pair found from the extremes (their distance to the box's centre plus the
-    farthest point's is below it) are dropped, the rest compared in blocks."""
+    """The largest distance between two of the points, exactly (no sampling): only the points on
+    their convex hull can be the pair (scipy's hull, where installed), and of those the ones that
+    can reach the best pair found from the extremes; the squared distances of all pairs of the rest
+    come from matrix products in blocks (|a|^2 + |b|^2 - 2 a.b), and the pairs within their
+    rounding of the largest are measured again directly."""
     points = np.asarray(points, np.float64)
     if len(points) < 2:
         return 0.0
-    try:  # the pair lies on the convex hull: scipy's, where installed, leaves far fewer points
+    try:  # the pair lies on the convex hull
         from scipy.spatial import ConvexHull
 
         points = points[ConvexHull(points).vertices]
     except Exception:  # no scipy, or a flat or degenerate set of points: all of them
         pass
     centre = (points.min(axis=0) + points.max(axis=0)) / 2
-    reach = np.linalg.norm(points - centre, axis=1)
+    points = points - centre
+    reach = np.linalg.norm(points, axis=1)
     extremes = np.unique(np.concatenate([points.argmin(axis=0), points.argmax(axis=0), [reach.argmax()]]))
     best = float(np.max(np.linalg.norm(points[extremes][:, None] - points[None], axis=2)))
-    candidates = points[reach + reach.max() >= best]
-    for start in range(0, len(candidates), 64):
-        block = candidates[start:start + 64]
-        distances = np.sqrt(((block[:, None, :] - candidates[None, :, :]) ** 2).sum(axis=2))
-        best = max(best, float(distances.max()))
+    points = points[reach + reach.max() >= best]
+    squares = (points**2).sum(axis=1)
+    slack = 16 * np.finfo(np.float64).eps * 4 * float(squares.max())  # the products' rounding, generously
+    largest, pairs = best**2, []
+    for start in range(0, len(points), 2048):
+        block = points[start:start + 2048]
+        d2 = squares[start:start + 2048, None] + squares[None, :] - 2.0 * (block @ points.T)
+        top = float(d2.max())
+        if top >= largest - slack:
+            largest = max(largest, top)
+            rows, columns = np.nonzero(d2 >= largest - slack)
+            pairs.append((rows + start, columns))
+    for rows, columns in pairs:
+        exact = np.sqrt(((points[rows] - points[columns]) ** 2).sum(axis=1))
+        best = max(best, float(exact.max()) if len(exact) else best)
     return best
 
 
