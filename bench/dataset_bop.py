@@ -103,7 +103,8 @@ def main() -> None:
     scene = bench_scene()
     triangles = sum(s.primitive_count() for s in scene.shapes if s.label is not None)
     print(f"scene: {triangles:,} triangles in 5 labelled meshes, 640x480")
-    local(scene, count)
+    if count:
+        local(scene, count)
     if cluster_count:
         cluster(scene, cluster_count)
 
