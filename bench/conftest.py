@@ -2,11 +2,12 @@
 
     python -m pytest bench                   # quick: the headline cases at 512x512, under a minute
     python -m pytest bench --bench-full      # the whole matrix (2048x2048, fp64, cold, scalar_rgb...)
-    python -m pytest bench --bench-full --bench-update   # the same, and rewrite the tracked report
+    python -m pytest bench --bench-full --update-report  # the same, and rewrite the tracked report
 
-A run leaves the checkout clean: the results go to bench/out/ (ignored by git), results.json, the
-report REPORT.md and its plot error_vs_time.png, written at the end of the run (the report needs
-matplotlib, in the bench extra). Only --bench-update writes the tracked bench/results.json,
+A run leaves the checkout as it was: the results go outside it, to bench.OUT
+($XDG_CACHE_HOME/pyclray/bench, by default ~/.cache/pyclray/bench; $PYCLRAY_BENCH_OUT moves it):
+results.json, the report REPORT.md and its plot error_vs_time.png, written at the end of the run (the
+report needs matplotlib, in the bench extra). Only --update-report writes the tracked bench/results.json,
 bench/REPORT.md, bench/error_vs_time.png and the headline table of docs/benchmarks.md. An explicit
 --benchmark-json PATH is honoured as given.
 
@@ -29,7 +30,7 @@ import pytest  # noqa: E402
 _CACHE = tempfile.mkdtemp(prefix="pyclray-bench-cache-")
 os.environ["PYCLRAY_CACHE_DIR"] = _CACHE  # never the user's cache
 
-from . import HERE, OUT  # noqa: E402  (OUT: bench/out/, untracked, where a run's results and report go)
+from . import HERE, OUT  # noqa: E402  (OUT: outside the checkout, where a run's results and report go)
 
 SCENES = HERE.parent / "scenes"
 TRACKED = {"results": HERE / "results.json", "report": HERE / "REPORT.md", "plot": HERE / "error_vs_time.png",
@@ -56,13 +57,13 @@ def pytest_addoption(parser):
     group = parser.getgroup("pyclray benchmarks")
     group.addoption("--bench-full", action="store_true",
                     help="run the whole benchmark matrix (about 7 minutes on 2 cores); default: the quick run")
-    group.addoption("--bench-update", action="store_true",
+    group.addoption("--update-report", "--bench-update", action="store_true", dest="update_report",
                     help="write the tracked bench/results.json, bench/REPORT.md, bench/error_vs_time.png and the "
-                    "headline of docs/benchmarks.md (default: bench/out/, untracked); use with --bench-full")
+                    f"headline of docs/benchmarks.md (default: {OUT}, outside the checkout); use with --bench-full")
 
 
 def _paths(config) -> dict:
-    if config.getoption("--bench-update"):
+    if config.getoption("update_report"):
         return TRACKED
     return {"results": OUT / "results.json", "report": OUT / "REPORT.md", "plot": OUT / "error_vs_time.png",
             "headline": None}
@@ -121,7 +122,7 @@ def pytest_sessionfinish(session, exitstatus):
 
 def pytest_report_header(config):
     mode = "the whole matrix" if config.getoption("--bench-full") else "quick (--bench-full for the whole matrix)"
-    where = "the tracked bench/ files" if config.getoption("--bench-update") else f"{OUT} (untracked)"
+    where = "the tracked bench/ files" if config.getoption("update_report") else f"{OUT} (outside the checkout)"
     return f"pyclray benchmarks: {mode}; results and report in {where}"
 
 

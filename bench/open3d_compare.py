@@ -1,8 +1,8 @@
 """pyclray against Open3D's RaycastingScene (Embree over triangle meshes) in one process, and the
 BVH's scaling, build times and memory (issue 11).
 
-    python -m bench.open3d_compare [--quick]      # writes bench/out/open3d_results.json and the
-                                                   # "Scale" section of bench/out/REPORT.md (untracked)
+    python -m bench.open3d_compare [--quick]      # writes OUT/open3d_results.json and the
+                                                   # "Scale" section of OUT/REPORT.md (bench.OUT)
     python -m bench.open3d_compare --update       # the tracked bench/open3d_results.json and
                                                    # bench/REPORT.md instead
 
@@ -42,7 +42,7 @@ from pyclray.engine.bvh.scene import scene_bvh as build_scene_bvh
 
 from . import scale
 
-from . import HERE, OUT  # OUT: untracked (.gitignore); --update writes the tracked files in HERE instead
+from . import HERE, OUT  # OUT: outside the checkout; --update writes the tracked files in HERE instead
 RESULTS_NAME, REPORT_NAME = "open3d_results.json", "REPORT.md"
 BEGIN, END = "<!-- scale:begin -->", "<!-- scale:end -->"
 
@@ -241,7 +241,7 @@ def main(argv=None) -> None:
     parser.add_argument("--quick", action="store_true", help="fewer rounds and no 1,000,000-sphere scene")
     parser.add_argument("--no-open3d", action="store_true", help="skip the comparison with Open3D")
     parser.add_argument("--update", action="store_true",
-                        help="write the tracked bench/open3d_results.json and bench/REPORT.md (default: bench/out/)")
+                        help="write the tracked bench/open3d_results.json and bench/REPORT.md (default: bench.OUT, outside the checkout)")
     args = parser.parse_args(argv)
     folder = HERE if args.update else OUT
     folder.mkdir(parents=True, exist_ok=True)

@@ -1,7 +1,7 @@
 """Read the pytest-benchmark JSON and write the report (REPORT.md) and its plot (error_vs_time.png).
 
-    python -m pytest bench                  # runs the benchmarks and writes bench/out/REPORT.md itself
-    python -m bench.report                  # bench/out/results.json -> bench/out/REPORT.md (untracked)
+    python -m pytest bench                  # runs the benchmarks and writes REPORT.md under bench.OUT itself
+    python -m bench.report                  # OUT/results.json -> OUT/REPORT.md (bench.OUT: outside the checkout)
     python -m bench.report --update         # bench/results.json -> the tracked bench/REPORT.md, plot and
                                             # the headline of docs/benchmarks.md
 """
@@ -299,8 +299,8 @@ def main(argv=None) -> None:
         f"{cpu.get('brand_raw', machine.get('processor', '?'))}, {cpu.get('count', '?')} logical CPUs, "
         f"Python {machine.get('python_version', '?')}. PoCL (CPU) is pyclray's device.",
         "",
-        "Run: `python -m pytest bench --bench-full --bench-update` (the whole matrix; `python -m pytest bench` alone "
-        "runs the quick subset and writes its report under bench/out/, untracked).",
+        "Run: `python -m pytest bench --bench-full --update-report` (the whole matrix; `python -m pytest bench` alone "
+        "runs the quick subset and writes its report outside the checkout (bench.OUT)).",
         "",
         "## Speed targets (ratios to Mitsuba 3 llvm_ad_rgb measured in the same run)",
         "",

@@ -19,7 +19,7 @@ For each scene and size:
 
 The 100,000 spheres are bench/scale.py's field (one pyclray.Spheres batch from an .npz, over a
 ground plane), tp02 is scenes/tp02.toml; both lit by one point light. Results go to
-bench/out/view.json (untracked) and are printed as a Markdown table with the machine's load.
+view.json under bench.OUT (outside the checkout) and are printed as a Markdown table with the machine's load.
 """
 from __future__ import annotations
 
@@ -231,7 +231,7 @@ def main(argv=None) -> None:
                 print(json.dumps(results[-1]), flush=True)
         browser.close()
     load = os.getloadavg()
-    out = Path(os.environ.get("PYCLRAY_BENCH_OUT", REPO / "bench/out"))
+    from bench import OUT as out  # outside the checkout
     out.mkdir(parents=True, exist_ok=True)
     (out / "view.json").write_text(json.dumps({"load": load, "results": results}, indent=1))
     print(f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; medians of one run (ms unless said)\n")

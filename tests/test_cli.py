@@ -323,3 +323,15 @@ def test_a_progress_bar_on_a_terminal_only(tmp_path):
     assert process.wait() == 0
     assert b"pyclray render" in drawn and b"/64 [" in drawn and b"row" in drawn, drawn
     assert stdout.strip().splitlines()[-1].startswith("rendered ")
+
+
+def test_render_without_o_writes_the_scene_stem_exr_in_the_current_folder(tmp_path):
+    """Issue 42 item 11: `pyclray render scenes/tp02.toml` writes ./tp02.exr (not an error)."""
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "tp02.toml"
+    result = cli("render", str(scene), "--size", "16x12", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tp02.exr"]
+    assert read_exr(tmp_path / "tp02.exr")["depth"].shape == (12, 16)
+    assert "tp02.exr" in result.stdout
+    help_text = cli("render", "--help").stdout
+    assert "default: SCENE's name" in " ".join(help_text.split())

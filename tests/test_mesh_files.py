@@ -150,3 +150,87 @@ def test_cli_bad_mesh_is_one_line_exit_2(tmp_path):
     assert run.returncode == 2
     assert len(run.stderr.strip().splitlines()) == 1 and "key 'file'" in run.stderr and "missing.obj" in run.stderr
     assert not out.exists()
+
+
+def write_ply_binary(path, vertices, polygons, order, count_type="u1", index_type="i4", extra=False):
+    """A binary PLY (order '<' or '>') whose faces mix polygon sizes, written byte by byte here (not
+    with plyfile, the reader under test): count_type and index_type are the list's numpy types."""
+    names = {"u1": "uchar", "i1": "char", "u2": "ushort", "i2": "short", "u4": "uint", "i4": "int"}
+    endian = "binary_little_endian" if order == "<" else "binary_big_endian"
+    header = ["ply", f"format {endian} 1.0", "comment mixed polygons", f"element vertex {len(vertices)}",
+              "property double x", "property double y", "property double z"]
+    if extra:
+        header += ["property uchar red"]
+    header += [f"element face {len(polygons)}",
+               f"property list {names[count_type]} {names[index_type]} vertex_indices"]
+    if extra:
+        header += ["property list uchar float texcoord"]
+    header += ["end_header"]
+    body = bytearray()
+    for v in vertices:
+        body += np.asarray(v, order + "f8").tobytes()
+        if extra:
+            body += b"\x07"
+    for p in polygons:
+        body += np.asarray(len(p), order + count_type).tobytes() + np.asarray(p, order + index_type).tobytes()
+        if extra:
+            body += np.asarray(2, "u1").tobytes() + np.asarray([0.5, 0.25], order + "f4").tobytes()
+    path.write_bytes(("\n".join(header) + "\n").encode() + bytes(body))
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+@pytest.mark.parametrize("count_type,index_type,extra", [
+    ("u1", "i4", False), ("u1", "u4", True), ("u2", "i2", False), ("i1", "u2", True), ("u4", "i4", False)])
+def test_binary_ply_with_mixed_polygons_reads_and_fans(tmp_path, order, count_type, index_type, extra):
+    """Issue 42 item 3: quads, triangles and a pentagon in one binary file (either byte order, any
+    list types, other properties beside the lists) are read and fanned as OBJ and OFF are."""
+    path = tmp_path / "mixed.ply"
+    write_ply_binary(path, QUAD_VERTICES, POLYGONS, order, count_type, index_type, extra)
+    mesh = pyclray.Mesh.load(path)
+    assert np.array_equal(mesh.faces, FANNED)
+    assert np.array_equal(mesh.vertices, QUAD_VERTICES)  # doubles kept to the bit
+
+
+def test_binary_ply_of_triangles_only_and_vertex_normals(tmp_path):
+    path = tmp_path / "tri.ply"
+    header = ("ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face 1\n"
+              "property list uchar uint vertex_index\nend_header\n")
+    rows = np.array([[0, 0, 0, 0, 0, 1], [1, 0, 0, 0, 0, 1], [0, 1, 0, 0, 0, 1]], ">f4")
+    path.write_bytes(header.encode() + rows.tobytes() + b"\x03" + np.array([0, 1, 2], ">u4").tobytes())
+    mesh = pyclray.Mesh.load(path)
+    assert np.array_equal(mesh.faces, [[0, 1, 2]]) and np.array_equal(mesh.normals, rows[:, 3:])
+
+
+@pytest.mark.parametrize("contents,message", [
+    (b"this is a text file, not a mesh\n", "not a PLY file: expected 'ply' on the first line"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
+     "not a readable PLY file"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nend_header\n0 0\n1 0\n0 1\n",
+     "expected the vertex properties x, y, z"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+     "face 0 is [0, 1, 7]"),
+])
+def test_a_bad_ply_is_one_clear_line(tmp_path, contents, message):
+    """Issue 42 item 7: a text file named .ply says what is wrong in one line (not 'list index out
+    of range')."""
+    path = tmp_path / "bad.ply"
+    path.write_bytes(contents)
+    with pytest.raises(pyclray.SceneError) as error:
+        pyclray.Mesh.load(path)
+    text = str(error.value)
+    assert message in text and "\n" not in text and "index out of range" not in text, text
+
+
+@pytest.mark.parametrize("suffix,message", [
+    (".ply", "not a PLY file"), (".off", "expected an OFF header"), (".obj", "holds no triangles"),
+    (".stl", "holds no triangle mesh"), (".glb", "not a GLB file"), (".gltf", "not a glTF file")])
+def test_a_text_file_of_any_mesh_suffix_is_one_clear_line(tmp_path, suffix, message):
+    path = tmp_path / f"notes{suffix}"
+    path.write_text("this is a text file, not a mesh\n")
+    with pytest.raises(pyclray.SceneError) as error:
+        pyclray.Mesh.load(path)
+    text = str(error.value)
+    assert message in text and f"notes{suffix}" in text and "\n" not in text, text

@@ -106,7 +106,7 @@ BAD = [
     ("target = [0.0, 0.5, 0.0]", "target = [0.0, 2.0, 6.0]", "[camera]", "target"),  # eye == target
     ("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 0.0]", "[camera]", "up"),  # zero up
     ("up = [0.0, 1.0, 0.0]", "up = [0.0, -1.5, -6.0]", "[camera]", "up"),  # up parallel to view
-    ("fov = 45.0\n", "", "[camera]", "fov"),  # missing
+    ("target = [0.0, 0.5, 0.0]\n", "", "[camera]", "target"),  # missing (fov may be: 45, issue 42)
     ("[image]", "[imgae]", "(top level)", "imgae"),
     ('name = "floor"', "name = 3", "[[shapes]] #0 (plane)", "name"),
 ]

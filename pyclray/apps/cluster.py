@@ -35,7 +35,7 @@ from ..engine.api import render
 from ..engine.queries.requests import Frame, frame_camera
 from ..model.aovs import AOVS
 from ..model.camera import Camera
-from ..model.errors import PyclrayError
+from ..model.errors import PyclrayError, RequestError
 from ..model.scene import Scene
 
 # Seconds to wait for a scheduler to answer, and for a running cluster to have a worker.
@@ -144,7 +144,7 @@ class Job(WorkerPlugin):
     def __init__(self, scene: Scene, aovs=AOVS, precision: str = "fp32", device: str | None = None, encode=None,
                  time=None):
         if device is not None and not isinstance(device, str):
-            raise PyclrayError("device: on a cluster, give a selector string (P:D or a part of its name), "
+            raise RequestError("device: on a cluster, give a selector string (P:D or a part of its name), "
                                f"not {type(device).__name__}: each worker picks its own device")
         self.name = f"pyclray-{uuid.uuid4().hex[:12]}"
         self.scene, self.aovs, self.precision, self.device, self.encode = scene, aovs, precision, device, encode
@@ -298,7 +298,7 @@ def render_views(client: Client, scene: Scene, views, aovs=AOVS, precision: str 
     views = list(views)
     for i, view in enumerate(views):
         if not isinstance(view, (Camera, Scene)):
-            raise PyclrayError(f"views: item {i} is a {type(view).__name__}; expected a pyclray Camera or Scene")
+            raise RequestError(f"views: item {i} is a {type(view).__name__}; expected a pyclray Camera or Scene")
     yield from run(client, Job(scene, aovs, precision, device, encode), "view", views, progress, what="view")
 
 
@@ -315,7 +315,7 @@ def render_bands(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
     width, height = scene.image.width, scene.image.height
     rows = band_rows(width, height) if rows is None else rows
     if not (isinstance(rows, int) and rows >= 1):
-        raise PyclrayError(f"rows: expected a whole number of rows >= 1, got {rows!r}")
+        raise RequestError(f"rows: expected a whole number of rows >= 1, got {rows!r}")
     windows = [(0, top, width, min(rows, height - top)) for top in range(0, height, rows)]
     for _, band in run(client, Job(scene, aovs, precision, device, time=time), "window", windows, progress, what="band"):
         yield band

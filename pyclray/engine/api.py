@@ -174,7 +174,7 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     Each ray is traced on its own, from its float64 origin and direction: its result does not
     depend on the other rays of the batch, bit for bit, and its float32 depth and normal meet the
     render's error model for the ray as given (see kernels/rays.h). Needs cl_khr_fp64.
-    Raises PyclrayError for arrays of other shapes, rows that are not finite, zero directions, a
+    Raises RequestError (a ValueError) for arrays of other shapes, rows that are not finite, zero directions, a
     tmax that is not > 0, and origins so far from the shapes that the precision overflows.
     """
     scene = as_scene(scene)

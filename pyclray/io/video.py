@@ -16,12 +16,15 @@ import subprocess
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..model.errors import OutputError
 from .bands import frame_bands, camera_of, write_images
+from .files import reason
 from .png import PREVIEWS, preview
 
 
@@ -78,14 +81,29 @@ class Folder:
 
     def write(self, k, frame):
         # frame_K.exr and its previews frame_K.AOV.png, as `pyclray render --png` writes them
-        self.encoder().write(Path(self._stem(k) + ".exr"), frame)
+        with self._named():
+            self.encoder().write(Path(self._stem(k) + ".exr"), frame)
 
     def store(self, k, files):
-        for suffix, data in files:
-            with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writer's
-                file.write(data)
-                file.flush()
-                os.fsync(file.fileno())  # on disk before the folder is renamed, as write_images leaves its files
+        with self._named():
+            for suffix, data in files:
+                with open(self._stem(k) + suffix, "xb") as file:  # mode 0666 less the umask, as the writer's
+                    file.write(data)
+                    file.flush()
+                    os.fsync(file.fileno())  # on disk before the folder is renamed, as write_images leaves its files
+
+    @contextmanager
+    def _named(self):
+        """A failed write (a full disk) said of OUTDIR/frame_K..., the name the user gave, not of the
+        hidden temporary folder the frames go to first."""
+        try:
+            yield
+        except OutputError as error:
+            raise OutputError(str(error).replace(str(self.tmp), str(self.out))) from None
+        except OSError as error:
+            name = Path(error.filename).name if getattr(error, "filename", None) else ""
+            raise OutputError(f"cannot write {self.out / name if name else str(self.out) + os.sep}: "
+                              f"{reason(error)}; nothing was replaced") from None
 
     def finish(self):
         os.chmod(self.tmp, 0o777 & ~umask())  # as an ordinary new folder, not mkdtemp's 0700

@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 from numbers import Real
 
+import numpy as np
+
 
 class PyclrayError(Exception):
     """Base class of pyclray's own errors."""
@@ -65,7 +67,15 @@ class PyclrayWarning(UserWarning):
 
 
 def _shown(value) -> str:
-    text = repr(value)
+    """A value as an error message shows it: one line of at most 60 characters, numpy's numbers as
+    plain numbers (1.0, not np.float64(1.0)) and an array with its shape."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, np.ndarray):
+        body = np.array2string(value, separator=", ", threshold=8, edgeitems=2, max_line_width=1 << 30)
+        text = f"an array of shape {value.shape}: {' '.join(body.split())}"
+    else:
+        text = " ".join(repr(value).split())
     return text if len(text) <= 60 else text[:57] + "..."
 
 

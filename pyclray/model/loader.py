@@ -64,19 +64,22 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     entries = data.get("shapes", [])
     if not isinstance(entries, list):
         raise SceneError("expected an array of tables [[shapes]]", key="shapes", file=source)
-    shapes, seen = [], {}
+    shapes, seen, tables = [], {}, []
     for index, entry in enumerate(entries):
         where = f"[[shapes]] #{index}"
         try:
             kind = typed_table(entry, REGISTRY, "shape")
             where = f"[[shapes]] #{index} ({kind})"
-            shape = REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None)
-            # names are unique, as the lights' (a name is what an animation key targets; the
-            # defaults "<type><index>" are unique)
-            if shape.name in seen:
-                raise SceneError(f"the name {shape.name!r} is already used by [[shapes]] #{seen[shape.name]}", key="name")
-            seen[shape.name] = index
-            shapes.append(shape)
+            made = REGISTRY[kind].from_table(entry, index, Path(source).parent if source else None)
+            for shape in made if isinstance(made, tuple) else (made,):  # a table may make several (split)
+                # names are unique, as the lights' (a name is what an animation key targets; the
+                # defaults "<type><index>" are unique)
+                if shape.name in seen:
+                    raise SceneError(f"the name {shape.name!r} is already used by [[shapes]] #{seen[shape.name]}",
+                                     key="name")
+                seen[shape.name] = index
+                shapes.append(shape)
+                tables.append(index)
         except SceneError as error:
             raise error.within(file=source, table=where) from None
     lights = lights_from_list(data.get("lights", []), source)
@@ -88,7 +91,9 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         animation = Animation.from_table(data["animation"]) if "animation" in data else None
     except SceneError as error:
         raise error.within(file=source, table="[animation]") from None
-    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation)
+    # each shape's table in the file, for messages, where a table made several shapes (ids != tables)
+    tables = None if tables == list(range(len(tables))) else tuple(tables)
+    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation, tables=tables)
 
 
 def load_scene(path) -> Scene:

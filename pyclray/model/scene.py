@@ -33,6 +33,9 @@ class Scene:
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.model.lights); none: the headlight
     shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
+    # the [[shapes]] table of each shape in the file (for messages) where a table made several shapes
+    # (a mesh file's objects, split = true); None: shape k is table k
+    tables: tuple[int, ...] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         object.__setattr__(self, "lights", check_lights(self.lights, self.source))
@@ -98,6 +101,13 @@ class Scene:
         for shape in self.shapes:
             size = max(size, shape.extent_from(eye))
         return size
+
+    def table_of(self, index: int) -> int:
+        """The [[shapes]] table of the file that shape `index` comes from (itself but after a table
+        that made several shapes)."""
+        if self.tables is not None and len(self.tables) == len(self.shapes):
+            return self.tables[index]
+        return index
 
     def shape_types(self) -> tuple[str, ...]:
         """The shape types present, in the registry's order."""
@@ -169,5 +179,5 @@ def check_renderable(scene: Scene, precision: str) -> None:
             raise SceneError(
                 f"{length:.3g} from the eye in the camera's frame, beyond what {precision} can render "
                 f"(at most {limit:.2g}: the kernel squares lengths); {remedy}",
-                file=scene.source, table=f"[[shapes]] #{index} ({shape.type})", key=key,
+                file=scene.source, table=f"[[shapes]] #{scene.table_of(index)} ({shape.type})", key=key,
             )

@@ -31,6 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
         import_module(f"{__package__}.{name}").add_command(commands)
+    for command in commands.choices.values():  # every command's help ends with the same exit statuses
+        command.epilog = EXIT_STATUS_HELP
     return parser
 
 
@@ -65,7 +67,7 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     command = "?"
     try:
-        from ...model.errors import DeviceError, OutputError, PyclrayError, PyclrayWarning, SceneError
+        from ...model.errors import DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 
         parser = build_parser()
         args, unknown = parser.parse_known_args(argv)
@@ -76,7 +78,7 @@ def main(argv=None) -> int:
             warnings.simplefilter("default", PyclrayWarning)
             warnings.showwarning = _show_warning(command)
             return args.run(args)
-    except (BadInput, SceneError, DeviceError, OutputError) as error:
+    except (BadInput, SceneError, RequestError, DeviceError, OutputError) as error:  # (RequestError: a bad option's value)
         print(f"pyclray {command}: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except PyclrayError as error:

@@ -179,7 +179,7 @@ def _animate(args, scene, frames, aovs, make_sink, out, kind) -> int:
             if sink is not None:
                 sink.abort()
             if kind == "folder" and isinstance(error, OSError) and not isinstance(error, (OutputError, InterruptedError)):
-                raise OutputError(f"cannot write {out}: {reason(error)}; nothing was replaced") from None
+                raise OutputError(f"cannot write {out}{os.sep}: {reason(error)}; nothing was replaced") from None
             if on_cluster and isinstance(error, cluster.ClusterError):
                 raise BadInput(str(error)) from None
             raise

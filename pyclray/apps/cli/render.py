@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ...model.aovs import RENDER_AOVS
 from .options import BadInput, add_cluster_options, aov_list, cluster_module, image_size, load, time_value
 from .texts import EXIT_STATUS_HELP
 
@@ -26,6 +27,8 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
     from ...io.bands import output_format
     from ...model.errors import RequestError
 
+    if args.output is None:  # the scene's name as an .exr, here (not beside the scene)
+        args.output = f"{Path(args.scene).stem}.exr"
     out, scene = Path(args.output), Path(args.scene)
 
     def is_scene(target: Path) -> bool:
@@ -168,9 +171,10 @@ def add_command(commands) -> None:
         "OUT.exr (one OpenEXR file with the channels Z (distance from the eye, inf on a miss), N.X N.Y N.Z "
         "(unit world normal, 0 on a miss), id (UINT holding the int32 shape id; 4294967295 = -1 on a miss), "
         "and as asked zdepth (depth along the optical axis), P.X P.Y P.Z (world hit point), R G B (shaded, "
-        "linear RGB) and label (UINT, the shape's label)); OUT.npz (every image as a numpy array under its "
+        "linear RGB), primitive (UINT, the triangle or batch member hit), bary.u bary.v (barycentric: (u, v) "
+        "in the triangle hit) and label (UINT, the shape's label)); OUT.npz (every image as a numpy array under its "
         "name, in its own type, with the camera's intrinsics K (3x3) and pose (4x4 camera-to-world, OpenCV's "
-        "convention)); OUT.png (the preview of the first image of --aov). "
+        "convention), deflated as numpy.savez_compressed writes it); OUT.png (the preview of the first image of --aov). "
         "Z, N and the other float images are 32-bit FLOAT channels also for --precision fp64 (rounded to "
         "float32): OpenEXR has no 64-bit "
         "float channel type (an .npz keeps float64). Large images are rendered and written in bands of rows, so "
@@ -178,12 +182,13 @@ def add_command(commands) -> None:
         epilog=EXIT_STATUS_HELP,
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
-    render.add_argument("-o", "--output", required=True, metavar="OUT.exr|OUT.npz|OUT.png",
-                        help="the file to write; its extension decides the format (.exr, .npz or .png)")
+    render.add_argument("-o", "--output", metavar="OUT.exr|OUT.npz|OUT.png",
+                        help="the file to write; its extension decides the format (.exr, .npz or .png); "
+                        "default: SCENE's name with .exr, in the current folder (scenes/tp02.toml: ./tp02.exr)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help="comma-separated images to compute: depth,normal,id,zdepth,position,shaded,primitive,label,"
-        "object_coordinates,flow (default: depth,normal,id; flow of an animated scene needs --time); fewer is faster",
+        help=f"comma-separated images to compute: {','.join(RENDER_AOVS)} (default: depth,normal,id; flow of an "
+        "animated scene needs --time); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",

@@ -55,7 +55,7 @@ def add_command(commands) -> None:
         "(ssh -L PORT:127.0.0.1:PORT host) rather than opening it.",
         epilog=EXIT_STATUS_HELP,
     )
-    view.add_argument("scene", metavar="SCENE", help="scene file (TOML)")
+    view.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
     view.add_argument("--aov", type=view_aov, default="shaded", metavar="NAME",
                       help="the image shown first: shaded (default), depth, zdepth, normal, id, primitive or label")
     view.add_argument("--size", type=image_size, metavar="WxH", help="override the scene's image size")

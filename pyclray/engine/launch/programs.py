@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
+import sys
 import tempfile
 import threading
 import warnings
@@ -315,10 +317,45 @@ def _quiet_compiler():
     """pyopencl warns (CompilerWarning) whenever a successful build left a log, as PoCL's often does
     (e.g. notes on vector arguments): a user can do nothing about it, and a warnings filter that
     makes warnings errors would turn it into an exception inside the build, after the driver made
-    the program (PoCL then crashes at its release). A failed build still raises with its log."""
-    with warnings.catch_warnings():
+    the program (PoCL then crashes at its release). A failed build still raises with its log.
+    PoCL's clang also prints its count ("4 warnings generated.") straight to the process's stderr
+    (file descriptor 2): that goes to a temporary file for the build's length, and whatever else
+    was printed there meanwhile (another thread's lines) is passed on afterwards."""
+    with warnings.catch_warnings(), _stderr_without_compiler_counts():
         warnings.simplefilter("ignore", cl.CompilerWarning)
         yield
+
+
+# clang's summary line, the one thing the compiler prints itself on a successful build
+_COMPILER_COUNT = re.compile(rb"\d+ (warning|error)s? generated\.")
+
+
+@contextlib.contextmanager
+def _stderr_without_compiler_counts():
+    """File descriptor 2 into a temporary file while the block runs (the C compiler writes there
+    directly, past Python's sys.stderr), then back; the captured bytes less clang's counts are
+    written to the real stderr."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no stderr to guard (a closed descriptor 2)
+        yield
+        return
+    with _stderr_lock, tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            lines = captured.read().splitlines(keepends=True)
+            rest = b"".join(line for line in lines if not _COMPILER_COUNT.fullmatch(line.rstrip(b"\r\n")))
+            if rest:
+                os.write(2, rest)
+
+
+_stderr_lock = threading.Lock()
 
 
 def _build(ctx: DeviceContext, variant: Variant) -> cl.Program:

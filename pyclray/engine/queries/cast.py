@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ...model.errors import DeviceError, PyclrayError
+from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.capabilities import capability
 from ..launch.programs import Variant, kernel_for
@@ -20,20 +20,20 @@ def _ray_array(name: str, value) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
-        raise PyclrayError(f"{name}: expected an array of shape (..., 3) of numbers") from None
+        raise RequestError(f"{name}: expected an array of shape (..., 3) of numbers") from None
     if array.size == 0 and array.ndim == 1:  # an empty list: no rays
         array = array.reshape(0, 3)
     if array.ndim == 0 or array.shape[-1] != 3:
-        raise PyclrayError(f"{name}: expected an array of shape (..., 3), got shape {array.shape}")
+        raise RequestError(f"{name}: expected an array of shape (..., 3), got shape {array.shape}")
     return array
 
 
 def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
     if not bad.ndim or not bad.size:  # one shared origin and no rays: the origin itself
-        raise PyclrayError(f"{name}: {what}: {rows}")
+        raise RequestError(f"{name}: {what}: {rows}")
     index = np.unravel_index(int(np.argmax(bad)), bad.shape)
     where = "row " + (str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index)))
-    raise PyclrayError(f"{name}: {where} {what}: {rows[index]}")
+    raise RequestError(f"{name}: {where} {what}: {rows[index]}")
 
 
 def _cast_rays(origins, directions, tmax, codes: bool = True):
@@ -48,7 +48,7 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
     shape = directions.shape[:-1]
     origins = _ray_array("origins", origins)
     if origins.shape != directions.shape and origins.shape != (3,):
-        raise PyclrayError(
+        raise RequestError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}"
         )
     extent = None
@@ -72,14 +72,14 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
         try:
             tmax = np.asarray(tmax, dtype=np.float64)
         except (TypeError, ValueError):
-            raise PyclrayError("tmax: expected a number or an array of numbers") from None
+            raise RequestError("tmax: expected a number or an array of numbers") from None
         try:
             tmax = np.broadcast_to(tmax, shape)
         except ValueError:
-            raise PyclrayError(f"tmax: expected one number or the shape {shape} of the rays, got {tmax.shape}") from None
+            raise RequestError(f"tmax: expected one number or the shape {shape} of the rays, got {tmax.shape}") from None
         bad = ~(tmax > 0)
         if bad.any():
-            raise PyclrayError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
+            raise RequestError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
         tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
     return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape, extent
 
@@ -178,7 +178,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
         with np.errstate(over="ignore", invalid="ignore"):
             packed = kind.cls.rebase(worlds[name], origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
-            raise PyclrayError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
+            raise RequestError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
         # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
         args.update({f"{name}s": input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
@@ -240,7 +240,7 @@ def run_cast(tracer, query: str, origins, directions, tmax, aovs):
         with np.errstate(over="ignore", invalid="ignore"):
             reach = np.abs(origins - anchor[:3]).max(axis=-1)
         row = int(np.argmax(~(reach <= bound)))
-        raise PyclrayError(
+        raise RequestError(
             f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
             "(their distances overflow)"
         )

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model.errors import PyclrayError
+from ...model.errors import RequestError
 from ...model.shapes.capabilities import capability
 
 # a ref holds its index shifted by 4 bits in an int: a block's place (64-byte units) below 2^27
@@ -83,7 +83,7 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
         vertices, corners = _corners(kind, worlds[name])
         data, places = kind.cls.pack_cast_blocks(vertices, corners, np.asarray(kind.ids), entries, starts)
         if len(places) and places[-1] >= MAX_PLACE:
-            raise PyclrayError(f"the scene's {name}es are too many for cast's blocks ({len(entries):,} entries)")
+            raise RequestError(f"the scene's {name}es are too many for cast's blocks ({len(entries):,} entries)")
         new_refs[runs] = places * 16 + 1 + list(shape_types).index(name)
         anchors[runs] = cast_anchors[bvh.leaf_index[head[runs]]]
         blocks[name] = (data, len(runs))

@@ -1,13 +1,14 @@
 """A render on a scene handle: one ray per pixel centre of the view's camera, the images asked for."""
 from __future__ import annotations
 
-import numpy as np
-
+import warnings
 from dataclasses import replace
+
+import numpy as np
 
 from ...model.aovs import RENDER_AOVS, kernel_aovs
 from ...model.camera import Camera
-from ...model.errors import PyclrayError, RequestError
+from ...model.errors import PyclrayWarning, RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
 from ..launch.programs import Variant, lanes_for, packet_shape
@@ -26,9 +27,9 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     try:
         col0, row0, cols, rows = (int(v) for v in window)
     except (TypeError, ValueError):
-        raise PyclrayError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
+        raise RequestError(f"window: expected (x0, y0, width, height) integers, got {window!r}") from None
     if not (0 <= col0 and 0 <= row0 and cols >= 1 and rows >= 1 and col0 + cols <= width and row0 + rows <= height):
-        raise PyclrayError(
+        raise RequestError(
             f"window: expected (x0, y0, width, height) inside the {width}x{height} image, got {tuple(window)!r}"
         )
     return col0, row0, cols, rows
@@ -81,6 +82,8 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
 
     def frame() -> Frame:
         images = pending.result()
+        if _all_missed(images) and _behind_the_camera(view.camera, prepared):
+            warnings.warn(LOOKS_AWAY, PyclrayWarning, stacklevel=2)
         if any(name in MOTION_AOVS for name in asked):  # derived on the host, then only what was asked
             images = with_motion(view, images, motion, asked)
             images = images if "label" in asked else {name: images[name] for name in asked}
@@ -88,6 +91,37 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
                      view=(view.camera, view.image.width, view.image.height, col0, row0))
 
     return frame
+
+
+LOOKS_AWAY = ("every pixel is a miss and every shape lies behind the camera: is the pose in OpenGL's convention "
+              "(y up, z backwards)? pyclray's pose is OpenCV's (x right, y down, z forward): "
+              "flip its y and z axes (pose @ diag(1, -1, -1, 1))")
+# the images that tell a miss apart from a hit, and the value a miss holds (model/aovs.py's TABLE)
+_MISS = (("id", -1), ("depth", np.inf), ("zdepth", np.inf), ("primitive", -1))
+
+
+def _all_missed(images: dict) -> bool:
+    """True if the render's images say no pixel hit (False where none of them can tell)."""
+    for name, miss in _MISS:
+        if name in images:
+            image = images[name].reshape(-1)
+            # a sample first: an image that hits anywhere mostly hits in it, without a pass over all
+            return bool((image[::997] == miss).all() and (image == miss).all())
+    return False
+
+
+def _behind_the_camera(camera, prepared) -> bool:
+    """True if the scene has bounded shapes and every corner of every one's box has camera z <= 0
+    (OpenCV's pose: z forward), where no pixel's ray can reach it. Asked only of an all-miss image."""
+    bounds = prepared.bvh.given_bounds
+    if not len(bounds):
+        return False  # planes only: no bounds to be behind
+    pose = camera.pose()
+    forward, eye = pose[:3, 2], pose[:3, 3]
+    with np.errstate(over="ignore", invalid="ignore"):
+        # a box's most forward corner: per axis the larger of its two faces' terms
+        terms = np.maximum((bounds[:, 0] - eye) * forward, (bounds[:, 1] - eye) * forward)
+        return bool((terms.sum(axis=1) <= 0).all())
 
 
 def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pyopencl as cl
 
-from ...model.errors import PyclrayError, SceneError
+from ...model.errors import RequestError, SceneError
 from ...model.scene import Scene, check_renderable, check_shape_count
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
@@ -30,7 +30,7 @@ TILES_MAX_SHAPES = 20_000
 
 def check_acceleration(acceleration) -> str:
     if acceleration not in ("auto", "bvh", "tiles"):
-        raise PyclrayError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
+        raise RequestError(f"acceleration: expected one of auto, bvh, tiles, got {acceleration!r}")
     return acceleration
 
 

@@ -112,15 +112,15 @@ def _intrinsics(key: str, value) -> np.ndarray:
     K = _matrix(key, value, 3, 3)
     form = "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]"
     if K[0, 1] != 0:
-        raise SceneError(f"expected no skew (K[0][1] = 0, as OpenCV's and Mitsuba's cameras), got {K[0, 1]!r}", key=key)
+        raise SceneError(f"expected no skew (K[0][1] = 0, as OpenCV's and Mitsuba's cameras), got {float(K[0, 1])!r}", key=key)
     if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
         raise SceneError(f"expected a pinhole matrix {form}, got {_shown(_nested(K))}", key=key)
     if not (K[0, 0] > 0 and K[1, 1] > 0):
         raise SceneError(f"expected focal lengths fx = K[0][0] > 0 and fy = K[1][1] > 0 (pixels), got "
-                         f"fx = {K[0, 0]!r}, fy = {K[1, 1]!r}", key=key)
+                         f"fx = {float(K[0, 0])!r}, fy = {float(K[1, 1])!r}", key=key)
     if max(abs(K[0, 2]), abs(K[1, 2])) > MAX_PRINCIPAL_POINT:
         raise SceneError(f"expected the principal point (cx, cy) within {MAX_PRINCIPAL_POINT:.0f} pixels of the "
-                         f"image's corner, got ({K[0, 2]!r}, {K[1, 2]!r})", key=key)
+                         f"image's corner, got ({float(K[0, 2])!r}, {float(K[1, 2])!r})", key=key)
     return K
 
 
@@ -251,7 +251,7 @@ class Camera(CameraModel):
         pose = _matrix("pose", pose, 4, 4)
         if not np.array_equal(pose[3], [0.0, 0.0, 0.0, 1.0]):
             raise SceneError(f"expected a rigid camera-to-world pose, its last row 0 0 0 1, got "
-                             f"{_shown(list(pose[3]))}", key="pose")
+                             f"{_shown(pose[3].tolist())}", key="pose")
         rotation = _rotation("pose", pose[:3, :3])
         if (width is None) != (height is None):
             raise SceneError("expected both width and height (the image K is in pixels of), or neither",
@@ -267,7 +267,7 @@ class Camera(CameraModel):
         """The [camera] table: eye, target, up, fov, fov_axis, or intrinsics and pose (scene-format.md,
         "Camera from intrinsics"), never a mix."""
         if not any(key in table for key in TABLE_INTRINSICS_KEYS):
-            no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target", "fov"))
+            no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target"))  # fov: 45 by default, as Camera(...)
             return cls(**table)
         no_unknown_keys(table, TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS)
         for key in TABLE_LOOK_AT_KEYS:

@@ -6,7 +6,7 @@ error naming the element and its line.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +35,8 @@ class Reading:
     shapes: list = field(default_factory=list)
     lights: list = field(default_factory=list)
     bsdfs: dict = field(default_factory=dict)  # id -> Material
-    groups: dict = field(default_factory=dict)  # shapegroup id -> its meshes
+    groups: dict = field(default_factory=dict)  # shapegroup id -> its <shape> elements
+    outer: object = None  # inside an instance: its to_world (a Transform), applied after a shape's own
 
 
 def checked(element: Element, make, *args, **kwargs):
@@ -113,8 +114,8 @@ def shape_material(element: Element, props: Properties, reading: Reading) -> Mat
 
 
 # -- shapes ----------------------------------------------------------------------------------------
-def shape_properties(element: Element) -> Properties:
-    props = Properties(element)
+def shape_properties(element: Element, reading: Reading) -> Properties:
+    props = Properties(element, outer=reading.outer)
     if props.take("flip_normals", "boolean", False):
         raise props.element.error("flip_normals = true: pyclray's normals point out of the shape, never flipped")
     return props
@@ -131,32 +132,36 @@ def registered_shape(cls):
     """The builder of the plugins a shape type reads (cls.mitsuba_plugins): its from_mitsuba takes
     the properties, the shape gets its name and material here."""
     def build(element: Element, reading: Reading) -> None:
-        props = shape_properties(element)
+        props = shape_properties(element, reading)
         add_shape(element, reading, props, cls.from_mitsuba(props, reading.folder or Path(".")))
     return build
 
 
 def shapegroup(element: Element, reading: Reading) -> None:
-    """A named group of shapes, drawn only where an instance places it: its meshes are read here."""
+    """A named group of shapes (any of the plugins pyclray reads, as Mitsuba instances any), drawn
+    only where an instance places it: each is read here once, to say what is wrong with it at its
+    own line, and again by each instance, under its to_world."""
     if "id" not in element.attrs:
         raise element.error("a shapegroup needs an id for instances to refer to")
     props = Properties(element)
     props.finish()
-    group = Reading(folder=reading.folder, bsdfs=reading.bsdfs)
+    children = []
     for child in props.plugins:
         if child.tag != "shape":
             raise child.error("not read inside a shapegroup: pyclray reads its <shape>s")
         kind = plugin_type(child, SHAPES)
-        if kind not in IN_GROUPS:
-            raise child.error(f"a {kind!r} shape in a shapegroup: pyclray instances triangle meshes "
-                              f"({', '.join(IN_GROUPS)})")
-        SHAPES[kind](child, group)
-    reading.groups[element.attrs["id"]] = group.shapes
+        if kind in ("shapegroup", "instance"):
+            raise child.error(f"a {kind} inside a shapegroup (Mitsuba nests neither)")
+        SHAPES[kind](child, Reading(folder=reading.folder, bsdfs=reading.bsdfs))
+        children.append((kind, child))
+    reading.groups[element.attrs["id"]] = children
 
 
 def instance(element: Element, reading: Reading) -> None:
-    """A shapegroup's meshes placed by to_world (after their own placement): the same triangles,
-    shared, named ID_k (ID the instance's id or instance<index>)."""
+    """A shapegroup's shapes placed by to_world (after their own placement), named ID_k (ID the
+    instance's id or instance<index>): a shape read under the composed transform, as Mitsuba places
+    it (a sphere stays a sphere only under a similarity: another is an error naming the instance).
+    Meshes of one file share its triangles (instances on the device)."""
     props = Properties(element)
     to_world = props.take("to_world", "transform", IDENTITY)
     props.finish()
@@ -168,16 +173,19 @@ def instance(element: Element, reading: Reading) -> None:
     if group is None:
         raise refs[0].error(f"no <shape type=\"shapegroup\" id=\"{refs[0].attrs['id']}\"> before this reference")
     name = name_of(element, reading, "shape")
-    for k, mesh in enumerate(group):
-        matrix = tuple(map(tuple, (to_world.matrix @ mesh.transform()).tolist()))
-        reading.shapes.append(checked(element, mesh.placed, matrix=matrix, name=f"{name}_{k}"))
+    placed = Reading(folder=reading.folder, bsdfs=reading.bsdfs, outer=to_world)
+    for kind, child in group:
+        try:
+            SHAPES[kind](child, placed)
+        except SceneError as error:  # what this placement makes of the shape: said of the instance
+            raise element.error(f"placing {error.message}") from None
+    for k, shape in enumerate(placed.shapes):
+        reading.shapes.append(checked(element, replace, shape, name=f"{name}_{k}"))
 
 
 # each shape type's plugins (the registry's), and the groups of shapes and their instances
 SHAPES = {plugin: registered_shape(cls) for cls in REGISTRY.values() for plugin in cls.mitsuba_plugins}
 SHAPES.update(shapegroup=shapegroup, instance=instance)
-# the plugins a shapegroup may hold (instances place them anew)
-IN_GROUPS = tuple(plugin for cls in REGISTRY.values() if cls.mitsuba_in_groups for plugin in cls.mitsuba_plugins)
 
 
 # -- emitters --------------------------------------------------------------------------------------

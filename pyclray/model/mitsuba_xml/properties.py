@@ -53,8 +53,11 @@ def scalar(element: Element, key: str = "value") -> float:
 
 # -- transforms ----------------------------------------------------------------------------------
 def rotation(axis, degrees: float) -> np.ndarray:
-    """The 3x3 right-handed rotation by ``degrees`` about ``axis`` (Rodrigues, as Transform4f::rotate)."""
-    a = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    """Mitsuba 3's Transform4f::rotate(axis, degrees) (drjit's rotate): cos I + sin [a]x + (1 - cos) a a^T
+    with the axis a as given. A unit axis makes the right-handed rotation by ``degrees`` (Rodrigues);
+    Mitsuba does not normalise another, and neither does pyclray: the result then also scales (and
+    may shear) what it places, as Mitsuba renders it."""
+    a = np.asarray(axis, np.float64)
     angle = math.radians(degrees)
     cross = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     return math.cos(angle) * np.eye(3) + math.sin(angle) * cross + (1 - math.cos(angle)) * np.outer(a, a)
@@ -166,8 +169,9 @@ IDENTITY = Transform(np.eye(4))
 class Properties:
     """The named properties and the nested plugins (and <ref>s) of a plugin element."""
 
-    def __init__(self, element: Element, ignore=()):
+    def __init__(self, element: Element, ignore=(), outer: "Transform | None" = None):
         self.element = element
+        self.outer = outer  # an instance's to_world, applied after the plugin's own (shapegroups)
         self.values: dict = {}
         self.plugins: list[Element] = []
         for child in element.children:
@@ -212,8 +216,9 @@ class Properties:
         return text
 
     def to_world(self) -> Transform:
-        """The plugin's to_world transform, the identity if it has none."""
-        return self.take("to_world", "transform", IDENTITY)
+        """The plugin's to_world transform, the identity if it has none (after it, an instance's)."""
+        own = self.take("to_world", "transform", IDENTITY)
+        return own if self.outer is None else Transform(self.outer.matrix @ own.matrix)
 
     def finish(self) -> None:
         """Every property taken or ignored; the nested plugins are the builder's (plugins.py)."""

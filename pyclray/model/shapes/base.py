@@ -44,7 +44,7 @@ class SceneShape:
     - ``type``: its name in scene files;
     - ``keys``: the keys of its scene table besides type, name, label and the material's;
     - ``_from_table(table, name)`` (``(table, name, folder)`` where ``reads_files``): the shape of a
-      scene table;
+      scene table (or a tuple of shapes, where one table makes several: a mesh file's objects);
     - ``random(rng, shift)``: a random shape for the generic tests (tests/test_shapes.py);
     - ``lengths(eye)``: the sizes of what its kernel computes from each key in the camera's frame
       (the range check).
@@ -53,7 +53,8 @@ class SceneShape:
     may name files), ``bounded`` (False: no finite bounds, outside the BVH; a bounded type defines
     the device part's ``bounds_of``), ``solid`` (has an inside), ``primitive_count`` (a batch's
     primitives), ``describe``, and for Mitsuba's XML files ``mitsuba_plugins`` with ``from_mitsuba``
-    (required where it names plugins) and ``mitsuba_in_groups``.
+    (required where it names plugins) and ``mitsuba_in_groups`` (what ``pyclray export`` writes as a
+    shapegroup where shapes share their arrays).
     """
 
     required_members: ClassVar[tuple[str, ...]] = ("type", "keys", "_from_table", "random", "lengths")
@@ -82,6 +83,12 @@ class SceneShape:
         label = check_label(table.get("label"))
         own = {k: v for k, v in table.items() if k not in MATERIAL_KEYS and k != "label"}
         shape = cls._from_table(own, name, folder) if cls.reads_files else cls._from_table(own, name)
+        if isinstance(shape, tuple):  # a file's objects as shapes of their own (a mesh's split): each alike
+            return tuple(cls._with_common(one, material, label) for one in shape)
+        return cls._with_common(shape, material, label)
+
+    @staticmethod
+    def _with_common(shape, material, label):
         common = {k: v for k, v in (("material", material), ("label", label)) if v != getattr(shape, k)}
         return replace(shape, **common) if common else shape
 
@@ -137,7 +144,8 @@ class SceneShape:
     # the <shape type=...> plugins of Mitsuba's XML read as this type (pyclray.model.mitsuba_xml),
     # each by from_mitsuba; none for a type Mitsuba has no plugin for
     mitsuba_plugins: ClassVar[tuple[str, ...]] = ()
-    # True where a <shapegroup> may hold it (an <instance> places it anew: ``placed(matrix=...)``)
+    # True where pyclray export writes the shapes that share this type's arrays as one <shapegroup>
+    # and an <instance> each (a mesh); reading, a shapegroup may hold any shape
     mitsuba_in_groups: ClassVar[bool] = False
 
     @classmethod

@@ -21,7 +21,7 @@ from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag
 from .capabilities import CastBlocks, IndexedTriangles, Instancing, SmoothShading
 from .device import in_frame, padded_bounds
-from .box import axis_angle, rotation
+from .rotations import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
 # does")
@@ -57,7 +57,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     type = "mesh"
     c_type = "Triangle"
-    keys = ("file", "vertices", "faces", "scale", "axis", "angle", "translate", "matrix", "smooth")
+    keys = ("file", "split", "vertices", "faces", "scale", "axis", "angle", "translate", "matrix", "smooth")
     reads_files = True
     struct = Struct(
         "Triangle",
@@ -152,11 +152,26 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     # -- files and placement -------------------------------------------------------------------
     @classmethod
-    def load(cls, path, **keys) -> "Mesh":
+    def load(cls, path, split: bool = False, **keys) -> "Mesh | tuple[Mesh, ...]":
         """The mesh of a file (OBJ, PLY, STL, OFF, glTF/GLB; read once per unchanged file), with
-        these keys (scale, axis, angle, translate, matrix, smooth, name, material, label)."""
-        vertices, faces, normals = _read_mesh(path)
-        return cls(vertices, faces, normals=normals, **keys)
+        these keys (scale, axis, angle, translate, matrix, smooth, name, material, label).
+
+        split=True: a tuple of one mesh per object of the file, in its order (OBJ's `o` and `g`
+        groups, glTF's nodes with their transforms applied; another file is one object), each with
+        the keys given and named as its object (made unique), after ``name.`` where a name is given."""
+        if split is not True:
+            if split is not False:
+                raise SceneError(f"expected True or False, got {_shown(split)}", key="split")
+            vertices, faces, normals = _read_mesh(path)
+            return cls(vertices, faces, normals=normals, **keys)
+        return cls._split(_read_mesh_objects(path), keys.pop("name", None), keys)
+
+    @classmethod
+    def _split(cls, objects, name, keys) -> tuple:
+        """One mesh per (object name, vertices, faces, normals), named name.object (object alone
+        without a name), the other keys alike."""
+        return tuple(cls(vertices, faces, normals=normals, name=own if name is None else f"{name}.{own}", **keys)
+                     for own, vertices, faces, normals in objects)
 
     def placed(self, **keys) -> "Mesh":
         """The same triangles (shared arrays) placed anew: scale, axis, angle, translate or matrix
@@ -168,6 +183,15 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     @classmethod
     def _from_table(cls, table, name, folder=None):
         keys = {k: table[k] for k in ("scale", "axis", "angle", "translate", "matrix", "smooth") if k in table}
+        split = flag("split", table.get("split", False))
+        if split and "file" not in table:
+            raise SceneError("expected 'file' with split = true (a file's objects as shapes of their own)", key="split")
+        if split:  # one shape per object of the file: named after the table's name where it has one
+            inline = [k for k in ("vertices", "faces") if k in table]
+            if inline:
+                raise SceneError(f"expected 'file' or inline 'vertices' and 'faces', not both (got 'file' and "
+                                 f"'{inline[0]}')", key="file")
+            return cls._split(_read_mesh_objects(table["file"], folder), table.get("name"), keys)
         if "file" in table:
             inline = [k for k in ("vertices", "faces") if k in table]
             if inline:
@@ -454,3 +478,9 @@ def _read_mesh(*args):
     from . import mesh_io
 
     return mesh_io.read_mesh(*args)
+
+
+def _read_mesh_objects(*args):
+    from . import mesh_io
+
+    return mesh_io.read_mesh_objects(*args)

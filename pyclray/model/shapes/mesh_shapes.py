@@ -61,3 +61,23 @@ def torus(rings: int, segments: int, major: float = 1.0, minor: float = 0.3):
     r = major + minor * np.cos(V)
     vertices = np.stack([r * np.cos(U), r * np.sin(U), minor * np.sin(V)], -1).reshape(-1, 3)
     return vertices, _wrap(rings, segments, True).astype(np.int64)
+
+
+def _shared(vertices, faces):
+    vertices, faces = np.array(vertices, np.float64), np.array(faces, np.int64)
+    vertices.setflags(write=False)
+    faces.setflags(write=False)
+    return vertices, faces
+
+
+# Mitsuba 3's own meshes of its cube ([-1, 1]^3: 4 vertices per face, 2 triangles each, in its
+# order) and rectangle ([-1, 1]^2 in z = 0), read from Mitsuba 3.9's shapes: what its `cube` and
+# `rectangle` plugins are under any to_world. One read-only pair each, shared by every use (so
+# that several are instances of one mesh on the device).
+MITSUBA_CUBE = _shared(
+    [[1, -1, -1], [1, -1, 1], [-1, -1, 1], [-1, -1, -1], [1, 1, -1], [-1, 1, -1], [-1, 1, 1], [1, 1, 1],
+     [1, -1, -1], [1, 1, -1], [1, 1, 1], [1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1], [-1, -1, 1],
+     [-1, -1, 1], [-1, 1, 1], [-1, 1, -1], [-1, -1, -1], [1, 1, -1], [1, -1, -1], [-1, -1, -1], [-1, 1, -1]],
+    [[0, 1, 2], [3, 0, 2], [4, 5, 6], [7, 4, 6], [8, 9, 10], [11, 8, 10], [12, 13, 14], [15, 12, 14],
+     [16, 17, 18], [19, 16, 18], [20, 21, 22], [23, 20, 22]])
+MITSUBA_RECTANGLE = _shared([[-1, -1, 0], [1, -1, 0], [-1, 1, 0], [1, 1, 0]], [[1, 2, 0], [1, 3, 2]])

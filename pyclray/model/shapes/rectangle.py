@@ -165,9 +165,17 @@ class Rectangle(Shape):
 
     @classmethod
     def from_mitsuba(cls, props, folder):
-        """Mitsuba's rectangle is [-1, 1]^2 in z = 0: centre, u and v are to_world's image of it; a
-        mirroring to_world swaps u and v, so that cross(u, v) stays along Mitsuba's normal."""
-        center, u, v, normal = props.to_world().flat_frame()
+        """Mitsuba's rectangle is [-1, 1]^2 in z = 0 (a 2-triangle mesh): centre, u and v are
+        to_world's image of it where that keeps its corners square (a mirroring to_world swaps u and
+        v, so that cross(u, v) stays along Mitsuba's normal); under any other affine to_world (a
+        shear) a parallelogram, Mitsuba's two triangles (mesh_shapes.MITSUBA_RECTANGLE)."""
+        to_world = props.to_world()
+        center, u, v, normal = to_world.flat_frame()
+        if abs(np.dot(u, v)) > ORTHOGONAL * np.linalg.norm(u) * np.linalg.norm(v):
+            from .mesh import Mesh
+            from .mesh_shapes import MITSUBA_RECTANGLE
+
+            return partial(Mesh, *MITSUBA_RECTANGLE, matrix=tuple(map(tuple, to_world.matrix.tolist())))
         if np.dot(np.cross(u, v), normal) < 0:
             u, v = v, u
         return partial(cls, tuple(center), tuple(u), tuple(v))
