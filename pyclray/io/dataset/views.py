@@ -88,7 +88,8 @@ class DatasetViews:
         stream = self._tracers[0].render_views(cameras, aovs=self.format.aovs, motion=self.motion)
         try:
             for k, camera, frame in zip(indices, cameras, stream):
-                yield RenderedView(k, camera, dict(frame), self._alone(camera, frame["id"].shape))
+                size = next(iter(frame.values())).shape[:2]
+                yield RenderedView(k, camera, dict(frame), self._alone(camera, size))
         finally:
             stream.close()
 
