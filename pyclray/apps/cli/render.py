@@ -187,7 +187,7 @@ def add_command(commands) -> None:
                         "default: SCENE's name with .exr, in the current folder (scenes/tp02.toml: ./tp02.exr)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help=f"comma-separated images to compute: {','.join(RENDER_AOVS)} (default: depth,normal,id; flow of an "
+        help=f"comma-separated images to compute, of {', '.join(RENDER_AOVS)} (default: depth,normal,id; flow of an "
         "animated scene needs --time); fewer is faster",
     )
     render.add_argument(
