@@ -22,6 +22,9 @@ from .run import check_output, complete_views, finish_output, remove_temporaries
 from .views import DatasetViews, EncodedView, RenderedView
 
 FORMATS = ("bop", "npz", "exr")
+# Views per task on a cluster: a task renders them in a row, encoding each while the next renders
+# (a task of one view would leave the worker's device idle while it encodes)
+REMOTE_BATCH = 4
 
 __all__ = ["FORMATS", "PLACEMENTS", "ArraysFormat", "BopFormat", "DatasetViews", "EncodedView", "Placement",
            "RenderedView", "Written", "id_image", "labelled_centre", "look_pose", "make_format", "mask_image",
@@ -70,8 +73,9 @@ def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, pre
 
     settings: what a resumed run must share (JSON-ready; the format's own and the views' are
     added). progress: something with update(n) (a tqdm bar), advanced per view written. remote:
-    None to render here, or a callable (work: DatasetViews, indices) -> iterator of EncodedView in
-    order, which renders elsewhere (a Dask cluster: pyclray.apps.cluster.map_work). motion: for the
+    None to render here, or a callable (work: DatasetViews, batches: lists of view indices) ->
+    iterator of each batch's list of EncodedView (work(batch)), in order, which renders elsewhere (a
+    Dask cluster: pyclray.apps.cluster.map_work). motion: for the
     flow AOV, the next frame's shapes (pyclray.engine.queries.motion.Motion(shapes, None): each view
     keeps its camera); None: the scene does not move."""
     out = Path(out)
@@ -100,8 +104,10 @@ def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, pre
             views.close()
         else:
             before = time.perf_counter()
-            for encoded in remote(work, todo):
-                pool.submit(write_view, out, encoded)
+            batches = [todo[i:i + REMOTE_BATCH] for i in range(0, len(todo), REMOTE_BATCH)]
+            for encoded_views in remote(work, batches):
+                for encoded in encoded_views:
+                    pool.submit(write_view, out, encoded)
             render_seconds = time.perf_counter() - before
         pool.finish()
     except BaseException:

@@ -148,11 +148,19 @@ class DatasetViews:
     def encode(self, rendered: RenderedView) -> EncodedView:
         return self.format.encode(self.scene, rendered)
 
-    def __call__(self, k: int) -> EncodedView:
-        """View k's files (a cluster's task: rendered and encoded on the worker)."""
-        encoded = self.encode(self.render(k))
+    def _encoded(self, rendered: RenderedView) -> EncodedView:
+        encoded = self.encode(rendered)
         encoded.files = {path: value() if callable(value) else value for path, value in encoded.files.items()}
         return encoded
+
+    def __call__(self, indices) -> list[EncodedView]:
+        """The files of these views (a cluster's task: rendered and encoded on the worker), each
+        view encoded on a thread of its own while the next ones render."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=2, thread_name_prefix="pyclray-dataset-encoder") as pool:
+            encoding = [pool.submit(self._encoded, rendered) for rendered in self.views(indices)]
+            return [future.result() for future in encoding]
 
 
 def _projected_window(box, K, pose, margin: int = 2):
