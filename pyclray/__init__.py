@@ -26,6 +26,7 @@ from .engine.tracer import Tracer, prepare
 from .model.animation import Animation, Key
 from .model.aovs import AOVS
 from .model.camera import Camera, Image
+from .model.cameras import Equirectangular, Fisheye, Orthographic
 from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
 from .model.lights import DirectionalLight, Material, PointLight, Shading
 from .model.loader import load_scene, scene_from_dict
@@ -37,9 +38,9 @@ from .version import __version__
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
-    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "cast", "list_devices", "load_scene", "render",
+    "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "all_hits", "cast", "count_hits", "list_devices", "load_scene", "render",
     "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
-    "write_npz",
+    "write_npz", "Equirectangular", "Fisheye", "Orthographic",
 ]
 
 
@@ -48,6 +49,7 @@ __all__ = [
 # the cluster extra (importing distributed takes a while). name -> (module, attribute)
 _LAZY = {
     "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"),
+    "count_hits": (".engine.api", "count_hits"), "all_hits": (".engine.api", "all_hits"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
     "cluster": (".apps.cluster", None),

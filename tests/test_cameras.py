@@ -22,6 +22,24 @@ EXAMPLES = {
         {"eye": [0.5, 2.0, 6.0], "target": [0.0, 0.5, 0.0], "fov": 30.0, "fov_axis": "y"},
         {"intrinsics": [[40.0, 0.0, 17.5], [0.0, 40.0, 14.25], [0.0, 0.0, 1.0]],
          "pose": [[0.8, 0.168, -0.576, 2.5], [0.0, -0.96, -0.28, 1.8], [-0.6, 0.224, -0.768, 4.2], [0.0, 0.0, 0.0, 1.0]]},
+        {"intrinsics": [[30.0, 0.0, 17.5], [0.0, 30.0, 13.5], [0.0, 0.0, 1.0]], "distortion": [-0.4, 0.0, 0.001, -0.002],
+         "pose": [[0.8, 0.168, -0.576, 2.5], [0.0, -0.96, -0.28, 1.8], [-0.6, 0.224, -0.768, 4.2], [0.0, 0.0, 0.0, 1.0]]},
+        {"intrinsics": [[40.0, 0.0, 18.0], [0.0, 40.0, 14.0], [0.0, 0.0, 1.0]], "pixel_origin": "corner",
+         "distortion": [0.3, 0.05, 0.0, 0.0, 0.01, 0.1, 0.0, 0.0],
+         "pose": [[0.8, 0.168, -0.576, 2.5], [0.0, -0.96, -0.28, 1.8], [-0.6, 0.224, -0.768, 4.2], [0.0, 0.0, 0.0, 1.0]]},
+    ],
+    "fisheye": [
+        {"intrinsics": [[9.0, 0.0, 17.5], [0.0, 9.0, 13.5], [0.0, 0.0, 1.0]], "distortion": [0.05, -0.01, 0.002, 0.0],
+         "fov": 190.0,
+         "pose": [[0.8, 0.168, -0.576, 2.5], [0.0, -0.96, -0.28, 1.8], [-0.6, 0.224, -0.768, 4.2], [0.0, 0.0, 0.0, 1.0]]},
+    ],
+    "orthographic": [
+        {"eye": [0.5, 2.0, 6.0], "target": [0.0, 0.5, 0.0], "height": 3.0},
+        {"eye": [0.5, 2.0, 6.0], "target": [0.0, 0.5, 0.0], "up": [0.1, 1.0, 0.0]},
+    ],
+    "equirectangular": [
+        {"eye": [0.5, 2.0, 6.0]},
+        {"eye": [0.5, 2.0, 6.0], "target": [0.0, 0.5, 0.0], "longitude": [-60.0, 90.0], "latitude": [-30.0, 45.0]},
     ],
 }
 SIZE = (36, 28)
@@ -61,7 +79,8 @@ def test_a_scene_file_names_its_model(tmp_path):
 
 
 @pytest.mark.parametrize("line,expected", [
-    ('model = "fisheye"', "unknown camera model 'fisheye' (expected one of: perspective)"),
+    ('model = "pinhole"', "unknown camera model 'pinhole' (expected one of: perspective, fisheye, orthographic, "
+                          "equirectangular)"),
     ("model = 3", "expected a string, got 3"),
 ])
 def test_a_bad_model_names_file_table_and_key(tmp_path, line, expected):
@@ -88,7 +107,11 @@ def test_rays_are_unit_from_the_pose_and_a_window_is_their_part(model, index):
     origins, directions = camera.rays(*SIZE)
     assert origins.shape == directions.shape == (SIZE[1], SIZE[0], 3) and directions.dtype == np.float64
     assert np.abs(np.linalg.norm(directions, axis=-1) - 1).max() < 4e-16
-    assert np.array_equal(origins, np.broadcast_to(camera.pose()[:3, 3], origins.shape))
+    eye, axis = camera.pose()[:3, 3], camera.pose()[:3, 2]
+    if camera.rays_from_eye:
+        assert np.array_equal(origins, np.broadcast_to(eye, origins.shape))
+    else:  # orthographic: from the plane through the eye, along the axis
+        assert np.abs((origins - eye) @ axis).max() < 1e-14 and np.array_equal(directions, np.broadcast_to(axis, origins.shape))
     window = (5, 7, 20, 9)  # x0, y0, columns, rows
     part_origins, part = camera.rays(*SIZE, window)
     assert np.array_equal(part, directions[7:16, 5:25]) and np.array_equal(part_origins, origins[7:16, 5:25])
@@ -100,17 +123,26 @@ def test_rays_are_unit_from_the_pose_and_a_window_is_their_part(model, index):
 @pytest.mark.parametrize("model,index", CASES)
 def test_rays_are_the_kernels_depth_of_a_plane_at_a_known_distance(model, index, precision, tolerance):
     """A plane across the optical axis at distance 3 from the eye: each pixel's depth is 3 / cos of
-    its float64 ray's angle to the axis, and the hit point lies on that ray."""
+    its float64 ray's angle to the axis (from the plane through the eye: its origin's offset along
+    the axis is 0), and the hit point lies on that ray. Rays that turn away from the plane (a
+    panorama's, a fisheye's beyond 90 degrees) and pixels outside a lens's field miss it."""
     camera = camera_of(model, index)
     pose = camera.pose()
     eye, axis = pose[:3, 3], pose[:3, 2]
     scene = pyclray.Scene(camera, pyclray.Image(*SIZE), (pyclray.Plane(tuple(axis), -float(axis @ (eye + 3.0 * axis))),))
     frame = pyclray.render(scene, aovs=("depth", "position"), precision=precision)
     origins, directions = camera.rays(*SIZE)
-    expected = 3.0 / (directions @ axis)
-    assert np.abs(frame["depth"] / expected - 1).max() < tolerance
-    along = np.asarray(frame["position"], np.float64) - origins
-    assert np.abs(along / np.linalg.norm(along, axis=-1, keepdims=True) - directions).max() < 4 * tolerance
+    cos = directions @ axis
+    field = camera.frame_directions(*SIZE)
+    reached = (cos > 1e-3) & (np.ones(cos.shape, bool) if field is None else field[1])
+    assert reached.mean() > 0.3
+    assert np.all(np.isinf(frame["depth"][~reached & (cos < -1e-3)]))
+    if field is not None:
+        assert np.all(np.isinf(frame["depth"][~field[1]]))
+    expected = 3.0 / cos[reached]
+    assert np.abs(frame["depth"][reached] / expected - 1).max() < tolerance
+    along = np.asarray(frame["position"], np.float64)[reached] - origins[reached]
+    assert np.abs(along / np.linalg.norm(along, axis=-1, keepdims=True) - directions[reached]).max() < 4 * tolerance
 
 
 # -- the Mitsuba sensor as data ---------------------------------------------------------------------
@@ -128,8 +160,9 @@ def as_read(sensor):
 @pytest.mark.parametrize("model,index", CASES)
 def test_a_cameras_mitsuba_sensor_reads_back_as_the_same_camera(model, index):
     camera = camera_of(model, index)
-    if CAMERAS[model].mitsuba_plugin is None:  # a model Mitsuba has no sensor of says so
-        with pytest.raises(SceneError, match="no sensor"):
+    # a model Mitsuba has no sensor of says so, as does a perspective camera with a lens distortion
+    if CAMERAS[model].mitsuba_plugin is None or getattr(camera, "distortion", None) is not None:
+        with pytest.raises(SceneError, match="no sensor|no lens distortion"):
             camera.mitsuba_sensor(*SIZE)
         return
     sensor = camera.mitsuba_sensor(*SIZE)

@@ -47,7 +47,21 @@ def random_scene(seed: int, size=SMALL, shift: float = 0.0):
 
 
 def scene_files():
-    return sorted(SCENES.glob("*.toml"))
+    """The shipped scenes Mitsuba can render: not those whose camera it has no sensor of (a lens's
+    distortion: scenes/lens.toml), whose cameras tests/test_lenses.py checks against OpenCV's own
+    projection and the float64 oracle instead."""
+    def has_sensor(path):
+        try:
+            scene = pyclray.load_scene(path)
+            scene.camera.mitsuba_sensor(scene.image.width, scene.image.height)
+        except pyclray.SceneError:
+            return False
+        return True
+
+    files = sorted(SCENES.glob("*.toml"))
+    checkable = [path for path in files if has_sensor(path)]
+    assert len(checkable) >= len(files) - 1  # only the lens scene is left out
+    return checkable
 
 
 def assert_passed(result):

@@ -32,7 +32,7 @@ def test_the_readme_keeps_its_two_commands_and_ci_runs_the_test_command():
 
 def test_the_readme_is_a_page_that_reads_in_minutes():
     lines = README.read_text().splitlines()
-    assert len(lines) < 215
+    assert len(lines) < 230  # (the sensors issue asks for a distorted camera with its picture and a migration note)
     for heading in ("## Install and render", "## Two commands", "## From Python", "## A data set of views",
                     "## Triangle meshes"):
         assert heading in lines, heading

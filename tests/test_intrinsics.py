@@ -7,6 +7,7 @@ import dataclasses
 import os
 import subprocess
 import sys
+import tomllib
 
 import numpy as np
 import pytest
@@ -85,7 +86,20 @@ def test_a_toml_camera_from_intrinsics_loads_as_from_intrinsics_builds_it(tmp_pa
 def test_the_shipped_intrinsics_scene_is_a_camera_from_intrinsics():
     scene = pyclray.load_scene(SCENES / "intrinsics.toml")
     assert scene.camera.K is not None and scene.camera.size == (640, 480)
-    assert scene.camera.intrinsics(640, 480)[0, 2] == 330.0
+    # written in OpenCV's convention since the sensors issue: 10 px right of the centre (319.5)
+    assert scene.camera.intrinsics(640, 480)[0, 2] == 329.5
+
+
+def test_a_corner_origin_k_is_the_same_camera_as_its_opencv_k():
+    """pixel_origin "corner" (COLMAP, NeRF: centres at i + 0.5) reads K half a pixel off OpenCV's:
+    the same rays, and the camera's K (and every K written) in OpenCV's convention."""
+    corner = pyclray.Camera.from_intrinsics(K(50.0, 60.0, 32.0, 24.0), POSE, 64, 48, pixel_origin="corner")
+    center = pyclray.Camera.from_intrinsics(K(50.0, 60.0, 31.5, 23.5), POSE, 64, 48)
+    assert corner == center and np.array_equal(corner.intrinsics(64, 48), K(50.0, 60.0, 31.5, 23.5))
+    table = camera_table(K(50.0, 60.0, 32.0, 24.0)) + 'pixel_origin = "corner"\n'
+    assert pyclray.scene_from_dict(tomllib.loads(table + "[image]\nwidth = 64\nheight = 48\n")).camera == center
+    with pytest.raises(pyclray.SceneError, match="key 'pixel_origin'"):
+        pyclray.Camera.from_intrinsics(K(50.0, 60.0, 32.0, 24.0), POSE, pixel_origin="centre")
 
 
 BAD = [
@@ -188,14 +202,16 @@ def test_a_pose_rigid_within_the_tolerance_renders_with_its_nearest_rotation():
 
 def test_intrinsics_scale_with_the_image_size():
     """K is in pixels of the camera's size (the scene's image); at another size it scales with the
-    image as resizing the image would: fx, cx by the ratio of widths, fy, cy by that of heights.
-    So --size and with_size keep the view (and an aspect change stretches it, fx != fy)."""
+    image as resizing the image would: fx, cx + 1/2 by the ratio of widths, fy, cy + 1/2 by that of
+    heights (OpenCV's convention since the sensors issue: the image's edge is at -1/2, so cx + 1/2
+    scales, where the corner convention before scaled cx itself). So --size and with_size keep the
+    view (and an aspect change stretches it, fx != fy)."""
     scene = scene_of(K(50.0, 60.0, 20.5, 30.25))
     assert scene.camera.size == (64, 48)
     bigger = scene.with_size(128, 96)
     assert bigger.camera == scene.camera  # the camera keeps its K and size ...
-    assert np.array_equal(bigger.camera.intrinsics(128, 96), K(100.0, 120.0, 41.0, 60.5))  # ... which scales
-    assert np.array_equal(scene.camera.intrinsics(32, 96), K(25.0, 120.0, 10.25, 60.5))
+    assert np.array_equal(bigger.camera.intrinsics(128, 96), K(100.0, 120.0, 41.5, 61.0))  # ... which scales
+    assert np.array_equal(scene.camera.intrinsics(32, 96), K(25.0, 120.0, 10.0, 61.0))
     # the same view: the four corners of the image look the same way at both sizes
     small_rays = oracle.camera_rays(scene)[1]
     big_rays = oracle.camera_rays(bigger)[1]
@@ -229,14 +245,15 @@ def test_fp64_renders_from_intrinsics_match_the_oracle():
 
 def test_the_kernel_looks_through_k_inverse_of_the_pixel_centre():
     """A plane facing the camera at distance 3: pixel (j, i)'s z-depth is exactly 3, and its
-    depth 3 |K^-1 [i + 0.5, j + 0.5, 1]| (the contract's formula, not just the oracle's)."""
+    depth 3 |K^-1 [i, j, 1]| (the contract's formula, not just the oracle's: OpenCV's pixel
+    convention since the sensors issue, pixel centres at integers; it was [i + 0.5, j + 0.5, 1])."""
     needs_fp64()
     intrinsics = np.array(K(7.0, 5.0, 2.25, 1.0))
     scene = pyclray.Scene(pyclray.Camera.from_intrinsics(intrinsics, np.eye(4)), pyclray.Image(5, 3),
                           (pyclray.Plane((0, 0, 1), -3.0),))  # z = 3, in front along OpenCV's +z
     frame = pyclray.render(scene, aovs=("depth", "zdepth", "position"), precision="fp64")
     j, i = np.mgrid[0:3, 0:5]
-    rays = np.stack([i + 0.5, j + 0.5, np.ones((3, 5))], axis=-1) @ np.linalg.inv(intrinsics).T
+    rays = np.stack([i, j, np.ones((3, 5))], axis=-1) @ np.linalg.inv(intrinsics).T
     assert np.allclose(frame["zdepth"], 3.0, rtol=1e-15)
     assert np.allclose(frame["depth"], 3 * np.linalg.norm(rays, axis=-1), rtol=1e-15)
     assert np.allclose(frame["position"], 3 * rays, rtol=1e-15, atol=1e-15)  # x right, y down in the world here
@@ -302,14 +319,15 @@ def test_a_look_at_camera_as_k_and_pose_renders_the_same_images(name):
 # -- back-projection --------------------------------------------------------------------------------
 @pytest.mark.parametrize("intrinsics", [K(40.0, 70.0, 45.25, 9.5), K(55.0, 55.0, 11.3, 40.7)], ids=["fx-fy", "off-centre"])
 def test_the_depth_map_back_projects_onto_the_shapes(intrinsics):
-    """pose @ (depth * normalize(K^-1 [i + .5, j + .5, 1])) with the frame's own K and pose, in
+    """pose @ (depth * normalize(K^-1 [i, j, 1])) (OpenCV's pixel centres, since the sensors issue)
+    with the frame's own K and pose, in
     plain numpy, is the oracle's hit point to the depth's own error: the rays are the oracle's to
     float64 rounding, and the depth meets the error model."""
     scene = scene_of(intrinsics)
     frame = pyclray.render(scene, aovs=("depth", "id", "position"))
     assert np.array_equal(frame.intrinsics, intrinsics) and np.array_equal(frame.pose, POSE)
     j, i = np.mgrid[0:48, 0:64]
-    pixels = np.stack([i + 0.5, j + 0.5, np.ones((48, 64))], axis=-1)
+    pixels = np.stack([i, j, np.ones((48, 64))], axis=-1)
     rays = pixels @ np.linalg.inv(frame.intrinsics).T
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     origins, directions = oracle.camera_rays(scene)
@@ -376,14 +394,15 @@ def test_the_render_command_writes_k_at_its_size(tmp_path):
     assert result.returncode == 0, result.stderr
     images, header = pyclray.read_exr(out, header=True)
     scene = pyclray.load_scene(SCENES / "intrinsics.toml").with_size(160, 120)
-    assert np.array_equal(header["intrinsics"], K(131.25, 131.25, 82.5, 61.5))  # 640x480's K / 4
+    # 640x480's K / 4 (fx / 4, (cx + 1/2) / 4 - 1/2: OpenCV's convention, the file's cx = 329.5)
+    assert np.array_equal(header["intrinsics"], K(131.25, 131.25, 82.0, 61.0))
     assert np.array_equal(header["pose"], scene.camera.pose())
     expected = pyclray.render(scene, aovs=("depth", "zdepth"))
     assert np.array_equal(images["depth"], expected["depth"]) and np.array_equal(images["zdepth"], expected["zdepth"])
-    # z-depth back-projects with K alone: zdepth K^-1 [i + .5, j + .5, 1] is the hit in the camera's frame
+    # z-depth back-projects with K alone: zdepth K^-1 [i, j, 1] is the hit in the camera's frame
     j, i = np.mgrid[0:120, 0:160]
     hit = np.isfinite(images["zdepth"])
-    camera_points = images["zdepth"][hit][:, None] * (np.stack([i + .5, j + .5, np.ones((120, 160))], -1)[hit]
+    camera_points = images["zdepth"][hit][:, None] * (np.stack([i, j, np.ones((120, 160))], -1)[hit]
                                                       @ np.linalg.inv(header["intrinsics"]).T)
     assert np.allclose(np.linalg.norm(camera_points, axis=-1), images["depth"][hit], rtol=1e-5)
 
@@ -391,12 +410,13 @@ def test_the_render_command_writes_k_at_its_size(tmp_path):
 # -- the Mitsuba mapping -------------------------------------------------------------------------
 def test_mitsubas_sensor_follows_the_principal_point_and_focal_length():
     """The sensor's own ray through each pixel centre is pyclray's pixel ray to float32 rounding
-    (Mitsuba's principal_point_offset is added to the film position: offset = 0.5 - c / size)."""
+    (Mitsuba's principal_point_offset is added to the film position: offset = 0.5 - c / size, c the
+    principal point from the image's corner: K's cx + 1/2 in OpenCV's convention)."""
     scene = scene_of(K(55.0, 55.0, 11.3, 40.7))
     sensor = mitsuba.sensor_of(scene)
     assert sensor["fov_axis"] == "x" and sensor["fov"] == pytest.approx(np.degrees(2 * np.arctan(64 / 110)))
-    assert sensor["principal_point_offset_x"] == pytest.approx(0.5 - 11.3 / 64)
-    assert sensor["principal_point_offset_y"] == pytest.approx(0.5 - 40.7 / 48)
+    assert sensor["principal_point_offset_x"] == pytest.approx(0.5 - 11.8 / 64)
+    assert sensor["principal_point_offset_y"] == pytest.approx(0.5 - 41.2 / 48)
     mitsuba.import_mitsuba("scalar_rgb")
     mi_scene, _ = mitsuba.load(scene, "scalar_rgb")
     rows, columns = np.mgrid[0:48:5, 0:64:7]

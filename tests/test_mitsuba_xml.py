@@ -200,7 +200,8 @@ def test_transforms_compose_in_mitsubas_order(tmp_path):
 
 def test_fov_axes_and_a_principal_point(tmp_path):
     """diagonal becomes x through tan(fov_x / 2) = tan(fov / 2) w / sqrt(w^2 + h^2); a principal
-    point offset makes a camera from intrinsics with the optical axis at (0.5 - offset) of the film."""
+    point offset makes a camera from intrinsics with the optical axis at (0.5 - offset) of the film
+    (the film's corner at 0: K's cx is that less 1/2, OpenCV's pixel convention since the sensors issue)."""
     def sensor(extra):
         path = tmp_path / "s.xml"
         path.write_text('<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="50"/>'
@@ -214,7 +215,7 @@ def test_fov_axes_and_a_principal_point(tmp_path):
     assert sensor('<string name="fov_axis" value="larger"/>').fov_axis == "x"
     shifted = sensor('<float name="principal_point_offset_x" value="0.1"/>')
     K = shifted.intrinsics(40, 30)
-    assert math.isclose(K[0, 2], 40 * 0.4) and math.isclose(K[1, 2], 15.0)
+    assert math.isclose(K[0, 2], 40 * 0.4 - 0.5) and math.isclose(K[1, 2], 14.5)
     assert math.isclose(K[0, 0], 20 / math.tan(math.radians(25)))
 
 

@@ -54,15 +54,16 @@ def test_write_npz_and_read_npz_with_the_frames_camera(tmp_path):
 
 
 def test_k_and_pose_back_project_the_depth_onto_the_positions(tmp_path):
-    """What K and pose are for: pose @ [depth * normalize(K^-1 [i + 0.5, j + 0.5, 1]), 1] is the
-    world hit point (the position image), for every pixel that hits."""
+    """What K and pose are for: pose @ [depth * normalize(K^-1 [i, j, 1]), 1] is the world hit
+    point (the position image), for every pixel that hits (K in OpenCV's pixel convention, centres
+    at integers, since the sensors issue: it was [i + 0.5, j + 0.5, 1])."""
     from pyclray.apps import cli
 
     out = tmp_path / "v.npz"
     assert cli.main(["render", str(SCENES / "shapes.toml"), "-o", str(out), "--aov", "depth,position", "--size", "64x48"]) == 0
     data = pyclray.read_npz(out)
     j, i = np.mgrid[0:48, 0:64]
-    pixels = np.stack([i + 0.5, j + 0.5, np.ones_like(i, float)], axis=-1)
+    pixels = np.stack([i, j, np.ones_like(i, float)], axis=-1)
     rays = pixels @ np.linalg.inv(data["K"]).T
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     hit = np.isfinite(data["depth"])

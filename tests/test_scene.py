@@ -247,8 +247,9 @@ def test_geometry_beyond_the_precision_is_a_scene_error_naming_the_key(tmp_path,
 
 def test_intrinsics_and_pose_back_project_a_depth_map_onto_the_surface(scenes_dir):
     """K and the pose of a look-at camera (OpenCV's convention) turn the depth image back into the
-    hit points: pose @ (depth * normalize(K^-1 [i + 0.5, j + 0.5, 1])) lies on the shapes, as the
-    float64 oracle's rays say (same rays: the directions agree to float64 rounding)."""
+    hit points: pose @ (depth * normalize(K^-1 [i, j, 1])) lies on the shapes, as the float64
+    oracle's rays say (same rays: the directions agree to float64 rounding). K in OpenCV's pixel
+    convention (centres at integers) since the sensors issue: it was [i + 0.5, j + 0.5, 1]."""
     import pyclray
     from pyclray.reference import oracle
 
@@ -256,7 +257,7 @@ def test_intrinsics_and_pose_back_project_a_depth_map_onto_the_surface(scenes_di
     K, pose = scene.camera.intrinsics(40, 30), scene.camera.pose()
     assert np.allclose(pose[:3, :3] @ pose[:3, :3].T, np.eye(3)) and np.isclose(np.linalg.det(pose[:3, :3]), 1.0)
     j, i = np.mgrid[0:30, 0:40]
-    pixels = np.stack([i + 0.5, j + 0.5, np.ones_like(i, dtype=float)], axis=-1)
+    pixels = np.stack([i, j, np.ones_like(i, dtype=float)], axis=-1)
     rays = pixels @ np.linalg.inv(K).T @ pose[:3, :3].T
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     _, directions = oracle.camera_rays(scene)

@@ -3,7 +3,6 @@ Debian's chromium driven by Playwright. The settled images are the previews `pyc
 of the same view, pixel for pixel (PNG, lossless); moving, reloading, the error banner, the time
 slider and Ctrl-C are checked as a user would see them."""
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -15,12 +14,9 @@ import pytest
 import pyclray
 from conftest import REPO
 from pyclray.io.png import preview
-from viewing import Viewer
+from viewing import Viewer, drag, launch_browser, open_page, painted, settle
 
 playwright = pytest.importorskip("playwright.sync_api", reason="the view's page tests need playwright (the test extra)")
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-if CHROMIUM is None:
-    pytest.skip("the view's page tests need Debian's chromium (apt-get install chromium)", allow_module_level=True)
 
 SIZE = (96, 64)  # not square: a mix-up of width and height shows
 TP02 = (REPO / "scenes/tp02.toml").read_text()
@@ -29,8 +25,7 @@ TP02 = (REPO / "scenes/tp02.toml").read_text()
 @pytest.fixture(scope="module")
 def browser():
     with playwright.sync_playwright() as driver:
-        browser = driver.chromium.launch(executable_path=CHROMIUM, args=["--headless=new", "--no-sandbox",
-                                                                          "--disable-dev-shm-usage"])
+        browser = launch_browser(driver)
         yield browser
         browser.close()
 
@@ -49,32 +44,11 @@ def viewer(scene_file):
     viewer.close()
 
 
-def open_page(browser, viewer):
-    # bypass_csp: Playwright's wait_for_function evaluates strings, which the page's policy forbids
-    context = browser.new_context(bypass_csp=True, viewport={"width": 800, "height": 600})
-    context.grant_permissions(["clipboard-read", "clipboard-write"], origin=viewer.origin)
-    page = context.new_page()
-    page.goto(viewer.url)
-    settle(page, 0)
-    return page
-
-
 @pytest.fixture(scope="module")
 def page(browser, viewer):
     page = open_page(browser, viewer)
     yield page
     page.context.close()
-
-
-def painted(page) -> int:
-    return int(page.locator("#view").get_attribute("data-frame"))
-
-
-def settle(page, after: int, timeout: float = 10_000) -> int:
-    """Wait for a lossless full image painted after the first `after` paints; the paints then."""
-    page.wait_for_function("n => window.pyclrayView.painted > n && window.pyclrayView.paints.at(-1).lossless",
-                           arg=after, timeout=timeout)
-    return painted(page)
 
 
 def shown(page) -> np.ndarray:
@@ -98,16 +72,6 @@ def expected(path, aov="shaded", t=None, text=None) -> np.ndarray:
 def camera_shown(page) -> str:
     """The eye and target the page shows."""
     return page.locator("#info").text_content().split(" · ", 1)[1]
-
-
-def drag(page, dx, dy, button="left", steps=8):
-    box = page.locator("#view").bounding_box()
-    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-    page.mouse.move(x, y)
-    page.mouse.down(button=button)
-    for k in range(1, steps + 1):
-        page.mouse.move(x + dx * k / steps, y + dy * k / steps)
-    page.mouse.up(button=button)
 
 
 def test_first_paint_is_the_render_of_the_scene(page, scene_file):

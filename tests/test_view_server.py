@@ -184,3 +184,79 @@ def test_a_port_in_use_is_one_line_and_exit_2():
                                  "--no-browser"], capture_output=True, text=True, cwd=REPO, timeout=60)
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr == f"pyclray view: error: --port {port}: cannot listen on 127.0.0.1:{port}: address already in use\n"
+
+
+def test_a_render_loop_ended_by_an_error_closes_its_page_with_a_word(capsys):
+    """A page's render loop that an error ends (a bug of ours) is said on the terminal and closes its
+    connection, so that the page says the server stopped instead of waiting for images for ever;
+    a loop ended by its connection's close says nothing."""
+    from pyclray.apps.view.server import _ended
+
+    class Connection:
+        closed_with = None
+
+        async def close(self, code, reason):
+            self.closed_with = code
+
+    async def failing():
+        raise RuntimeError("a bug of ours")
+
+    async def closed():
+        raise ConnectionClosed(None, None)
+
+    async def scenario(loop_body):
+        connection = Connection()
+        task = asyncio.create_task(loop_body())
+        task.add_done_callback(lambda task: _ended(task, connection))
+        await asyncio.gather(task, return_exceptions=True)
+        await asyncio.sleep(0.01)  # the close it scheduled
+        return connection.closed_with
+
+    assert asyncio.run(scenario(failing)) == 1011
+    assert capsys.readouterr().err == "pyclray view: warning: a page's images stopped: RuntimeError: a bug of ours\n"
+    assert asyncio.run(scenario(closed)) is None
+    assert capsys.readouterr().err == ""
+
+
+def test_a_clip_longer_than_100_s_is_shown_at_any_of_its_times(tmp_path):
+    """The time slider's value is bound by the clip's duration only (it once went through the bound
+    of a mouse motion, 100, and a time past 100 s was ignored); past the duration it is ignored."""
+    scene = tmp_path / "long.toml"
+    scene.write_text((REPO / "scenes/tp02.toml").read_text() + """
+[animation]
+fps = 1.0
+duration = 300.0
+
+[[animation.keys]]
+target = "camera"
+time = 0.0
+eye = [0.0, 2.0, 6.0]
+
+[[animation.keys]]
+target = "camera"
+time = 300.0
+eye = [6.0, 2.0, 0.0]
+""")
+    viewer = Viewer(scene, "--size", "32x24")
+    try:
+        async def scenario():
+            async with connect(f"ws://127.0.0.1:{viewer.port}/ws?token={viewer.token}", max_size=None) as connection:
+                shown = await _frames(connection, 10, until=len)
+                for t in (150.0, 300.0, 300.5, float("nan")):
+                    for frame in shown:  # painted, as the page says of each
+                        await connection.send(json.dumps({"type": "painted", "frame": frame["frame"]}))
+                    shown = []
+                    await connection.send(json.dumps({"type": "time", "t": t}))
+                    await connection.send(json.dumps({"type": "end"}))
+                    frames = await _frames(connection, 10 if t <= 300 else 1, until=lambda f: f[-1]["lossless"])
+                    if t <= 300:
+                        assert frames and frames[-1]["t"] == t, (t, frames)
+                        shown = frames
+                        last = frames[-1]
+                    else:
+                        assert frames == [], t  # past the clip (or not a number): ignored
+                assert last["eye"] == pytest.approx([6.0, 2.0, 0.0])
+
+        asyncio.run(scenario())
+    finally:
+        viewer.close()

@@ -71,3 +71,37 @@ def test_a_reload_keeps_the_prepared_scene_or_updates_the_changed_shapes(scene_f
     scene_file.write_text(TP02)  # the radii back (the light gone): the shapes are the first ones again
     back, _ = watch.load(scene_file, (64, 48), both)
     assert np.array_equal(pyclray.render(back, aovs=("depth",))["depth"], fresh(scene_file, "depth"))
+
+
+def test_the_watcher_outlives_an_error_of_its_own(scene_file, monkeypatch, capsys):
+    """A watcher task ended by an exception would leave the page on a scene no save changes any more,
+    without a word (issue 42, item 13): an error anywhere in a poll is said, and the next save loads."""
+    import asyncio
+
+    from pyclray.apps.view.server import App
+
+    app = App(scene_file, pyclray.load_scene(scene_file), "shaded", (64, 48))
+    real, failures = watch.signature, [1]
+
+    def failing_once(paths):
+        if failures:
+            failures.pop()
+            raise RuntimeError("a bug of ours")
+        return real(paths)
+
+    monkeypatch.setattr(watch, "signature", failing_once)
+
+    async def scenario():
+        task = asyncio.create_task(app.watch())
+        await asyncio.sleep(3 * watch.POLL_SECONDS)  # the failing poll has come and gone
+        scene_file.write_text(TP02.replace("radius = 0.5", "radius = 0.4"))
+        for _ in range(200):
+            await asyncio.sleep(watch.POLL_SECONDS)
+            if app.scene.shapes[3].radius == 0.4:
+                break
+        task.cancel()
+        app.executor.shutdown()
+
+    asyncio.run(scenario())
+    assert not failures and app.scene.shapes[3].radius == 0.4
+    assert "pyclray view: warning: reloading failed: RuntimeError: a bug of ours" in capsys.readouterr().err

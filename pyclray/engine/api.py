@@ -17,7 +17,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..model.animation import scene_at
-from ..model.aovs import AOVS, RENDER_AOVS
+from ..model.aovs import AOVS, CAST_AOVS, RENDER_AOVS
 from ..model.errors import RequestError, SceneError
 from ..model.frames import derivation
 from ..model.loader import as_scene
@@ -163,13 +163,17 @@ def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, fra
 
 
 # -- casts ---------------------------------------------------------------------------------------
-def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None) -> Frame:
+def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", device=None, tmax=None,
+         tmin=0.0) -> Frame:
     """Cast arbitrary rays through the scene's shapes (the scene's camera and image are not used).
 
     origins: (..., 3) like directions, or one (3,) origin for every ray; directions: (..., 3), any
-    non-zero length; tmax: None, one number or one per ray (shape (...)): hits farther than it
-    are misses. Returns a Frame of per-ray arrays: depth (...) is the distance from the origin
-    along the normalized direction (+inf on a miss), normal (..., 3), id (...).
+    non-zero length (float64 or float32, as given); tmax: None, one number or one per ray (shape
+    (...)): hits farther than it are misses; tmin: one number >= 0 or one per ray: only hits beyond
+    it count (each shape is tested from the ray's point at tmin on, in float64). aovs: any of depth,
+    normal, id, position (the hit point, origin + depth times the unit direction, in float64 rounded
+    once), label (the hit shape's label). Returns a Frame of per-ray arrays: depth (...) is the
+    distance from the origin along the normalized direction (+inf on a miss), normal (..., 3), id (...).
 
     Each ray is traced on its own, from its float64 origin and direction: its result does not
     depend on the other rays of the batch, bit for bit, and its float32 depth and normal meet the
@@ -180,12 +184,13 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     scene = as_scene(scene)
     check_shape_count(scene)
     ctx = context_for(device)
-    check_request(aovs, precision, ctx)
+    check_request(aovs, precision, ctx, CAST_AOVS)
     check_cast_device(ctx)
-    return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmax)
+    return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmin=tmin, tmax=tmax)
 
 
-def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None) -> np.ndarray:
+def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
+             tmin=0.0) -> np.ndarray:
     """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array
     of the rays' leading shape. The any-hit query of shadow rays: the search stops at the first
     hit found. The same rays, arguments and exactness as cast: occluded is true exactly where
@@ -195,5 +200,46 @@ def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp3
     ctx = context_for(device)
     check_precision(precision)  # (fp64 on a device: the device check's matter, for casts)
     check_cast_device(ctx)
-    return tracer_for(scene, ctx, precision).occluded(origins, directions, tmax)
+    return tracer_for(scene, ctx, precision).occluded(origins, directions, tmin=tmin, tmax=tmax)
+
+
+# -- every hit -----------------------------------------------------------------------------------
+def _ray_query_tracer(scene, precision, device) -> Tracer:
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision, ctx)
+    check_cast_device(ctx)
+    return tracer_for(scene, ctx, precision)
+
+
+def count_hits(scene: Scene, origins, directions, tmin=0.0, tmax=None, precision: str = "fp32",
+               device=None) -> np.ndarray:
+    """How many times each ray crosses the shapes' surfaces at a distance t with tmin < t < tmax:
+    an int32 array of the rays' leading shape, without storing the hits. The same rays and
+    arguments as cast (origins (..., 3) or one (3,), directions (..., 3), tmin and tmax one number
+    or one per ray).
+
+    Each crossing counts once: a ray through an edge or a vertex shared by triangles of a mesh
+    counts one hit where it crosses the surface there, none or two where it only touches it (a tie
+    rule in the ray's projected plane, as a rasterizer's top-left rule: kernels/mesh.cl), so that
+    the parity of the count from a point is inside/outside of a closed mesh on every ray; an
+    analytic shape counts its real crossings (a tangent ray: 0 or 2, never 1)."""
+    return _ray_query_tracer(scene, precision, device).count_hits(origins, directions, tmin, tmax)
+
+
+def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=None, aovs=("depth", "id", "primitive"),
+             precision: str = "fp32", device=None) -> Frame:
+    """Every hit along each ray at a distance t with tmin < t < tmax, nearest first: a mapping with
+    offsets (int64, N + 1: the hits of ray k, the rays flattened in C order, are rows
+    offsets[k]:offsets[k + 1]), ray (int64, the ray of each hit) and one array per AOV asked for,
+    one row per hit: depth, id, primitive (the triangle's index in its mesh, the sphere's in its
+    batch, 0 for other shapes), label, position, normal (the outward unit normal, never flipped),
+    barycentric (a triangle's (u, v); 0, 0 for other shapes); position, normal and barycentric in
+    float64 from the hit's point, rounded once. The hits are count_hits' (see there), each crossing
+    once."""
+    from .queries.hits import check_hit_aovs
+
+    aovs = check_hit_aovs(aovs)
+    return _ray_query_tracer(scene, precision, device).all_hits(origins, directions, tmin, tmax, aovs)
 

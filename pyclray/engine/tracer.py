@@ -18,7 +18,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import replace
 
-from ..model.aovs import AOVS
+from ..model.aovs import AOVS, CAST_AOVS
 from ..model.errors import RequestError
 from ..model.frames import derivation
 from ..model.loader import as_scene
@@ -26,6 +26,7 @@ from ..model.scene import Scene, check_shape_count
 from .launch.run import OutputBuffers
 from .opencl.device import context_for
 from .queries import cast as cast_queries
+from .queries import hits as hit_queries
 from .queries import render as render_query
 from .queries.requests import check_precision, check_request
 from .scene.prepared import PreparedScene
@@ -173,18 +174,32 @@ class Tracer:
             return state
 
     # -- casts -----------------------------------------------------------------------------------
-    def cast(self, origins, directions, aovs=AOVS, tmax=None):
-        """The nearest hit of each ray: exactly ``pyclray.cast(scene, origins, directions, aovs,
-        precision, device, tmax)`` (see there)."""
-        aovs = check_request(aovs, self.precision, self.ctx)
+    def cast(self, origins, directions, aovs=AOVS, tmin=0.0, tmax=None):
+        """The nearest hit t in (tmin, tmax) of each ray: exactly ``pyclray.cast(scene, origins,
+        directions, aovs, precision, device, tmax, tmin)`` (see there)."""
+        aovs = check_request(aovs, self.precision, self.ctx, CAST_AOVS)
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs)
+        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs, tmin)
 
-    def occluded(self, origins, directions, tmax=None):
-        """Whether each ray hits any shape up to tmax: exactly ``pyclray.occluded(scene, origins,
-        directions, tmax, precision, device)`` (see there)."""
+    def occluded(self, origins, directions, tmin=0.0, tmax=None):
+        """Whether each ray hits any shape at t in (tmin, tmax): exactly ``pyclray.occluded(scene,
+        origins, directions, tmax, precision, device, tmin)`` (see there)."""
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, ())
+        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, (), tmin)
+
+    # -- hit counts ------------------------------------------------------------------------------
+    def count_hits(self, origins, directions, tmin=0.0, tmax=None):
+        """How many times each ray crosses the shapes' surfaces at t in (tmin, tmax), without storing
+        the hits: exactly ``pyclray.count_hits(scene, origins, directions, tmin, tmax, ...)`` (see there)."""
+        cast_queries.check_cast_device(self.ctx)
+        return hit_queries.run_count_hits(self, origins, directions, tmin, tmax)
+
+    def all_hits(self, origins, directions, tmin=0.0, tmax=None, aovs=hit_queries.DEFAULT_HIT_AOVS):
+        """Every hit t in (tmin, tmax) of each ray, nearest first, in CSR form: exactly
+        ``pyclray.all_hits(scene, origins, directions, tmin, tmax, aovs, ...)`` (see there)."""
+        aovs = hit_queries.check_hit_aovs(aovs)
+        cast_queries.check_cast_device(self.ctx)
+        return hit_queries.run_all_hits(self, origins, directions, tmin, tmax, aovs)
 
     def cast_inputs(self):
         """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""

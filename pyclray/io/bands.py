@@ -99,7 +99,8 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
             main = _ExrBands(ExrWriter(files.enter_context(open(temporaries[0], "wb")), width, height, channels, comment,
                                        camera))
         elif kind == "npz":
-            arrays = None if camera is None else dict(zip(CAMERA_ARRAYS, camera))
+            # (K None: a camera model without one, orthographic or a panorama: its pose alone)
+            arrays = None if camera is None else {k: v for k, v in zip(CAMERA_ARRAYS, camera) if v is not None}
             main = NpzWriter(files.enter_context(open(temporaries[0], "wb")), width, height, arrays, out.parent)
         if main is not None:
             files.callback(main.stop)  # after a failure: no background job writes on (closes run last first)
@@ -141,7 +142,7 @@ def write_images(out, bands: Iterable[dict], *, width: int, height: int, aovs, p
 def camera_of(frame):
     """(K, pose) of a render's Frame (its intrinsics and pose), or None (a plain dict of images)."""
     K, pose = getattr(frame, "intrinsics", None), getattr(frame, "pose", None)
-    return None if K is None or pose is None else (K, pose)
+    return None if pose is None else (K, pose)  # (K None: a camera model without one)
 
 
 def write_exr(path, frame, comment: str | None = None) -> None:

@@ -72,14 +72,14 @@ def _attribute(name: str, kind: str, value: bytes) -> bytes:
 def camera_attributes(intrinsics, pose) -> list[bytes]:
     """The header attributes of a render's camera (see the module's docstring): K and the pose in
     OpenCV's convention, and OpenEXR's standard worldToCamera."""
-    K = np.asarray(intrinsics, np.float64)
     pose = np.asarray(pose, np.float64)
     axes = pose[:3, :3] * [1.0, -1.0, 1.0]  # columns: RenderMan's x right, y up, z forward
     world_to_camera = np.eye(4)  # Imath's row-vector form: the transpose of the column-vector matrix
     world_to_camera[:3, :3] = axes
     world_to_camera[3, :3] = -(pose[:3, 3] @ axes)
     return [
-        _attribute("intrinsics", "m33d", K.astype("<f8").tobytes()),
+        # (no intrinsics for a camera model without K: orthographic, a panorama)
+        *([] if intrinsics is None else [_attribute("intrinsics", "m33d", np.asarray(intrinsics, "<f8").tobytes())]),
         _attribute("pose", "m44d", pose.astype("<f8").tobytes()),
         _attribute("worldToCamera", "m44f", world_to_camera.astype("<f4").tobytes()),
     ]

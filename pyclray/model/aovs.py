@@ -68,6 +68,8 @@ TABLE = {
 # the images of every render and cast (and their default), and every image a render can make
 AOVS = tuple(name for name, aov in TABLE.items() if aov.cast)
 RENDER_AOVS = tuple(TABLE)
+# every AOV a cast can return (per ray, where it means something for a ray given in world coordinates)
+CAST_AOVS = ("depth", "normal", "id", "position", "primitive", "barycentric", "label")
 
 
 def kernel_aovs(aovs) -> tuple[str, ...]:

@@ -13,6 +13,7 @@ import numpy as np
 from .animation import Animation, _find_places, scene_at
 from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
+from .cameras import CAMERAS, CameraModel
 from .errors import PyclrayWarning, RequestError, SceneError
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
@@ -59,11 +60,15 @@ class Scene:
                     except SceneError as error:
                         raise error.within(file=self.source, table=f"[[shapes]] #{index} ({shape.type})") from None
             object.__setattr__(self, "shapes", CheckedShapes(shapes))
-        if not isinstance(self.camera, Camera):
-            raise SceneError(f"expected a pyclray.Camera, got {type(self.camera).__name__}", table="[camera]", file=self.source)
-        if self.camera.K is not None and self.camera.size is None:  # K is in pixels of this scene's image
+        if not isinstance(self.camera, CameraModel):
+            models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+            raise SceneError(f"expected a {models}, got {type(self.camera).__name__}", table="[camera]",
+                             file=self.source)
+        # K is in pixels of this scene's image (a camera from intrinsics, a fisheye)
+        if getattr(self.camera, "K", None) is not None and self.camera.size is None:
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
-        check_image_plane(self.camera, self.image, self.source)
+        if isinstance(self.camera, Camera):  # the pinhole's image plane (the lens models' rays are their tables)
+            check_image_plane(self.camera, self.image, self.source)
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
@@ -96,7 +101,7 @@ class Scene:
         """A length that bounds the scene as seen from the eye (at least 1): the distance to the
         target and the farthest reach of any shape (Mitsuba's clip range and plane stand-in)."""
         eye = np.array(self.camera.eye)
-        target = self.camera.target
+        target = getattr(self.camera, "target", None)
         size = max(1.0, float(np.linalg.norm(np.subtract(target, eye)))) if target is not None else 1.0
         for shape in self.shapes:
             size = max(size, shape.extent_from(eye))

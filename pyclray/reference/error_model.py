@@ -171,6 +171,14 @@ def camera_size(scene: Scene) -> float:
     to_world a matrix) max(tan_x, tan_y) (1 + 2 |offset|), offset the larger principal point
     offset (mitsuba.sensor_of), which Mitsuba adds to the film position in float32."""
     camera = scene.camera
+    if not camera.rays_from_eye:
+        # (orthographic) Mitsuba's origins are the eye plus the film's offsets, rounded to float32, its
+        # direction its to_world's z: S bounds those origins' size (as a look-at's |eye| / |target - eye|
+        # does) in units of the eye's distance to its target, at least 1
+        origins, _ = camera.rays(scene.image.width, scene.image.height)
+        eye, target = np.array(camera.eye), np.array(getattr(camera, "target", None) or camera.eye)
+        reach = float(np.linalg.norm(eye) + np.linalg.norm(origins - eye, axis=-1).max())
+        return max(1.0, reach / max(np.linalg.norm(target - eye), 1.0))
     if camera.K is None:
         eye, target = np.array(camera.eye), np.array(camera.target)
         return max(np.linalg.norm(eye), np.linalg.norm(target)) / np.linalg.norm(target - eye)

@@ -232,7 +232,7 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     if mi.variant().startswith("scalar"):
         depth, normal, sh_normal, found, primitive = _cast_pixels(mi, scene)
         hit = found >= 0
-        return {"depth": np.where(hit, depth + near / axis_cosines(scene), np.inf), "normal": normal,
+        return {"depth": np.where(hit, depth + scene.camera.mitsuba_ray_starts(scene.image.width, scene.image.height, near), np.inf), "normal": normal,
                 "sh_normal": sh_normal, "id": found, "primitive": primitive}
     mi_scene, ids = load(scene, variant)
     with quiet_interrupts(mi):
@@ -241,7 +241,7 @@ def render(scene: Scene, variant: str = DEFAULT_VARIANT) -> dict:
     hit = index > 0
     lookup = np.vectorize(lambda k: ids.get(int(k), -1), otypes=[np.int32])
     out = {
-        "depth": np.where(hit, image[..., 0] + near / axis_cosines(scene), np.inf),
+        "depth": np.where(hit, image[..., 0] + scene.camera.mitsuba_ray_starts(scene.image.width, scene.image.height, near), np.inf),
         "normal": np.where(hit[..., None], image[..., 1:4], 0.0),
         "sh_normal": np.where(hit[..., None], image[..., 4:7], 0.0),
         "id": np.where(hit, lookup(np.where(hit, index, 0)) if hit.any() else -1, -1).astype(np.int32),

@@ -92,3 +92,38 @@ def incidence_cosine(scene: Scene, directions, ids, normals) -> np.ndarray:
     """|cos| of the angle between each ray and the surface it hit (1 on a miss)."""
     cos = np.abs(np.einsum("...k,...k", directions, normals))
     return np.where(ids >= 0, cos, 1.0)
+
+
+def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf) -> dict:
+    """Every crossing t of each ray with tmin < t < tmax, nearest first (then by id and primitive),
+    in all_hits' CSR form: offsets (int64, N + 1), ray, depth (float64), id, primitive. Directions of
+    any length (t is along the unit direction); tmin, tmax one number or one per ray. Each shape's
+    crossings (oracle_crossings: a tangent ray none, a ray through a mesh's shared edge or vertex
+    one triangle there, decided in exact arithmetic); every shape against every ray."""
+    D = np.asarray(directions, np.float64).reshape(-1, 3)
+    D = D / np.linalg.norm(D, axis=1, keepdims=True)
+    O = np.broadcast_to(np.asarray(origins, np.float64).reshape(-1, 3), D.shape)
+    lo = np.broadcast_to(np.asarray(tmin, np.float64).reshape(-1), (len(D),))
+    hi = np.broadcast_to(np.asarray(tmax, np.float64).reshape(-1), (len(D),))
+    rays, ts, ids, primitives = [], [], [], []
+    for index, item in enumerate(scene.shapes):
+        t, primitive = item.oracle_crossings(O, D)
+        keep = (t > lo[:, None]) & (t < hi[:, None])
+        row, column = np.nonzero(keep)
+        rays.append(row)
+        ts.append(t[row, column])
+        ids.append(np.full(len(row), index, np.int32))
+        primitives.append(primitive[row, column].astype(np.int32))
+    ray, t, ident, primitive = (np.concatenate(x) if x else np.zeros(0) for x in (rays, ts, ids, primitives))
+    order = np.lexsort((primitive, ident, t, ray))
+    ray = ray[order].astype(np.int64)
+    counts = np.bincount(ray, minlength=len(D))
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return {"offsets": offsets, "ray": ray, "depth": t[order], "id": ident[order].astype(np.int32),
+            "primitive": primitive[order].astype(np.int32)}
+
+
+def count_hits(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf) -> np.ndarray:
+    """The number of all_hits' crossings of each ray (int32, the rays' leading shape)."""
+    shape = np.shape(directions)[:-1]
+    return np.diff(all_hits(scene, origins, directions, tmin, tmax)["offsets"]).astype(np.int32).reshape(shape)

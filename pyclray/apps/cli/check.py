@@ -6,6 +6,10 @@ from pathlib import Path
 from .options import BadInput, image_size, load
 
 
+# the rays of the all-hits comparison (at most --rays): Mitsuba's re-casts go one hit at a time
+ALL_HITS_RAYS = 256
+
+
 def add_command(subparsers) -> None:
     from ...reference.check import DEFAULT_RAYS, VARIANTS
 
@@ -14,7 +18,8 @@ def add_command(subparsers) -> None:
         help="cross-check pyclray's images against Mitsuba 3 (exit 1 outside the tolerance)",
         description="Render SCENE with pyclray (fp32) and Mitsuba 3 and print one table per image "
         "(depth, normal, id, misses), the ray-level comparison (Mitsuba's own primary rays cast "
-        "through both) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
+        "through both), every hit along some of those rays (pyclray.all_hits against the float64 oracle, Mitsuba's "
+        "ray_intersect repeated past each hit beside) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
     parser.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
@@ -58,11 +63,14 @@ def run(args) -> int:
     from ...reference.validation.arbitrate import mitsuba_faults
     from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
 
-    with steps(9, desc="pyclray check") as timing:
+    from ...reference.validation.hits import all_hits_check, format_hits_check
+
+    with steps(11, desc="pyclray check") as timing:
         images = cross_check(scene, args.variant, device=args.device)
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
+        hits = all_hits_check(scene, args.variant, min(args.rays, ALL_HITS_RAYS), args.seed, device=args.device)
         shaded = None
-        if scene.shading.shadows:
+        if scene.shading.shadows and scene.camera.rays_from_eye:  # (an orthographic render has no shaded image)
             shaded = cross_check_shaded(scene, args.variant, device=args.device, truth=images.truth)
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
@@ -74,7 +82,10 @@ def run(args) -> int:
     print()
     print(format_ray_check(rays))
     print()
-    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
+    print(format_hits_check(hits))
+    print()
+    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)"
+          if scene.camera.rays_from_eye else f"shaded: not compared (the {scene.camera.model} camera renders no shaded image)")
     print()
     print(time_table(timing.times, seconds))
     if folder is not None:
@@ -82,7 +93,7 @@ def run(args) -> int:
         written = save(images, folder, Path(args.scene).stem)
         print()
         print("wrote " + ", ".join(map(str, written)))
-    failures = images.failures + rays.failures + (shaded.failures if shaded else [])
+    failures = images.failures + rays.failures + hits.failures + (shaded.failures if shaded else [])
     verdicts = {f"image {name}": v for name, v in images.verdicts.items()}
     verdicts.update({f"ray-level {name}": v for name, v in rays.verdicts.items()})
     if shaded:

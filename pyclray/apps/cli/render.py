@@ -61,10 +61,11 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
 def _camera(scene):
     """(K, pose) of the scene's camera at its image size: the EXR header's (io/exr.py) and the
     .npz's K and pose arrays."""
+    # (K None for a model without one: its pose alone)
     return scene.camera.intrinsics(scene.image.width, scene.image.height), scene.camera.pose()
 
 
-def _written(kind: str, aovs) -> str:
+def _written(kind: str, aovs, intrinsics=True) -> str:
     """What the files hold, for the last line: the EXR's channels, the .npz's arrays, the AOV a .png shows."""
     from ...io import exr
     from ...model.aovs import empty_images
@@ -72,7 +73,7 @@ def _written(kind: str, aovs) -> str:
     if kind == "exr":
         return ", ".join(exr.exr_channel_arrays(empty_images(aovs)))
     if kind == "npz":
-        return ", ".join((*aovs, "K", "pose"))
+        return ", ".join((*aovs, "K", "pose") if intrinsics else (*aovs, "pose"))  # (no K: a model without one)
     return f"the {aovs[0]} preview"
 
 
@@ -119,7 +120,7 @@ def run(args) -> int:
     print(
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (render {seconds(spent['render'])}, write {seconds(total - spent['render'])}); "
-        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs)}]"
+        f"wrote {', '.join(map(str, written))} [{_written(kind, aovs, _camera(scene)[0] is not None)}]"
     )
     return 0
 
@@ -158,7 +159,7 @@ def _render_on_cluster(args, scene, out, aovs, kind, moving=None) -> int:
         f"rendered {args.scene} ({width}x{height}, {args.precision}, {devices[0] if devices else '?'}) in "
         f"{seconds(total)} (cluster start {seconds(start_time)}, {count} band{'s' if count != 1 else ''} of {rows} rows "
         f"on {where}, rendered there and written here as they came); wrote {', '.join(map(str, written))} "
-        f"[{_written(kind, aovs)}]"
+        f"[{_written(kind, aovs, _camera(scene)[0] is not None)}]"
     )
     return 0
 

@@ -52,7 +52,7 @@ class Orbit:
         one unit ahead), with its image's up as the up."""
         u, v, w = camera.basis()
         eye = np.array(camera.eye)
-        if camera.K is None:
+        if getattr(camera, "K", None) is None:  # a look-at (perspective, orthographic, panorama)
             target, up = np.array(camera.target), np.array(camera.up)
         else:
             target, up = eye + w * max(1.0, float(-eye @ w)), v
@@ -99,14 +99,14 @@ class Orbit:
 
     def camera(self) -> Camera:
         """The camera the user sees: the start camera from the new eye toward the new target."""
-        if self.start.K is None:
+        if getattr(self.start, "K", None) is None:
             return replace(self.start, eye=self.eye, target=self.target)
         w = _unit(np.subtract(self.target, self.eye))
         u = _unit(np.cross(self.up, w))
         v = np.cross(w, u)
-        pose = np.eye(4)
-        pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -u, -v, w, self.eye
-        return Camera.from_intrinsics(self.start.K, pose, *self.start.size)
+        # the start camera (its K, size, lens) turned: OpenCV's axes x right, y down, z forward
+        rotation = tuple(tuple(float(x) for x in row) for row in np.stack([-u, -v, w], axis=1))
+        return replace(self.start, eye=tuple(float(x) for x in self.eye), rotation=rotation)
 
 
 def _number(x: float) -> str:
@@ -119,8 +119,21 @@ def _vector(values) -> str:
     return "[" + ", ".join(_number(float(x)) for x in values) + "]"
 
 
+def _value(value) -> str:
+    """A [camera] key's value as TOML: a string, a number, a vector or a matrix."""
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, (int, float)):
+        return _number(float(value))
+    if len(value) and not isinstance(value[0], (int, float)):
+        return "[" + ", ".join(_vector(row) for row in value) + "]"
+    return _vector(value)
+
+
 def camera_toml(camera: Camera) -> str:
     """The [camera] table of a scene file that loads as this camera (the "copy camera" button)."""
+    if camera.model != "perspective":  # the other models say their own keys
+        return "[camera]\n" + "\n".join(f"{key} = {_value(value)}" for key, value in camera.table().items()) + "\n"
     if camera.K is None:
         lines = [f"eye = {_vector(camera.eye)}", f"target = {_vector(camera.target)}",
                  f"up = {_vector(camera.up)}", f"fov = {_number(camera.fov)}"]
@@ -130,4 +143,6 @@ def camera_toml(camera: Camera) -> str:
         pose = camera.pose()
         lines = ["intrinsics = [" + ", ".join(_vector(row) for row in camera.K) + "]",
                  "pose = [" + ", ".join(_vector(row) for row in pose) + "]"]
+        if camera.distortion is not None:
+            lines.append(f"distortion = {_vector(camera.distortion)}")
     return "[camera]\n" + "\n".join(lines) + "\n"

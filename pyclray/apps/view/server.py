@@ -126,6 +126,7 @@ class App:
         session = Session(self, connection)
         self.sessions.add(session)
         loop = asyncio.create_task(session.run())
+        loop.add_done_callback(lambda task: _ended(task, connection))
         try:
             async for message in connection:
                 session.receive(message)
@@ -138,20 +139,25 @@ class App:
                 await loop
             except (asyncio.CancelledError, ConnectionClosed):
                 pass
+            except Exception:  # the loop's own error: said by _ended, which closed this connection
+                pass
 
     # -- live editing -------------------------------------------------------------------------------
     async def watch(self) -> None:
-        """Poll the files; load the scene again once a change has held for one poll."""
+        """Poll the files; load the scene again once a change has held for one poll. Nothing ends
+        this loop but the server's end: a watcher ended by an error would leave every page showing
+        a scene that no save changes any more, without a word."""
         seen = self.loaded
         while True:
             await asyncio.sleep(watch.POLL_SECONDS)
-            now = watch.signature(self.files)
-            if now != self.loaded and now == seen:
-                try:
+            try:
+                now = watch.signature(self.files)
+                if now != self.loaded and now == seen:
                     await self.reload(now)
-                except Exception as error:  # a bug of ours: said, and the next save tries again
-                    print(f"pyclray view: warning: reloading failed: {type(error).__name__}: {error}", file=sys.stderr,
-                          flush=True)
+                    now = self.loaded
+            except Exception as error:  # a bug of ours: said, and the next save tries again
+                print(f"pyclray view: warning: reloading failed: {type(error).__name__}: {error}", file=sys.stderr,
+                      flush=True)
                 now = self.loaded
             seen = now
 
@@ -209,6 +215,20 @@ class App:
             first.cancel()
         self.executor.shutdown(wait=False, cancel_futures=True)
         return 130
+
+
+def _ended(task: asyncio.Task, connection) -> None:
+    """A page's render loop has ended: by its connection's close (or cancelled then), or by an error
+    no handler took, which is said and closes the connection, so that the page says the server has
+    stopped rather than waiting on images that will not come."""
+    from websockets.exceptions import ConnectionClosed
+
+    if task.cancelled() or task.exception() is None or isinstance(task.exception(), ConnectionClosed):
+        return
+    error = task.exception()
+    print(f"pyclray view: warning: a page's images stopped: {type(error).__name__}: {error}", file=sys.stderr,
+          flush=True)
+    asyncio.ensure_future(connection.close(1011, "the server's render loop failed"))
 
 
 async def _quietly(sending) -> None:

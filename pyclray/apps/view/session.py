@@ -118,16 +118,26 @@ class Session:
         self.changed()
 
     def _time(self, message):
+        # a time is bound by the animation's duration, not by LIMIT (a motion's bound: a clip may be
+        # longer than 100 s)
         animation = self.app.scene.animation
-        t = _number(message, "t") if animation is not None else None
-        if t is None or not 0 <= t <= animation.duration:
+        t = message.get("t")
+        if animation is None or isinstance(t, bool) or not isinstance(t, (int, float)) or \
+                not 0 <= t <= animation.duration:  # (NaN is not)
             raise Ignored
+        t = float(t)
         self.t = t
         self.changed(moving=True)  # a slider dragged or a clip played: coarse frames allowed
 
     def _painted(self, message):
-        frame = _number(message, "frame")
-        if self.in_flight and frame <= self.sent:
+        """The page is done with image number `frame` (painted, or failed to): one frame less in
+        flight. The frame is a count, checked against the frames sent only: through _number, whose
+        LIMIT bounds a motion, every acknowledgement past the hundredth image was refused, two
+        frames stayed in flight for ever and the view stopped answering any input."""
+        frame = message.get("frame")
+        if isinstance(frame, bool) or not isinstance(frame, int) or not 1 <= frame <= self.sent:
+            raise Ignored
+        if self.in_flight:
             self.in_flight -= 1
             self.wake.set()
 
@@ -167,7 +177,16 @@ class Session:
 
     # -- the loop -----------------------------------------------------------------------------------
     async def run(self) -> None:
-        await self.send_scene()
+        """Send what is due whenever woken, until the connection closes. Nothing but a closed
+        connection ends this loop: the server's reader keeps taking the page's messages whether it
+        runs or not, so a loop ended by a bug of ours would leave the page deaf without a word."""
+        try:
+            await self.send_scene()
+        except ConnectionClosed:
+            raise
+        except Exception as error:  # a bug of ours: said, and the images still come
+            print(f"pyclray view: warning: the scene's description failed: {type(error).__name__}: {error}",
+                  file=sys.stderr)
         self.wake.set()  # the first image
         while True:
             await self.wake.wait()
@@ -204,7 +223,8 @@ class Session:
             if not self.settled:
                 self._wake_at(self.moving_until)  # the full image once the motion has stopped
             return False
-        version, aov, seq, camera = self.version, self.aov, self.seq, None
+        # what this frame shows, taken before the render's await (inputs may change them meanwhile)
+        version, aov, seq, t, orbit, camera = self.version, self.aov, self.seq, self.t, self.orbit, None
         try:
             camera = self.camera()
             full_size = (self.app.scene.image.width, self.app.scene.image.height)
@@ -233,7 +253,7 @@ class Session:
             self.render_error = None
             await self.send_error()
         self.shown, self.settled = version, lossless
-        await self.send_frame(kind, data, rgb.shape, lossless, seconds, camera, seq)
+        await self.send_frame(kind, data, rgb.shape, lossless, seconds, camera, (orbit, aov, t, seq))
         return True
 
     # -- what the page receives ---------------------------------------------------------------------
@@ -251,12 +271,14 @@ class Session:
     async def send_error(self) -> None:
         await self.connection.send(json.dumps({"type": "error", "message": self.app.error or self.render_error or ""}))
 
-    async def send_frame(self, kind, data, shape, lossless, seconds, camera, seq) -> None:
+    async def send_frame(self, kind, data, shape, lossless, seconds, camera, shown) -> None:
+        """One image and what it shows: shown is (orbit, aov, t, seq) as they were when it was rendered."""
+        orbit, aov, t, seq = shown
+        orbit = orbit or Orbit.of(camera)
         self.sent += 1
         self.in_flight += 1
-        orbit = self.orbit or Orbit.of(camera)
         header = json.dumps({
             "frame": self.sent, "type": kind, "width": shape[1], "height": shape[0], "lossless": lossless,
             "ms": round(seconds * 1000, 1), "eye": orbit.eye, "target": orbit.target, "camera": camera_toml(camera),
-            "aov": self.aov, "t": self.t, "seq": seq}).encode()
+            "aov": aov, "t": t, "seq": seq}).encode()
         await self.connection.send(len(header).to_bytes(4, "big") + header + data)

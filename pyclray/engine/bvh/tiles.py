@@ -8,6 +8,8 @@ not ``bounded`` (the plane) is visited in every tile.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-group size)
@@ -92,3 +94,64 @@ def tile_lists(bounded, spheres, n, origin, rotation, plane, width, height, tile
     if index.size == 0:
         index = np.zeros(1, np.int32)  # no zero-size buffers
     return start, index
+
+
+def table_rects(directions, valid, tile=TILE) -> np.ndarray:
+    """(tiles_y * tiles_x, 4) rectangles (sx_lo, sx_hi, sy_lo, sy_hi) of the image-plane coordinates
+    (x / z, y / z in the camera frame) of each tile's rays, for a camera whose rays are a table (a
+    lens, a panorama: CameraModel.frame_directions; directions (height, width, 3), valid (height,
+    width)): a ray that meets a sphere has its coordinates in the sphere's sphere_bounds, and in its
+    tile's rectangle, so a tile visits the spheres whose bounds meet its rectangle. A tile with a
+    ray at or behind the eye's plane (a fisheye's rim, a panorama) is NaN: it visits every shape;
+    a tile without a ray in the field is empty (+inf lo): it visits none."""
+    height, width = valid.shape
+    tiles_x, tiles_y = -(-width // tile), -(-height // tile)
+    padded = np.full((tiles_y * tile, tiles_x * tile, 3), np.nan)
+    padded[:height, :width] = np.where(valid[..., None], directions, np.nan)
+    cells = padded.reshape(tiles_y, tile, tiles_x, tile, 3).transpose(0, 2, 1, 3, 4).reshape(tiles_y * tiles_x, tile * tile, 3)
+    z = cells[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sx, sy = cells[..., 0] / z, cells[..., 1] / z
+        behind = np.any(z <= 1e-6 * np.linalg.norm(cells, axis=-1), axis=1)  # NaN compares False: padding is ignored
+    with warnings.catch_warnings():  # an all-NaN tile (out of the field) gives NaN min and max
+        warnings.simplefilter("ignore", RuntimeWarning)
+        rects = np.stack([np.nanmin(sx, axis=1), np.nanmax(sx, axis=1), np.nanmin(sy, axis=1), np.nanmax(sy, axis=1)], axis=1)
+    empty = np.isnan(rects).any(axis=1) & ~behind
+    rects[empty] = (np.inf, -np.inf, np.inf, -np.inf)
+    rects[behind] = np.nan
+    return rects
+
+
+# entries x tiles compared at once (tile_lists_in_rects): bounds the temporary boolean matrix's size
+RECT_CHUNK = 1 << 22
+
+
+def tile_lists_in_rects(bounded, spheres, n, origin, rotation, rects, tiles_x, tiles_y):
+    """tile_lists for a camera whose tiles' rays are given as rectangles (table_rects): entry e is in
+    tile t's list where its sphere bounds meet t's rectangle (or either is everywhere); the same
+    (start, index) arrays, entries in increasing order within a tile."""
+    n_tiles = tiles_x * tiles_y
+    if not (ENABLED and bounded and n):
+        start = np.arange(n_tiles + 1, dtype=np.int64) * n
+        index = np.tile(np.arange(n, dtype=np.int32), n_tiles)
+        return start.astype(np.int32), (index if index.size else np.zeros(1, np.int32))
+    bounds = sphere_bounds(*spheres, np.asarray(origin, np.float64), rotation)
+    everywhere = np.isnan(bounds).any(axis=1)
+    anywhere_tile = np.isnan(rects).any(axis=1)
+    pairs_tile, pairs_entry = [], []
+    step = max(1, RECT_CHUNK // max(n_tiles, 1))
+    for first in range(0, n, step):
+        b = bounds[first:first + step]
+        meets = ((b[:, None, 0] <= rects[None, :, 1]) & (rects[None, :, 0] <= b[:, None, 1])
+                 & (b[:, None, 2] <= rects[None, :, 3]) & (rects[None, :, 2] <= b[:, None, 3]))
+        meets |= everywhere[first:first + step, None] | anywhere_tile[None, :]
+        entry, tile = np.nonzero(meets)
+        pairs_tile.append(tile)
+        pairs_entry.append(entry + first)
+    tiles = np.concatenate(pairs_tile)
+    entries = np.concatenate(pairs_entry)
+    order = np.lexsort((entries, tiles))
+    start = np.zeros(n_tiles + 1, np.int32)
+    start[1:] = np.cumsum(np.bincount(tiles, minlength=n_tiles))
+    index = entries[order].astype(np.int32)
+    return start, (index if index.size else np.zeros(1, np.int32))

@@ -132,4 +132,17 @@ inline vec3v box_normal(SHAPE_SPACE const Box* box, const RayPacket* ray, const 
     return v3_scale(e, sign);
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* Every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl): the entry and the exit
+ * where the slabs overlap with entry < exit, none where they do not or only touch (a ray grazing an
+ * edge or a corner counts 0, never 1); one behind the origin (from inside: the entry) is MISS. */
+inline void box_hits(SHAPE_SPACE const Box* box, const RayPacket* ray, realv* first, realv* second)
+{
+    const BoxSlabs slabs = box_slabs(box, ray);
+    const intv crosses = slabs.overlap && slabs.entry < slabs.exit;
+    *first = crosses && slabs.entry > 0 ? slabs.entry : SPLAT(MISS);
+    *second = crosses && slabs.exit > 0 && slabs.exit < MISS ? slabs.exit : SPLAT(MISS);
+}
+#endif
+
 #endif

@@ -46,6 +46,27 @@
         PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
         normal = PYCLRAY_NORMAL_##type(&framed, &ray, &world_axes, MISS, 1);        \
     }
+/* the winner's index within its shape (PYCLRAY_CAST_PRIMITIVE_OF_<type>: its packed entry's, or a
+ * mesh instance's triangle); in blocks its key, -2 - key, which the host turns into the triangle's
+ * index (engine/queries/cast.py: the block lanes' entries) */
+#define PYCLRAY_CAST_PRIMITIVE(Type, type)                                          \
+    if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_PRIMITIVE_, type)(Type, type) }
+#define PYCLRAY_CAST_PRIMITIVE_ENTRY(Type, type)                                    \
+    {                                                                               \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        primitive = PYCLRAY_CAST_PRIMITIVE_OF_##type(&framed, &ray);                \
+    }
+#define PYCLRAY_CAST_PRIMITIVE_BLOCKS(Type, type) primitive = -2 - best_k;
+/* the winner's barycentrics (a triangle's; 0, 0 for other shapes) */
+#define PYCLRAY_CAST_BARYCENTRIC(Type, type)                                        \
+    if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_BARYCENTRIC_, type)(Type, type) }
+#define PYCLRAY_CAST_BARYCENTRIC_ENTRY(Type, type)                                  \
+    {                                                                               \
+        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
+        PYCLRAY_CAST_BARYCENTRIC_OF_##type(&framed, &ray, &u, &v);                  \
+    }
+#define PYCLRAY_CAST_BARYCENTRIC_BLOCKS(Type, type)                                 \
+    mesh_block_barycentric(MESH_BLOCKS(type) + 8 * (size_t)(best_k >> 3), best_k & 7, &ray, &u, &v);
 
 /* Each work-item's rays (a group of CAST_GROUP) traverse the BVH together: a step of each in turn
  * (kernels/bvh_ray.h's PYCLRAY_TRAVERSE_STEP: a node's children pushed, or a leaf's shapes tested), so
@@ -60,7 +81,7 @@
 /* the state's parts, (type, name) each, kept as name_ and saved from cast_start's local of that name:
  * the ray's, and (with bounded shapes) its traversal's */
 #define CAST_RAY_STATE(X) \
-    X(RayPacket, ray) X(double, t_max) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, ray_length)
+    X(RayPacket, ray) X(double, t_max) X(double, t_min) X(double, best) X(int, r) X(int, best_kind) X(int, best_k) X(int, best_q) X(real, ray_length)
 #define CAST_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
     X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
 #define CAST_STATE_FIELD(T, name) T name##_;
@@ -100,6 +121,7 @@ inline void cast_start(CastRay* S, const int r, const CastDirection* direction, 
 /* the names the visit's macros use (PYCLRAY_CAST_VISIT and what it expands to), bound to the state's
  * (none may be a shape type's name, which the macros paste: the box ray is passed as S->box_) */
 #define ray (S->ray_)
+#define t_min (S->t_min_)
 #define ray_length (S->ray_length_)
 #define best (S->best_)
 #define best_kind (S->best_kind_)
@@ -120,6 +142,7 @@ inline void cast_step(CastRay* S, PYCLRAY_PARAMETERS)
     PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 1, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
 }
 #undef ray
+#undef t_min
 #undef ray_length
 #undef best
 #undef best_kind
@@ -147,15 +170,21 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 #ifdef PYCLRAY_AOV_DEPTH
     depth_out[index] = hit ? (real)best : MISS;
 #endif
+#if defined(PYCLRAY_AOV_NORMAL) || defined(PYCLRAY_AOV_PRIMITIVE) || defined(PYCLRAY_AOV_BARYCENTRIC)
+    /* the winner's own ray, as it was tested */
+#ifdef PYCLRAY_HAS_BOUNDED
+    if (hit && best_q >= 0) {
+        double s0;
+        bool near;
+        ray = moved_ray(&ray, anchors[best_q], S->t_min_, &s0, &near);
+    } else
+#endif
+    if (hit && S->t_min_ > 0) {  /* an unbounded winner, tested from the ray's start */
+        ray.world = ray.world + S->t_min_ * ray.dir_exact;
+    }
+#endif
 #ifdef PYCLRAY_AOV_NORMAL
     {
-#ifdef PYCLRAY_HAS_BOUNDED
-        if (hit && best_q >= 0) {  /* the winner's own ray, as it was tested */
-            double s0;
-            bool near;
-            ray = moved_ray(&ray, anchors[best_q], &s0, &near);
-        }
-#endif
         vec3v normal = v3(0, 0, 0);
         /* each shape is framed on the world's axes (kernels/cast.h): its normal is turned by them */
         const Basis world_axes = {(real4)(1, 0, 0, 0), (real4)(0, 1, 0, 0), (real4)(0, 0, 1, 0)};
@@ -163,6 +192,21 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
         normal_out[3 * index] = normal.x;
         normal_out[3 * index + 1] = normal.y;
         normal_out[3 * index + 2] = normal.z;
+    }
+#endif
+#ifdef PYCLRAY_AOV_PRIMITIVE
+    {
+        int primitive = -1;
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_PRIMITIVE) }
+        primitive_out[index] = primitive;
+    }
+#endif
+#ifdef PYCLRAY_AOV_BARYCENTRIC
+    {
+        real u = 0, v = 0;
+        if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_BARYCENTRIC) }
+        barycentric_out[2 * index] = u;
+        barycentric_out[2 * index + 1] = v;
     }
 #endif
 #ifdef PYCLRAY_AOV_ID

@@ -150,4 +150,51 @@ inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPack
     return v3_select(outward, cap, hit.kind >= SPLAT_INT(3));
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* Every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl), from the ray's origin
+ * (cast's frame: FROM_EYE). Capped: the solid is convex, the points within r of the axis (between
+ * the side's roots, everywhere for a ray along the axis inside it) and between the end planes (the
+ * caps' distances, everywhere for a ray parallel to them between them): the entry and exit of
+ * those two intervals' overlap where entry < exit, else none (a ray grazing the side or a rim
+ * counts 0, never 1). Open tube: each side root whose point lies between the end planes. */
+inline void cylinder_hits(SHAPE_SPACE const Cylinder* cylinder, const RayPacket* ray, realv* first, realv* second)
+{
+    const CylinderHit hit = cylinder_intersect(cylinder, ray);
+    const vec3v A = v3_splat(cylinder->axis), D = ray->dir;
+    const realv c = SPLAT(cylinder->axis.w);
+    const realv d0 = SPLAT(cylinder->world_axis.w), d1 = SPLAT(cylinder->d1);
+    const realv a = v3_dot(hit.DxA, hit.DxA);
+    const realv b = v3_dot(v3_cross(v3_splat(cylinder->p0), A), hit.DxA);
+    const realv root = v_sqrt(hit.disc);
+    const realv q = b + v_copysign(root, b);
+    const realv s_q = q / a, s_c = c / q;
+    const realv dA = v3_dot(D, A);
+    *first = *second = SPLAT(MISS);
+    if (cylinder->caps) {
+        /* the side's interval (a ray along the axis: all of it inside, none outside) */
+        const intv along_axis = a == 0;
+        const realv side_lo = along_axis ? (c < 0 ? SPLAT(-INFINITY) : SPLAT(INFINITY)) : v_min(s_q, s_c);
+        const realv side_hi = along_axis ? (c < 0 ? SPLAT(INFINITY) : SPLAT(-INFINITY)) : v_max(s_q, s_c);
+        const intv side = along_axis || hit.disc > 0;
+        /* the end planes' interval: p0's plane at d0 / dA, p1's at d1 / dA (parallel: between them or not) */
+        const intv parallel = dA == 0;
+        const realv e0 = d0 / dA, e1 = d1 / dA;
+        const intv between = d0 <= 0 && d1 >= 0;
+        const realv cap_lo = parallel ? (between ? SPLAT(-INFINITY) : SPLAT(INFINITY)) : v_min(e0, e1);
+        const realv cap_hi = parallel ? (between ? SPLAT(INFINITY) : SPLAT(-INFINITY)) : v_max(e0, e1);
+        const realv entry = v_max(side_lo, cap_lo), exit = v_min(side_hi, cap_hi);
+        const intv crosses = side && entry < exit;
+        *first = crosses && entry > 0 && entry < MISS ? entry : SPLAT(MISS);
+        *second = crosses && exit > 0 && exit < MISS ? exit : SPLAT(MISS);
+    } else {
+        const realv near = v_min(s_q, s_c), far = v_max(s_q, s_c);
+        const realv length = SPLAT(cylinder->p1.w);
+        const realv z_near = near * dA - d0, z_far = far * dA - d0;
+        const intv crosses = hit.disc > 0 && a > 0;
+        *first = crosses && near > 0 && z_near >= 0 && z_near <= length ? near : SPLAT(MISS);
+        *second = crosses && far > 0 && z_far >= 0 && z_far <= length ? far : SPLAT(MISS);
+    }
+}
+#endif
+
 #endif

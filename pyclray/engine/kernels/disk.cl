@@ -43,4 +43,13 @@ inline vec3v disk_normal(SHAPE_SPACE const Disk* disk, const RayPacket* ray, con
     return v3_splat(disk->world_normal);
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl): a flat shape's one */
+inline void disk_hits(SHAPE_SPACE const Disk* shape, const RayPacket* ray, realv* first, realv* second)
+{
+    *first = disk_hit(shape, ray);
+    *second = SPLAT(MISS);
+}
+#endif
+
 #endif

@@ -299,6 +299,52 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
     instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
     return instance_normal(inst, which, vertices, faces);
 }
+#ifdef PYCLRAY_ALL_HITS
+/* every triangle the ray crosses (count_hits, all_hits: kernels/allhits.cl), each one's distance
+ * ALLHITS_TAKE'n with its index in its mesh: the instance's tree traversed to its end, each triangle
+ * framed on the object-space eye and tested by kernels/mesh.cl (with its tie rule); from is the
+ * distance of the ray's start, where the instance was framed, k the instance's index */
+#define INSTANCE_ALL_VISIT(q)                                                                         \
+    {                                                                                                 \
+        const int4 f_ = own_[q];                                                                      \
+        const real s_ = mesh_hit_of(INSTANCE_CORNERS(instance_vertices, f_, eye_), &object_);         \
+        if (s_ < MISS) ALLHITS_TAKE(from_ + (double)(s_ / scale_) * ray_length, kind_, instance_k_, f_.w) \
+    }
+#define PYCLRAY_ALL_HITS_instance(shape, ray, from, kind, k)                                          \
+    {                                                                                                 \
+        const Instance* inst_ = (shape);                                                              \
+        const real scale_ = inst_->m0.w;                                                              \
+        const RayPacket object_ = instance_ray(inst_, (ray));                                         \
+        const BoxPacket box_ = box_packet(object_.dir, inst_->box);                                   \
+        const double3 eye_ = inst_->eye.xyz;                                                          \
+        __global const BvhNode* tree_ = instance_nodes + inst_->root;                                 \
+        __global const int4* own_ = instance_faces + inst_->first;                                    \
+        const double from_ = (from);                                                                  \
+        const int kind_ = (kind), instance_k_ = (k);                                                  \
+        const realv reach_ = SPLAT(MISS);                                                             \
+        PYCLRAY_TRAVERSE_PACKET(tree_, box_, reach_, INSTANCE_ALL_VISIT)                              \
+    }
+#endif
+/* cast's winner's triangle index in its mesh and its barycentrics (found again, as for its normal) */
+inline int instance_cast_primitive(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                                   __global const int4* faces, __global const BvhNode* nodes)
+{
+    int which;
+    instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
+    return instance_primitive(inst, which, faces);
+}
+
+inline void instance_cast_barycentric(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
+                                      __global const int4* faces, __global const BvhNode* nodes, real* u, real* v)
+{
+    int which;
+    instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
+    instance_barycentric(inst, ray, which, vertices, faces, u, v);
+}
+#define PYCLRAY_CAST_PRIMITIVE_OF_instance(shape, ray) \
+    instance_cast_primitive(shape, ray, instance_vertices, instance_faces, instance_nodes)
+#define PYCLRAY_CAST_BARYCENTRIC_OF_instance(shape, ray, u, v) \
+    instance_cast_barycentric(shape, ray, instance_vertices, instance_faces, instance_nodes, u, v)
 #define PYCLRAY_HIT_instance(shape, ray, limit) \
     instance_cast_hit(shape, ray, instance_vertices, instance_faces, instance_nodes)
 #define PYCLRAY_NORMAL_instance(shape, ray, basis, best, mine) \

@@ -65,14 +65,58 @@ inline void mesh_exact_lane(const float ax, const float ay, const float bx, cons
     *e0 = (float)(d0 * inverse);
     *e1 = (float)(d1 * inverse);
     *e2 = (float)(d2 * inverse);
+#ifdef PYCLRAY_TIE_RULE
+    /* a sign the scaling would lose (below float's least subnormal): kept, for the tie rule */
+    if (*e0 == 0 && d0 != 0) *e0 = d0 > 0 ? 0x1p-149f : -0x1p-149f;
+    if (*e1 == 0 && d1 != 0) *e1 = d1 > 0 ? 0x1p-149f : -0x1p-149f;
+    if (*e2 == 0 && d2 != 0) *e2 = d2 > 0 ? 0x1p-149f : -0x1p-149f;
+#endif
 }
 
+#endif
+#if defined(PYCLRAY_MESH_EXACT) || (defined(PYCLRAY_TIE_RULE) && defined(PYCLRAY_FP64))
 /* a packet's lanes as an array (the double path goes lane by lane: PoCL's code generator rejects
  * 8-wide double conversions) */
 typedef union {
     realv v;
     real s[LANES];
 } MeshLanes;
+#endif
+
+#ifdef PYCLRAY_TIE_RULE
+/* The tie rule of the hit counts (count_hits, all_hits: kernels/allhits.cl), so that each crossing of
+ * a mesh's surface counts once. The ray's projected point (0, 0) is taken as moved by (eps, eps^2),
+ * eps infinitesimal, in the projected plane (simulation of simplicity, the rasterizer's top-left
+ * rule): an edge function e = p x q (p, q its projected endpoints in the triangle's order) that is
+ * exactly 0 takes the sign of its change, (q - p) x (eps, eps^2) = -(qy - py) eps + (qx - px) eps^2:
+ * that of py - qy, or where py == qy of qx - px (comparisons: exact). Every triangle sees the same
+ * moved point, the edge of two triangles has the same endpoints (opposite order) in both, so a ray
+ * through a shared edge is inside exactly one of two triangles that lie on both sides of it (two or
+ * none where both lie on one side: a silhouette), and a ray through a shared vertex inside exactly
+ * one triangle of a fan around it: the count is that of a ray in general position. An edge whose
+ * endpoints project to one point never counts (its triangles have no projected area). The signs
+ * themselves are exact (see mesh_exact_lane and mesh_exact_edge64). */
+#define MESH_TIE_POSITIVE(e, px, py, qx, qy) ((e) > 0 || ((e) == 0 && ((py) > (qy) || ((py) == (qy) && (qx) > (px)))))
+#define MESH_TIE_NEGATIVE(e, px, py, qx, qy) ((e) < 0 || ((e) == 0 && ((py) < (qy) || ((py) == (qy) && (qx) < (px)))))
+/* all three edge functions (e0: b to c, e1: c to a, e2: a to b) of one sign under the rule */
+#define MESH_TIE_INSIDE(e0, e1, e2, ax, ay, bx, by, cx, cy)                                              \
+    ((MESH_TIE_POSITIVE(e0, bx, by, cx, cy) && MESH_TIE_POSITIVE(e1, cx, cy, ax, ay) && MESH_TIE_POSITIVE(e2, ax, ay, bx, by)) \
+     || (MESH_TIE_NEGATIVE(e0, bx, by, cx, cy) && MESH_TIE_NEGATIVE(e1, cx, cy, ax, ay) && MESH_TIE_NEGATIVE(e2, ax, ay, bx, by)))
+#ifdef PYCLRAY_FP64
+/* px qy - py qx where its float64 form rounded to 0 (the products are then equal): the difference of
+ * the products' exact rounding errors (fused multiply-adds), which is the exact value rounded once,
+ * its sign exact; the other triangle of the edge computes its negation, bit for bit */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#define MESH_FMA(a, b, c) __builtin_fma(a, b, c)
+#else
+#define MESH_FMA(a, b, c) fma(a, b, c)
+#endif
+inline double mesh_exact_edge64(const double px, const double py, const double qx, const double qy)
+{
+    const double product = px * qy;
+    return MESH_FMA(px, qy, -product) - MESH_FMA(py, qx, -product);
+}
+#endif
 #endif
 
 #if defined(PYCLRAY_FP64) || defined(cl_khr_fp64)
@@ -107,6 +151,9 @@ inline vec3v mesh_permute(const vec3v v, const intv z_is_x, const intv z_is_y)
  * of the distance, and dz; a lane misses where the signs differ or det is 0. */
 typedef struct {
     realv e0, e1, e2, det, numerator, dz;
+#ifdef PYCLRAY_TIE_RULE
+    intv inside;  /* the tie rule's (MESH_TIE_INSIDE) */
+#endif
 } MeshEdges;
 
 /* (the triangle's vertices by value: mesh instances frame theirs in private memory, kernels/instance.cl) */
@@ -152,6 +199,24 @@ inline MeshEdges mesh_edges_of(const real4 a, const real4 b, const real4 c, cons
         e.e2 = E2.v;
     }
 #endif
+#if defined(PYCLRAY_TIE_RULE) && defined(PYCLRAY_FP64)
+    if (ANY(e.e0 == 0 || e.e1 == 0 || e.e2 == 0)) {  /* those lanes' zeros exactly signed */
+        MeshLanes Ax, Ay, Bx, By, Cx, Cy, E0, E1, E2;
+        Ax.v = ax_; Ay.v = ay_; Bx.v = bx_; By.v = by_; Cx.v = cx_; Cy.v = cy_;
+        E0.v = e.e0; E1.v = e.e1; E2.v = e.e2;
+        for (int l = 0; l < LANES; ++l) {
+            if (E0.s[l] == 0) E0.s[l] = mesh_exact_edge64(Bx.s[l], By.s[l], Cx.s[l], Cy.s[l]);
+            if (E1.s[l] == 0) E1.s[l] = mesh_exact_edge64(Cx.s[l], Cy.s[l], Ax.s[l], Ay.s[l]);
+            if (E2.s[l] == 0) E2.s[l] = mesh_exact_edge64(Ax.s[l], Ay.s[l], Bx.s[l], By.s[l]);
+        }
+        e.e0 = E0.v;
+        e.e1 = E1.v;
+        e.e2 = E2.v;
+    }
+#endif
+#ifdef PYCLRAY_TIE_RULE
+    e.inside = MESH_TIE_INSIDE(e.e0, e.e1, e.e2, ax_, ay_, bx_, by_, cx_, cy_);
+#endif
     e.det = (e.e0 + e.e1) + e.e2;
     e.numerator = (e.e0 * A.z + e.e1 * B.z) + e.e2 * C.z;
     e.dz = D.z;
@@ -169,9 +234,13 @@ inline realv mesh_hit_of(const real4 a, const real4 b, const real4 c, const RayP
 {
     if (a.w == 0 && b.w == 0 && c.w == 0) return SPLAT(MISS);
     const MeshEdges e = mesh_edges_of(a, b, c, ray);
+#ifdef PYCLRAY_TIE_RULE
+    const intv inside = e.inside && e.det != 0;
+#else
     const intv negative = e.e0 < 0 || e.e1 < 0 || e.e2 < 0;
     const intv positive = e.e0 > 0 || e.e1 > 0 || e.e2 > 0;
     const intv inside = !(negative && positive) && e.det != 0;
+#endif
     if (!ANY(inside)) return SPLAT(MISS);  /* most tests of a packet miss: no division for them */
     const realv s = e.numerator / (inside ? e.det * e.dz : SPLAT(1));
     return inside && s > 0 ? s : SPLAT(MISS);
@@ -313,10 +382,35 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
         e2 = E2.v;
     }
 #endif
+#if defined(PYCLRAY_TIE_RULE) && defined(PYCLRAY_FP64)
+    const int zero = mesh_block_bits(e0 == (blockv)(0) || e1 == (blockv)(0) || e2 == (blockv)(0)) & lanes;
+    if (zero) {  /* those lanes' zeros exactly signed (mesh_exact_edge64) */
+        MeshBlockLanes Sax, Say, Sbx, Sby, Scx, Scy, E0, E1, E2;
+        Sax.v = ax_; Say.v = ay_; Sbx.v = bx_; Sby.v = by_; Scx.v = cx_; Scy.v = cy_;
+        E0.v = e0; E1.v = e1; E2.v = e2;
+        for (int mask = zero; mask != 0; mask &= mask - 1) {
+            const int l = BVH_LOWEST_BIT(mask);
+            if (E0.s[l] == 0) E0.s[l] = mesh_exact_edge64(Sbx.s[l], Sby.s[l], Scx.s[l], Scy.s[l]);
+            if (E1.s[l] == 0) E1.s[l] = mesh_exact_edge64(Scx.s[l], Scy.s[l], Sax.s[l], Say.s[l]);
+            if (E2.s[l] == 0) E2.s[l] = mesh_exact_edge64(Sax.s[l], Say.s[l], Sbx.s[l], Sby.s[l]);
+        }
+        e0 = E0.v;
+        e1 = E1.v;
+        e2 = E2.v;
+    }
+#endif
     const blockv det = (e0 + e1) + e2;
+#ifdef PYCLRAY_TIE_RULE
+    /* the tie rule where some lane's edge function is 0 (rare), else the strict signs (the same there) */
+    blockmask inside = (e0 > (blockv)(0) && e1 > (blockv)(0) && e2 > (blockv)(0))
+                       || (e0 < (blockv)(0) && e1 < (blockv)(0) && e2 < (blockv)(0));
+    if (mesh_block_bits(e0 == (blockv)(0) || e1 == (blockv)(0) || e2 == (blockv)(0)) & lanes)
+        inside = MESH_TIE_INSIDE(e0, e1, e2, ax_, ay_, bx_, by_, cx_, cy_) && det != (blockv)(0);
+#else
     const blockmask negative = e0 < (blockv)(0) || e1 < (blockv)(0) || e2 < (blockv)(0);
     const blockmask positive = e0 > (blockv)(0) || e1 > (blockv)(0) || e2 > (blockv)(0);
     const blockmask inside = !(negative && positive) && det != (blockv)(0);
+#endif
     *hits = mesh_block_bits(inside) & lanes;
     if (!*hits) return (blockv)(MISS);  /* most blocks a ray reaches it misses: no division */
     const blockv numerator = (e0 * Az + e1 * Bz) + e2 * Cz;
@@ -379,6 +473,23 @@ inline void mesh_barycentric(MESH_SPACE const Triangle* tri, const RayPacket* ra
 {
     mesh_barycentric_of(tri->a, tri->b, tri->c, ray, u, v);
 }
+
+#ifdef PYCLRAY_CAST
+/* The barycentrics (u, v) of lane's triangle of a block for the ray (cast's winner): its corners
+ * as mesh_block_hits frames them (each vertex minus the moved origin in float64, rounded once) and
+ * mesh_barycentric_of's edge functions over their sum. */
+inline void mesh_block_barycentric(__global const double* block, const int lane, const RayPacket* ray, real* u, real* v)
+{
+    const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
+    __global const double* rows = block + 1;
+    __global const uchar* corner = (__global const uchar*)(rows + 3 * unique) + lane;
+    const double3 o = ray->world;
+#define MESH_BLOCK_CORNER(k) (real4)((real)(rows[corner[(k) * count]] - o.x), (real)(rows[unique + corner[(k) * count]] - o.y), \
+                                     (real)(rows[2 * unique + corner[(k) * count]] - o.z), 1)
+    mesh_barycentric_of(MESH_BLOCK_CORNER(0), MESH_BLOCK_CORNER(1), MESH_BLOCK_CORNER(2), ray, u, v);
+#undef MESH_BLOCK_CORNER
+}
+#endif
 
 #ifdef PYCLRAY_SMOOTH
 /* Smooth shading: the unit world vertex normals interpolated at the hit's barycentrics,

@@ -39,4 +39,13 @@ inline vec3v plane_normal(SHAPE_SPACE const Plane* plane, const RayPacket* ray, 
     return v3_splat(plane->world_normal);
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl): a flat shape's one */
+inline void plane_hits(SHAPE_SPACE const Plane* shape, const RayPacket* ray, realv* first, realv* second)
+{
+    *first = plane_hit(shape, ray);
+    *second = SPLAT(MISS);
+}
+#endif
+
 #endif

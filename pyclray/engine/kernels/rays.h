@@ -57,7 +57,7 @@
         const double4 anchor = anchors[q];                                          \
         if (!(anchor.x == moved_anchor.x && anchor.y == moved_anchor.y && anchor.z == moved_anchor.z \
               && anchor.w == moved_anchor.w)) {                                     \
-            moved = moved_ray(&ray, anchor, &s0, &near);                            \
+            moved = moved_ray(&ray, anchor, t_min, &s0, &near);                     \
             moved_anchor = anchor;                                                  \
         }                                                                           \
         if (near && s0 <= PYCLRAY_CAST_REACH) {                                     \
@@ -81,11 +81,12 @@
         const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
     }
+/* (unbounded shapes: framed on the ray's start, O + t_min D, which is O itself where t_min is 0) */
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
-        PYCLRAY_CAST_FRAMED(Type, type, q, ray.world)                               \
-        const real s = PYCLRAY_HIT_##type(&framed, &ray, MISS);                     \
-        const double t = s < MISS ? (double)s * ray_length : INFINITY;              \
+        PYCLRAY_CAST_FRAMED(Type, type, q, start.world)                             \
+        const real s = PYCLRAY_HIT_##type(&framed, &start, MISS);                   \
+        const double t = s < MISS ? t_min + (double)s * ray_length : INFINITY;      \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
 
@@ -110,19 +111,20 @@
         CAST_PREFETCH(&limits[ahead * (size_t)limit_stride], 1)                     \
     }
 
-/* The ray from O + s0 D, s0 = max(0, (A - O).D - R - m): see above. m = 2^-50
+/* The ray from O + s0 D, s0 = max(t_min, (A - O).D - R - m): see above (t_min, the ray's own start,
+ * 0 unless the query asks for hits beyond some tmin: no point before it is tested). m = 2^-50
  * |A - O|_1 bounds the float64 rounding of (A - O).D, so that the new origin is never past the
  * shape's near side, however far O is (at 1e40 the rounding of (A - O).D alone exceeds a unit R).
  * near: whether the ray passes within R of A (|G x D| <= R, G = A - O - s0 D, in float64 without
  * cancellation); where it does not, it misses the shape by more than 2^-12 R, far more than the
  * shape's test, which rounds quantities of the size of G, could err by: the test is skipped. */
-inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, double* s0, bool* near)
+inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, const double t_min, double* s0, bool* near)
 {
     const double3 O = ray->world, D = ray->dir_exact;
     const double3 F = anchor.xyz - O;
     const double size = (CAST_FABS(F.x) + CAST_FABS(F.y)) + CAST_FABS(F.z);
     const double along = (F.x * D.x + F.y * D.y) + F.z * D.z - anchor.w - 0x1p-50 * size;
-    *s0 = along > 0 ? along : 0;
+    *s0 = along > t_min ? along : t_min;
     const double3 G = F - *s0 * D;
     const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
     *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
@@ -248,8 +250,9 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     CAST_LOAD_DIRECTIONS4(0)                                                        \
     CAST_LOAD_DIRECTIONS4(4)
 
-/* the setup shared by cast and occluded: ray r (origins: 3 doubles per ray; one origin for every
- * ray where origin_stride is 0) and its direction, set up by its group */
+/* the setup shared by cast, occluded and the hit counts: ray r (origins: 3 doubles per ray; one
+ * origin for every ray where origin_stride is 0), its direction, set up by its group, and the
+ * distances its hits lie between: t_min (starts, hits beyond it; 0: from the origin) and t_max */
 #define PYCLRAY_CAST_RAY                                                            \
     RayPacket ray;                                                                  \
     ray.world = load_double3(origins, r * origin_stride);                           \
@@ -258,7 +261,10 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     ray.a = direction->a;                                                           \
     ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
     const real ray_length = direction->ray_length;                                  \
-    const double t_max = limits[(size_t)r * (size_t)limit_stride];
+    const double t_max = limits[(size_t)r * (size_t)limit_stride];                  \
+    const double t_min = starts[(size_t)r * (size_t)start_stride];                  \
+    RayPacket start = ray;  /* the ray from its start, O + t_min D (t_min >= 0) */  \
+    if (t_min > 0) start.world = ray.world + t_min * ray.dir_exact;
 
 /* its box ray around the scene's anchor, with a margin over the rounding of its origin */
 #define PYCLRAY_CAST_BOX                                                            \

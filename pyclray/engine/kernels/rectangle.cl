@@ -44,4 +44,13 @@ inline vec3v rectangle_normal(SHAPE_SPACE const Rectangle* rectangle, const RayP
     return v3_splat(rectangle->world_normal);
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl): a flat shape's one */
+inline void rectangle_hits(SHAPE_SPACE const Rectangle* shape, const RayPacket* ray, realv* first, realv* second)
+{
+    *first = rectangle_hit(shape, ray);
+    *second = SPLAT(MISS);
+}
+#endif
+
 #endif

@@ -52,7 +52,12 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYC
     place.stride = cols;
     place.row_first = row0 > j0 ? row0 - j0 : 0;
     place.row_end = row0 + rows - j0 < PYCLRAY_PACKET_H ? row0 + rows - j0 : PYCLRAY_PACKET_H;
+#ifdef PYCLRAY_CAMERA_TABLE
+    intv in_field;  /* the lanes the lens reaches: the others are misses, whatever their ray meets */
+    const RayPacket ray = camera_table_rays(camera, camera_directions, i0, j0, &in_field);
+#else
     const RayPacket ray = camera_rays(camera, i0, j0);
+#endif
 #ifdef PYCLRAY_FRAMED
     const Frame view_frame = {frame_origin.xyz, frame_u.xyz, frame_v.xyz, frame_w.xyz};  /* the eye's */
 #endif
@@ -62,6 +67,9 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYC
     /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
     const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET_WIDE(wide_nodes, box, best, PYCLRAY_VISIT)
+#endif
+#ifdef PYCLRAY_CAMERA_TABLE
+    PYCLRAY_OUT_OF_FIELD(in_field)
 #endif
     PYCLRAY_WRITE_IMAGES(place, from, to)
 }

@@ -120,4 +120,20 @@ inline vec3v sphere_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* ra
     return world_from_basis(basis, v3_normalize(n));
 }
 
+#ifdef PYCLRAY_ALL_HITS
+/* Every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl): both roots where the
+ * ray crosses the sphere (disc > 0), none where it misses or only touches it (disc <= 0: a tangent
+ * ray counts 0, never 1); a root <= 0 (behind the origin, or from inside) is MISS. */
+inline void sphere_hits(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, realv* first, realv* second)
+{
+    const SphereTerms t = sphere_terms(sphere, ray);
+    const realv q = t.b + v_copysign(v_sqrt(t.disc), t.b);
+    const realv s_q = q / ray->a, s_c = t.c / q;
+    const realv near = v_min(s_q, s_c), far = v_max(s_q, s_c);
+    const intv crosses = t.disc > 0 && q != 0;
+    *first = crosses && near > 0 ? near : SPLAT(MISS);
+    *second = crosses && far > 0 ? far : SPLAT(MISS);
+}
+#endif
+
 #endif

@@ -21,4 +21,11 @@ inline vec3v spheres_normal(SHAPE_SPACE const Sphere* sphere, const RayPacket* r
     return sphere_normal(sphere, ray, basis);
 }
 
+#ifdef PYCLRAY_ALL_HITS
+inline void spheres_hits(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, realv* first, realv* second)
+{
+    sphere_hits(sphere, ray, first, second);
+}
+#endif
+
 #endif

@@ -28,7 +28,12 @@ from ..opencl.pocl_cpu import named_cpu
 from .signatures import SIGNATURES, c_defines
 
 # each query's kernel file (the kernel of that name is in it; its signature: engine/launch/signatures.py)
-QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl"}
+QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl", "count_hits": "allhits.cl",
+               "all_hits": "allhits.cl"}
+# the queries of rays given in world coordinates, one at a time (kernels/rays.h)
+RAY_QUERIES = ("cast", "occluded", "count_hits", "all_hits")
+# the queries of every hit along a ray (kernels/allhits.cl: each type's <type>_hits, the mesh's tie rule)
+HIT_QUERIES = ("count_hits", "all_hits")
 # the images that need the nearest hit's shape, not only its distance (PYCLRAY_TRACK_ID)
 WINNER_AOVS = ("normal", "id", "shaded", "primitive", "barycentric")
 
@@ -114,6 +119,10 @@ class Variant:
     # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
     # float64, engine/scene/indexed.py), framed or not
     indexed: bool = False
+    # render: the camera's rays read from a table (a lens or a panorama: kernels/camera.h,
+    # camera_table_rays) instead of the pinhole's image plane: "plane" (each ray's image-plane
+    # coordinates: every ray ahead of the eye's plane) or "sphere" (unit directions); None: a pinhole
+    camera_table: str | None = None
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
@@ -144,14 +153,18 @@ class Variant:
             lines.append("#define PYCLRAY_TRACK_ID 1")
         if self.precision == "fp64":
             lines.append("#define PYCLRAY_FP64 1")
-        if self.query in ("cast", "occluded"):
+        if self.query in HIT_QUERIES:
+            lines += ["#define PYCLRAY_ALL_HITS 1", "#define PYCLRAY_TIE_RULE 1"]
+            if self.query == "all_hits":
+                lines.append("#define PYCLRAY_STORE_HITS 1")
+        if self.query in RAY_QUERIES:
             lines.append("#define PYCLRAY_CAST 1")
             # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]
             # a work-item's rays traverse interleaved where leaves are blocks (a mesh's triangles:
             # kernels/cast.cl's cast_group, on PoCL's CPU device), one after the other elsewhere
-            if any(REGISTRY[t].cast_blocks for t in self.shape_types):
+            if self.query in ("cast",) + HIT_QUERIES and any(REGISTRY[t].cast_blocks for t in self.shape_types):
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
         if self.query == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")
@@ -165,6 +178,10 @@ class Variant:
         lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
+        if self.camera_table and self.query == "render":
+            lines.append("#define PYCLRAY_CAMERA_TABLE 1")
+            if self.camera_table == "plane":
+                lines.append("#define PYCLRAY_CAMERA_PLANE 1")
         if self.smooth and "shaded" in self.aovs:  # each type's shading normals: one more argument each
             lines.append("#define PYCLRAY_SMOOTH 1")
             lines.append(f"#define PYCLRAY_SMOOTH_TYPES(X) {listed(self.smooth)}")
@@ -186,6 +203,13 @@ class Variant:
                           f"#define PYCLRAY_NORMAL_{t}(shape, ray, basis, best, mine) {t}_normal(shape, ray, basis)",
                           f"#define PYCLRAY_PRIMITIVE_{t}(shape, k, best, mine) SPLAT_INT(PYCLRAY_PRIMITIVE_AT({t}, k))",
                           f"#define PYCLRAY_BARYCENTRIC_{t}(shape, ray, best, mine, u, v) {t}_barycentric(shape, ray, u, v)"]
+                if self.query == "cast":  # the winner's primitive and barycentrics (kernels/cast.cl)
+                    lines.append(f"#define PYCLRAY_CAST_PRIMITIVE_OF_{t}(shape, ray) ((shape)->primitive)")
+                    lines.append(f"#define PYCLRAY_CAST_BARYCENTRIC_OF_{t}(shape, ray, u, v) "
+                                 + (f"{t}_barycentric(shape, ray, u, v)" if REGISTRY[t].barycentric else "{}"))
+                if self.query in HIT_QUERIES:  # every hit of an entry (kernels/allhits.cl)
+                    lines.append(f"#define PYCLRAY_ALL_HITS_{t}(shape, ray, start, kind, k) "
+                                 f"ALLHITS_TWO({t}, shape, ray, start, kind, k)")
         return lines
 
     def mode(self, t: str) -> str:
@@ -214,7 +238,7 @@ class Variant:
         if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        cast = self.query in ("cast", "occluded")  # frames each shape on its ray's origin: the world entries too
+        cast = self.query in RAY_QUERIES  # frames each shape on its ray's origin: the world entries too
         framed = self.framed and self.query == "render"
         structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
                           + [x for s in shapes for x in s.kernel_structs]

@@ -50,6 +50,11 @@ def _framed(variant, _type=None) -> bool:
     return variant.framed
 
 
+def _camera_table(variant, _type=None) -> bool:
+    """A render whose camera's rays are a table of directions (kernels/camera.h: camera_table_rays)."""
+    return bool(variant.camera_table)
+
+
 def _asked(aov: str) -> Callable:
     """The condition: the image aov is asked for."""
     return lambda variant, _type=None: aov in variant.aovs
@@ -115,6 +120,8 @@ _FRAMED, _COPIED, _INDEXED = _mode("FRAMED"), _mode("COPIED"), _mode("INDEXED")
 
 RENDER = (
     Parameter("camera", "__global const Camera*"),
+    # a lens's or a panorama's rays: per packet, the lanes' coordinates and in-field flags (kernels/camera.h)
+    Parameter("camera_directions", "__global const real*", (_camera_table,)),
     # the window (col0, row0, cols, rows) and the tiles: 1 << tile_shift pixels square, tiles_x a row
     Parameter("col0", "const int"),
     Parameter("row0", "const int"),
@@ -187,6 +194,8 @@ RAYS = (
     Parameter("directions", "__global const double*"),
     Parameter("limits", "__global const double*"),
     Parameter("limit_stride", "const int"),
+    Parameter("starts", "__global const double*"),  # tmin: hits beyond it (one for every ray where start_stride is 0)
+    Parameter("start_stride", "const int"),
     Parameter("scene_anchor", "const double4"),
     Parameter("nodes", "__global const WideNode*", (_bounded,)),
     Parameter("refs", "__global const int*", (_bounded,)),
@@ -206,12 +215,27 @@ CAST = (
     _image("depth", "__global real*"),
     _image("normal", "__global real*"),
     _image("id", "__global int*"),
+    _image("primitive", "__global int*"),
+    _image("barycentric", "__global real*"),
 )
 
 OCCLUDED = (*RAYS, Parameter("occluded_out", "__global char*"))
 
+# count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
+# (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
+COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
+ALL_HITS = (
+    *RAYS,
+    Parameter("hit_counts", "__global int*"),
+    Parameter("hit_capacity", "const int"),
+    Parameter("hit_t", "__global double*"),
+    Parameter("hit_kind", "__global int*"),
+    Parameter("hit_k", "__global int*"),
+    Parameter("hit_sub", "__global int*"),
+)
+
 # each query's kernel (programs.QUERY_FILES) and its signature
-SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED}
+SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED, "count_hits": COUNT_HITS, "all_hits": ALL_HITS}
 
 
 def _templates(variant, type_: str) -> dict:

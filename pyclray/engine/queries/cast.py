@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ...model.aovs import TABLE
 from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
+from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer, run_kernel
@@ -36,9 +38,35 @@ def _first_bad(name: str, bad: np.ndarray, rows: np.ndarray, what: str):
     raise RequestError(f"{name}: {where} {what}: {rows[index]}")
 
 
-def _cast_rays(origins, directions, tmax, codes: bool = True):
-    """(origins (M, 3), directions (N, 3), tmax, leading shape, extent): float64 arrays of the rays as
-    given, flattened, checked; M is N, or 1 for one origin shared by every ray; extent: the origins'
+def _distances(name: str, value, shape: tuple, default: float, good, expected: str) -> np.ndarray:
+    """tmin or tmax as float64, (1,) for one number (None: default), else flattened from the rays'
+    leading shape; a value that is not good is a RequestError naming its index."""
+    if value is None:
+        return np.full(1, default)
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RequestError(f"{name}: expected a number or an array of numbers") from None
+    if array.ndim == 0:
+        if not good(array):
+            raise RequestError(f"{name}: expected {expected}, got {float(array)}")
+        return array.reshape(1)
+    try:
+        array = np.broadcast_to(array, shape)
+    except ValueError:
+        raise RequestError(f"{name}: expected one number or the shape {shape} of the rays, got {array.shape}") from None
+    bad = ~good(array)
+    if bad.any():
+        index = np.unravel_index(int(np.argmax(bad)), bad.shape)
+        where = str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index))
+        raise RequestError(f"{name}: expected {expected}, got {array[index]} at row {where}")
+    return np.ascontiguousarray(array).reshape(-1)
+
+
+def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None):
+    """(origins (M, 3), directions (N, 3), tmin, tmax, leading shape, extent): float64 arrays of the rays as
+    given, flattened, checked; M is N, or 1 for one origin shared by every ray; tmin and tmax (1,) for
+    one number, else (N,); extent: the origins'
     (lo, hi) and the rays' direction codes (None unless codes: a batch that is not ordered) where a
     large batch's compiled scan found them (cast_order.scan_codes), else None. The kernel normalizes the
     directions (scaled by a power of two near their largest component first, so that neither a tiny
@@ -66,22 +94,9 @@ def _cast_rays(origins, directions, tmax, codes: bool = True):
         flat = directions.reshape(-1, 3)
         if ((flat[:, 0] == 0) & (flat[:, 1] == 0) & (flat[:, 2] == 0)).any():
             _first_bad("directions", ~directions.any(axis=-1), directions, "has zero length")
-    if tmax is None:
-        tmax = np.full(1, np.inf)
-    else:
-        try:
-            tmax = np.asarray(tmax, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise RequestError("tmax: expected a number or an array of numbers") from None
-        try:
-            tmax = np.broadcast_to(tmax, shape)
-        except ValueError:
-            raise RequestError(f"tmax: expected one number or the shape {shape} of the rays, got {tmax.shape}") from None
-        bad = ~(tmax > 0)
-        if bad.any():
-            raise RequestError(f"tmax: expected numbers > 0 (inf for no limit), got {tmax[np.unravel_index(int(np.argmax(bad)), bad.shape)]}")
-        tmax = tmax.reshape(-1) if tmax.ndim else tmax.reshape(1)
-    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmax, shape, extent
+    tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+    tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    return origins.reshape(-1, 3), directions.reshape(-1, 3), tmin, tmax, shape, extent
 
 
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
@@ -123,12 +138,13 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
-def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
-    """(arguments by name, anchor, size, bytes): the BVH around the scene's anchor (its root box's
+def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict]:
+    """(arguments by name, anchor, size, bytes, block lanes): the BVH around the scene's anchor (its root box's
     centre), its refs and the entries' anchors, and per packed kind its buffer (each bounded entry
     relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
     They depend on the shapes only, never on the rays: a scene handle makes them at its first cast
-    and keeps them until its shapes change."""
+    and keeps them until its shapes change. block lanes: per cast_blocks type, which entry each
+    block's lane is (engine/queries/cast_blocks.py: regroup), for the hit queries."""
     ctx, precision, shape_types = prepared.ctx, prepared.precision, prepared.types
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
@@ -141,7 +157,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
     args = {}
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
-    blocks = {}
+    blocks, block_lanes = {}, {}
     if tree.types:
         nodes = tree.nodes(anchor[:3])
         if any(capability(prepared.kinds[name].cls, "cast_blocks") for name in tree.types):  # a leaf's triangles of a mesh at once
@@ -164,7 +180,8 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
     for name in shape_types:
         kind = prepared.kinds[name]
         if name in blocks:  # its blocks in place of its world entries, and no packed entries (kernels/mesh.cl)
-            data, count = blocks[name]
+            data, count, lanes = blocks[name]
+            block_lanes[name] = lanes
             args.update({f"{name}s": input_buffer(ctx, np.zeros(1, layout(kind.cls.struct, precision).dtype)),
                          f"{name}_worlds": input_buffer(ctx, data), **shared_arguments(name, kind.shared),
                          f"n_{name}s": np.int32(count)})
@@ -184,7 +201,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int]:
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
                      **shared_arguments(name, kind.shared), f"n_{name}s": np.int32(kind.count)})
     held = sum(a.size for a in args.values() if isinstance(a, cl.MemoryObjectHolder))
-    return args, anchor, size, held
+    return args, anchor, size, held, block_lanes
 
 
 def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
@@ -216,63 +233,135 @@ def check_cast_device(ctx) -> None:
         )
 
 
-def run_cast(tracer, query: str, origins, directions, tmax, aovs):
+class RayBatch:
+    """A batch of rays checked and set up for a kernel of kernels/rays.h on a scene handle: args (the
+    kernel's arguments by name but for its results: engine/launch/signatures.py's RAYS and the
+    scene's cast inputs), shape (the rays' leading shape), count, sizes (global, local). Batches of
+    COHERENT_FROM rays or more are traced in a coherent order where _orders says so, or always with
+    order_always."""
+
+    def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False):
+        ctx, precision = tracer.ctx, tracer.precision
+        real = REAL[precision]
+        inputs = tracer.cast_inputs()
+        args, anchor, scene_size, scene_bytes = inputs[:4]
+        self.block_lanes = inputs[4]
+        # the scan of a large batch makes its codes only where it is ordered (order_always: every large
+        # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
+        orders = order_always or _orders(ctx, scene_bytes)
+        origins, directions, tmin, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders, tmin=tmin)
+        count = len(directions)
+        ordered = orders and count >= COHERENT_FROM
+        # the distances the kernel squares, from a shape's anchor, must stay below the square root of
+        # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
+        bound = np.sqrt(np.finfo(real).max) / 4
+        direction_codes = None
+        if extent is not None:
+            lo, hi, direction_codes = extent
+        else:
+            lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
+            reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
+        if not reach <= bound:  # the row, looked for only now
+            with np.errstate(over="ignore", invalid="ignore"):
+                reach = np.abs(origins - anchor[:3]).max(axis=-1)
+            row = int(np.argmax(~(reach <= bound)))
+            raise RequestError(
+                f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
+                "(their distances overflow)"
+            )
+        self.origins, self.directions, self.tmin, self.tmax = origins, directions, tmin, tmax
+        self.shape, self.count = shape, count
+        if count == 0:
+            return
+        if ordered:  # numba's code, imported for large batches only
+            from .ray_order import coherent_order
+
+            order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
+        else:
+            order = np.zeros(1, np.int32)
+        # the kernel's arguments by name (engine/launch/signatures.py: the rays), but for the results
+        self.args = {"n_rays": np.int32(count), "order": _ray_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
+                     "origins": _ray_buffer(ctx, origins), "origin_stride": np.int32(1 if len(origins) > 1 else 0),
+                     "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),
+                     "limit_stride": np.int32(1 if len(tmax) > 1 else 0), "starts": _ray_buffer(ctx, tmin),
+                     "start_stride": np.int32(1 if len(tmin) > 1 else 0),
+                     "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
+        groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
+        self.sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
+
+    def unit_directions(self) -> np.ndarray:
+        """(N, 3) float64: each direction over its length (as the kernel scales it: kernels/rays.h)."""
+        d = self.directions
+        scale = np.exp2(-np.floor(np.log2(np.abs(d).max(axis=1))))[:, None]
+        scaled = d * scale
+        return scaled / np.sqrt((scaled * scaled).sum(axis=1))[:, None]
+
+    def positions(self, rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(M, 3) float64: the points at distances t along rays rows (origin + t times the unit direction)."""
+        origins = self.origins[rows] if len(self.origins) > 1 else np.broadcast_to(self.origins, (len(rows), 3))
+        return origins + t[:, None] * self.unit_directions()[rows]
+
+
+def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
     """The nearest hit of each ray ("cast": a Frame of the aovs) or whether any ("occluded": a bool
     array), on a scene handle (engine/tracer.py) whose request and device were checked."""
     ctx, precision = tracer.ctx, tracer.precision
     real = REAL[precision]
-    args, anchor, scene_size, scene_bytes = tracer.cast_inputs()
-    orders = _orders(ctx, scene_bytes)  # the scan of a large batch makes its codes only then
-    origins, directions, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders)
-    count = len(directions)
-    ordered = orders and count >= COHERENT_FROM
-    # the distances the kernel squares, from a shape's anchor, must stay below the square root of
-    # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
-    bound = np.sqrt(np.finfo(real).max) / 4
-    direction_codes = None
-    if extent is not None:
-        lo, hi, direction_codes = extent
-    else:
-        lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
-    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
-        reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
-    if not reach <= bound:  # the row, looked for only now
-        with np.errstate(over="ignore", invalid="ignore"):
-            reach = np.abs(origins - anchor[:3]).max(axis=-1)
-        row = int(np.argmax(~(reach <= bound)))
-        raise RequestError(
-            f"origins: row {row} ({origins[row]}) is too far from the scene's shapes for {precision} "
-            "(their distances overflow)"
-        )
-    if count == 0:
-        if query == "occluded":
-            return np.zeros(shape, bool)
-        empty = {"depth": np.empty(shape, real), "normal": np.empty(shape + (3,), real), "id": np.empty(shape, np.int32)}
-        return Frame({k: empty[k] for k in aovs}, precision=precision, device=ctx.device.name.strip())
-    if ordered:  # numba's code, imported for large batches only
-        from .ray_order import coherent_order
-
-        order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
-    else:
-        order = np.zeros(1, np.int32)
-    # the kernel's arguments by name (engine/launch/signatures.py: cast's and occluded's rays), but for the results
-    rays = {"n_rays": np.int32(count), "order": _ray_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
-            "origins": _ray_buffer(ctx, origins), "origin_stride": np.int32(1 if len(origins) > 1 else 0),
-            "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),
-            "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
-            "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
-    groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
-    sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
+    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    shape, count = batch.shape, batch.count
     if query == "occluded":
+        if count == 0:
+            return np.zeros(shape, bool)
         variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
-        _run_into(ctx, variant, sizes, rays, out)
+        _run_into(ctx, variant, batch.sizes, batch.args, out)
         return out.reshape(shape)
-    variant = Variant("cast", tracer.prepared.types, aovs, precision)
-    results = run_kernel(ctx, variant, rays, sizes[0], count, aovs, precision, (count,), tracer.outputs,
-                         local_size=sizes[1])
-    results = {k: v.reshape(shape + v.shape[1:]) for k, v in results.items()}
-    return Frame(results, precision=precision, device=ctx.device.name.strip())
+    # what the kernel makes (in the table's order): label comes from id, position from depth (on the host)
+    needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
+    kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
+    if count == 0:
+        results = {k: TABLE[k].empty((0,), precision) for k in kernel_aovs}
+    else:
+        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
+        results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
+                             tracer.outputs, local_size=batch.sizes[1])
+    if "primitive" in results:
+        results["primitive"] = _block_primitives(tracer, batch, results["primitive"])
+    out = {}
+    for name in aovs:
+        if name in results:
+            out[name] = results[name]
+        elif name == "label":
+            out[name] = label_of(tracer, results["id"])
+        elif name == "position":
+            depth = results["depth"].astype(np.float64)
+            hit = np.isfinite(depth)
+            position = np.zeros((count, 3), real)
+            rows = np.flatnonzero(hit)
+            position[rows] = batch.positions(rows, depth[rows])
+            out[name] = position
+    out = {k: v.reshape(shape + v.shape[1:]) for k, v in out.items()}
+    return Frame(out, precision=precision, device=ctx.device.name.strip())
+
+
+def _block_primitives(tracer, batch, primitive: np.ndarray) -> np.ndarray:
+    """The kernel's primitives with each block's key (-2 - key: kernels/cast.cl) turned into its
+    triangle's index in its mesh (the block lanes' entries: RayBatch.block_lanes)."""
+    keyed = primitive <= -2
+    if not keyed.any():
+        return primitive
+    (name, (places, first, kept)), = batch.block_lanes.items()  # one type is cast in blocks: meshes
+    key = -2 - primitive[keyed].astype(np.int64)
+    entry = kept[first[np.searchsorted(places, key >> 3)] + (key & 7)]
+    primitive = primitive.copy()
+    primitive[keyed] = np.asarray(tracer.prepared.kinds[name].primitives)[entry]
+    return primitive
+
+
+def label_of(tracer, ids: np.ndarray) -> np.ndarray:
+    """int32: each id's shape's label (-1 for a miss and for a shape without one)."""
+    return np.append(labels_of(tracer.shapes), np.int32(-1))[ids]
 
 
 def _ray_buffer(ctx, array: np.ndarray):

@@ -30,7 +30,8 @@ def leaves(tree) -> tuple[np.ndarray, np.ndarray]:
 def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
     """(refs, anchors, per type): cast's refs and anchors (engine/launch/signatures.py: the cast kernel's refs and anchors)
     with each leaf's entries of one shape of a cast_blocks type grouped into one ref; per bounded
-    type (by name) its blocks array and number of refs where it is a cast_blocks type, else its
+    type (by name) its blocks array, number of refs and lanes' entries (places, first, kept: the
+    entries of block i at place places[i] are kept[first[i]:first[i + 1]]) where it is a cast_blocks type, else its
     entries' anchors (in its leaf order); the wide nodes' leaf codes (nodes["child"]) are
     renumbered in place. bvh: the scene's SceneBVH; kinds, worlds: the prepared kinds and their
     world entries (in leaf order) by name."""
@@ -86,7 +87,14 @@ def regroup(bvh, shape_types, kinds, worlds, nodes: np.ndarray):
             raise RequestError(f"the scene's {name}es are too many for cast's blocks ({len(entries):,} entries)")
         new_refs[runs] = places * 16 + 1 + list(shape_types).index(name)
         anchors[runs] = cast_anchors[bvh.leaf_index[head[runs]]]
-        blocks[name] = (data, len(runs))
+        # which entry each block's lane is (the hit queries' primitives and ids, engine/queries/hits.py):
+        # block i at 64-byte place places[i], its lanes the entries kept[first[i]:first[i + 1]] (the
+        # zero-area ones left out, as pack_cast_blocks leaves them)
+        valid = corners[entries, 0] >= 0
+        block_of = np.repeat(np.arange(len(runs)), lengths)
+        kept_count = np.bincount(block_of[valid], minlength=len(runs))
+        lanes = (np.asarray(places, np.int64), np.concatenate([[0], np.cumsum(kept_count)]), entries[valid])
+        blocks[name] = (data, len(runs), lanes)
     # the wide tree's leaves: (first, count) of positions -> of the new refs
     run_leaf = leaf_sorted[run_start]
     new_first = np.searchsorted(run_leaf, np.arange(len(first)))

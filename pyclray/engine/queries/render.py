@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...model.aovs import RENDER_AOVS, kernel_aovs
-from ...model.camera import Camera
+from ...model.cameras import CAMERAS, CameraModel
 from ...model.errors import PyclrayWarning, RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
@@ -43,6 +43,11 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
     flow (engine/queries/motion.py; its camera None: the view's)."""
     ctx, precision = tracer.ctx, tracer.precision
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    if "zdepth" in asked and not view.camera.has_zdepth:
+        raise RequestError(f"aovs: zdepth is the depth along the optical axis, which the {view.camera.model} camera "
+                           "model has not; ask for depth")
+    if not view.camera.rays_from_eye:  # rays from many origins (orthographic): cast, not the camera packets
+        return start_cast_view(tracer, view, asked, window)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     prepared = tracer.prepared
     state = tracer.view_state(view)
@@ -55,12 +60,14 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
     shadows = "shaded" in aovs and view.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
-                      framed=prepared.framed, indexed=prepared.indexed)
+                      framed=prepared.framed, indexed=prepared.indexed, camera_table=inputs.table_format)
     tile = tiles.TILE
     # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
             "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
             "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
+    if inputs.table is not None:  # in this program's packets
+        args["camera_directions"] = inputs.directions_for(lanes)
     if "position" in aovs:
         args["eye_high"], args["eye_low"] = inputs.eye_parts()
     if "shaded" in aovs:
@@ -124,6 +131,47 @@ def _behind_the_camera(camera, prepared) -> bool:
         return bool((terms.sum(axis=1) <= 0).all())
 
 
+# the images a render by casting (a camera whose rays start apart) makes: cast's own, and those
+# derived from them on the host
+CAST_VIEW_AOVS = ("depth", "normal", "id", "zdepth", "position", "label")
+
+
+def start_cast_view(tracer, view: Scene, asked, window):
+    """A render of a camera whose rays do not share the eye (orthographic): its float64 pixel-centre
+    rays (CameraModel.rays) cast on the handle (the same exact tests as any cast ray), the images
+    assembled: depth, normal, id from cast; zdepth (depth along the view direction: the same, the
+    rays being parallel to it), position (origin + depth dir, float64) and label on the host."""
+    other = [aov for aov in asked if aov not in CAST_VIEW_AOVS]
+    if other:
+        raise RequestError(f"aovs: the {view.camera.model} camera model renders {', '.join(CAST_VIEW_AOVS)}; "
+                           f"not {', '.join(other)}")
+    col0, row0, cols, rows = _window(view, window)
+    state = tracer.view_state(view)
+    state.check_renderable(view, tracer.precision, tracer.prepared)
+    check_images_fit(asked, tracer.precision, cols, rows)
+    origins, directions = view.camera.rays(view.image.width, view.image.height, (col0, row0, cols, rows))
+    cast_aovs = tuple(dict.fromkeys(("depth",) + tuple("id" if a == "label" else a for a in asked
+                                                       if a in ("normal", "id", "label"))))
+    hits = tracer.cast(origins.reshape(-1, 3), directions.reshape(-1, 3), aovs=cast_aovs)
+    images = {}
+    depth = hits["depth"].reshape(rows, cols)
+    for aov in asked:
+        if aov in ("depth", "zdepth"):
+            images[aov] = depth.copy() if aov == "zdepth" else depth
+        elif aov in ("normal", "id"):
+            images[aov] = hits[aov].reshape((rows, cols) + hits[aov].shape[1:])
+        elif aov == "position":
+            hit = np.isfinite(depth)[..., None]
+            points = origins + np.where(hit, depth[..., None], 0.0) * directions
+            images[aov] = np.where(hit, points, 0.0).astype(depth.dtype)
+    if "label" in asked and "id" not in asked:
+        images["id"] = hits["id"].reshape(rows, cols)
+    images = with_labels(view, images, asked)
+    frame = Frame(images, precision=tracer.precision, device=tracer.ctx.device.name.strip(),
+                  view=(view.camera, view.image.width, view.image.height, col0, row0))
+    return lambda: frame
+
+
 def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_group: int):
     """(global size, local size or None) of the render kernel over a window: one packet of
     programs.packet_shape(lanes) pixels per work-item, packets aligned to multiples of that shape in
@@ -139,6 +187,7 @@ def launch_size(lanes: int, col0: int, row0: int, cols: int, rows: int, max_grou
 
 def with_camera(scene: Scene, camera) -> Scene:
     """The scene seen from another camera (its shapes tuple kept: the prepared scene serves it)."""
-    if not isinstance(camera, Camera):
-        raise RequestError(f"camera: expected a pyclray.Camera, got {type(camera).__name__}")
+    if not isinstance(camera, CameraModel):
+        models = ", ".join(f"pyclray.{cls.__name__}" for cls in CAMERAS.values())  # pyclray.Camera first
+        raise RequestError(f"camera: expected a {models}, got {type(camera).__name__}")
     return replace(scene, camera=camera)

@@ -19,9 +19,10 @@ class Frame(dict):
 
     A render's frame also holds its camera as the vision tools take it: ``intrinsics`` (K, 3x3, in
     pixels of these images: a window's principal point is shifted by its corner) and ``pose`` (4x4
-    camera-to-world), OpenCV's convention (x right, y down, z forward), so that
-    pose @ [depth * normalize(K^-1 [i + 0.5, j + 0.5, 1]), 1] is pixel (j, i)'s hit point; None
-    for a cast's.
+    camera-to-world), OpenCV's convention (x right, y down, z forward; pixel centres at integer
+    coordinates), so that pose @ [depth * normalize(K^-1 [i, j, 1]), 1] is pixel (j, i)'s hit point
+    (a pinhole's; a lens's K comes with its distortion, the camera's); None for a cast's, and K None
+    for a camera model without one (orthographic, equirectangular).
     """
 
     def __init__(self, arrays, *, precision: str, device: str, intrinsics=None, pose=None, view=None):
@@ -89,6 +90,7 @@ def frame_camera(camera, width: int, height: int, col0: int = 0, row0: int = 0) 
     """The intrinsics and pose of a Frame (see Frame) of the window of a width x height image from
     column col0 and row row0 on."""
     K = camera.intrinsics(width, height)
-    K[0, 2] -= col0
-    K[1, 2] -= row0
+    if K is not None:  # (None: a model without pinhole intrinsics)
+        K[0, 2] -= col0
+        K[1, 2] -= row0
     return {"intrinsics": K, "pose": camera.pose()}

@@ -345,3 +345,9 @@ class PreparedScene(Refit):
         """(start, index) of the kind's entries for each screen tile of this view (tiles.tile_lists)."""
         spheres = kind.cls.spheres_of(kind.world) if kind.cls.bounded else None
         return tiles.tile_lists(kind.cls.bounded, spheres, kind.count, eye, rows, plane, width, height)
+
+    def tile_lists_in_rects(self, kind: Kind, eye, rows, rects, tiles_x, tiles_y):
+        """(start, index) of the kind's entries for each tile of a view whose camera's rays are a
+        table (a lens, a panorama), its tiles' rays bounded by rects (tiles.table_rects)."""
+        spheres = kind.cls.spheres_of(kind.world) if kind.cls.bounded else None
+        return tiles.tile_lists_in_rects(kind.cls.bounded, spheres, kind.count, eye, rows, rects, tiles_x, tiles_y)

@@ -11,6 +11,8 @@ import pyopencl as cl
 
 from ...model.errors import RequestError, SceneError
 from ...model.scene import Scene, check_renderable, check_shape_count
+from ..bvh import tiles
+from ..launch.programs import lanes_for, packet_shape
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import shared_arguments
 from . import lighting
@@ -38,13 +40,10 @@ def cheaper_acceleration(scene: Scene, prepared: PreparedScene) -> str:
     """Tile lists while they average at most TILE_LIST_MAX shapes a tile, else the BVH."""
     if prepared.bounded > TILES_MAX_SHAPES:
         return "bvh"
-    width, height = scene.image.width, scene.image.height
-    rows = scene.camera.basis()
-    plane = scene.camera.image_plane(width, height)
     pairs, tiles = 0, 1
     for kind in prepared.kinds.values():
         if kind.cls.bounded:
-            start, _ = prepared.tile_lists(kind, scene.camera.eye, rows, plane, width, height)
+            start, _ = view_tile_lists(prepared, kind, scene)
             pairs += int(start[-1])
             tiles = len(start) - 1
     return "tiles" if pairs <= TILE_LIST_MAX * tiles else "bvh"
@@ -58,6 +57,55 @@ def check_entry_count(prepared: PreparedScene) -> None:
         if kind.count > scene_model.MAX_SHAPES:
             raise SceneError(f"{kind.count} {kind.name} primitives; pyclray renders at most {scene_model.MAX_SHAPES} of a "
                              "type (the kernels index one by 16 x its position + its type in 32 bits)")
+
+
+def view_tile_lists(prepared: PreparedScene, kind, scene: Scene):
+    """(start, index) of the kind's entries for each tile of this view (engine/bvh/tiles.py): culled
+    by the pinhole's image plane, or for a camera whose rays are a table (a lens, a panorama) by the
+    rectangles its tiles' rays span on that plane (tiles.table_rects, once per camera and size)."""
+    width, height = scene.image.width, scene.image.height
+    camera = scene.camera
+    table = camera.frame_directions(width, height)
+    if table is None:
+        return prepared.tile_lists(kind, camera.eye, camera.basis(), camera.image_plane(width, height), width, height)
+    rects = table.derived.get("tile_rects")
+    if rects is None:  # (kept with the table: every view of the lens at this size shares it)
+        rects = table.derived["tile_rects"] = tiles.table_rects(*table)
+    return prepared.tile_lists_in_rects(kind, camera.eye, camera.basis(), rects, -(-width // tiles.TILE),
+                                        -(-height // tiles.TILE))
+
+
+def table_format(directions: np.ndarray, valid: np.ndarray) -> str:
+    """"plane" where every ray in the field is ahead of the eye's plane (a lens of a perspective
+    camera: each ray as its image-plane coordinates, two numbers a pixel), else "sphere" (unit
+    directions, three: a fisheye beyond 90 degrees, a panorama)."""
+    return "plane" if np.all(directions[..., 2][valid] > 0) else "sphere"
+
+
+def packet_table(directions: np.ndarray, valid: np.ndarray, lanes: int, real, form: str) -> np.ndarray:
+    """A camera's table of rays (kernels/camera.h: camera_table_rays) for packets of this many lanes,
+    in packet order (a packet's lanes contiguous, lane l = row * columns + column): per packet, the
+    lanes' x / z, then y / z ("plane"; the kernel normalizes (x / z, y / z, 1) as a pinhole's ray),
+    or x, y, z ("sphere"), then one number whose bit l says lane l is in the field (pixels past the
+    image's edge are not). Each coordinate is the float64 ray's, rounded once."""
+    columns, rows = packet_shape(lanes)
+    height, width = valid.shape
+    packets_x, packets_y = -(-width // columns), -(-height // rows)
+    padded = np.zeros((packets_y * rows, packets_x * columns, 3))
+    padded[..., 2] = 1.0  # a ray (forward) for the padding's lanes and the misses
+    inside = np.zeros(padded.shape[:2], bool)
+    padded[:height, :width] = np.where(valid[..., None], directions, [0.0, 0.0, 1.0])
+    inside[:height, :width] = valid
+    if form == "plane":
+        padded = padded[..., :2] / padded[..., 2:]
+    count = padded.shape[-1]
+    # (py, row, px, column, channel) -> (py, px, channel, row, column)
+    values = padded.reshape(packets_y, rows, packets_x, columns, count).transpose(0, 2, 4, 1, 3).reshape(
+        packets_y, packets_x, count * lanes)
+    bits = (inside.reshape(packets_y, rows, packets_x, columns).transpose(0, 2, 1, 3).reshape(packets_y, packets_x, lanes)
+            * (1 << np.arange(lanes))).sum(axis=-1)
+    table = np.concatenate([values, bits[..., None].astype(np.float64)], axis=-1)
+    return np.ascontiguousarray(table, dtype=real).reshape(-1)
 
 
 class ViewState:
@@ -116,20 +164,39 @@ class ViewInputs:
         width, height = scene.image.width, scene.image.height
         self.rows = scene.camera.basis()
         self.eye = np.asarray(scene.camera.eye, np.float64)
-        plane = scene.camera.image_plane(width, height)
         self.camera = input_buffer(ctx, scene.camera.pack(width, height, precision, self.eye - prepared.anchor))
         self.tiles = {}
+        # a lens's or panorama's rays (kernels/camera.h: camera_table_rays): the camera's float64 table,
+        # and its device buffer in the packet order of a lane count (directions_for)
+        self.table = scene.camera.frame_directions(width, height)
+        self.table_format = None if self.table is None else table_format(*self.table)
+        self.directions = None
         if acceleration == "tiles":
             for kind in prepared.kinds.values():
-                start, index = prepared.tile_lists(kind, self.eye, self.rows, plane, width, height)
+                start, index = view_tile_lists(prepared, kind, scene)
                 self.tiles[kind.name] = (input_buffer(ctx, start), input_buffer(ctx, index))
         # what the lights are packed from, when asked (not the scene, whose shapes may move on)
         self._made = (ctx, scene.camera, scene.lights, scene.shading, precision)
         self._lighting = self._eye_parts = None
+        if self.table is not None:
+            self.directions_for(lanes_for(ctx.device, precision))
+
+    def directions_for(self, lanes: int):
+        """The device buffer of the camera's table of rays in packets of this many lanes (made again
+        only if the lanes change: PYCLRAY_LANES between renders of one handle); None for a pinhole."""
+        if self.table is None:
+            return None
+        if self.directions is None or self.directions_lanes != lanes:
+            ctx, precision = self._made[0], self._made[-1]
+            self.directions = input_buffer(ctx, packet_table(*self.table, lanes, REAL[precision], self.table_format))
+            self.directions_lanes = lanes
+        return self.directions
 
     def nbytes(self) -> int:
         """The bytes of its device buffers (the camera, tile lists, lights)."""
         buffers = [self.camera, *(b for pair in self.tiles.values() for b in pair)]
+        if self.directions is not None:
+            buffers.append(self.directions)
         if self._lighting is not None:
             buffers.append(self._lighting["lights"])
         return sum(b.size for b in buffers)

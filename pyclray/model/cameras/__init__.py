@@ -5,6 +5,9 @@ A new model is one module here, its line in CAMERAS, its OpenCL ray function and
 from __future__ import annotations
 
 from .base import MAX_IMAGE_SIDE, CameraModel, LookAt, MitsubaSensor
+from .equirectangular import Equirectangular
+from .fisheye import Fisheye
+from .orthographic import Orthographic
 from .perspective import Camera, ImagePlane
 
 DEFAULT_MODEL = "perspective"  # a [camera] table without a model key
@@ -12,7 +15,10 @@ DEFAULT_MODEL = "perspective"  # a [camera] table without a model key
 # model name -> its class
 CAMERAS: dict[str, type[CameraModel]] = {
     "perspective": Camera,
+    "fisheye": Fisheye,
+    "orthographic": Orthographic,
+    "equirectangular": Equirectangular,
 }
 
-__all__ = ["CAMERAS", "DEFAULT_MODEL", "MAX_IMAGE_SIDE", "Camera", "CameraModel", "ImagePlane", "LookAt",
-           "MitsubaSensor"]
+__all__ = ["CAMERAS", "DEFAULT_MODEL", "MAX_IMAGE_SIDE", "Camera", "CameraModel", "Equirectangular", "Fisheye",
+           "ImagePlane", "LookAt", "MitsubaSensor", "Orthographic"]

@@ -8,7 +8,7 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import RequestError, SceneError
 from ..layout import Struct
 
 MAX_IMAGE_SIDE = 1 << 16
@@ -43,6 +43,27 @@ class MitsubaSensor:
     height: int
     to_world: np.ndarray | None = None
     look_at: LookAt | None = None
+
+
+class RayTable:
+    """A camera's rays where they are not a pinhole's image plane (CameraModel.frame_directions):
+    ``directions`` (height, width, 3) unit float64 in the camera's frame (u left, v up, w forward),
+    ``valid`` (height, width): the pixels in the model's field; both read-only. It unpacks as
+    (directions, valid). ``derived`` keeps what the engine makes of it once (its tiles' bounds), for
+    as long as the table is kept."""
+
+    __slots__ = ("directions", "valid", "derived")
+
+    def __init__(self, directions: np.ndarray, valid: np.ndarray):
+        directions.setflags(write=False)
+        valid.setflags(write=False)
+        self.directions, self.valid, self.derived = directions, valid, {}
+
+    def __iter__(self):
+        return iter((self.directions, self.valid))
+
+    def __getitem__(self, index):
+        return (self.directions, self.valid)[index]
 
 
 class CameraModel(ABC):
@@ -87,13 +108,59 @@ class CameraModel(ABC):
         width x height image, or of the window (x0, y0, columns, rows) of it (render's window):
         the rays the kernel casts, computed in float64 for the oracle and the checks."""
 
-    @abstractmethod
-    def intrinsics(self, width: int, height: int) -> np.ndarray:
-        """K (3x3 float64) of the pixel-centre rays at this image size, OpenCV's convention."""
+    # every pixel's ray starts at the eye (render's packets share their origin); a model whose rays
+    # start elsewhere (orthographic) is rendered by casting its rays (engine/queries/render.py)
+    rays_from_eye: ClassVar[bool] = True
+    # the depth along the optical axis (zdepth) means something for this model
+    has_zdepth: ClassVar[bool] = True
+
+    def intrinsics(self, width: int, height: int) -> np.ndarray | None:
+        """K (3x3 float64) of the pixel-centre rays at this image size, OpenCV's convention (pixel
+        centres at integer coordinates); None for a model without one (orthographic, panoramas)."""
+        return None
 
     @abstractmethod
-    def pose(self) -> np.ndarray:
-        """The camera-to-world pose (4x4 float64), OpenCV's convention (x right, y down, z forward)."""
+    def basis(self) -> np.ndarray:
+        """Rows u (left), v (up), w (forward): the camera's axes in world coordinates, float64."""
+
+    def frame_directions(self, width: int, height: int):
+        """(directions, valid) of a model whose rays are not a pinhole's image plane (a lens, a
+        panorama): unit directions (height, width, 3) in the camera's frame (u, v, w components),
+        float64, and whether each pixel is in the model's field (a miss where not); None for a
+        pinhole (the kernel computes those rays itself: kernels/camera.h)."""
+        return None
+
+    def pose(self, convention: str = "opencv") -> np.ndarray:
+        """The camera-to-world pose (4x4 float64): its rotation's columns the camera's axes in world
+        coordinates, its translation the eye. convention "opencv" (the default; also Open3D's, BOP's
+        and COLMAP's axes): x right, y down, z forward; "opengl" (Blender, pyrender, NeRF): x right,
+        y up, z backward."""
+        u, v, w = self.basis()
+        pose = np.eye(4)
+        if convention == "opencv":
+            pose[:3, 0], pose[:3, 1], pose[:3, 2] = -u, -v, w
+        elif convention == "opengl":
+            pose[:3, 0], pose[:3, 1], pose[:3, 2] = -u, v, -w
+        else:
+            raise RequestError(f'convention: expected "opencv" or "opengl", got {convention!r}')
+        pose[:3, 3] = self.eye
+        return pose
+
+    def extrinsic(self) -> np.ndarray:
+        """The world-to-camera matrix (4x4 float64), OpenCV's axes: the inverse of pose(), as
+        Open3D (its ``extrinsic``), BOP (``cam_R_w2c``, ``cam_t_w2c``) and OpenCV (rvec, tvec) take it."""
+        pose = self.pose()
+        extrinsic = np.eye(4)
+        extrinsic[:3, :3] = pose[:3, :3].T
+        extrinsic[:3, 3] = -pose[:3, :3].T @ pose[:3, 3]
+        return extrinsic
+
+    def mitsuba_ray_starts(self, width: int, height: int, near: float) -> np.ndarray:
+        """How far along each pixel's ray (from its origin here) Mitsuba's sensor starts it, given its
+        near clip (height, width): a pinhole's starts on the near plane, near / cos of the ray's
+        angle to the optical axis."""
+        _, directions = self.rays(width, height)
+        return near / (directions @ self.basis()[2])
 
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """This camera as Mitsuba's sensor of a width x height film; a SceneError where Mitsuba has none."""

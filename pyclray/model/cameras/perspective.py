@@ -9,8 +9,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import SceneError, _shown, integer, no_unknown_keys, norm3, number, vector3
+from ..errors import SceneError, _shown, integer, no_unknown_keys, norm3, number, text, vector3
 from ..layout import Struct, layout
+from . import lens
 from .base import MAX_IMAGE_SIDE, CameraModel, LookAt, MitsubaSensor
 
 # Below this sine of the angle between up and the view direction the image's roll is decided by
@@ -34,9 +35,14 @@ MAX_PLANE_REACH = 1e16
 MAX_PRINCIPAL_POINT = 2.0**28
 
 LOOK_AT_KEYS = ("target", "up", "fov", "fov_axis")  # the fields of each kind of camera
-INTRINSICS_KEYS = ("K", "rotation", "size")
+INTRINSICS_KEYS = ("K", "rotation", "size", "distortion")
 TABLE_LOOK_AT_KEYS = ("eye", "target", "up", "fov", "fov_axis")  # the [camera] table's keys of each kind
 TABLE_INTRINSICS_KEYS = ("intrinsics", "pose")
+TABLE_INTRINSICS_OPTIONS = ("pixel_origin", "distortion")  # besides intrinsics and pose
+# OpenCV's distortion vectors: k1, k2, p1, p2[, k3[, k4, k5, k6]] (its 12- and 14-coefficient thin
+# prism and tilted models are not this model's)
+DISTORTION_LENGTHS = (4, 5, 8)
+PIXEL_ORIGINS = ("center", "corner")
 # Mitsuba's pixels are square: a camera from intrinsics maps to its sensor where fx and fy agree
 # to this (relative; K scaled to another image size may round them apart)
 SQUARE_PIXELS = 1e-9
@@ -180,7 +186,7 @@ class Camera(CameraModel):
     is the same camera (mitsuba_sensor, from_mitsuba)."""
 
     model = "perspective"
-    keys = TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS
+    keys = TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS + TABLE_INTRINSICS_OPTIONS
     struct = CAMERA
     mitsuba_plugin = "perspective"
     mitsuba_properties = (("fov", "float", None), ("focal_length", "string", None), ("fov_axis", "string", "x"),
@@ -194,6 +200,7 @@ class Camera(CameraModel):
     K: tuple | None = None
     rotation: tuple | None = None
     size: tuple[int, int] | None = None
+    distortion: tuple | None = None  # OpenCV's k1, k2, p1, p2, k3, k4, k5, k6 (zeros appended)
 
     def __post_init__(self):
         object.__setattr__(self, "eye", vector3("eye", self.eye))
@@ -232,6 +239,8 @@ class Camera(CameraModel):
                 raise SceneError("missing: a camera from intrinsics needs both K and rotation", key=key)
         object.__setattr__(self, "K", _nested(_intrinsics("K", self.K)))
         object.__setattr__(self, "rotation", _nested(_rotation("rotation", _matrix("rotation", self.rotation, 3, 3))))
+        if self.distortion is not None:
+            object.__setattr__(self, "distortion", distortion_coefficients("distortion", self.distortion))
         if self.size is not None:
             if isinstance(self.size, (str, bytes)) or not hasattr(self.size, "__len__") or len(self.size) != 2:
                 raise SceneError(f"expected (width, height), got {_shown(self.size)}", key="size")
@@ -239,19 +248,34 @@ class Camera(CameraModel):
             object.__setattr__(self, "size", size)
 
     @classmethod
-    def from_intrinsics(cls, K, pose, width: int | None = None, height: int | None = None) -> "Camera":
+    def from_intrinsics(cls, K, pose, width: int | None = None, height: int | None = None, *, convention: str = "opencv",
+                        pixel_origin: str = "center", distortion=None) -> "Camera":
         """The camera of pinhole intrinsics K (3x3, pixels: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
         fx, fy > 0, no skew, principal point anywhere) and a rigid camera-to-world pose (4x4, last
-        row 0 0 0 1), in OpenCV's convention (x right, y down, z forward): pixel (row j, column i)
-        casts normalize(R K^-1 [i + 0.5, j + 0.5, 1]) from the pose's translation.
+        row 0 0 0 1). pixel (row j, column i) casts normalize(R K^-1 [i, j, 1]) from the pose's
+        translation: OpenCV's pixel convention, pixel centres at integer coordinates
+        (pixel_origin "center"); pixel_origin "corner" (COLMAP, NeRF, OpenGL) reads K with pixel
+        centres at i + 0.5, j + 0.5 (the camera keeps the same K in OpenCV's convention: cx - 0.5,
+        cy - 0.5). convention: the pose's axes, "opencv" (x right, y down, z forward: OpenCV,
+        Open3D, BOP, COLMAP) or "opengl" (x right, y up, z backward: Blender, pyrender, NeRF).
+        distortion: OpenCV's coefficients k1, k2, p1, p2[, k3[, k4, k5, k6]] (cv2.projectPoints'),
+        each pixel's ray the exact inverse of that lens, pixels it cannot reach misses.
         width, height: the image K is in pixels of (both or neither); left out, the scene's image.
-        Rendered at another size, K scales with the image (fx, cx by the ratio of widths; fy, cy
-        of heights). Errors name the key: intrinsics, pose, width or height."""
+        Rendered at another size, K scales with the image (the pixels' edges: fx, cx + 1/2 by the
+        ratio of widths; fy, cy + 1/2 of heights). Errors name the key: intrinsics, pose, width,
+        height, convention, pixel_origin or distortion."""
         K = _intrinsics("intrinsics", K)
+        if pixel_origin not in PIXEL_ORIGINS:
+            raise SceneError(f'expected "center" (OpenCV: pixel centres at integers) or "corner" (centres at i + 0.5), '
+                             f"got {_shown(pixel_origin)}", key="pixel_origin")
+        if pixel_origin == "corner":
+            K[0, 2] -= 0.5
+            K[1, 2] -= 0.5
         pose = _matrix("pose", pose, 4, 4)
         if not np.array_equal(pose[3], [0.0, 0.0, 0.0, 1.0]):
             raise SceneError(f"expected a rigid camera-to-world pose, its last row 0 0 0 1, got "
                              f"{_shown(pose[3].tolist())}", key="pose")
+        pose = opencv_pose(pose, convention)
         rotation = _rotation("pose", pose[:3, :3])
         if (width is None) != (height is None):
             raise SceneError("expected both width and height (the image K is in pixels of), or neither",
@@ -260,16 +284,22 @@ class Camera(CameraModel):
         if width is not None:
             size = (integer("width", width, minimum=1, maximum=MAX_IMAGE_SIDE),
                     integer("height", height, minimum=1, maximum=MAX_IMAGE_SIDE))
-        return cls(tuple(pose[:3, 3]), K=_nested(K), rotation=_nested(rotation), size=size)
+        if distortion is not None:
+            distortion = distortion_coefficients("distortion", distortion)
+        return cls(tuple(pose[:3, 3]), K=_nested(K), rotation=_nested(rotation), size=size, distortion=distortion)
 
     @classmethod
     def from_table(cls, table: dict) -> "Camera":
         """The [camera] table: eye, target, up, fov, fov_axis, or intrinsics and pose (scene-format.md,
-        "Camera from intrinsics"), never a mix."""
-        if not any(key in table for key in TABLE_INTRINSICS_KEYS):
+        "Camera from intrinsics") with optional pixel_origin and distortion, never a mix."""
+        if not any(key in table for key in TABLE_INTRINSICS_KEYS + TABLE_INTRINSICS_OPTIONS):
             no_unknown_keys(table, TABLE_LOOK_AT_KEYS, required=("eye", "target"))  # fov: 45 by default, as Camera(...)
             return cls(**table)
-        no_unknown_keys(table, TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS)
+        no_unknown_keys(table, TABLE_LOOK_AT_KEYS + TABLE_INTRINSICS_KEYS + TABLE_INTRINSICS_OPTIONS)
+        if not any(key in table for key in TABLE_INTRINSICS_KEYS):  # a look-at with an option of intrinsics
+            key = next(key for key in TABLE_INTRINSICS_OPTIONS if key in table)
+            raise SceneError("only a camera from intrinsics and a pose has it (give intrinsics and pose for a lens, "
+                             "or leave it out)", key=key)
         for key in TABLE_LOOK_AT_KEYS:
             if key in table:
                 raise SceneError("a camera is given either by eye, target, up, fov, fov_axis or by intrinsics and pose, "
@@ -277,13 +307,18 @@ class Camera(CameraModel):
         for key in TABLE_INTRINSICS_KEYS:
             if key not in table:
                 raise SceneError("missing required key: a camera from intrinsics needs both intrinsics and pose", key=key)
-        return cls.from_intrinsics(table["intrinsics"], table["pose"])
+        return cls.from_intrinsics(table["intrinsics"], table["pose"],
+                                   pixel_origin=text("pixel_origin", table.get("pixel_origin", "center")),
+                                   distortion=table.get("distortion"))
 
     @property
     def fixed_keys(self) -> tuple[str, ...]:
         """The fields an animation cannot key (pyclray.model.animation): the other kind's, and the
-        size. A camera from intrinsics animates its eye (the pose's translation) only."""
-        return INTRINSICS_KEYS if self.K is None else LOOK_AT_KEYS + INTRINSICS_KEYS
+        size. A camera from intrinsics animates its eye (the pose's translation) and its lens's coefficients."""
+        if self.K is None:
+            return INTRINSICS_KEYS
+        # a lens's coefficients may be keyed (each frame's lens solved); a pinhole does not become a lens
+        return LOOK_AT_KEYS + ("K", "rotation", "size") + (("distortion",) if self.distortion is None else ())
 
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the world_from_camera columns, in float64 (read-only:
@@ -299,60 +334,37 @@ class Camera(CameraModel):
         if self.K is not None:
             R = np.array(self.rotation)
             return np.stack([-R[:, 0], -R[:, 1], R[:, 2]])  # OpenCV's x right, y down, z forward
-        with np.errstate(over="ignore"):
-            forward = np.subtract(self.target, self.eye)
-        length = norm3(forward)
-        if not math.isfinite(length):
-            raise SceneError("expected target - eye within the range of float64, got an overflow", key="target")
-        if length == 0:
-            raise SceneError("expected target != eye (the view direction is undefined)", key="target")
-        w = forward / length
-        up_length = norm3(self.up)
-        if up_length == 0:
-            raise SceneError("expected a non-zero up vector, got [0, 0, 0]", key="up")
-        left = np.cross(np.array(self.up) / up_length, w)
-        sine = norm3(left)
-        if sine < MIN_UP_SINE:
-            raise SceneError(
-                f"expected up not parallel to the view direction (target - eye); the sine of "
-                f"their angle is {sine:.3g}, below {MIN_UP_SINE:g}",
-                key="up",
-            )
-        u = left / sine
-        v = np.cross(w, u)
-        return np.stack([u, v, w])
+        return look_at_rows(self.eye, self.target, self.up)
+
 
     def intrinsics(self, width: int, height: int) -> np.ndarray:
         """K (3x3 float64): the pinhole intrinsics of this camera's pixel-centre rays at this image
         size, in OpenCV's convention (x right, y down, z forward; pixel (row j, column i) looks
-        through K^-1 [i + 0.5, j + 0.5, 1]). A look-at camera: fx = width / (2 tan_x), cx = width / 2,
-        and alike in y. A camera from intrinsics: its K as given at its size, scaled with the image
-        at another (fx and cx by width / its width, fy and cy by height / its height)."""
+        through K^-1 [i, j, 1]: pixel centres at integer coordinates). A look-at camera:
+        fx = width / (2 tan_x), cx = (width - 1) / 2, and alike in y. A camera from intrinsics: its
+        K as given at its size (in OpenCV's convention, also where it was given with pixel_origin
+        "corner"), scaled with the image at another (fx and cx + 1/2 by width / its width, fy and
+        cy + 1/2 by height / its height)."""
         if self.K is None:
             tan_x, tan_y = self.tangents(width, height)
-            return np.array([[width / (2 * tan_x), 0.0, width / 2], [0.0, height / (2 * tan_y), height / 2], [0.0, 0.0, 1.0]])
+            return np.array([[width / (2 * tan_x), 0.0, width / 2 - 0.5], [0.0, height / (2 * tan_y), height / 2 - 0.5],
+                             [0.0, 0.0, 1.0]])
         K = np.array(self.K)
         if self.size is not None and (width, height) != self.size:
-            K[0] *= width / self.size[0]  # fx, 0, cx (a multiple of the image's edges: pixel centres at i + 0.5)
-            K[1] *= height / self.size[1]
+            # the image's edges scale (pixel centres at integers: the edge at -1/2), so fx and cx + 1/2
+            for row, ratio in ((0, width / self.size[0]), (1, height / self.size[1])):
+                K[row, row] *= ratio
+                K[row, 2] = (K[row, 2] + 0.5) * ratio - 0.5
         return K
-
-    def pose(self) -> np.ndarray:
-        """The camera-to-world pose (4x4 float64) in OpenCV's convention: its rotation's columns are
-        the camera's x (right = -u), y (down = -v) and z (forward = w) axes in world coordinates, its
-        translation the eye. A depth map back-projects as pose @ [depth * normalize(K^-1 [i+.5, j+.5, 1]), 1]."""
-        u, v, w = self.basis()
-        pose = np.eye(4)
-        pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -u, -v, w, self.eye
-        return pose
 
     def image_plane(self, width: int, height: int) -> ImagePlane:
         """Where this camera's pixel-centre rays go at this image size (see ImagePlane): the one
         description of them that the kernel's camera struct, the oracle and the culling share."""
         if self.K is None:  # exactly the tangents, and the centre: a look-at camera's rays as ever
             return ImagePlane(*self.tangents(width, height), width / 2, height / 2)
-        K = self.intrinsics(width, height)
-        return ImagePlane(float(width / (2 * K[0, 0])), float(height / (2 * K[1, 1])), float(K[0, 2]), float(K[1, 2]))
+        K = self.intrinsics(width, height)  # OpenCV's centres at integers: the plane's at i + 0.5
+        return ImagePlane(float(width / (2 * K[0, 0])), float(height / (2 * K[1, 1])), float(K[0, 2]) + 0.5,
+                          float(K[1, 2]) + 0.5)
 
     def tangents(self, width: int, height: int) -> tuple[float, float]:
         """tan of the half opening angles along x and y (square pixels for a look-at camera; for a
@@ -374,7 +386,7 @@ class Camera(CameraModel):
         per column and per row (of the window (x0, y0, columns, rows), if given), float64:
         sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height (ImagePlane; a
         look-at camera: cx = width / 2, so sx = tan_x (width - 2 i - 1) / width). For a camera from
-        intrinsics that is (cx - i - 0.5) / fx: the x of K^-1 [i + 0.5, j + 0.5, 1], negated
+        intrinsics that is (cx - i) / fx (K's cx, OpenCV's convention): the x of K^-1 [i, j, 1], negated
         (OpenCV's x points right, the frame's u left)."""
         col0, row0, columns, rows = (0, 0, width, height) if window is None else window
         plane = self.image_plane(width, height)
@@ -386,13 +398,34 @@ class Camera(CameraModel):
         """(origins, directions) of the pixel-centre rays, each (rows, columns, 3) float64, unit
         directions: pixel (row j, column i) looks through (sx, sy) (plane_coordinates):
         d = normalize(w + sx u + sy v); for a camera from intrinsics that is
-        normalize(R K^-1 [i + 0.5, j + 0.5, 1]). The origins are the eye."""
+        normalize(R K^-1 [i, j, 1]). With a distortion: each pixel's undistorted direction
+        (frame_directions; a pixel the lens cannot reach gets its pinhole ray, which render and
+        cast report as a miss there). The origins are the eye."""
         u, v, w = self.basis()
+        if self.distortion is not None:
+            frame, _ = self.frame_directions(width, height)
+            if window is not None:
+                col0, row0, columns, rows = window
+                frame = frame[row0:row0 + rows, col0:col0 + columns]
+            d = frame @ np.stack([u, v, w])
+            d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+            return np.broadcast_to(np.array(self.eye), d.shape), d
         sx, sy = self.plane_coordinates(width, height, window)
         d = w + sx[None, :, None] * u + sy[:, None, None] * v
         d /= np.linalg.norm(d, axis=-1, keepdims=True)
         origins = np.broadcast_to(np.array(self.eye), d.shape)
         return origins, d
+
+    def frame_directions(self, width: int, height: int):
+        """With a distortion, each pixel's undistorted unit direction in the camera's frame and
+        whether the lens reaches it (lens.pinhole_table: Newton on OpenCV's forward model in
+        float64), solved once per lens and image size (kept by value: a moving camera's frames, or a
+        handle's views, share it); None for a pinhole."""
+        if self.distortion is None:
+            return None
+        K = self.intrinsics(width, height)
+        return lens.pinhole_table((float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])), self.distortion,
+                                  width, height)
 
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """Mitsuba's perspective sensor of the same rays. A look-at camera is its look_at with its
@@ -401,11 +434,16 @@ class Camera(CameraModel):
         Mitsuba's pixels are square, only fx = fy (a SceneError otherwise): fov = 2 atan(width / (2 fx))
         along x, and the principal point through principal_point_offset_x/_y, which Mitsuba adds to
         the film position in [0, 1]^2 before projecting (perspective.cpp's sample_ray): the optical
-        axis meets the film at 0.5 - offset, so offset_x = 0.5 - cx / width and offset_y = 0.5 - cy / height."""
+        axis meets the film at 0.5 - offset, so offset_x = 0.5 - c_x / width and offset_y = 0.5 - c_y / height,
+        c the principal point from the film's corner (ImagePlane's: K's cx + 0.5 in OpenCV's convention)."""
+        if self.distortion is not None:
+            raise SceneError("Mitsuba 3's perspective sensor has no lens distortion, so this camera cannot be checked "
+                             "against Mitsuba or exported for it", key="distortion")
         if self.K is None:
             return MitsubaSensor(self.mitsuba_plugin, {"fov": self.fov, "fov_axis": self.fov_axis}, width, height,
                                  look_at=LookAt(list(self.eye), list(self.target), list(self.up)))
         K = self.intrinsics(width, height)
+        plane = self.image_plane(width, height)  # the principal point with pixel centres at i + 0.5
         fx, fy = float(K[0, 0]), float(K[1, 1])
         if abs(fx - fy) > SQUARE_PIXELS * max(fx, fy):
             raise SceneError(f"Mitsuba's perspective sensor has square pixels only (fx = fy); this camera has fx = {fx:g}, "
@@ -414,8 +452,8 @@ class Camera(CameraModel):
         to_world[:3, :3] = self.basis().T  # columns u, v, w: Mitsuba's camera space
         to_world[:3, 3] = self.eye
         properties = {"fov": float(np.degrees(2 * np.arctan(width / (2 * fx)))), "fov_axis": "x",
-                      "principal_point_offset_x": 0.5 - float(K[0, 2]) / width,
-                      "principal_point_offset_y": 0.5 - float(K[1, 2]) / height}
+                      "principal_point_offset_x": 0.5 - plane.cx / width,
+                      "principal_point_offset_y": 0.5 - plane.cy / height}
         return MitsubaSensor(self.mitsuba_plugin, properties, width, height, to_world=to_world)
 
     @classmethod
@@ -456,7 +494,7 @@ class Camera(CameraModel):
         K = [[fx, 0.0, width * (0.5 - offset[0])], [0.0, fx, height * (0.5 - offset[1])], [0.0, 0.0, 1.0]]
         pose = np.eye(4)
         pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = -left, -up, forward, eye
-        return cls.from_intrinsics(K, pose, width, height)
+        return cls.from_intrinsics(K, pose, width, height, pixel_origin="corner")  # Mitsuba's film: centres at i + 0.5
 
 
 def _fov_along_x_or_y(fov: float, axis: str, width: int, height: int) -> tuple[float, str]:
@@ -472,3 +510,50 @@ def _fov_along_x_or_y(fov: float, axis: str, width: int, height: int) -> tuple[f
         tangent = math.tan(math.radians(fov) / 2) * width / math.hypot(width, height)
         return math.degrees(2 * math.atan(tangent)), "x"
     raise SceneError(f"property 'fov_axis': expected x, y, smaller, larger or diagonal, got {axis!r}")
+
+
+def opencv_pose(pose: np.ndarray, convention: str) -> np.ndarray:
+    """A camera-to-world pose in OpenCV's axes (x right, y down, z forward) from one in convention
+    "opencv" or "opengl" (x right, y up, z backward: y and z negated)."""
+    if convention == "opencv":
+        return pose
+    if convention == "opengl":
+        return pose * [1.0, -1.0, -1.0, 1.0]
+    raise SceneError(f'expected "opencv" (x right, y down, z forward) or "opengl" (x right, y up, z backward), '
+                     f"got {_shown(convention)}", key="convention")
+
+
+def distortion_coefficients(key: str, value) -> tuple:
+    """OpenCV's distortion vector k1, k2, p1, p2[, k3[, k4, k5, k6]] as 8 floats (zeros appended)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) not in DISTORTION_LENGTHS:
+        raise SceneError(f"expected OpenCV's coefficients [k1, k2, p1, p2], [k1, k2, p1, p2, k3] or "
+                         f"[k1, k2, p1, p2, k3, k4, k5, k6], got {_shown(value)}", key=key)
+    coefficients = tuple(number(f"{key}[{index}]", c) for index, c in enumerate(np.asarray(value, dtype=object).tolist()))
+    return coefficients + (0.0,) * (8 - len(coefficients))
+
+
+def look_at_rows(eye, target, up) -> np.ndarray:
+    """Rows u (left), v (up), w (forward) of a camera at eye looking at target with up (float64);
+    a SceneError naming the key where they make no frame."""
+    with np.errstate(over="ignore"):
+        forward = np.subtract(target, eye)
+    length = norm3(forward)
+    if not math.isfinite(length):
+        raise SceneError("expected target - eye within the range of float64, got an overflow", key="target")
+    if length == 0:
+        raise SceneError("expected target != eye (the view direction is undefined)", key="target")
+    w = forward / length
+    up_length = norm3(up)
+    if up_length == 0:
+        raise SceneError("expected a non-zero up vector, got [0, 0, 0]", key="up")
+    left = np.cross(np.array(up) / up_length, w)
+    sine = norm3(left)
+    if sine < MIN_UP_SINE:
+        raise SceneError(
+            f"expected up not parallel to the view direction (target - eye); the sine of "
+            f"their angle is {sine:.3g}, below {MIN_UP_SINE:g}",
+            key="up",
+        )
+    u = left / sine
+    v = np.cross(w, u)
+    return np.stack([u, v, w])

@@ -150,6 +150,14 @@ class Box(Shape):
         t = np.where(entry > 0, entry, exit_)
         return np.where((entry <= exit_) & (t > 0) & np.isfinite(t), t, np.inf)
 
+    def oracle_crossings(self, origins, directions):
+        """The entry and the exit where the slabs overlap with entry < exit (a ray grazing an edge or
+        a corner: none), each where t > 0."""
+        entry, exit_, _, _ = self._slabs(origins, directions)
+        t = np.stack([entry, exit_], axis=-1)
+        t = np.where((entry < exit_)[..., None] & np.isfinite(t) & (t > 0), t, np.inf).reshape(-1, 2)
+        return t, np.zeros(t.shape, np.int64)
+
     def _local(self, points):
         return (np.asarray(points, np.float64) - np.array(self.center)) @ self.axes()
 

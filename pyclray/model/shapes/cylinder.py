@@ -160,6 +160,49 @@ class Cylinder(Shape):
     def oracle_distance(self, origins, directions):
         return self._candidates(origins, directions).min(axis=0)
 
+    def oracle_crossings(self, origins, directions):
+        """Capped (a convex solid): the entry and exit of the overlap of the side's interval (between
+        its roots; a ray along the axis: all of it inside, none outside) and the end planes' (between
+        them; parallel to them: all of it or none), where entry < exit. An open tube: each side root
+        between the end planes where the ray crosses the side (disc > 0). Each where t > 0."""
+        A, _ = self.axis()
+        r = self.radius
+        origins = np.asarray(origins, np.float64)
+        F = np.array(self.p0) - origins
+        FxA = np.cross(F, A)
+        DxA = np.cross(directions, A)
+        a = dot_rows(DxA, DxA)
+        b = dot_rows(FxA, DxA)
+        c = cross_norm2_minus(F, np.broadcast_to(A, F.shape), r)
+        triple = dot_rows(F, DxA)
+        disc = np.where(b * b + np.abs(a * c) < a * r * r + triple * triple, b * b - a * c, a * r * r - triple * triple)
+        d0 = dot_rows(F, A)
+        d1 = dot_rows(np.array(self.p1) - origins, A)
+        dA = directions @ A
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q = b + np.copysign(np.sqrt(disc), b)
+            roots = np.sort(np.stack([q / a, c / q], axis=-1), axis=-1)
+            ends = np.sort(np.stack([d0 / dA, d1 / dA], axis=-1), axis=-1)
+        if self.caps:
+            along = a == 0
+            inside = np.where(c < 0, 1.0, -1.0) * np.inf
+            side_lo = np.where(along, -inside, roots[..., 0])
+            side_hi = np.where(along, inside, roots[..., 1])
+            between = np.where((d0 <= 0) & (d1 >= 0), 1.0, -1.0) * np.inf
+            parallel = dA == 0
+            end_lo = np.where(parallel, -between, ends[..., 0])
+            end_hi = np.where(parallel, between, ends[..., 1])
+            entry, exit_ = np.maximum(side_lo, end_lo), np.minimum(side_hi, end_hi)
+            crosses = (along | (disc > 0)) & (entry < exit_)
+            t = np.stack([entry, exit_], axis=-1)
+            t = np.where(crosses[..., None] & np.isfinite(t) & (t > 0), t, np.inf)
+        else:
+            z = roots * dA[..., None]
+            ok = (disc > 0)[..., None] & (a > 0)[..., None] & (d0[..., None] <= z) & (z <= d1[..., None])
+            t = np.where(ok & np.isfinite(roots) & (roots > 0), roots, np.inf)
+        t = t.reshape(-1, 2)
+        return t, np.zeros(t.shape, np.int64)
+
     def _local(self, points):
         """(axial coordinate from p0, radial vector from the axis) of points."""
         A, _ = self.axis()

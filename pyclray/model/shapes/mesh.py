@@ -373,6 +373,35 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     def oracle_primitives(self, origins, directions):
         return self.oracle_hits(origins, directions)[1]
 
+    def oracle_crossings(self, origins, directions):
+        """Every triangle each ray crosses, by kernels/mesh.cl's test and tie rule in exact
+        arithmetic (mesh_oracle.crossings): each crossing of the surface once."""
+        from .mesh_oracle import crossings
+
+        O = np.broadcast_to(np.asarray(origins, np.float64), np.shape(directions)).reshape(-1, 3)
+        D = np.asarray(directions, np.float64).reshape(-1, 3)
+        a, b, c = self.corners()
+        valid = np.any(self.face_normals() != 0, axis=1)
+        found = [crossings(a, b, c, valid, o, d) for o, d in zip(O, D)]
+        width = max([len(t) for t, _ in found] + [1])
+        t = np.full((len(D), width), np.inf)
+        primitives = np.full((len(D), width), -1, np.int64)
+        for row, (ts, which) in enumerate(found):
+            t[row, : len(ts)] = ts
+            primitives[row, : len(ts)] = which
+        return t, primitives
+
+    def hit_normals(self, points, primitives):
+        """Each hit triangle's unit normal (face_normals: the bits cast's normal has)."""
+        return self.face_normals()[primitives]
+
+    def hit_barycentrics(self, points, primitives):
+        """(u, v) of each point on its triangle (mesh_oracle.barycentrics, float64)."""
+        from .mesh_oracle import barycentrics
+
+        a, b, c = (x[primitives] for x in self.corners())
+        return np.stack(barycentrics(np.asarray(points, np.float64), a, b, c), axis=-1)
+
     def oracle_distance(self, origins, directions):
         shape = np.shape(directions)[:-1]
         return self.oracle_hits(origins, directions)[0].reshape(shape)

@@ -183,3 +183,78 @@ def point_triangle(P, a, b, c):
         plane = np.abs(_dot(P - a, n)) / np.sqrt(n2)
     inside = (n2 > 0) & (w_a >= 0) & (w_b >= 0) & (w_c >= 0)
     return np.where(inside, plane, edges), edges
+
+
+# -- every crossing, with the tie rule (the float64 oracle of count_hits and all_hits) -------------
+def _projected(A, D, kx, ky, kz):
+    """The homogeneous shear of kernels/mesh.cl: each vertex A (from the origin) to
+    (A_x d_z - A_z d_x, A_y d_z - A_z d_y) with the ray's largest component as z."""
+    return A[..., kx] * D[kz] - A[..., kz] * D[kx], A[..., ky] * D[kz] - A[..., kz] * D[ky]
+
+
+def _axes(D):
+    """(kx, ky, kz): kernels/mesh.cl's cyclic permutation, the largest |component| as z (ties: z, then y)."""
+    ax, ay, az = np.abs(D)
+    if ax > ay and ax > az:
+        return 1, 2, 0
+    if not ax > ay and ay > az:
+        return 2, 0, 1
+    return 0, 1, 2
+
+
+def crossings(a, b, c, valid, origin, direction):
+    """(t, triangle) of every triangle the ray origin + t direction (t > 0) crosses, by
+    kernels/mesh.cl's test and tie rule in exact arithmetic: the projected vertices and edge functions
+    in float64 where their rounding cannot change a sign (an error bound of 2^-40 of their terms'
+    size), else exactly (fractions.Fraction of the float64 vertices, origin and direction). So a ray
+    through a shared edge or vertex crosses exactly one triangle there where it crosses the surface,
+    and the parity from a point is exact. t is float64 (the plane's). valid: the triangles of area."""
+    from fractions import Fraction
+
+    O = np.asarray(origin, np.float64)
+    D = np.asarray(direction, np.float64)
+    kx, ky, kz = _axes(D)
+    A, B, C = a - O, b - O, c - O
+    (ax, ay), (bx, by), (cx, cy) = (_projected(X, D, kx, ky, kz) for X in (A, B, C))
+    e0, e1, e2 = bx * cy - by * cx, cx * ay - cy * ax, ax * by - ay * bx
+
+    def size(X):
+        m = np.abs(X[..., kx] * D[kz]) + np.abs(X[..., kz] * D[kx]) + np.abs(X[..., ky] * D[kz]) + np.abs(X[..., kz] * D[ky])
+        return m + np.abs(X).sum(axis=-1) * np.abs(D).sum()
+
+    sa, sb, sc = size(A), size(B), size(C)
+    bound = 2.0**-40
+    sure0, sure1, sure2 = (np.abs(e0) > bound * sb * sc), (np.abs(e1) > bound * sc * sa), (np.abs(e2) > bound * sa * sb)
+    s0, s1, s2 = np.sign(e0), np.sign(e1), np.sign(e2)
+    inside = valid & sure0 & sure1 & sure2 & (s0 == s1) & (s1 == s2)
+    unsure = valid & ~(sure0 & sure1 & sure2)
+    # a sure pair of opposite signs is a sure miss
+    unsure &= ~((sure0 & sure1 & (s0 * s1 < 0)) | (sure1 & sure2 & (s1 * s2 < 0)) | (sure0 & sure2 & (s0 * s2 < 0)))
+    inside = inside.copy()
+    Of = [Fraction(float(x)) for x in O]
+    Df = [Fraction(float(x)) for x in D]
+    for i in np.flatnonzero(unsure):
+        P = []
+        for X in (a[i], b[i], c[i]):
+            V = [Fraction(float(X[k])) - Of[k] for k in range(3)]
+            P.append((V[kx] * Df[kz] - V[kz] * Df[kx], V[ky] * Df[kz] - V[kz] * Df[ky]))
+        (pax, pay), (pbx, pby), (pcx, pcy) = P
+        f0, f1, f2 = pbx * pcy - pby * pcx, pcx * pay - pcy * pax, pax * pby - pay * pbx
+        signs = [_exact_tie(f, px, py, qx, qy) for f, (px, py), (qx, qy) in
+                 ((f0, (pbx, pby), (pcx, pcy)), (f1, (pcx, pcy), (pax, pay)), (f2, (pax, pay), (pbx, pby)))]
+        inside[i] = signs[0] != 0 and signs[0] == signs[1] == signs[2]
+    rows = np.flatnonzero(inside)
+    n = np.cross(b[rows] - a[rows], c[rows] - a[rows])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (n * (a[rows] - O)).sum(axis=1) / (n @ D)
+    keep = np.isfinite(t) & (t > 0)
+    return t[keep], rows[keep]
+
+
+def _exact_tie(f, px, py, qx, qy) -> int:
+    """The sign of an exact edge function f = p x q under the tie rule (_tie_signs)."""
+    if f != 0:
+        return 1 if f > 0 else -1
+    if py != qy:
+        return 1 if py > qy else -1
+    return (qx > px) - (qx < px)

@@ -28,7 +28,8 @@ class ReferenceShape:
       back to its id.
 
     Optional, with defaults here: ``oracle_primitives`` (a shape of many primitives: which one a
-    ray hits), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
+    ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``hit_normals`` and
+    ``hit_barycentrics`` (all_hits' per-hit normal and barycentrics: oracle_normal, and 0, 0), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
     ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
     ``extent_from`` (from its box), ``mitsuba_error_scale`` (1), ``mitsuba_primitives`` (False)
     and ``mitsuba_covers`` (everywhere: no stand-in).
@@ -54,6 +55,27 @@ class ReferenceShape:
         """The index of the primitive each ray's nearest hit is on (-1 on a miss), float64; None for
         a shape of one primitive."""
         return None
+
+    def oracle_crossings(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
+        """(t, primitive): every crossing t > 0 of each ray (unit directions (N, 3)) as (N, K) float64
+        distances, inf where a ray has fewer than K, and each one's primitive index (the oracle of
+        count_hits and all_hits). A tangent ray crosses nothing; a ray through a shared edge or
+        vertex of a mesh crosses it once (kernels/mesh.cl's tie rule). The default: a flat shape's one
+        crossing, its nearest hit."""
+        t = np.asarray(self.oracle_distance(origins, directions), np.float64).reshape(-1, 1)
+        primitives = self.oracle_primitives(origins, directions)
+        primitives = np.zeros(t.shape, np.int64) if primitives is None else np.asarray(primitives).reshape(-1, 1)
+        return t, primitives
+
+    def hit_normals(self, points, primitives) -> np.ndarray:
+        """(N, 3) float64 unit world normals (outward, never flipped) at hit points on the surface,
+        each on its primitive (all_hits' normal, engine/queries/hits.py). The default: oracle_normal."""
+        return self.oracle_normal(np.asarray(points, np.float64))
+
+    def hit_barycentrics(self, points, primitives) -> np.ndarray:
+        """(N, 2) float64 (u, v) of hit points on their triangles (all_hits' barycentric); 0, 0 for a
+        shape without triangles (the default)."""
+        return np.zeros((len(points), 2))
 
     def edge_distance(self, points) -> np.ndarray:
         """Distance from points on the surface to its nearest edge (a rim, a border, a box's edge),

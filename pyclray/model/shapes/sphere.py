@@ -97,6 +97,22 @@ class Sphere(Shape):
         roots = np.where(np.isfinite(roots) & (roots > 0), roots, np.inf)
         return np.where(disc >= 0, roots.min(axis=0), np.inf)
 
+    def oracle_crossings(self, origins, directions):
+        """Both roots t > 0 where the ray crosses the sphere (disc > 0); a tangent ray (disc = 0) none."""
+        C = np.array(self.center)
+        r = self.radius
+        F = C - np.asarray(origins, np.float64)
+        b = np.einsum("...k,...k", F, directions)
+        c = eye_term(F, r)
+        perp = F - b[..., None] * directions
+        perp2 = np.einsum("...k,...k", perp, perp)
+        disc = np.where(b * b + np.abs(c) < r * r + perp2, b * b - c, r * r - perp2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q = b + np.copysign(np.sqrt(disc), b)
+            roots = np.sort(np.stack([q, c / q], axis=-1), axis=-1)
+        t = np.where((disc > 0)[..., None] & np.isfinite(roots) & (roots > 0), roots, np.inf).reshape(-1, 2)
+        return t, np.zeros(t.shape, np.int64)
+
     def oracle_normal(self, points):
         n = points - np.array(self.center)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)

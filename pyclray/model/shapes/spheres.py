@@ -152,6 +152,20 @@ class Spheres(Shape):
     def oracle_primitives(self, origins, directions):
         return self.oracle_hits(origins, directions)[1]
 
+    def oracle_crossings(self, origins, directions):
+        """Each sphere's crossings (Sphere.oracle_crossings), with its index in the batch."""
+        ts, primitives = [], []
+        for index, sphere in enumerate(self._each()):
+            t, _ = sphere.oracle_crossings(origins, directions)
+            ts.append(t)
+            primitives.append(np.full(t.shape, index, np.int64))
+        return np.concatenate(ts, axis=1), np.concatenate(primitives, axis=1)
+
+    def hit_normals(self, points, primitives):
+        """The outward normal of each point's own sphere of the batch (its primitive)."""
+        n = np.asarray(points, np.float64) - self.centers[primitives]
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
     def oracle_hits(self, origins, directions):
         """(distance, primitive index) of the nearest sphere of the batch per ray (inf, -1 on a miss)."""
         best = np.full(np.shape(directions)[:-1], np.inf)

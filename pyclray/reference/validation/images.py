@@ -69,7 +69,12 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     from ...io.progress import step
 
     step("pyclray render")
-    ours = render(scene, aovs=("depth", "normal", "id", "primitive"), precision="fp32", device=device)
+    # a camera rendered by casting its rays (orthographic) makes no primitive image: none are compared
+    primitives = scene.camera.rays_from_eye
+    ours = render(scene, aovs=("depth", "normal", "id") + (("primitive",) if primitives else ()), precision="fp32",
+                  device=device)
+    if not primitives:
+        ours["primitive"] = np.full(ours["id"].shape, -1, np.int32)  # (a Frame is a dict)
     step(f"Mitsuba {variant} render")
     theirs = mitsuba.render(scene if mitsuba_scene is None else mitsuba_scene, variant)
     step("float64 oracle")
@@ -110,7 +115,7 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     theirs_only = disagree & (ours["id"] < 0) & (theirs["id"] >= 0)
 
     # primitives (a mesh's triangle: Mitsuba's prim_index) where both judge the same shape
-    numbered = np.array([s.mitsuba_primitives for s in scene.shapes] or [False])[np.maximum(ours["id"], 0)]
+    numbered = np.array([s.mitsuba_primitives for s in scene.shapes] or [False])[np.maximum(ours["id"], 0)] & primitives
     primitive_judged = judged & numbered
     primitive_wrong = primitive_judged & (ours["primitive"] != theirs["primitive"])
     # primitives against the float64 oracle, judged by pyclray's own edge band (error_model's
@@ -120,7 +125,8 @@ def cross_check(scene, variant: str = "scalar_rgb", device=None, mitsuba_scene=N
     # primitive there; pyclray's does not grow with the distance to the origin
     ref = {**truth, "cos": cos, "origins": origins, "directions": directions, "scene": scene}
     ours_apart = error_model.judged_pixels(ours, ref, "fp32")
-    oracle_judged = (ours["id"] == truth["id"]) & (ours["id"] >= 0) & ~ours_apart["silhouette"] & ~ours_apart["edge"]
+    oracle_judged = ((ours["id"] == truth["id"]) & (ours["id"] >= 0) & ~ours_apart["silhouette"] & ~ours_apart["edge"]
+                     & primitives)
     oracle_primitive = np.full(ours["id"].shape, -1, np.int64)
     for index, shape in enumerate(scene.shapes):
         mine = oracle_judged & (ours["id"] == index)

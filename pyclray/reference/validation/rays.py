@@ -64,12 +64,15 @@ def ray_level(
 
     # the cameras: Mitsuba's rays against pyclray's pixel rays (float64 oracle)
     eye = np.array(scene.camera.eye)
-    _, pixel_directions = oracle.camera_rays(scene)
+    pixel_origins, pixel_directions = oracle.camera_rays(scene)
     ours_directions = pixel_directions[rows, columns]
-    offset = origins - eye
+    offset = origins - pixel_origins[rows, columns]  # (the eye, but for an orthographic camera's rays)
     sideways = offset - np.einsum("nk,nk->n", offset, ours_directions)[:, None] * ours_directions
     camera_angle = angle_between(directions, ours_directions)
-    camera_origin = np.linalg.norm(sideways, axis=1) / (EPS32 * max(np.linalg.norm(eye), 1.0))
+    # (per ray, the size of what its origin is summed from in float32: the eye, and for an orthographic
+    # camera the pixel's offset on the plane through it)
+    terms = max(np.linalg.norm(eye), 1.0) + np.linalg.norm(pixel_origins[rows, columns] - eye, axis=-1)
+    camera_origin = np.linalg.norm(sideways, axis=1) / (EPS32 * terms)
     camera_tolerance = error_model.camera_angle_tolerance(scene)
 
     # the same rays through both

@@ -2,11 +2,20 @@
 // shift + left drag pans, the wheel dollies, r restores the scene's camera, h shows the keys.
 // Motion goes to the server in fractions of the image's shown height (it keeps the camera).
 
+// A right drag opens no context menu: the browser asks for one at the press (Linux, macOS) or at the
+// release (Windows), over whatever element the pointer is on then, the image or not.
+const MENU_AFTER_RELEASE_MS = 500;
+
 export function attachControls(view, send, toggleHelp) {
   let mode = null;
   let last = null;
+  let rightReleased = -Infinity;  // when the last right drag ended
 
-  view.addEventListener("contextmenu", (event) => event.preventDefault());
+  window.addEventListener("contextmenu", (event) => {
+    if (event.target === view || mode !== null || performance.now() - rightReleased < MENU_AFTER_RELEASE_MS) {
+      event.preventDefault();
+    }
+  });
   view.addEventListener("pointerdown", (event) => {
     if (event.button !== 0 && event.button !== 2) return;
     mode = event.button === 2 || event.shiftKey ? "pan" : "orbit";
@@ -22,9 +31,10 @@ export function attachControls(view, send, toggleHelp) {
     last = [event.clientX, event.clientY];
     if (dx !== 0 || dy !== 0) send({ type: mode, dx, dy });
   });
-  const release = () => {
+  const release = (event) => {
     if (mode === null) return;
     mode = null;
+    if (event.button === 2) rightReleased = performance.now();
     send({ type: "end" });  // the motion is over: the full image now
   };
   view.addEventListener("pointerup", release);
@@ -37,7 +47,11 @@ export function attachControls(view, send, toggleHelp) {
   }, { passive: false });
   window.addEventListener("keydown", (event) => {
     if (event.ctrlKey || event.metaKey || event.altKey) return;
-    if (event.target instanceof HTMLSelectElement) return;  // typing in the selector picks an image
+    // typing in the image selector picks the image whose name starts with the key: such a key is the
+    // selector's. Any other (r: no image's name starts with it) is the view's, also with the focus
+    // left on the selector after picking an image with the mouse (the key once did nothing there)
+    if (event.target instanceof HTMLSelectElement && [...event.target.options].some(
+      (option) => option.text.toLowerCase().startsWith(event.key.toLowerCase()))) return;
     if (event.key === "r" || event.key === "R") send({ type: "reset" });
     else if (event.key === "h" || event.key === "H" || event.key === "?") toggleHelp();
   });

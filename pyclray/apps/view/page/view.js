@@ -8,9 +8,11 @@ const socket = new WebSocket(`ws://${location.host}/ws${location.search}`);
 socket.binaryType = "arraybuffer";
 
 // what the page measured, for bench/view.py and the tests: when each input was sent, when each
-// image was painted (the latest KEEP of each), the images painted, the camera shown
+// image was painted (the latest KEEP of each), the images painted, the camera shown, and the seq of
+// the latest input that changes the view (a release does not): an image whose seq is at least that
+// shows every input so far
 const KEEP = 2000;
-const stats = { sent: {}, paints: [], painted: 0, camera: "" };
+const stats = { sent: {}, paints: [], painted: 0, camera: "", latest: 0 };
 window.pyclrayView = stats;
 let seq = 0, painted = 0, last = null, playing = null, animation = null;
 
@@ -19,18 +21,25 @@ function send(message) {
   if (message.type !== "painted") {
     message.seq = ++seq;
     stats.sent[seq] = performance.now();
+    if (message.type !== "end") stats.latest = seq;
     delete stats.sent[seq - KEEP];
   }
   socket.send(JSON.stringify(message));
 }
 
-// images are decoded as they come and painted in the order they were sent
+// images are decoded as they come and painted in the order they were sent. Every image is
+// acknowledged once, painted or not (the server sends no more while two are unacknowledged), and a
+// failure with one image never passes down the queue to the next ones
 let queue = Promise.resolve();
 function receiveImage(buffer) {
   const length = new DataView(buffer).getUint32(0);
   const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, length)));
   const decoded = createImageBitmap(new Blob([new Uint8Array(buffer, 4 + length)], { type: header.type }));
-  queue = queue.then(() => decoded).then((bitmap) => paint(header, bitmap), () => send({ type: "painted", frame: header.frame }));
+  queue = queue
+    .then(() => decoded)
+    .then((bitmap) => paint(header, bitmap))
+    .catch((error) => console.warn(`pyclray view: image ${header.frame} not shown:`, error))
+    .then(() => send({ type: "painted", frame: header.frame }));
 }
 
 function paint(header, bitmap) {
@@ -43,7 +52,6 @@ function paint(header, bitmap) {
   stats.paints.push({ time: performance.now(), seq: header.seq, width: header.width, lossless: header.lossless });
   if (stats.paints.length > 2 * KEEP) stats.paints.splice(0, KEEP);
   stats.camera = header.camera;
-  send({ type: "painted", frame: header.frame });
   last = header;
   const vector = (v) => "[" + v.map((x) => x.toFixed(3)).join(", ") + "]";
   $("info").textContent = `${header.aov} ${header.width}x${header.height}${header.lossless ? "" : " (moving)"} in ` +

@@ -1,0 +1,221 @@
+/* The hit counts: count_hits (how many times each ray of a batch given in world coordinates crosses
+ * the shapes' surfaces between t_min and t_max) and all_hits (each of those hits: its distance and
+ * what it hit, nearest first) (pyclray/engine/queries/hits.py). The host puts before this file
+ * common.h, lanes.h, the generated struct header, shapes.h, the BVH's headers, cast.h, the file of
+ * each shape type present (with PYCLRAY_ALL_HITS: each type's <type>_hits, every hit of one entry;
+ * with PYCLRAY_TIE_RULE: kernels/mesh.cl's tie rule, so that a crossing through a shared edge or
+ * vertex counts once) and rays.h, whose visit this file gives what a hit does.
+ *
+ * Every entry a ray may meet is visited (the traversal's limit stays at t_max: no hit ends it), each
+ * tested from the ray moved to just before it (kernels/rays.h: moved_ray, never before t_min), and
+ * each of its hits s > 0 there with t < t_max counted: a ray's count does not depend on the other
+ * rays nor on the order of its visits. all_hits counts them too and writes the first hit_capacity
+ * of them into the ray's rows (r * hit_capacity on), sorted there by distance (then kind, entry,
+ * triangle: the same order at any batch); the host casts the rays with more hits again with room
+ * for all (the same visits find the same hits) and gathers the rows. */
+
+/* a hit at distance t (float64, from the ray's origin) of entry k of a kind (its triangle sub in
+ * mesh instances, -1 elsewhere): counted, and stored where this is all_hits */
+#ifdef PYCLRAY_STORE_HITS
+#define ALLHITS_STORE(t, kind, k, sub)                                              \
+    if (n_hits < hits_room) {                                                        \
+        const size_t row = (size_t)(hits_at + n_hits);                                   \
+        hit_t[row] = (t);                                                           \
+        hit_kind[row] = (kind);                                                     \
+        hit_k[row] = (k);                                                           \
+        hit_sub[row] = (sub);                                                       \
+    }
+#else
+#define ALLHITS_STORE(t, kind, k, sub)
+#endif
+#define ALLHITS_TAKE(t, kind, k, sub)                                               \
+    if ((t) < t_max) {                                                              \
+        ALLHITS_STORE(t, kind, k, sub)                                              \
+        ++n_hits;                                                                   \
+    }
+
+/* kernels/rays.h's visit, for every hit: a leaf's block of triangles reports each lane hit (its key
+ * k * 8 + lane), an entry each of its <type>_hits (PYCLRAY_ALL_HITS_<type>: programs.py, or the
+ * type's own, kernels/instance.cl), the unbounded shapes theirs from the ray's start */
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) ALLHITS_TAKE(t, kind, k, -1)
+#define PYCLRAY_CAST_LIMIT
+#define PYCLRAY_CAST_REACH t_max
+#define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)
+#undef PYCLRAY_CAST_TEST_ENTRY
+#define PYCLRAY_CAST_TEST_ENTRY(Type, type)                                         \
+    {                                                                               \
+        PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
+        PYCLRAY_ALL_HITS_##type(&framed, &moved, s0, KIND_##type, k)                \
+    }
+#undef PYCLRAY_CAST_LINEAR
+#define PYCLRAY_CAST_LINEAR(Type, type)                                             \
+    for (int q = 0; q < n_##type##s; ++q) {                                         \
+        PYCLRAY_CAST_FRAMED(Type, type, q, start.world)                             \
+        PYCLRAY_ALL_HITS_##type(&framed, &start, t_min, KIND_##type, q)             \
+    }
+/* an entry's two candidates (<type>_hits: MISS where there is none), from the ray at distance from */
+#define ALLHITS_TWO(type, shape, ray, from, kind, k)                                \
+    {                                                                               \
+        real first_, second_;                                                       \
+        type##_hits(shape, ray, &first_, &second_);                                 \
+        if (first_ < MISS) ALLHITS_TAKE((from) + (double)first_ * ray_length, kind, k, -1) \
+        if (second_ < MISS) ALLHITS_TAKE((from) + (double)second_ * ray_length, kind, k, -1) \
+    }
+
+#ifdef PYCLRAY_STORE_HITS
+/* whether hit row i goes before row j: nearer, then by kind, entry and triangle */
+inline bool allhits_before(__global const double* hit_t, __global const int* hit_kind, __global const int* hit_k,
+                           __global const int* hit_sub, const size_t i, const size_t j)
+{
+    if (hit_t[i] != hit_t[j]) return hit_t[i] < hit_t[j];
+    if (hit_kind[i] != hit_kind[j]) return hit_kind[i] < hit_kind[j];
+    if (hit_k[i] != hit_k[j]) return hit_k[i] < hit_k[j];
+    return hit_sub[i] < hit_sub[j];
+}
+#endif
+
+/* Each work-item's rays traverse the BVH together where leaves are blocks of triangles, a step of
+ * each in turn (as cast's: kernels/cast.cl, whose reasons hold here, where no hit shortens a ray's
+ * traversal): each ray's own steps are the same, in the same order, as one ray's traversal. A ray's
+ * state (HitsRay) lives between its steps in the work-item's memory: hits_start sets it up (the ray,
+ * its unbounded shapes, its box ray, the root pushed), hits_step is one step, hits_end sorts its rows
+ * and writes its count. */
+#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits)
+#define HITS_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
+    X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
+#define HITS_STATE_FIELD(T, name) T name##_;
+#define HITS_STATE_SAVE(T, name) S->name##_ = name;
+typedef struct {
+    HITS_RAY_STATE(HITS_STATE_FIELD)
+#ifdef PYCLRAY_HAS_BOUNDED
+    HITS_TRAVERSAL_STATE(HITS_STATE_FIELD)
+    int top_;
+    int stack_child_[BVH_STACK];
+    float stack_entry_[BVH_STACK];
+#endif
+} HitsRay;
+
+inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
+{
+    PYCLRAY_CAST_RAY
+    int n_hits = 0;
+#ifdef PYCLRAY_STORE_HITS
+    const long hits_at = (long)r * hit_capacity;
+    const int hits_room = hit_capacity;
+#endif
+    PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
+#ifdef PYCLRAY_HAS_BOUNDED
+    {
+        PYCLRAY_CAST_BOX
+        float limit = float_above_wide(t_max);
+        S->top_ = 0;
+        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
+        HITS_TRAVERSAL_STATE(HITS_STATE_SAVE)
+    }
+#endif
+    HITS_RAY_STATE(HITS_STATE_SAVE)
+}
+
+#ifdef PYCLRAY_HAS_BOUNDED
+/* the names the visit's macros use, bound to the state's (as in kernels/cast.cl), but for the stack
+ * and its top, locals (a mesh instance's own traversal declares locals of those names in its block) */
+#define ray (S->ray_)
+#define t_max (S->t_max_)
+#define t_min (S->t_min_)
+#define ray_length (S->ray_length_)
+#define n_hits (S->n_hits_)
+#define moved (S->moved_)
+#define moved_anchor (S->moved_anchor_)
+#define s0 (S->s0_)
+#define near (S->near_)
+#define o (S->o_)
+#define box_direction (S->box_direction_)
+#define limit (S->limit_)
+inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
+{
+    int top = S->top_;
+    int* stack_child = S->stack_child_;
+    float* stack_entry = S->stack_entry_;
+#ifdef PYCLRAY_STORE_HITS
+    const long hits_at = (long)S->r_ * hit_capacity;
+    const int hits_room = hit_capacity;
+#endif
+    PYCLRAY_TRAVERSE_STEP(nodes, S->box_, limit, stack_child, stack_entry, top, 0, PYCLRAY_CAST_LEAF_MASK, PYCLRAY_CAST_VISIT)
+    S->top_ = top;
+}
+#undef ray
+#undef t_max
+#undef t_min
+#undef ray_length
+#undef n_hits
+#undef moved
+#undef moved_anchor
+#undef s0
+#undef near
+#undef o
+#undef box_direction
+#undef limit
+#endif
+
+inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
+{
+    const int r = S->r_, n_hits = S->n_hits_;
+#ifdef PYCLRAY_STORE_HITS
+    /* the ray's rows sorted, nearest first (insertion sort: a few hits a ray) */
+    const long hits_at = (long)r * hit_capacity;
+    const int n = n_hits < hit_capacity ? n_hits : hit_capacity;
+    for (int i = 1; i < n; ++i) {
+        for (int j = i; j > 0 && allhits_before(hit_t, hit_kind, hit_k, hit_sub, (size_t)(hits_at + j), (size_t)(hits_at + j - 1)); --j) {
+            const size_t a = (size_t)(hits_at + j), b = (size_t)(hits_at + j - 1);
+            const double t = hit_t[a]; hit_t[a] = hit_t[b]; hit_t[b] = t;
+            const int kind = hit_kind[a]; hit_kind[a] = hit_kind[b]; hit_kind[b] = kind;
+            const int k = hit_k[a]; hit_k[a] = hit_k[b]; hit_k[b] = k;
+            const int sub = hit_sub[a]; hit_sub[a] = hit_sub[b]; hit_sub[b] = sub;
+        }
+    }
+#endif
+    hit_counts[r] = n_hits;
+}
+
+PYCLRAY_KERNELS_BEGIN
+/* one work-item per group of CAST_GROUP places of the order, interleaved as cast's (kernels/cast.cl:
+ * cast_group) where leaves are blocks on PoCL's CPU device, else one ray after the other */
+PYCLRAY_WORK_ITEM_FUNCTION void hits_group(const int group, PYCLRAY_PARAMETERS)
+{
+    PYCLRAY_CAST_GROUP_SETUP
+#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
+    HitsRay state[CAST_GROUP];
+    for (int l = 0; l < in_group; ++l)
+        hits_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
+    for (bool going = true; going;) {
+        going = false;
+        for (int l = 0; l < in_group; ++l) {
+            if (state[l].top_ > 0) {
+                hits_step(&state[l], PYCLRAY_ARGUMENTS);
+                going = true;
+            }
+        }
+    }
+    for (int l = 0; l < in_group; ++l)
+        hits_end(&state[l], PYCLRAY_ARGUMENTS);
+#else
+    for (int l = 0; l < in_group; ++l) {
+        HitsRay one;
+        hits_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
+#ifdef PYCLRAY_HAS_BOUNDED
+        while (one.top_ > 0) hits_step(&one, PYCLRAY_ARGUMENTS);
+#endif
+        hits_end(&one, PYCLRAY_ARGUMENTS);
+    }
+#endif
+}
+
+#ifdef PYCLRAY_STORE_HITS
+__kernel void all_hits(PYCLRAY_PARAMETERS)
+#else
+__kernel void count_hits(PYCLRAY_PARAMETERS)
+#endif
+{
+    const int group = get_global_id(0);
+    if (group * CAST_GROUP < n_rays) hits_group(group, PYCLRAY_ARGUMENTS);
+}
