@@ -64,10 +64,11 @@ def _world_points(shapes, ids, primitives, local) -> np.ndarray:
 
 def _project(camera, width: int, height: int, points) -> tuple[np.ndarray, np.ndarray]:
     """(pixel coordinates (N, 2), depth along the optical axis (N,)) of world points, by K and the pose."""
-    intrinsics = getattr(camera, "intrinsics", None)
-    if intrinsics is None:
-        raise RequestError(f"flow: needs a pinhole camera (K and a pose); the {camera.model} camera has no K")
-    K, pose = intrinsics(width, height), camera.pose()
+    K = camera.intrinsics(width, height)
+    if K is None or getattr(camera, "distortion", None) is not None:
+        raise RequestError(f"flow: needs a pinhole camera (K and a pose, no lens distortion); this "
+                           f"{camera.model} camera {'has none' if K is None else 'has a distortion'}")
+    pose = camera.pose()
     in_camera = (points - pose[:3, 3]) @ pose[:3, :3]
     z = in_camera[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):

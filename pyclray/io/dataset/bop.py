@@ -102,9 +102,8 @@ class BopFormat:
         files = {f"models/obj_{obj_id:06d}.ply": ply_bytes(model) for obj_id, model in sorted(models.items())}
         files["models/models_info.json"] = bop_json({obj_id: model_info(model) for obj_id, model in models.items()})
         width, height = scene.image.width, scene.image.height
-        intrinsics = getattr(scene.camera, "intrinsics", None)
-        if intrinsics is not None:
-            K = intrinsics(width, height)
+        K = scene.camera.intrinsics(width, height)
+        if K is not None:
             camera = {"cx": float(K[0, 2]), "cy": float(K[1, 2]), "depth_scale": self.depth_scale,
                       "fx": float(K[0, 0]), "fy": float(K[1, 1]), "height": height, "width": width}
             files["camera.json"] = json.dumps(camera, sort_keys=True, indent=2).encode()

@@ -160,14 +160,14 @@ def view_cameras(scene, placement: Placement, count: int) -> list[Camera]:
     """The pinhole camera of each view at the scene's image size: K the scene camera's
     (``intrinsics(width, height)``) or the poses file's, the pose placed."""
     width, height = scene.image.width, scene.image.height
-    own = getattr(scene.camera, "intrinsics", None)
+    own = scene.camera.intrinsics(width, height)  # (a lens's distortion is not carried: views are pinholes)
     cameras = []
     for index, (K, pose) in enumerate(view_poses(scene, placement, count)):
         if K is None:
             if own is None:
                 raise RequestError(f"placing views: the scene's {scene.camera.model} camera has no pinhole K; "
                                    "give K per view in --poses")
-            K = own(width, height)
+            K = own
         try:
             cameras.append(Camera.from_intrinsics(K, pose, width, height))
         except ValueError as error:
