@@ -226,3 +226,24 @@ def test_cli_render_and_dataset_with_time(tmp_path, scene):
         # the view's camera stays; the shapes move to the next frame
         motion = pyclray.render(scene, aovs=("flow",), time=T, camera=camera)
         assert np.array_equal(data["flow"], motion["flow"]) and np.abs(data["flow"]).max() > 0
+
+
+def test_every_shape_type_has_its_own_frame():
+    """scenes/shapes.toml holds every shape type: each hit's object coordinates, taken back to the
+    world through its shape's frame (its primitive's, for a batch), are the hit point."""
+    from pyclray.model.shapes import REGISTRY
+
+    scene = pyclray.load_scene("scenes/shapes.toml").with_size(96, 72)
+    assert {shape.type for shape in scene.shapes} == set(REGISTRY)
+    frame = pyclray.render(scene, aovs=("object_coordinates", "position", "id", "primitive"))
+    for shape_id, shape in enumerate(scene.shapes):
+        chosen = frame["id"] == shape_id
+        assert chosen.any(), shape.type
+        frames = shape.object_frames()
+        assert frames.ndim == 3 and frames.shape[1:] == (4, 4) and len(frames) in (1, shape.primitive_count())
+        F = frames[frame["primitive"][chosen] if len(frames) > 1 else np.zeros(chosen.sum(), int)]
+        X = frame["object_coordinates"][chosen].astype(np.float64)
+        world = np.einsum("nij,nj->ni", F[:, :3, :3], X) + F[:, :3, 3]
+        position = frame["position"][chosen].astype(np.float64)
+        scale = max(1.0, float(np.abs(position).max()))
+        assert np.abs(world - position).max() <= 1e-5 * scale, shape.type
