@@ -247,3 +247,12 @@ def test_every_shape_type_has_its_own_frame():
         position = frame["position"][chosen].astype(np.float64)
         scale = max(1.0, float(np.abs(position).max()))
         assert np.abs(world - position).max() <= 1e-5 * scale, shape.type
+
+
+def test_flow_needs_a_pinhole(scene):
+    lens = pyclray.Camera.from_intrinsics(scene.camera.intrinsics(96, 72), scene.camera.pose(), 96, 72,
+                                          distortion=(0.1, 0.0, 0.0, 0.0))
+    with pytest.raises(RequestError, match="flow: needs a pinhole camera"):
+        pyclray.render(scene, aovs=("flow",), time=T, camera=lens)
+    frame = pyclray.render(scene, aovs=("object_coordinates",), time=T, camera=lens)  # any camera has those
+    assert np.abs(frame["object_coordinates"]).max() > 0

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...model.camera import Camera
 from ...model.errors import RequestError
 
 MOTION_AOVS = ("object_coordinates", "flow")
@@ -64,11 +65,11 @@ def _world_points(shapes, ids, primitives, local) -> np.ndarray:
 
 def _project(camera, width: int, height: int, points) -> tuple[np.ndarray, np.ndarray]:
     """(pixel coordinates (N, 2), depth along the optical axis (N,)) of world points, by K and the pose."""
-    K = camera.intrinsics(width, height)
-    if K is None or getattr(camera, "distortion", None) is not None:
-        raise RequestError(f"flow: needs a pinhole camera (K and a pose, no lens distortion); this "
-                           f"{camera.model} camera {'has none' if K is None else 'has a distortion'}")
-    pose = camera.pose()
+    # a pinhole's projection (K and the pose): the perspective camera without a lens's distortion
+    if not isinstance(camera, Camera) or camera.distortion is not None:
+        raise RequestError(f"flow: needs a pinhole camera (pyclray.Camera without distortion), not this {camera.model} "
+                           f"camera{' with a distortion' if isinstance(camera, Camera) else ''}")
+    K, pose = camera.intrinsics(width, height), camera.pose()
     in_camera = (points - pose[:3, 3]) @ pose[:3, :3]
     z = in_camera[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
