@@ -256,3 +256,10 @@ def test_flow_needs_a_pinhole(scene):
         pyclray.render(scene, aovs=("flow",), time=T, camera=lens)
     frame = pyclray.render(scene, aovs=("object_coordinates",), time=T, camera=lens)  # any camera has those
     assert np.abs(frame["object_coordinates"]).max() > 0
+
+
+def test_a_handle_of_an_animated_scene_asks_for_the_time(scene):
+    with pyclray.prepare(scene) as tracer:
+        with pytest.raises(RequestError, match="flow"):
+            tracer.render(aovs=("flow",))
+        assert tracer.render(aovs=("depth",))["depth"].shape == (72, 96)

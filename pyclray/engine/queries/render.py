@@ -46,6 +46,9 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
     if "zdepth" in asked and not view.camera.has_zdepth:
         raise RequestError(f"aovs: zdepth is the depth along the optical axis, which the {view.camera.model} camera "
                            "model has not; ask for depth")
+    if "flow" in asked and motion is None and view.animation is not None:  # (a handle of an animated scene)
+        raise RequestError("flow: an animated scene's flow is to its next frame: render the scene at a time "
+                           "(pyclray.render(scene, ..., time=t)), or give the handle's render_views a motion")
     if not view.camera.rays_from_eye:  # rays from many origins (orthographic): cast, not the camera packets
         return start_cast_view(tracer, view, asked, window)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
