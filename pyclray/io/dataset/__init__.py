@@ -93,15 +93,16 @@ def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, pre
     work = DatasetViews(scene, cameras, fmt, precision, device, motion)
     pool = ViewWriters(writers or default_writers(), on_done=(lambda: progress.update(1)) if progress else None)
     render_seconds = 0.0
+    views = None
     try:
         if remote is None:
+            # the renders here, each view's encoding and files on a writer thread
             views = work.views(todo)
             for _ in todo:
                 before = time.perf_counter()
                 rendered = next(views)
                 render_seconds += time.perf_counter() - before
                 pool.submit(lambda r=rendered: write_view(out, work.encode(r)))
-            views.close()
         else:
             before = time.perf_counter()
             batches = [todo[i:i + REMOTE_BATCH] for i in range(0, len(todo), REMOTE_BATCH)]
@@ -114,6 +115,8 @@ def write_dataset(scene, out, cameras, fmt, *, settings: dict | None = None, pre
         pool.stop()
         raise
     finally:
+        if views is not None:
+            views.close()  # (its last view's kernel waited for) before the handles close
         work.close()
     index = finish_output(out, fmt, scene, len(cameras))
     return Written(len(todo), len(done), render_seconds, time.perf_counter() - start, pool.busy, index)
