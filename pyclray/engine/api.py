@@ -189,6 +189,30 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmin=tmin, tmax=tmax)
 
 
+def scan(scene: Scene, lidar=None, time=None, precision: str = "fp32", device=None):
+    """A LiDAR scan (docs/lidar.md): every beam of every column of ``lidar`` cast from the sensor's
+    origin as a float64 ray (exactly as pyclray.cast casts it: each range held to the error model),
+    returns outside the sensor's range limits made misses. Returns a Scan: the range image
+    (beams, columns) ``range``, ``id``, ``label``, ``normal``, ``position``, and the point cloud
+    ``points`` (sensor frame), ``points_world``, ``ring``, ``column``, ``point_range``.
+
+    lidar: a pyclray.Lidar, the name of one of the scene's [[lidars]], or None (the scene's first);
+    time: the time (seconds) of an animated scene the revolution starts at (None: 0); a sensor with
+    ``sweep = true`` fires column c at its own time (Lidar.step_times), the scene's shapes and the
+    sensor moved to it, so the motion shows in the scan as in a real spinning sensor's."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision, ctx)
+    check_cast_device(ctx)
+    from .queries.scan import run_scan
+
+    # the handles: cached ones (an animated scene's at its frame, an earlier frame's handle updated; a
+    # sweep's still shapes'), and a new one for a sweep's moving shapes
+    handles = (lambda shapes: tracer_for(shapes, ctx, precision), lambda shapes: Tracer(shapes, ctx.device, precision))
+    return run_scan(None, scene, lidar, time, handles)
+
+
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
              tmin=0.0) -> np.ndarray:
     """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array

@@ -28,6 +28,7 @@ from .opencl.device import context_for
 from .queries import cast as cast_queries
 from .queries import hits as hit_queries
 from .queries import render as render_query
+from .queries import scan as scan_query
 from .queries.requests import check_precision, check_request
 from .scene.prepared import PreparedScene
 from .scene.views import ViewState
@@ -51,6 +52,7 @@ class Tracer:
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
         self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
+        self._scan_still = None  # (shapes, Tracer): a sweeping scan's still shapes, prepared once (see scan)
         self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
@@ -61,6 +63,9 @@ class Tracer:
             self._prepared = None
             self._views.clear()
             self._cast_inputs = None
+            if self._scan_still is not None:
+                self._scan_still[1].close()
+                self._scan_still = None
             self.outputs.buffers.clear()
 
     @property
@@ -103,6 +108,7 @@ class Tracer:
             if self._prepared is None:
                 return 0
             total = self._prepared.nbytes() + self.outputs.nbytes()
+            total += 0 if self._scan_still is None else self._scan_still[1].nbytes
             total += sum(state.nbytes() for state in self._views.values())
             return total + (0 if self._cast_inputs is None else self._cast_inputs[3])
 
@@ -200,6 +206,30 @@ class Tracer:
         aovs = hit_queries.check_hit_aovs(aovs)
         cast_queries.check_cast_device(self.ctx)
         return hit_queries.run_all_hits(self, origins, directions, tmin, tmax, aovs)
+
+    def scan(self, lidar=None, time=None):
+        """A LiDAR scan of the handle's scene: exactly ``pyclray.scan(scene, lidar, time, precision,
+        device)`` (see there). On an animated scene the handle is updated to each time the scan
+        needs, and back to the scene's own shapes after it; a sweep among moving shapes keeps a handle
+        of the still shapes (in ``nbytes``, freed by ``close``) and updates one of the moving shapes."""
+        cast_queries.check_cast_device(self.ctx)
+        self.prepared  # closed: the error, before anything is cast
+        animated = self._scene if self._scene.animation is not None else None
+
+        def still(view):  # a sweep's still shapes: a handle of this one's, kept until they change
+            with self.lock:
+                if self._scan_still is None or self._scan_still[0] is not view.shapes:
+                    if self._scan_still is not None:
+                        self._scan_still[1].close()
+                    self._scan_still = (view.shapes, Tracer(view, self.ctx.device, self.precision))
+                return self._scan_still[1]
+
+        handles = (still, lambda view: Tracer(view, self.ctx.device, self.precision))
+        try:
+            return scan_query.run_scan(self, self._scene, lidar, time, handles)
+        finally:
+            if animated is not None and not self.closed:
+                self.update(animated)
 
     def cast_inputs(self):
         """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""
