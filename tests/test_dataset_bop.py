@@ -272,10 +272,16 @@ def test_depth_back_projects_onto_the_meshes(bop):
 
 
 def test_coco_masks_decode_to_the_rendered_ids(bop):
+    """The COCO API reads the file (pycocotools.coco.COCO, annToMask) and pycocotools.mask decodes
+    each segmentation as it is: exactly the rendered id image's pixels; the counts are the string
+    pycocotools.mask.encode makes of that mask."""
     from pycocotools import mask as coco_mask
+    from pycocotools.coco import COCO
 
     out, scene, cameras = bop
-    coco = json.loads((out / "train/000000/scene_gt_coco.json").read_text())
+    path = out / "train/000000/scene_gt_coco.json"
+    coco = json.loads(path.read_text())
+    api = COCO(str(path))
     assert sorted(coco) == ["annotations", "categories", "images", "info", "licenses"]
     assert coco["categories"] == [{"id": 1, "name": "1", "supercategory": "pyclray"},
                                   {"id": 7, "name": "7", "supercategory": "pyclray"}]
@@ -295,9 +301,11 @@ def test_coco_masks_decode_to_the_rendered_ids(bop):
                 continue
             (annotation,) = mine
             assert annotation["id"] == k * 2 + gt_id + 1 and annotation["iscrowd"] == 0
-            rle = coco_mask.frPyObjects(annotation["segmentation"], 48, 64)
-            decoded = coco_mask.decode(rle)
-            assert np.array_equal(decoded.astype(bool), expected)
+            rle = annotation["segmentation"]
+            assert rle["size"] == [48, 64]
+            assert rle["counts"] == coco_mask.encode(np.asfortranarray(expected.astype(np.uint8)))["counts"].decode()
+            assert np.array_equal(coco_mask.decode(rle).astype(bool), expected)
+            assert np.array_equal(api.annToMask(api.anns[annotation["id"]]).astype(bool), expected)
             assert annotation["area"] == expected.sum() == int(coco_mask.area(rle))
             ys, xs = np.nonzero(expected)
             assert annotation["bbox"] == [xs.min(), ys.min(), xs.max() - xs.min() + 1, ys.max() - ys.min() + 1]
@@ -322,3 +330,21 @@ def test_diameter_is_exact():
     for points in (rng.normal(size=(300, 3)), rng.normal(size=(40, 3)) * [5, 1, 0.1], np.zeros((1, 3))):
         brute = max((np.linalg.norm(a - b) for a in points for b in points), default=0.0)
         assert diameter(points) == pytest.approx(brute, rel=1e-12)
+
+
+def test_coco_rle_is_pycocotools_encode():
+    """Random masks of several sizes and densities, and masks starting with a run of 1s: the counts
+    string and size are exactly pycocotools.mask.encode's."""
+    from pycocotools import mask as coco_mask
+
+    from pyclray.io.dataset.bop import coco_rle
+
+    rng = np.random.default_rng(0)
+    for shape, density in (((48, 64), 0.5), ((120, 160), 0.02), ((7, 3), 0.9), ((30, 30), 0.0), ((5, 5), 1.0)):
+        for _ in range(10):
+            mask = rng.random(shape) < density
+            expected = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
+            assert coco_rle(mask) == {"size": list(expected["size"]), "counts": expected["counts"].decode()}
+    big = np.zeros((480, 640), bool)
+    big[100:300, 200:500] = True  # runs beyond 2^15 and differences of both signs
+    assert coco_rle(big)["counts"] == coco_mask.encode(np.asfortranarray(big.astype(np.uint8)))["counts"].decode()

@@ -53,17 +53,31 @@ def mask_box(mask: np.ndarray):
     return int(columns[0]), int(rows[0]), int(columns[-1]), int(rows[-1])
 
 
-def coco_rle(mask: np.ndarray) -> dict:
-    """COCO's uncompressed run-length encoding (the toolkit's pycoco_utils.binary_mask_to_rle):
-    runs of 0s and 1s in column-major order, starting with a run of 0s, and size [height, width];
-    pycocotools decodes it (mask.frPyObjects, then decode)."""
+def run_lengths(mask: np.ndarray) -> list[int]:
+    """The runs of 0s and 1s of a mask in column-major order, starting with a run of 0s (COCO's RLE
+    counts; the toolkit's pycoco_utils.binary_mask_to_rle)."""
     flat = np.asarray(mask, bool).ravel(order="F")
     changes = np.flatnonzero(flat[1:] != flat[:-1]) + 1
-    bounds = np.concatenate([[0], changes, [flat.size]])
-    counts = np.diff(bounds).tolist()
-    if flat.size and flat[0]:
-        counts = [0] + counts
-    return {"counts": counts, "size": list(mask.shape)}
+    counts = np.diff(np.concatenate([[0], changes, [flat.size]])).tolist()
+    return [0] + counts if flat.size and flat[0] else counts
+
+
+def coco_rle(mask: np.ndarray) -> dict:
+    """COCO's compressed run-length encoding of a mask, as pycocotools.mask.encode makes it: size
+    [height, width] and counts, the run lengths as a string (maskApi.c's rleToString: from the
+    third run on, each run less the one two before it, in 5-bit groups, low first, with a
+    continuation bit, as characters 48 + value). pycocotools.mask.decode reads it as it is."""
+    counts = run_lengths(mask)
+    text = []
+    for i, count in enumerate(counts):
+        x = count - counts[i - 2] if i > 2 else count
+        more = True
+        while more:
+            c = x & 0x1F
+            x >>= 5  # arithmetic: a negative difference ends in -1
+            more = x != -1 if c & 0x10 else x != 0
+            text.append(chr(48 + (c | 0x20 if more else c)))
+    return {"size": list(mask.shape), "counts": "".join(text)}
 
 
 class BopFormat:
