@@ -4,9 +4,9 @@ scene's with the same camera.
 
 ``DatasetViews`` is the work of one run, picklable: ``prepare()`` once per process (here, or on each
 Dask worker), then ``render(k)`` or ``views(ks)`` (the next view enqueued while one is returned,
-render_views) gives the arrays of view k, and ``encode(k, rendered)`` turns them into the view's
-files (the format's; PNG encoding is the slow part, done off the render's path). ``__call__(k)`` is
-both, for a cluster's task."""
+render_views) gives the arrays of view k, and ``encode(rendered)`` turns them into the view's files
+(the format's; PNG encoding is the slow part, done off the render's path). ``__call__(ks)`` is both
+for a few views, a cluster's task."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
