@@ -40,7 +40,7 @@ __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
     "Image", "Key", "Lidar", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "all_hits", "cast", "count_hits", "list_devices", "load_scene", "render",
-    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "Scan", "scan", "scene_from_dict", "select_device", "write_exr",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "closest_points", "distance", "signed_distance", "occupancy", "Scan", "scan", "scene_from_dict", "select_device", "write_exr",
     "write_npz", "write_ply", "Equirectangular", "Fisheye", "Orthographic",
 ]
 
@@ -51,6 +51,8 @@ __all__ = [
 _LAZY = {
     "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"), "scan": (".engine.api", "scan"),
     "Scan": (".engine.queries.scan", "Scan"), "write_ply": (".io.ply", "write_ply"),
+    "closest_points": (".engine.api", "closest_points"), "distance": (".engine.api", "distance"),
+    "signed_distance": (".engine.api", "signed_distance"), "occupancy": (".engine.api", "occupancy"),
     "count_hits": (".engine.api", "count_hits"), "all_hits": (".engine.api", "all_hits"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),
