@@ -22,8 +22,9 @@
 
 /* A render's fp32 pinhole camera rays carry their image-plane point as float pairs, for the flat
  * shapes' n . d (pixel_dot below); cast traces the caller's rays, a camera table's rays (a lens, a
- * panorama: kernels/camera.h) come rounded from the host, and fp64 has the digits without it. */
-#if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE)
+ * panorama: kernels/camera.h) come rounded from the host, the closest-point query has no rays, and
+ * fp64 has the digits without it. */
+#if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE) && !defined(PYCLRAY_CLOSEST)
 #define PYCLRAY_PIXEL_EXACT 1
 #endif
 
