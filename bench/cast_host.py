@@ -28,7 +28,6 @@ import numpy as np
 import pyopencl as cl
 
 import pyclray
-from pyclray.engine.launch import run as run_module
 from pyclray.engine.opencl.buffers import KeptBuffers
 from pyclray.engine.opencl.device import context_for
 from pyclray.engine.queries import cast as cast_module
@@ -54,6 +53,35 @@ def empty_launch(ctx):
     def call():
         kernel(ctx.queue, (1,), None).wait()
     return call
+
+
+def _launching_modules():
+    """The engine's modules that enqueue kernels through engine/opencl/device.py's launch."""
+    import sys
+
+    from pyclray.engine.opencl import device
+
+    return [module for name, module in list(sys.modules.items())
+            if name.startswith("pyclray.engine") and getattr(module, "launch", None) is device.launch]
+
+
+def profiling_queue(ctx):
+    """Swap ctx's queue for a profiling one (the kernels' events then carry their times); returns the
+    queue to put back."""
+    plain = ctx.queue
+    ctx.queue = cl.CommandQueue(ctx.context, ctx.device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    return plain
+
+
+def kernel_ms(call, calls: int) -> float:
+    """The median over calls of call()'s kernels' time (ms: the sum of their profiling events,
+    start to end); the engine's queue must be a profiling one (profiling_queue)."""
+    totals = []
+    for _ in range(calls):
+        with Split() as phases:
+            call()
+        totals.append(sum((e.profile.end - e.profile.start) * 1e-6 for e in phases.events if e is not None))
+    return float(np.median(totals))
 
 
 class Split:
@@ -84,19 +112,18 @@ class Split:
         self._wrap(KeptBuffers, "write", "uploads")
         self._wrap(KeptBuffers, "read", "readback")
         events = self.events
-        for module in (cast_module, run_module):
-            if hasattr(module, "launch"):
-                original = module.launch
+        for module in _launching_modules():
+            original = module.launch
 
-                def launched(*args, _original=original, **kwargs):
-                    start = time.perf_counter()
-                    event = _original(*args, **kwargs)
-                    self.times["launch"] += time.perf_counter() - start
-                    self.launched_at = time.perf_counter()
-                    events.append(event)
-                    return event
-                self.saved.append((module, "launch", original))
-                module.launch = launched
+            def launched(*args, _original=original, **kwargs):
+                start = time.perf_counter()
+                event = _original(*args, **kwargs)
+                self.times["launch"] += time.perf_counter() - start
+                self.launched_at = time.perf_counter()
+                events.append(event)
+                return event
+            self.saved.append((module, "launch", original))
+            module.launch = launched
         return self
 
     def __exit__(self, *exc):
@@ -107,8 +134,7 @@ class Split:
 def split(tracer, origins, directions, calls: int) -> dict:
     """Per phase the median ms per call over calls casts, on a profiling queue."""
     ctx = tracer.ctx
-    plain = ctx.queue
-    ctx.queue = cl.CommandQueue(ctx.context, ctx.device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    plain = profiling_queue(ctx)
     try:
         tracer.cast(origins, directions)  # warm
         rows = []

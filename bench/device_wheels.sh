@@ -17,3 +17,19 @@ for name in pyopencl pytools platformdirs siphash24 OpenEXR trimesh grimp import
         $platforms -d .whl "$name${version:+==$version}"
 done
 ls .whl
+# NVIDIA Warp (bench/gpu_warp.py) for a CPython 3.12 x86-64 machine: its wheel (about 150 MB) exceeds what
+# one call may carry, so its package, less what a GPU run does not load (warp-clang.so, its CPU
+# compiler; the examples), is packed as one xz tarball in parts of PART_MB under .warp/ (ignored like
+# .whl/), each carried by one call (bench/device_check.sh stage), with the tarball's sha256
+warp=${WARP_VERSION:-$("$python" -m pip show warp-lang 2>/dev/null | sed -n 's/^Version: //p')}
+grep -qx '/.warp/' .git/info/exclude 2>/dev/null || echo '/.warp/' >> .git/info/exclude
+tmp=$(mktemp -d)
+"$python" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+    $platforms -d "$tmp" "warp-lang${warp:+==$warp}"
+(cd "$tmp" && "$python" -m zipfile -e warp_lang-*.whl site && rm -rf site/warp/bin/warp-clang.so site/warp/examples)
+rm -rf .warp && mkdir -p .warp
+tar -C "$tmp/site" -cf - warp "$(cd "$tmp/site" && ls -d warp_lang-*.dist-info)" | xz -T2 -6 > "$tmp/warp.tar.xz"
+(cd "$tmp" && sha256sum warp.tar.xz) > .warp/warp.tar.xz.sha256
+split -b "${PART_MB:-40}M" -d -a 2 "$tmp/warp.tar.xz" .warp/warp.tar.xz.part
+rm -rf "$tmp"
+ls -la .warp

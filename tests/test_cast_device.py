@@ -146,3 +146,12 @@ def test_kept_buffers_grow_and_give_the_new_buffers_bits(tracer, monkeypatch):
         for name in CAST_AOVS:
             same(frame[name], expected[name])
         same(occluded, tracer.occluded(origins, directions))
+
+
+def test_the_hit_queries_refuse_device_arrays_clearly(tracer):
+    origins, directions = rays(10, 13)
+    queue = tracer.ctx.queue
+    with pytest.raises(pyclray.RequestError, match="directions: a pyopencl array is taken by cast and occluded only"):
+        tracer.all_hits(origins, cl_array.to_device(queue, directions))
+    with pytest.raises(pyclray.RequestError, match="origins: a pyopencl array is taken by cast and occluded only"):
+        tracer.count_hits(cl_array.to_device(queue, origins), directions)
