@@ -42,8 +42,8 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir .whl/
 python3 -m pip install -q --no-index --no-deps --no-build-isolation -e . || exit 1
 # Warp: its parts joined, checked against the sum device_wheels.sh wrote, unpacked onto the path
 if ! python3 -c "import warp" 2>/dev/null; then
-    (cd /tmp/warp-parts && cat warp.tar.xz.part* > /tmp/warp.tar.xz && sha256sum -c warp.tar.xz.sha256) || exit 1
-    mkdir -p /tmp/warp-site && tar -xJf /tmp/warp.tar.xz -C /tmp/warp-site || exit 1
+    (cd /tmp/warp-parts && cat warp.tar.xz.part* > warp.tar.xz && sha256sum -c warp.tar.xz.sha256) || exit 1
+    mkdir -p /tmp/warp-site && tar -xJf /tmp/warp-parts/warp.tar.xz -C /tmp/warp-site || exit 1
     export PYTHONPATH=/tmp/warp-site${PYTHONPATH:+:$PYTHONPATH}
 fi
 lib=$(find / -xdev -name 'libnvidia-opencl.so*' 2>/dev/null | head -1)

@@ -155,3 +155,24 @@ def test_the_hit_queries_refuse_device_arrays_clearly(tracer):
         tracer.all_hits(origins, cl_array.to_device(queue, directions))
     with pytest.raises(pyclray.RequestError, match="origins: a pyopencl array is taken by cast and occluded only"):
         tracer.count_hits(cl_array.to_device(queue, origins), directions)
+
+
+def test_kept_buffers_of_a_device_without_shared_memory(monkeypatch):
+    """The kept buffers as on a GPU (copies enqueued in and out, every cast through them), on this
+    device: a fresh handle whose buffers are told not to be host memory gives the same bits."""
+    from pyclray.engine.opencl import buffers
+
+    scene = mixed_scene()
+    origins, directions = rays(5000, 14)
+    with pyclray.prepare(scene) as handle:
+        expected = handle.cast(origins, directions, aovs=CAST_AOVS)
+        occluded = handle.occluded(origins, directions)
+    monkeypatch.setattr(buffers, "shares_host_memory", lambda ctx: False)
+    monkeypatch.setattr(cast_module, "shares_host_memory", lambda ctx: False)
+    with pyclray.prepare(scene) as handle:
+        for count in (5000, 3, 700):
+            frame = handle.cast(origins[:count], directions[:count], aovs=CAST_AOVS)
+            for name in CAST_AOVS:
+                same(frame[name], expected[name][:count])
+            same(handle.occluded(origins[:count], directions[:count]), occluded[:count])
+        assert all(host is None for _, host in handle.ray_buffers.buffers.values())

@@ -89,16 +89,15 @@ class KeptBuffers:
             cl.enqueue_copy(ctx.queue, buffer, array, is_blocking=False)
         return buffer
 
-    def read(self, ctx, name: str, out: np.ndarray, done: cl.Event) -> None:
-        """Into out, the first out.nbytes bytes of the buffer called name, once done (the kernel's
-        event) has completed: from its host memory after waiting (a CPU device's kernel writes the
-        array itself), else by a copy."""
+    def read(self, ctx, name: str, out: np.ndarray) -> None:
+        """Into out, the first out.nbytes bytes of the buffer called name, the kernel that writes it
+        done: from its host memory (a CPU device's kernel wrote the array itself), else by a copy
+        enqueued (current after the queue's finish)."""
         buffer, host = self.buffers[name]
         if host is not None:
-            done.wait()
             out.reshape(-1).view(np.uint8)[:] = host[:out.nbytes]
         else:
-            cl.enqueue_copy(ctx.queue, out, buffer, is_blocking=True)
+            cl.enqueue_copy(ctx.queue, out, buffer, is_blocking=False)
 
     def clear(self) -> None:
         self.buffers.clear()

@@ -441,9 +441,14 @@ def _run_kept(ctx, variant, batch: RayBatch, kept, outputs: dict) -> None:
     (outputs: parameter name -> the array each is read back into, once, at the end), and wait."""
     buffers = {name: kept.get(ctx, name, out.nbytes)[0] for name, out in outputs.items()}
     done = launch(ctx, kernel_for(ctx, variant), *batch.sizes, arguments(variant, {**batch.args, **buffers}))
-    done.wait()
-    for name, out in outputs.items():
-        kept.read(ctx, name, out, done)
+    if shares_host_memory(ctx):
+        done.wait()  # then the results are in the kept arrays, each copied out
+        for name, out in outputs.items():
+            kept.read(ctx, name, out)
+    else:  # the copies out enqueued behind the kernel, then one wait for all
+        for name, out in outputs.items():
+            kept.read(ctx, name, out)
+        ctx.queue.finish()
 
 
 def _run_into(ctx, variant, sizes, args: dict, out: np.ndarray) -> None:
