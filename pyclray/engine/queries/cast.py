@@ -285,7 +285,7 @@ class RayBatch:
         else:
             order = np.zeros(1, np.int32)
         # the rays' buffers: new ones (on a CPU device the arrays' own memory), or the handle's kept
-        # ones (kept: a small cast, run_cast's KEPT_BELOW), written by copies enqueued before the kernel
+        # ones (kept: a small cast, run_cast's KEPT_BELOW), the rays copied into them (KeptBuffers.write)
         rays = {"order": order, "origins": origins, "directions": directions, "limits": tmax, "starts": tmin}
         if kept is None:
             buffers = {name: _ray_buffer(ctx, array) for name, array in rays.items()}

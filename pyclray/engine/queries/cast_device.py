@@ -46,6 +46,8 @@ def _device_rays(ctx, kernels, name: str, value) -> cl_array.Array:
             host = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError, OverflowError):
             raise RequestError(f"{name}: expected an array of shape (..., 3) of numbers") from None
+        if host.size == 0 and host.ndim == 1:  # an empty list: no rays
+            host = host.reshape(0, 3)
         value = cl_array.to_device(ctx.queue, np.ascontiguousarray(host))
     elif value.context.int_ptr != ctx.context.int_ptr:
         raise RequestError(f"{name}: a pyopencl array on another context than the handle's (its device's context)")
