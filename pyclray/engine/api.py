@@ -18,12 +18,13 @@ import numpy as np
 
 from ..model.animation import scene_at
 from ..model.aovs import AOVS, CAST_AOVS, RENDER_AOVS
-from ..model.errors import SceneError
+from ..model.errors import RequestError, SceneError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count, checked_time
 from .opencl.device import context_for
 from .queries.cast import check_cast_device
+from .queries.motion import Motion
 from .queries.render import with_camera
 from .queries.requests import Frame, check_precision, check_request
 from .tracer import Tracer
@@ -78,7 +79,7 @@ def tracer_for(scene: Scene, ctx, precision: str) -> Tracer:
 
 # -- renders -------------------------------------------------------------------------------------
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto",
-           camera=None) -> Frame:
+           camera=None, time=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
@@ -94,22 +95,42 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     The images do not depend on it, bit for bit.
     camera: a pyclray.Camera to render the scene's shapes from instead of its own (the same as
     rendering ``dataclasses.replace(scene, camera=camera)``).
+    time: render the animated scene at time t (seconds): ``scene.at(t)``, and its `flow` to the next
+    frame, t + 1/fps (the shapes and camera there; a given ``camera`` stays). Without a time an
+    animated scene's flow is an error; a static scene's flow is 0.
 
     The scene's shapes are prepared on the device once and kept (a cached scene handle, see
     pyclray.prepare for one of your own): a view from another camera uploads the camera only,
     whatever the number of shapes.
     """
-    return _start(scene, aovs, precision, device, window, acceleration, camera)()
+    return _start(scene, aovs, precision, device, window, acceleration, camera, time)()
 
 
-def _start(scene, aovs, precision, device, window=None, acceleration="auto", camera=None):
+def _start(scene, aovs, precision, device, window=None, acceleration="auto", camera=None, time=None):
     """render's checks, in their order, and its start on the cached handle (Tracer.start_render)."""
     scene = as_scene(scene)
+    ctx = context_for(device)
+    asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    scene, motion = _at_time(scene, time, camera, "flow" in asked)
     if camera is not None:
         scene = with_camera(scene, camera)
-    ctx = context_for(device)
-    check_request(aovs, precision, ctx, RENDER_AOVS)
-    return tracer_for(scene, ctx, precision).start_render(scene, aovs, window, acceleration)
+    return tracer_for(scene, ctx, precision).start_render(scene, aovs, window, acceleration, motion)
+
+
+def _at_time(scene: Scene, time, camera, flow: bool):
+    """(the scene at `time`, the next frame's Motion for flow or None)."""
+    if time is None:
+        if flow and scene.animation is not None:
+            raise RequestError("flow: an animated scene's flow is to its next frame: give the time (render(..., time=t))")
+        return scene, None
+    if scene.animation is None:
+        raise RequestError(f"time: the scene has no [animation] to be at time {time!r}")
+    t = checked_time(time)
+    motion = None
+    if flow:
+        following = scene_at(scene, t + 1.0 / scene.animation.fps)
+        motion = Motion(following.shapes, camera if camera is not None else following.camera)
+    return scene_at(scene, t, lazy=True), motion
 
 
 def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", device=None, acceleration: str = "auto"):
@@ -130,7 +151,7 @@ def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", devi
 
 def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):
     """Yield (t, Frame) for each frame of the scene's animation: frame k at t = k / fps is
-    exactly ``render(scene.at(t), aovs, precision, device)``. frames: the frame indices (a range
+    exactly ``render(scene, aovs, precision, device, time=t)`` (``scene.at(t)``; its flow to frame k + 1). frames: the frame indices (a range
     or any iterable of ints; default all of them)."""
     animation = scene.animation
     if animation is None:
@@ -138,7 +159,7 @@ def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, fra
     for k in range(animation.frame_count()) if frames is None else frames:
         t = animation.frame_time(k)
         # scene.at(t) with its shapes held as the animated scene's and the changes (O(K) work)
-        yield t, render(scene_at(scene, checked_time(t), lazy=True), aovs=aovs, precision=precision, device=device)
+        yield t, render(scene, aovs=aovs, precision=precision, device=device, time=t)
 
 
 # -- casts ---------------------------------------------------------------------------------------
@@ -166,6 +187,30 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     check_request(aovs, precision, ctx, CAST_AOVS)
     check_cast_device(ctx)
     return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmin=tmin, tmax=tmax)
+
+
+def scan(scene: Scene, lidar=None, time=None, precision: str = "fp32", device=None):
+    """A LiDAR scan (docs/lidar.md): every beam of every column of ``lidar`` cast from the sensor's
+    origin as a float64 ray (exactly as pyclray.cast casts it: each range held to the error model),
+    returns outside the sensor's range limits made misses. Returns a Scan: the range image
+    (beams, columns) ``range``, ``id``, ``label``, ``normal``, ``position``, and the point cloud
+    ``points`` (sensor frame), ``points_world``, ``ring``, ``column``, ``point_range``.
+
+    lidar: a pyclray.Lidar, the name of one of the scene's [[lidars]], or None (the scene's first);
+    time: the time (seconds) of an animated scene the revolution starts at (None: 0); a sensor with
+    ``sweep = true`` fires column c at its own time (Lidar.step_times), the scene's shapes and the
+    sensor moved to it, so the motion shows in the scan as in a real spinning sensor's."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision, ctx)
+    check_cast_device(ctx)
+    from .queries.scan import run_scan
+
+    # the handles: cached ones (an animated scene's at its frame, an earlier frame's handle updated; a
+    # sweep's still shapes'), and a new one for a sweep's moving shapes
+    handles = (lambda shapes: tracer_for(shapes, ctx, precision), lambda shapes: Tracer(shapes, ctx.device, precision))
+    return run_scan(None, scene, lidar, time, handles)
 
 
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
@@ -222,3 +267,49 @@ def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=None, aovs=("dept
     aovs = check_hit_aovs(aovs)
     return _ray_query_tracer(scene, precision, device).all_hits(origins, directions, tmin, tmax, aovs)
 
+
+
+# -- closest points, distances, inside -------------------------------------------------------------
+def _point_tracer(scene, precision: str, device) -> Tracer:
+    """The cached handle for a points query (the checks of cast: a scene, a precision, a device with float64)."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision)
+    check_cast_device(ctx)
+    return tracer_for(scene, ctx, precision)
+
+
+def closest_points(scene: Scene, points, precision: str = "fp32", device=None) -> dict:
+    """For each point (an array of shape (..., 3), float64 or float32 as given), the nearest point of
+    any shape's surface. Returns a dict of arrays of the points' leading shape: ``position`` (..., 3)
+    (float32, float64 with precision "fp64"; NaN where the scene has no shape), ``distance`` (float64,
+    computed in float64 from the point as given; +inf with no shape), ``id`` (int32, -1 with no shape),
+    ``primitive`` (int32: a mesh's triangle, a batch's sphere; 0 for a single shape), ``barycentric``
+    (..., 2) (a triangle's (u, v): position = (1 - u - v) a + u b + v c; 0 for other shapes) and
+    ``normal`` (..., 3) (the unit geometric normal of the nearest surface there, outward). An exact tie
+    of distances goes to the lower id, then the lower primitive. Planes are unbounded: the distance
+    to a plane is to its whole plane. Needs cl_khr_fp64. Bad points (another shape, NaN or inf) are
+    a RequestError (a ValueError) naming the argument and the first bad row."""
+    return _point_tracer(scene, precision, device).closest_points(points)
+
+
+def distance(scene: Scene, points, precision: str = "fp32", device=None) -> np.ndarray:
+    """The distance (float64) of each point to the nearest surface: closest_points' ``distance`` alone."""
+    return _point_tracer(scene, precision, device).distance(points)
+
+
+def signed_distance(scene: Scene, points, sign: str = "parity", precision: str = "fp32", device=None) -> np.ndarray:
+    """The distance of each point to the nearest surface (float64), negative inside a solid: a
+    sphere, a box, a capped cylinder, the half-space behind a plane, or a mesh by ``sign``: "parity"
+    (a closed mesh, pyclray.Mesh.closed: the exact parity of one ray's crossings; open meshes have no
+    inside) or "winding" (any mesh: its generalized winding number >= 1/2, for meshes with holes,
+    self-intersections or several parts). Disks, rectangles and open cylinders have no inside. A point
+    on a surface is at distance 0 and inside."""
+    return _point_tracer(scene, precision, device).signed_distance(points, sign)
+
+
+def occupancy(scene: Scene, points, sign: str = "parity", precision: str = "fp32", device=None) -> np.ndarray:
+    """1 where a point is inside a solid or on a surface, else 0 (uint8, the points' leading shape):
+    signed_distance's inside (see there for ``sign``)."""
+    return _point_tracer(scene, precision, device).occupancy(points, sign)

@@ -8,9 +8,9 @@ import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
-from .base import Shape, distance, frame_columns, to_world, unit_rows
+from .base import Shape, distance, frame_columns, object_matrix, to_world, unit_rows
 from .device import padded_bounds, rebase_flat
-from .reference import dot_rows, flat_hits
+from .reference import dot_rows, flat_hits, exact_at_most, plain_closest, rational
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,10 @@ class Disk(Shape):
         "A disk in world coordinates: center.xyz, center.w = radius, normal.xyz unit.",
     )
     kernel_files = ("disk.cl",)
+
+    def object_frame(self) -> np.ndarray:
+        """The disk's own frame: its centre at 0, z along its normal (x, y: frame_columns')."""
+        return object_matrix(frame_columns(self.unit_normal()), self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -104,6 +108,18 @@ class Disk(Shape):
     def surface_distance(self, points):
         height, rho = self._plane_coordinates(points)
         return np.hypot(height, np.maximum(rho - self.radius, 0.0))
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        n = self.unit_normal()
+        P = points - np.array(self.center)
+        height = P @ n
+        rho_vector = P - height[:, None] * n
+        rho = np.linalg.norm(rho_vector, axis=-1)
+        scale = np.where(rho > self.radius, self.radius / np.where(rho > 0, rho, 1.0), 1.0)
+        out = plain_closest(points, np.array(self.center) + scale[:, None] * rho_vector, n)
+        return out[:4] + (self.surface_distance(points),)
 
     def edge_distance(self, points):
         height, rho = self._plane_coordinates(points)

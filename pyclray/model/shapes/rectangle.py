@@ -8,9 +8,9 @@ import numpy as np
 
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
-from .base import Shape, distance, to_world, unit_rows
+from .base import Shape, distance, object_matrix, to_world, unit_rows
 from .device import in_frame, padded_bounds, rebase_flat
-from .reference import flat_hits
+from .reference import flat_hits, exact_at_most, plain_closest, rational
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -53,6 +53,15 @@ class Rectangle(Shape):
         "A rectangle in world coordinates: centre, unit normal, the dual vectors of u and v, u and v.",
     )
     kernel_files = ("rectangle.cl",)
+
+    def object_frame(self) -> np.ndarray:
+        """The rectangle's own frame: its centre at 0, x along u, y along v, z along u x v (unit
+        axes: coordinates in scene units)."""
+        u, v = np.asarray(self.u, np.float64), np.asarray(self.v, np.float64)
+        x = u / np.linalg.norm(u)
+        z = np.cross(u, v)
+        z /= np.linalg.norm(z)
+        return object_matrix([x, np.cross(z, x), z], self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -140,6 +149,14 @@ class Rectangle(Shape):
     def surface_distance(self, points):
         height, qa, qb = self._border(points)
         return np.hypot(height, np.hypot(np.maximum(qa, 0), np.maximum(qb, 0)))
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        _, a, b = self._coordinates(points)
+        position = np.array(self.center) + np.clip(a, -1, 1)[:, None] * np.array(self.u) + np.clip(b, -1, 1)[:, None] * np.array(self.v)
+        out = plain_closest(points, position, self.unit_normal())
+        return out[:4] + (self.surface_distance(points),)
 
     def edge_distance(self, points):
         height, qa, qb = self._border(points)
