@@ -176,3 +176,10 @@ def test_kept_buffers_of_a_device_without_shared_memory(monkeypatch):
                 same(frame[name], expected[name][:count])
             same(handle.occluded(origins[:count], directions[:count]), occluded[:count])
         assert all(host is None for _, host in handle.ray_buffers.buffers.values())
+
+
+def test_distances_stay_host_values(tracer):
+    origins, directions = rays(4, 15)
+    queue = tracer.ctx.queue
+    with pytest.raises(pyclray.RequestError, match="tmax: expected a number or a numpy array"):
+        tracer.cast(origins, cl_array.to_device(queue, directions), tmax=cl_array.to_device(queue, np.ones(4)))

@@ -47,6 +47,9 @@ def _distances(name: str, value, shape: tuple, default: float, good, expected: s
     leading shape; a value that is not good is a RequestError naming its index."""
     if value is None:
         return np.full(1, default)
+    if type(value).__module__.startswith("pyopencl"):
+        raise RequestError(f"{name}: expected a number or a numpy array (pyopencl arrays are taken for origins and "
+                           "directions only)")
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
