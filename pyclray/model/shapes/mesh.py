@@ -79,7 +79,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         ),
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
-    kernel_files = ("mesh.cl",)
+    kernel_files = ("mesh.cl", "mesh_blocks.cl", "mesh_closest.cl")  # the ray tests, cast's blocks, the closest point
     # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh/wide.py:
     # count < 8), about a packet's 8 lanes: a triangle test is cheap next to a node's box test and the
     # stack (docs/benchmarks.md, "Why the engine does what it does": Mesh.leaf_size)
@@ -225,6 +225,14 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         out[:3, :3] = rotation(self.axis, self.angle) * np.asarray(self.scale, np.float64)
         out[:3, 3] = self.translate
         return out
+
+    def object_frame(self) -> np.ndarray:
+        """world_from_object: the placement (transform) of the file's coordinates."""
+        return self.transform()
+
+    def object_model(self) -> tuple[np.ndarray, np.ndarray]:
+        """The file's vertices and the faces (the mesh in its own frame)."""
+        return self.vertices, self.faces
 
     def world_vertices(self) -> np.ndarray:
         """(V, 3) float64: translate + R (scale p) (or the matrix's), per vertex (computed once)."""
