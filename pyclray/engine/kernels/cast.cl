@@ -219,41 +219,11 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 }
 
 PYCLRAY_KERNELS_BEGIN
-/* one work-item per group of CAST_GROUP places of the order: its rays' traversals interleaved where
- * the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py), on PoCL's
- * CPU device (PYCLRAY_INLINE_BUILTINS): a GPU hides a ray's misses behind its other work-items', and
- * the group's 8 states (17 KB with their stacks) would not fit its private memory */
+/* one work-item per group of CAST_GROUP places of the order (kernels/rays.h: PYCLRAY_GROUP_TRAVERSAL) */
 PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
-#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
-    CastRay state[CAST_GROUP];
-    for (int l = 0; l < in_group; ++l)
-        cast_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-    /* a step of each ray still traversing, until none is (cast's limit never falls below 0) */
-    for (bool going = true; going;) {
-        going = false;
-        for (int l = 0; l < in_group; ++l) {
-            if (state[l].top_ > 0) {
-                cast_step(&state[l], PYCLRAY_ARGUMENTS);
-                going = true;
-            }
-        }
-    }
-    for (int l = 0; l < in_group; ++l)
-        cast_end(&state[l], PYCLRAY_ARGUMENTS);
-#else
-    /* one ray after the other (no block types: spheres' short paths through data that the caches
-     * hold lose by interleaving; docs/benchmarks.md, "Mesh cast's traversal") */
-    for (int l = 0; l < in_group; ++l) {
-        CastRay one;
-        cast_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-#ifdef PYCLRAY_HAS_BOUNDED
-        while (one.top_ > 0) cast_step(&one, PYCLRAY_ARGUMENTS);
-#endif
-        cast_end(&one, PYCLRAY_ARGUMENTS);
-    }
-#endif
+    PYCLRAY_GROUP_TRAVERSAL(CastRay, cast_start, cast_step, cast_end)
 }
 
 __kernel void cast(PYCLRAY_PARAMETERS)
