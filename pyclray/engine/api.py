@@ -170,7 +170,7 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
 
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
              tmin=0.0) -> np.ndarray:
-    """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array
+    """Whether each ray hits any shape at a distance below tmax (None: any distance): a bool array
     of the rays' leading shape. The any-hit query of shadow rays: the search stops at the first
     hit found. The same rays, arguments and exactness as cast: occluded is true exactly where
     cast(..., tmax=tmax) finds a hit, up to hits within rounding of tmax."""
