@@ -28,6 +28,7 @@ from .model.aovs import AOVS
 from .model.camera import Camera, Image
 from .model.cameras import Equirectangular, Fisheye, Orthographic
 from .model.errors import BuildError, DeviceError, OutputError, PyclrayError, PyclrayWarning, RequestError, SceneError
+from .model.lidar import Lidar
 from .model.lights import DirectionalLight, Material, PointLight, Shading
 from .model.loader import load_scene, scene_from_dict
 from .model.scene import Scene
@@ -37,10 +38,10 @@ from .version import __version__
 
 __all__ = [
     "AOVS", "Animation", "Box", "BuildError", "Camera", "clear_cache", "Cylinder", "DeviceError", "DirectionalLight", "Disk", "Frame",
-    "Image", "Key", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
+    "Image", "Key", "Lidar", "Material", "OutputError", "Plane", "PointLight", "PyclrayError", "PyclrayWarning", "Rectangle",
     "Mesh", "RequestError", "Scene", "SceneError", "Shading", "Sphere", "Spheres", "Tracer", "all_hits", "cast", "count_hits", "list_devices", "load_scene", "render",
-    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "scene_from_dict", "select_device", "write_exr",
-    "write_npz", "Equirectangular", "Fisheye", "Orthographic",
+    "read_exr", "read_npz", "render_animation", "render_views", "occluded", "prepare", "closest_points", "distance", "signed_distance", "occupancy", "Scan", "scan", "scene_from_dict", "select_device", "write_exr",
+    "write_npz", "write_ply", "Equirectangular", "Fisheye", "Orthographic",
 ]
 
 
@@ -48,7 +49,10 @@ __all__ = [
 # path (a first render of a new process pays for every module it imports), and pyclray.cluster needs
 # the cluster extra (importing distributed takes a while). name -> (module, attribute)
 _LAZY = {
-    "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"),
+    "cast": (".engine.api", "cast"), "occluded": (".engine.api", "occluded"), "scan": (".engine.api", "scan"),
+    "Scan": (".engine.queries.scan", "Scan"), "write_ply": (".io.ply", "write_ply"),
+    "closest_points": (".engine.api", "closest_points"), "distance": (".engine.api", "distance"),
+    "signed_distance": (".engine.api", "signed_distance"), "occupancy": (".engine.api", "occupancy"),
     "count_hits": (".engine.api", "count_hits"), "all_hits": (".engine.api", "all_hits"),
     "write_exr": (".io.bands", "write_exr"), "write_npz": (".io.bands", "write_npz"),
     "read_exr": (".io.exr", "read_exr"), "read_npz": (".io.npz", "read_npz"),

@@ -13,7 +13,7 @@ from pyclray.model.aovs import TABLE
 from conftest import REPO
 
 DOCS = sorted((REPO / "docs").glob("*.md"))
-COMMANDS = ["render", "animate", "devices", "check", "stability", "view", "export"]
+COMMANDS = ["render", "animate", "devices", "check", "stability", "view", "export", "scan"]
 
 
 def helps(command) -> str:

@@ -67,6 +67,41 @@ def test_an_update_is_a_fresh_handle_of_the_moved_scene(precision):
                 assert np.array_equal(tracer.occluded(origins, directions), fresh.occluded(origins, directions))
 
 
+def test_an_update_moving_a_mesh_and_a_sphere_far_casts_as_a_fresh_handle():
+    """Beside a mesh (cast tests a leaf's triangles at once: its refs and anchors regrouped), a sphere
+    moved from 100 to 50 along +x is cast from its new box (its anchor and radius: a ray from the
+    origin that started at the old anchor's reach would pass it) and a moved mesh from its new
+    vertices, as a handle prepared for the moved scene casts them, bit for bit."""
+    import trimesh
+
+    ico = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    mesh = pyclray.Mesh(ico.vertices, ico.faces, translate=(0.0, 10.0, 0.0))
+    before = pyclray.Scene(pyclray.Camera((0.0, 0.0, -5.0), (0.0, 0.0, 0.0)), pyclray.Image(8, 8),
+                           (mesh, pyclray.Sphere((100.0, 0.0, 0.0), 1.0)))
+    after = dataclasses.replace(before, shapes=(dataclasses.replace(mesh, translate=(0.0, -10.0, 0.0)),
+                                                pyclray.Sphere((50.0, 0.0, 0.0), 1.0)))
+    rng = np.random.default_rng(3)
+    origins = np.zeros((400, 3))
+    directions = np.concatenate([[[1.0, 0.0, 0.0], [0.011, -1.0, 0.013]], rng.normal(size=(398, 3))])  # (off the vertices)
+    with pyclray.prepare(before) as tracer:
+        tracer.cast(origins, directions)  # cast's inputs made for the shapes before
+        tracer.update(after)
+        moved = tracer.cast(origins, directions)
+        assert moved["id"][:2].tolist() == [1, 0] and moved["depth"][0] == pytest.approx(49.0)
+        with pyclray.prepare(after) as fresh:
+            same(moved, fresh.cast(origins, directions))
+    # an animation's frames (scene.at): the mesh's triangles where the frame has them
+    animated = dataclasses.replace(before, animation=pyclray.Animation(10.0, 1.0, (
+        {"target": "mesh", "time": 0.0, "translate": [0.0, 10.0, 0.0]},
+        {"target": "mesh", "time": 0.1, "translate": [10.0, 0.0, 0.0]})))
+    with pyclray.prepare(animated.at(0.0)) as tracer:
+        tracer.cast(origins, directions)
+        for t in (0.05, 0.1):
+            tracer.update(animated.at(t))
+            with pyclray.prepare(animated.at(t)) as fresh:
+                same(tracer.cast(origins, directions), fresh.cast(origins, directions))
+
+
 def test_a_closed_handle_refuses_every_query():
     scene = pyclray.load_scene("scenes/tp02.toml").with_size(16, 16)
     origins, directions = rays(10)

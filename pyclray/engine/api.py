@@ -168,6 +168,30 @@ def cast(scene: Scene, origins, directions, aovs=AOVS, precision: str = "fp32", 
     return tracer_for(scene, ctx, precision).cast(origins, directions, aovs, tmin=tmin, tmax=tmax)
 
 
+def scan(scene: Scene, lidar=None, time=None, precision: str = "fp32", device=None):
+    """A LiDAR scan (docs/lidar.md): every beam of every column of ``lidar`` cast from the sensor's
+    origin as a float64 ray (exactly as pyclray.cast casts it: each range held to the error model),
+    returns outside the sensor's range limits made misses. Returns a Scan: the range image
+    (beams, columns) ``range``, ``id``, ``label``, ``normal``, ``position``, and the point cloud
+    ``points`` (sensor frame), ``points_world``, ``ring``, ``column``, ``point_range``.
+
+    lidar: a pyclray.Lidar, the name of one of the scene's [[lidars]], or None (the scene's first);
+    time: the time (seconds) of an animated scene the revolution starts at (None: 0); a sensor with
+    ``sweep = true`` fires column c at its own time (Lidar.step_times), the scene's shapes and the
+    sensor moved to it, so the motion shows in the scan as in a real spinning sensor's."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision, ctx)
+    check_cast_device(ctx)
+    from .queries.scan import run_scan
+
+    # the handles: cached ones (an animated scene's at its frame, an earlier frame's handle updated; a
+    # sweep's still shapes'), and a new one for a sweep's moving shapes
+    handles = (lambda shapes: tracer_for(shapes, ctx, precision), lambda shapes: Tracer(shapes, ctx.device, precision))
+    return run_scan(None, scene, lidar, time, handles)
+
+
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
              tmin=0.0) -> np.ndarray:
     """Whether each ray hits any shape at a distance below tmax (None: any distance): a bool array
@@ -222,3 +246,49 @@ def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=None, aovs=("dept
     aovs = check_hit_aovs(aovs)
     return _ray_query_tracer(scene, precision, device).all_hits(origins, directions, tmin, tmax, aovs)
 
+
+
+# -- closest points, distances, inside -------------------------------------------------------------
+def _point_tracer(scene, precision: str, device) -> Tracer:
+    """The cached handle for a points query (the checks of cast: a scene, a precision, a device with float64)."""
+    scene = as_scene(scene)
+    check_shape_count(scene)
+    ctx = context_for(device)
+    check_precision(precision)
+    check_cast_device(ctx)
+    return tracer_for(scene, ctx, precision)
+
+
+def closest_points(scene: Scene, points, precision: str = "fp32", device=None) -> dict:
+    """For each point (an array of shape (..., 3), float64 or float32 as given), the nearest point of
+    any shape's surface. Returns a dict of arrays of the points' leading shape: ``position`` (..., 3)
+    (float32, float64 with precision "fp64"; NaN where the scene has no shape), ``distance`` (float64,
+    computed in float64 from the point as given; +inf with no shape), ``id`` (int32, -1 with no shape),
+    ``primitive`` (int32: a mesh's triangle, a batch's sphere; 0 for a single shape), ``barycentric``
+    (..., 2) (a triangle's (u, v): position = (1 - u - v) a + u b + v c; 0 for other shapes) and
+    ``normal`` (..., 3) (the unit geometric normal of the nearest surface there, outward). An exact tie
+    of distances goes to the lower id, then the lower primitive. Planes are unbounded: the distance
+    to a plane is to its whole plane. Needs cl_khr_fp64. Bad points (another shape, NaN or inf) are
+    a RequestError (a ValueError) naming the argument and the first bad row."""
+    return _point_tracer(scene, precision, device).closest_points(points)
+
+
+def distance(scene: Scene, points, precision: str = "fp32", device=None) -> np.ndarray:
+    """The distance (float64) of each point to the nearest surface: closest_points' ``distance`` alone."""
+    return _point_tracer(scene, precision, device).distance(points)
+
+
+def signed_distance(scene: Scene, points, sign: str = "parity", precision: str = "fp32", device=None) -> np.ndarray:
+    """The distance of each point to the nearest surface (float64), negative inside a solid: a
+    sphere, a box, a capped cylinder, the half-space behind a plane, or a mesh by ``sign``: "parity"
+    (a closed mesh, pyclray.Mesh.closed: the exact parity of one ray's crossings; open meshes have no
+    inside) or "winding" (any mesh: its generalized winding number >= 1/2, for meshes with holes,
+    self-intersections or several parts). Disks, rectangles and open cylinders have no inside. A point
+    on a surface is at distance 0 and inside."""
+    return _point_tracer(scene, precision, device).signed_distance(points, sign)
+
+
+def occupancy(scene: Scene, points, sign: str = "parity", precision: str = "fp32", device=None) -> np.ndarray:
+    """1 where a point is inside a solid or on a surface, else 0 (uint8, the points' leading shape):
+    signed_distance's inside (see there for ``sign``)."""
+    return _point_tracer(scene, precision, device).occupancy(points, sign)

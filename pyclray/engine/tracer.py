@@ -26,8 +26,10 @@ from ..model.scene import Scene, check_shape_count
 from .launch.run import OutputBuffers
 from .opencl.device import context_for
 from .queries import cast as cast_queries
+from .queries import closest as closest_queries
 from .queries import hits as hit_queries
 from .queries import render as render_query
+from .queries import scan as scan_query
 from .queries.requests import check_precision, check_request
 from .scene.prepared import PreparedScene
 from .scene.views import ViewState
@@ -51,6 +53,11 @@ class Tracer:
         self._prepared: PreparedScene | None = PreparedScene(ctx, scene.shapes, precision)
         self._views: OrderedDict = OrderedDict()  # (camera, image, lights, shading) -> ViewState
         self._cast_inputs = None  # cast's buffers, made at the first cast (engine/queries/cast.py: cast_inputs)
+        # the closest-point query's inputs, and the handles of the closed and of the open meshes alone
+        # (sign="parity" and "winding"), made when first asked for (engine/queries/closest.py)
+        self._closest_inputs = None
+        self._mesh_handles: dict = {}
+        self._scan_still = None  # (shapes, Tracer): a sweeping scan's still shapes, prepared once (see scan)
         self.outputs = OutputBuffers()
 
     # -- its life --------------------------------------------------------------------------------
@@ -61,6 +68,10 @@ class Tracer:
             self._prepared = None
             self._views.clear()
             self._cast_inputs = None
+            self._drop_closest()
+            if self._scan_still is not None:
+                self._scan_still[1].close()
+                self._scan_still = None
             self.outputs.buffers.clear()
 
     @property
@@ -103,7 +114,10 @@ class Tracer:
             if self._prepared is None:
                 return 0
             total = self._prepared.nbytes() + self.outputs.nbytes()
+            total += 0 if self._scan_still is None else self._scan_still[1].nbytes
             total += sum(state.nbytes() for state in self._views.values())
+            total += 0 if self._closest_inputs is None else self._closest_inputs.nbytes
+            total += sum(handle.nbytes for handle in self._mesh_handles.values() if handle is not None)
             return total + (0 if self._cast_inputs is None else self._cast_inputs[3])
 
     # -- renders ---------------------------------------------------------------------------------
@@ -200,6 +214,30 @@ class Tracer:
         cast_queries.check_cast_device(self.ctx)
         return hit_queries.run_all_hits(self, origins, directions, tmin, tmax, aovs)
 
+    def scan(self, lidar=None, time=None):
+        """A LiDAR scan of the handle's scene: exactly ``pyclray.scan(scene, lidar, time, precision,
+        device)`` (see there). On an animated scene the handle is updated to each time the scan
+        needs, and back to the scene's own shapes after it; a sweep among moving shapes keeps a handle
+        of the still shapes (in ``nbytes``, freed by ``close``) and updates one of the moving shapes."""
+        cast_queries.check_cast_device(self.ctx)
+        self.prepared  # closed: the error, before anything is cast
+        animated = self._scene if self._scene.animation is not None else None
+
+        def still(view):  # a sweep's still shapes: a handle of this one's, kept until they change
+            with self.lock:
+                if self._scan_still is None or self._scan_still[0] is not view.shapes:
+                    if self._scan_still is not None:
+                        self._scan_still[1].close()
+                    self._scan_still = (view.shapes, Tracer(view, self.ctx.device, self.precision))
+                return self._scan_still[1]
+
+        handles = (still, lambda view: Tracer(view, self.ctx.device, self.precision))
+        try:
+            return scan_query.run_scan(self, self._scene, lidar, time, handles)
+        finally:
+            if animated is not None and not self.closed:
+                self.update(animated)
+
     def cast_inputs(self):
         """cast's buffers of the shapes (engine/queries/cast.py: cast_inputs), made at the first cast."""
         with self.lock:
@@ -207,6 +245,58 @@ class Tracer:
             if self._cast_inputs is None:
                 self._cast_inputs = cast_queries.cast_inputs(prepared)
             return self._cast_inputs
+
+    # -- closest points, distances, inside ------------------------------------------------------
+    def closest_points(self, points) -> dict:
+        """The nearest surface point of each point: exactly ``pyclray.closest_points(scene, points,
+        precision, device)`` (see there)."""
+        cast_queries.check_cast_device(self.ctx)
+        return closest_queries.closest_points(self, points)
+
+    def distance(self, points):
+        """The distance of each point to the nearest surface: exactly ``pyclray.distance(scene,
+        points, ...)`` (see there)."""
+        cast_queries.check_cast_device(self.ctx)
+        return closest_queries.distance(self, points)
+
+    def signed_distance(self, points, sign: str = "parity"):
+        """The distance, negative inside a solid: exactly ``pyclray.signed_distance(scene, points,
+        sign, ...)`` (see there)."""
+        cast_queries.check_cast_device(self.ctx)
+        return closest_queries.signed_distance(self, points, sign)
+
+    def occupancy(self, points, sign: str = "parity"):
+        """1 inside a solid (or on a surface), else 0, uint8: exactly ``pyclray.occupancy(scene,
+        points, sign, ...)`` (see there)."""
+        cast_queries.check_cast_device(self.ctx)
+        return closest_queries.occupancy(self, points, sign)
+
+    def closest_inputs(self):
+        """The closest-point query's buffers of the shapes (engine/queries/closest.py: ClosestInputs),
+        made at its first call."""
+        with self.lock:
+            prepared = self.prepared
+            if self._closest_inputs is None:
+                self._closest_inputs = closest_queries.ClosestInputs(prepared, prepared.shapes)
+            return self._closest_inputs
+
+    def mesh_handle(self, closed: bool):
+        """A handle of this scene's closed meshes alone (closed=True: sign="parity" counts their
+        crossings, "winding" signs them), or of its open ones (their hierarchical winding number);
+        None where it has none; made when first asked for."""
+        with self.lock:
+            self.prepared
+            if closed not in self._mesh_handles:
+                scene = closest_queries.meshes_scene(replace(self._scene, shapes=self.prepared.shapes), closed)
+                self._mesh_handles[closed] = None if scene is None else Tracer(scene, self.ctx.device, self.precision)
+            return self._mesh_handles[closed]
+
+    def _drop_closest(self) -> None:
+        self._closest_inputs = None
+        for handle in self._mesh_handles.values():
+            if handle is not None:
+                handle.close()
+        self._mesh_handles = {}
 
     # -- a moved scene ---------------------------------------------------------------------------
     def update(self, scene) -> "Tracer":
@@ -256,6 +346,7 @@ class Tracer:
                     self._prepared.base, self._prepared.dirty = prepared.base, set(changed)
                 self._views.clear()
             self._cast_inputs = None
+            self._drop_closest()
             return updated
 
 

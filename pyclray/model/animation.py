@@ -312,3 +312,18 @@ def _frame_error(scene, error: SceneError, target: str, values: dict, when: str)
     animated = ", ".join(values) or "nothing"
     return SceneError(f"{when}, with {animated} animated: {error.message}",
                       file=scene.source, table=f"{KEYS_TABLE} (target '{target}')", key=error.key)
+
+
+def tracks_in(scene, collection: str) -> tuple:
+    """((index in the collection, track), ...) for the animation's tracks whose target sits in the
+    scene's ``collection`` ("shapes", "lidars", ...; "camera" for the camera, index None): what a
+    scan asks to know which shapes move and how its sensor moves (engine/queries/scan.py)."""
+    if scene.animation is None:
+        return ()
+    places = _places(scene)
+    found = []
+    for track in scene.animation.tracks:
+        place = places[track.target][0]
+        if place[0] == collection:
+            found.append((place[1], track))
+    return tuple(found)

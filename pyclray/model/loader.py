@@ -9,6 +9,7 @@ from .animation import Animation
 from .camera import Image
 from .cameras import CAMERAS, DEFAULT_MODEL, CameraModel
 from .errors import RequestError, SceneError, no_unknown_keys, text, typed_table
+from .lidar import Lidar
 from .lights import Shading, lights_from_list
 from .scene import Scene
 from .shapes import REGISTRY
@@ -47,11 +48,16 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     if not isinstance(data, dict):
         raise SceneError(f"expected a table of [camera], [image] and [[shapes]], got {type(data).__name__}", file=source)
     try:
-        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading", "animation"), required=())
+        no_unknown_keys(data, ("camera", "image", "shapes", "lights", "shading", "animation", "lidar", "lidars"),
+                        required=())
     except SceneError as error:
         raise error.within(file=source, table="(top level)") from None
+    lidars = lidars_from_data(data, source)
     try:
-        camera = camera_from_table(_table(data, "camera", required=True))
+        if "camera" not in data and lidars:  # a sensor's scene: the camera looks where its first sensor does
+            camera = sensor_camera(lidars[0])
+        else:
+            camera = camera_from_table(_table(data, "camera", required=True))
     except SceneError as error:
         raise error.within(file=source, table="[camera]") from None
     try:
@@ -93,7 +99,42 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         raise error.within(file=source, table="[animation]") from None
     # each shape's table in the file, for messages, where a table made several shapes (ids != tables)
     tables = None if tables == list(range(len(tables))) else tuple(tables)
-    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation, tables=tables)
+    return Scene(camera, image, tuple(shapes), source, lights, shading, animation=animation, tables=tables,
+                 lidars=lidars)
+
+
+def sensor_camera(lidar: Lidar) -> CameraModel:
+    """The camera of a scene file without [camera] but with a sensor: at the sensor's origin, looking
+    along its x axis (forward), its z axis up, a 90 degree field of view."""
+    pose = lidar.world_from_sensor
+    eye = pose[:3, 3]
+    return CAMERAS[DEFAULT_MODEL].from_table({"eye": eye.tolist(), "target": (eye + pose[:3, 0]).tolist(),
+                                             "up": pose[:3, 2].tolist(), "fov": 90.0})
+
+
+def lidars_from_data(data: dict, source: str | None = None) -> tuple:
+    """The scene file's sensors: one [lidar] table or an array of [[lidars]] tables (not both),
+    scene-format.md "LiDAR"; a SceneError naming the table and the key."""
+    if "lidar" in data and "lidars" in data:
+        raise SceneError("expected one [lidar] table or an array of [[lidars]] tables, not both", key="lidars",
+                         file=source, table="(top level)")
+    if "lidar" in data:
+        entries, tables = [data["lidar"]], ["[lidar]"]
+        if not isinstance(data["lidar"], dict):
+            raise SceneError("expected a table [lidar] (several sensors: [[lidars]])", key="lidar", file=source,
+                             table="(top level)")
+    else:
+        entries = data.get("lidars", [])
+        if not isinstance(entries, list):
+            raise SceneError("expected an array of tables [[lidars]]", key="lidars", file=source, table="(top level)")
+        tables = [f"[[lidars]] #{index}" for index in range(len(entries))]
+    lidars = []
+    for index, (entry, table) in enumerate(zip(entries, tables)):
+        try:
+            lidars.append(Lidar.from_table(entry, f"lidar{index}"))
+        except SceneError as error:
+            raise error.within(file=source, table=table) from None
+    return tuple(lidars)
 
 
 def load_scene(path) -> Scene:

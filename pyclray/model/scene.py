@@ -10,11 +10,12 @@ from numbers import Real
 
 import numpy as np
 
-from .animation import Animation, _find_places, scene_at
+from .animation import Animation, _find_places, scene_at, tracks_in
 from .frames import CheckedShapes, FrameShapes, FrameWork
 from .camera import MAX_PLANE_REACH, MAX_PRINCIPAL_POINT, MIN_PIXEL_TAN, Camera, Image
 from .cameras import CAMERAS, CameraModel
 from .errors import PyclrayWarning, RequestError, SceneError
+from .lidar import Lidar
 from .lights import Shading, check_lights
 from .shapes import REGISTRY
 from .shapes.base import Shape, check_label
@@ -34,6 +35,7 @@ class Scene:
     lights: tuple = ()  # PointLight, DirectionalLight (pyclray.model.lights); none: the headlight
     shading: Shading = field(default_factory=Shading)
     animation: Animation | None = None  # keyframes (pyclray/model/animation.py); None: a static scene
+    lidars: tuple = ()  # pyclray.Lidar sensors (pyclray/model/lidar/), each named ("lidar<index>" by default)
     # the [[shapes]] table of each shape in the file (for messages) where a table made several shapes
     # (a mesh file's objects, split = true); None: shape k is table k
     tables: tuple[int, ...] | None = field(default=None, compare=False, repr=False)
@@ -69,6 +71,7 @@ class Scene:
             object.__setattr__(self, "camera", replace(self.camera, size=(self.image.width, self.image.height)))
         if isinstance(self.camera, Camera):  # the pinhole's image plane (the lens models' rays are their tables)
             check_image_plane(self.camera, self.image, self.source)
+        object.__setattr__(self, "lidars", check_lidars(self.lidars, self.source))
         if self.animation is not None:
             self.animation.bind(self)  # known targets and keys, and every frame's scene valid
 
@@ -83,8 +86,16 @@ class Scene:
         """The frames' working copies of the animated collections (pyclray.model.frames.FrameWork)."""
         return FrameWork()
 
+    @cached_property
+    def still_shapes(self) -> tuple[tuple[int, ...], CheckedShapes]:
+        """(the indices of the shapes its animation moves, the other shapes as one kept tuple): a
+        sweeping scan prepares the still shapes once (engine/queries/scan.py)."""
+        moving = tuple(sorted({index for index, _ in tracks_in(self, "shapes")}))
+        skip = set(moving)
+        return moving, CheckedShapes(shape for index, shape in enumerate(self.shapes) if index not in skip)
+
     def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("animation_places", "frame_work", "still_shapes")}
 
     def at(self, t: float) -> "Scene":
         """The static scene at time t (seconds, >= 0) of its animation; the scene itself if it has
@@ -118,6 +129,28 @@ class Scene:
         """The shape types present, in the registry's order."""
         present = {shape.type for shape in self.shapes}
         return tuple(t for t in REGISTRY if t in present)
+
+
+def check_lidars(lidars, source=None) -> tuple:
+    """The scene's sensors as a tuple of Lidars, each named (an unnamed one "lidar<index>"), the
+    names unique; a SceneError naming the sensor otherwise."""
+    if isinstance(lidars, Lidar):
+        lidars = (lidars,)
+    if isinstance(lidars, (str, bytes, dict)) or not hasattr(lidars, "__iter__"):
+        raise SceneError(f"expected a tuple of pyclray.Lidar, got {type(lidars).__name__}", table="[[lidars]]", file=source)
+    named, seen = [], {}
+    for index, lidar in enumerate(lidars):
+        if not isinstance(lidar, Lidar):
+            raise SceneError(f"expected a pyclray.Lidar, got {type(lidar).__name__}", table=f"[[lidars]] #{index}",
+                             file=source)
+        if lidar.name is None:
+            lidar = replace(lidar, name=f"lidar{index}")
+        if lidar.name in seen:
+            raise SceneError(f"the name {lidar.name!r} is already used by [[lidars]] #{seen[lidar.name]}",
+                             table=f"[[lidars]] #{index}", key="name", file=source)
+        seen[lidar.name] = index
+        named.append(lidar)
+    return tuple(named)
 
 
 def checked_time(t) -> float:

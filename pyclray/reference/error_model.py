@@ -390,3 +390,20 @@ def meets_targets(result: dict, precision: str) -> bool:
                 and result["id_mismatch"] == 0 and result["miss_mismatch"] == 0)
     return (result["depth_ulps_max"] <= FP32_DEPTH_ULPS and result["normal_cos_max"] <= FP32_NORMAL
             and result["id_mismatch"] == 0 and result["miss_mismatch"] == 0)
+
+
+# -- closest points --------------------------------------------------------------------------------
+def closest_tolerances(points, truth: dict, precision: str) -> dict:
+    """How far closest_points may be from the float64 oracle's (truth: oracle.closest_points). Both
+    compute in float64 from the point as given and the shapes' float64 geometry, so the distance
+    errs by a few eps64 of the coordinates involved on each side: K_ORACLE eps64 (|p| + |q| + d) twice
+    (q the nearest point, d the distance). The position is that, plus its rounding to the precision
+    (eps |q|). A normal is unit and exact up to the position's error over the surface's curvature
+    radius; where the nearest point is ambiguous (two surfaces within the distance's tolerance, a
+    box's edge, a point on a sphere's centre) the tests judge the distance alone."""
+    points = np.asarray(points, np.float64)
+    position = np.nan_to_num(truth["position"])
+    size = np.linalg.norm(points, axis=-1) + np.linalg.norm(position, axis=-1) + truth["distance"]
+    distance = 2 * K_ORACLE * ORACLE_EPSILON * size
+    return {"distance": distance,
+            "position": distance + K_ORACLE * EPSILON[precision] * np.linalg.norm(position, axis=-1)}

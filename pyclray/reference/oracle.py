@@ -94,6 +94,62 @@ def incidence_cosine(scene: Scene, directions, ids, normals) -> np.ndarray:
     return np.where(ids >= 0, cos, 1.0)
 
 
+# -- closest points, distances, inside -------------------------------------------------------------
+def closest_points(scene: Scene, points) -> dict:
+    """For each point (..., 3), the nearest point of any shape's surface, float64: position,
+    distance, id (-1 without shapes), primitive, barycentric, normal; an exact tie of distances keeps
+    the lower id (each shape's oracle_closest, every shape for every point)."""
+    points = np.asarray(points, np.float64)
+    shape = points.shape[:-1]
+    P = points.reshape(-1, 3)
+    n = len(P)
+    out = {"position": np.full((n, 3), np.nan), "distance": np.full(n, np.inf), "id": np.full(n, -1, np.int32),
+           "primitive": np.full(n, -1, np.int32), "barycentric": np.zeros((n, 2)), "normal": np.zeros((n, 3))}
+    if n:
+        for index, item in enumerate(scene.shapes):
+            position, normal, primitive, barycentric, distance = item.oracle_closest(P)
+            closer = distance < out["distance"]
+            for key, value in (("position", position), ("normal", normal), ("barycentric", barycentric)):
+                out[key][closer] = value[closer]
+            out["primitive"][closer] = primitive[closer]
+            out["id"][closer] = index
+            out["distance"][closer] = distance[closer]
+    return {k: v.reshape(shape + v.shape[1:]) for k, v in out.items()}
+
+
+def distance(scene: Scene, points) -> np.ndarray:
+    return closest_points(scene, points)["distance"]
+
+
+def inside(scene: Scene, points, sign: str = "parity") -> np.ndarray:
+    """Whether each point is inside any solid (each shape's oracle_inside: exact where a sign
+    decides), or on a surface (distance 0)."""
+    points = np.asarray(points, np.float64)
+    P = points.reshape(-1, 3)
+    out = np.zeros(len(P), bool)
+    for item in scene.shapes:
+        out |= np.asarray(item.oracle_inside(P, sign), bool).reshape(-1)
+    out |= distance(scene, P) == 0
+    return out.reshape(points.shape[:-1])
+
+
+def signed_distance(scene: Scene, points, sign: str = "parity") -> np.ndarray:
+    d = distance(scene, points)
+    return np.where(inside(scene, points, sign) & (d > 0), -d, d)
+
+
+def occupancy(scene: Scene, points, sign: str = "parity") -> np.ndarray:
+    return inside(scene, points, sign).astype(np.uint8)
+
+
+def winding_number(scene: Scene, points) -> np.ndarray:
+    """The generalized winding number of every mesh's triangles together at each point (float64)."""
+    points = np.asarray(points, np.float64)
+    total = np.zeros(points.shape[:-1]).reshape(-1)
+    for item in scene.shapes:
+        if type(item).winding_number:  # (meshes)
+            total += item.oracle_winding(points.reshape(-1, 3))
+    return total.reshape(points.shape[:-1])
 def all_hits(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf) -> dict:
     """Every crossing t of each ray with tmin < t < tmax, nearest first (then by id and primitive),
     in all_hits' CSR form: offsets (int64, N + 1), ray, depth (float64), id, primitive. Directions of

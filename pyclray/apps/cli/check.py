@@ -19,7 +19,8 @@ def add_command(subparsers) -> None:
         description="Render SCENE with pyclray (fp32) and Mitsuba 3 and print one table per image "
         "(depth, normal, id, misses), the ray-level comparison (Mitsuba's own primary rays cast "
         "through both), every hit along some of those rays (pyclray.all_hits against the float64 oracle, Mitsuba's "
-        "ray_intersect repeated past each hit beside) and the shaded image against Mitsuba's direct integrator. Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
+        "ray_intersect repeated past each hit beside), the shaded image against Mitsuba's direct integrator, and closest points of points in and "
+        "around the scene against the float64 oracle (Mitsuba has no closest-point query). Exit status 0 within the tolerance of the error model (printed), 1 outside it, "
         "2 on bad input.",
     )
     parser.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
@@ -32,6 +33,8 @@ def add_command(subparsers) -> None:
                         help="write DIR/NAME.pyclray.exr, DIR/NAME.mitsuba-VARIANT.exr and DIR/NAME.depth-error.png "
                         "(log10 relative depth difference, 1e-9 dark blue to 1e-4 red, white outside the "
                         "tolerance, black where not compared)")
+    parser.add_argument("--points", type=int, default=2000, metavar="N",
+                        help="points in the closest-point comparison against the float64 oracle (default 2000)")
     parser.add_argument("--device", metavar="DEV", help="OpenCL device (as for pyclray render)")
     parser.set_defaults(run=run)
 
@@ -39,6 +42,8 @@ def add_command(subparsers) -> None:
 def run(args) -> int:
     if args.rays < 1:
         raise BadInput(f"--rays: expected a whole number >= 1, got {args.rays}")
+    if args.points < 1:
+        raise BadInput(f"--points: expected a whole number >= 1, got {args.points}")
     folder = None
     if args.save is not None:
         folder = Path(args.save)
@@ -61,17 +66,18 @@ def run(args) -> int:
     from ...reference.check import (cross_check, format_image_check, format_ray_check, ray_level, save,
                                     tolerance_text)
     from ...reference.validation.arbitrate import mitsuba_faults
+    from ...reference.validation.closest import closest_check, format_closest_check
+    from ...reference.validation.hits import all_hits_check, format_hits_check
     from ...reference.validation.shaded import cross_check_shaded, format_shaded_check
 
-    from ...reference.validation.hits import all_hits_check, format_hits_check
-
-    with steps(11, desc="pyclray check") as timing:
+    with steps(12, desc="pyclray check") as timing:
         images = cross_check(scene, args.variant, device=args.device)
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
         hits = all_hits_check(scene, args.variant, min(args.rays, ALL_HITS_RAYS), args.seed, device=args.device)
         shaded = None
         if scene.shading.shadows:
             shaded = cross_check_shaded(scene, args.variant, device=args.device, truth=images.truth)
+        closest = closest_check(scene, args.points, args.seed, device=args.device)
     print(
         f"pyclray check {args.scene}: {images.width}x{images.height}, pyclray fp32 on {images.device} "
         f"against Mitsuba {mi.__version__} {args.variant}"
@@ -86,13 +92,15 @@ def run(args) -> int:
     print()
     print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
     print()
+    print(format_closest_check(closest))
+    print()
     print(time_table(timing.times, seconds))
     if folder is not None:
         folder.mkdir(exist_ok=True)
         written = save(images, folder, Path(args.scene).stem)
         print()
         print("wrote " + ", ".join(map(str, written)))
-    failures = images.failures + rays.failures + hits.failures + (shaded.failures if shaded else [])
+    failures = images.failures + rays.failures + hits.failures + (shaded.failures if shaded else []) + closest.failures
     verdicts = {f"image {name}": v for name, v in images.verdicts.items()}
     verdicts.update({f"ray-level {name}": v for name, v in rays.verdicts.items()})
     if shaded:

@@ -39,7 +39,8 @@ def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
         kind = output_format(out)
     except RequestError:
         raise BadInput(f"-o {args.output}: expected OUT.exr (OpenEXR channels), OUT.npz (numpy arrays, with the "
-                       "camera's K and pose) or OUT.png (the preview of one image); the format follows the extension") from None
+                       "camera's K and pose), OUT.png (the preview of one image) or OUT.ply (the hit pixels as a point cloud); the "
+                       "format follows the extension") from None
     aovs = args.aov
     if kind == "png":
         if args.png:
@@ -81,6 +82,8 @@ def run(args) -> int:
     from ...io.bands import band_rows, write_images
     from ...io.progress import progress, seconds
 
+    if args.output is not None and Path(args.output).suffix.lower() == ".ply":  # a point cloud of the hit pixels
+        return _render_cloud(args)
     # the options first: a wrong -o costs no scene read, no device and no render
     kind, aovs, targets = _outputs(args)
     for target in targets:  # a path that cannot be written costs no time either
@@ -120,6 +123,55 @@ def run(args) -> int:
         f"wrote {', '.join(map(str, written))} [{_written(kind, aovs, _camera(scene)[0] is not None)}]"
     )
     return 0
+
+
+# what a point cloud of a render holds (io/ply.py): each hit pixel's world position, normal, id and label
+CLOUD_AOVS = ("position", "normal", "id", "label")
+
+
+def _render_cloud(args) -> int:
+    """`pyclray render SCENE -o OUT.ply`: the hit pixels as a binary PLY point cloud (x y z, nx ny nz,
+    id, label, row, column), rendered in bands of rows, written once whole."""
+    import numpy as np
+
+    from ...io import files
+    from ...io.ply import write_ply
+    from ...io.progress import progress, seconds
+
+    out, scene_path = Path(args.output), Path(args.scene)
+    if out.resolve() == scene_path.resolve() or (out.exists() and scene_path.exists() and out.samefile(scene_path)):
+        raise BadInput(f"-o {args.output}: is the scene file itself; give another output path")
+    if args.png:
+        raise BadInput(f"--png: -o {args.output} is a point cloud; --png writes previews beside an .exr or .npz")
+    if args.workers is not None or args.scheduler is not None:
+        raise BadInput(f"-o {args.output}: a point cloud is rendered here; --workers and --scheduler write .exr, "
+                       ".npz or .png")
+    files.check_target(out)
+    scene = load(args.scene, args.size, args.time)
+    width, height = scene.image.width, scene.image.height
+    render_band = _band_renderer(scene, CLOUD_AOVS, args.precision, args.device)
+    rows = _band_rows(width)
+    parts: dict[str, list] = {name: [] for name in CLOUD_AOVS}
+    start = time.perf_counter()
+    with progress(height, desc="pyclray render", unit="row") as bar:
+        for top in range(0, height, rows):
+            count = min(rows, height - top)
+            band = render_band((0, top, width, count))
+            for name in CLOUD_AOVS:
+                parts[name].append(band[name])
+            bar.update(count)
+    frame = {name: np.concatenate(arrays) for name, arrays in parts.items()}
+    write_ply(out, frame, comment=f"pyclray render of {args.scene}")
+    hits = int((frame["id"] >= 0).sum())
+    print(f"rendered {args.scene} ({width}x{height}, {args.precision}) in {seconds(time.perf_counter() - start)}; "
+          f"wrote {out} [{hits} hit pixels: x y z nx ny nz id label row column]")
+    return 0
+
+
+def _band_rows(width: int) -> int:
+    from ...io.bands import band_rows
+
+    return band_rows(width)
 
 
 def _render_on_cluster(args, scene, out, aovs, kind) -> int:
@@ -179,8 +231,9 @@ def add_command(commands) -> None:
         epilog=EXIT_STATUS_HELP,
     )
     render.add_argument("scene", metavar="SCENE", help="scene file (TOML, or Mitsuba 3 XML)")
-    render.add_argument("-o", "--output", metavar="OUT.exr|OUT.npz|OUT.png",
-                        help="the file to write; its extension decides the format (.exr, .npz or .png); "
+    render.add_argument("-o", "--output", metavar="OUT.exr|OUT.npz|OUT.png|OUT.ply",
+                        help="the file to write; its extension decides the format (.exr, .npz, .png, or .ply: the "
+                        "hit pixels as a point cloud with normals, id, label, row and column); "
                         "default: SCENE's name with .exr, in the current folder (scenes/tp02.toml: ./tp02.exr)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",

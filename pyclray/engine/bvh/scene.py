@@ -60,7 +60,12 @@ class SceneBVH:
         in cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
         shape test's rounding (no hit the test reports lies nearer than (A - O).D - R). Of the
         given positions only, where given (their bounds gathered without keeping them)."""
-        bounds = self.bounds if positions is None else self.given_bounds[self.tree.order[positions]]
+        if positions is None:
+            bounds = self.bounds
+        elif "bounds" in self.__dict__:  # gathered, and written by a refit since (the given ones are the build's)
+            bounds = self.__dict__["bounds"][positions]
+        else:
+            bounds = self.given_bounds[self.tree.order[positions]]
         lo, hi = bounds[:, 0], bounds[:, 1]
         out = np.empty((max(len(lo), 1), 4))
         out[: len(lo), :3] = 0.5 * (lo + hi)

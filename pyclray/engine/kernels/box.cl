@@ -35,7 +35,7 @@ inline void box_rebase(__global const BoxWorld* world, PYCLRAY_FRAME_OUT Box* ou
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving its outer side toward the light never meets it again (convex) */
 #define PYCLRAY_FLAT_box 0
@@ -145,4 +145,42 @@ inline void box_hits(SHAPE_SPACE const Box* box, const RayPacket* ray, realv* fi
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The box's nearest point, in its own axes (l_k = (p - C).e_k): outside, each coordinate clamped to
+ * [-h_k, h_k]; inside, moved onto the nearest face. The normal is the face's along which p lies
+ * farthest beyond (or least within) its half size, |l_k| - h_k largest (the lowest axis on a tie),
+ * on the side of l_k (+ for 0). */
+inline ClosestPoint box_closest(__global const BoxWorld* world, const double3 p)
+{
+    const double3 F = p - world->center.xyz, h = world->half_size.xyz;
+    const double3 e0 = world->axis0.xyz, e1 = world->axis1.xyz, e2 = world->axis2.xyz;
+    double3 l = (double3)(closest_dot(F, e0), closest_dot(F, e1), closest_dot(F, e2));
+    const double3 beyond = fabs(l) - h;
+    const int face = beyond.x >= beyond.y ? (beyond.x >= beyond.z ? 0 : 2) : (beyond.y >= beyond.z ? 1 : 2);
+    const double sign_x = l.x < 0.0 ? -1.0 : 1.0, sign_y = l.y < 0.0 ? -1.0 : 1.0, sign_z = l.z < 0.0 ? -1.0 : 1.0;
+    const bool inside = beyond.x <= 0.0 && beyond.y <= 0.0 && beyond.z <= 0.0;
+    double3 q = clamp(l, -h, h);
+    double3 n;
+    if (face == 0) { n = sign_x * e0; if (inside) q.x = sign_x * h.x; }
+    else if (face == 1) { n = sign_y * e1; if (inside) q.y = sign_y * h.y; }
+    else { n = sign_z * e2; if (inside) q.z = sign_z * h.z; }
+    ClosestPoint c = closest_at(p, world->center.xyz + (q.x * e0 + q.y * e1) + q.z * e2, n);
+    if (inside) {  /* the nearest face's distance itself, better conditioned */
+        const double d = face == 0 ? beyond.x : (face == 1 ? beyond.y : beyond.z);
+        c.d2 = d * d;
+    } else {
+        const double3 out = fmax(beyond, (double3)(0.0));
+        c.d2 = closest_norm2(out);
+    }
+    return c;
+}
+
+inline int box_inside(__global const BoxWorld* world, const double3 p)
+{
+    const double3 F = p - world->center.xyz, h = world->half_size.xyz;
+    return fabs(closest_dot(F, world->axis0.xyz)) <= h.x && fabs(closest_dot(F, world->axis1.xyz)) <= h.y
+        && fabs(closest_dot(F, world->axis2.xyz)) <= h.z;
+}
 #endif

@@ -33,7 +33,7 @@ inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_O
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* leaving the outer side of the tube or a cap toward the light never meets it again (convex);
  * its inner side may (the opposite wall) */
@@ -197,4 +197,40 @@ inline void cylinder_hits(SHAPE_SPACE const Cylinder* cylinder, const RayPacket*
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The cylinder's nearest point: along the axis, h = (p - p0).a and the radial part rho of p - p0;
+ * the side's nearest point (h clamped to [0, L], at radius r along rho) and, where it is capped,
+ * each cap's (the disk of radius r at h = 0 and h = L, rho clamped to r): the nearest of them, the
+ * side first, then the cap at p0, then the one at p1, on an exact tie. A point on the axis has every
+ * radial direction equally near: closest_perpendicular picks one. */
+inline ClosestPoint cylinder_closest(__global const CylinderWorld* world, const double3 p)
+{
+    const double3 a = world->axis.xyz, p0 = world->p0.xyz;
+    const double r = world->p0.w, L = world->p1.w;
+    const double3 F = p - p0;
+    const double h = closest_dot(F, a);
+    const double3 rho = F - h * a;
+    const double radial = sqrt(closest_norm2(rho));
+    const double3 out = radial > 0.0 ? rho / radial : closest_perpendicular(a);
+    const double along = h < 0.0 ? 0.0 : (h > L ? L : h);
+    ClosestPoint best = closest_at(p, p0 + along * a + r * out, out);
+    if (world->caps) {
+        const double3 on_cap = (radial < r ? radial : r) * out;
+        const ClosestPoint bottom = closest_at(p, p0 + on_cap, -a);
+        if (bottom.d2 < best.d2) best = bottom;
+        const ClosestPoint top = closest_at(p, world->p1.xyz + on_cap, a);
+        if (top.d2 < best.d2) best = top;
+    }
+    return best;
+}
+
+/* a capped cylinder's solid: 0 <= h <= L and |rho| <= r; an open tube has no inside */
+inline int cylinder_inside(__global const CylinderWorld* world, const double3 p)
+{
+    const double3 a = world->axis.xyz, F = p - world->p0.xyz;
+    const double r = world->p0.w, h = closest_dot(F, a);
+    return world->caps && h >= 0.0 && h <= world->p1.w && closest_norm2(F - h * a) <= r * r;
+}
 #endif

@@ -19,7 +19,7 @@ inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk*
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving it on either side never meets it again (flat) */
 #define PYCLRAY_FLAT_disk 1
@@ -52,4 +52,22 @@ inline void disk_hits(SHAPE_SPACE const Disk* shape, const RayPacket* ray, realv
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The disk's nearest point: p's foot on its plane, pulled in to the rim where it lies beyond (the
+ * radial part rho of p - C, clamped to r). A disk has no inside. */
+inline ClosestPoint disk_closest(__global const DiskWorld* world, const double3 p)
+{
+    const double3 n = world->normal.xyz, F = p - world->center.xyz;
+    const double r = world->center.w, s = closest_dot(F, n);
+    const double3 rho = F - s * n;
+    const double radial = sqrt(closest_norm2(rho));
+    const double3 in_plane = radial > r ? rho * (r / radial) : rho;
+    ClosestPoint c = closest_at(p, world->center.xyz + in_plane, n);
+    if (radial <= r) c.d2 = s * s;  /* over the disk: the plane's distance, better conditioned */
+    return c;
+}
+
+inline int disk_inside(__global const DiskWorld* world, const double3 p) { return 0; }
 #endif

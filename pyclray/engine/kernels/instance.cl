@@ -56,7 +56,7 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving a triangle never meets it again (as a mesh's); shadow rays see instances'
  * meshes as their own triangles, though (engine/queries/render.py), so this only completes the type */

@@ -16,7 +16,7 @@ inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_FRAME_OUT Pla
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving it on either side never meets it again (flat) */
 #define PYCLRAY_FLAT_plane 1
@@ -48,4 +48,22 @@ inline void plane_hits(SHAPE_SPACE const Plane* shape, const RayPacket* ray, rea
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The plane's nearest point: the foot of p, p - s n with s = n.p + h (n unit); d2 = s^2, which is
+ * better conditioned than |p - foot|^2. Inside: the half-space behind it (s <= 0: its surface too). */
+inline ClosestPoint plane_closest(__global const PlaneWorld* world, const double3 p)
+{
+    const double3 n = world->normal.xyz;
+    const double s = closest_dot(n, p) + world->normal.w;
+    ClosestPoint c = closest_at(p, p - s * n, n);
+    c.d2 = s * s;
+    return c;
+}
+
+inline int plane_inside(__global const PlaneWorld* world, const double3 p)
+{
+    return closest_dot(world->normal.xyz, p) + world->normal.w <= 0.0;
+}
 #endif

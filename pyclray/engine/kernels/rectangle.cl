@@ -20,7 +20,7 @@ inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving it on either side never meets it again (flat) */
 #define PYCLRAY_FLAT_rectangle 1
@@ -53,4 +53,26 @@ inline void rectangle_hits(SHAPE_SPACE const Rectangle* shape, const RayPacket* 
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The rectangle's nearest point: p's coordinates a, b along its half sides u, v (dot products with
+ * their dual vectors) clamped to [-1, 1] (its sides are orthogonal, so clamping each is the nearest
+ * point). A rectangle has no inside. */
+inline ClosestPoint rectangle_closest(__global const RectangleWorld* world, const double3 p)
+{
+    const double3 F = p - world->center.xyz;
+    double a = closest_dot(F, world->u_dual.xyz), b = closest_dot(F, world->v_dual.xyz);
+    const bool over = fabs(a) <= 1.0 && fabs(b) <= 1.0;
+    a = a < -1.0 ? -1.0 : (a > 1.0 ? 1.0 : a);
+    b = b < -1.0 ? -1.0 : (b > 1.0 ? 1.0 : b);
+    ClosestPoint c = closest_at(p, world->center.xyz + a * world->u.xyz + b * world->v.xyz, world->normal.xyz);
+    if (over) {  /* over the rectangle: the plane's distance, better conditioned */
+        const double s = closest_dot(F, world->normal.xyz);
+        c.d2 = s * s;
+    }
+    return c;
+}
+
+inline int rectangle_inside(__global const RectangleWorld* world, const double3 p) { return 0; }
 #endif

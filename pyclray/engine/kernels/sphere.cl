@@ -20,7 +20,7 @@ inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT S
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 /* a shadow ray leaving a sphere's outer side toward the light never meets it again (convex) */
 #define PYCLRAY_FLAT_sphere 0
@@ -136,4 +136,25 @@ inline void sphere_hits(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray, 
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The sphere's nearest point: C + r (p - C) / |p - C| (the centre itself: any point, the pole
+ * along +z); d2 = (|p - C| - r)^2, which rounds less than |p - q|^2 near the surface. */
+inline ClosestPoint sphere_closest(__global const SphereWorld* world, const double3 p)
+{
+    const double3 F = p - world->center.xyz;
+    const double r = world->center.w, length = sqrt(closest_norm2(F));
+    const double3 n = length > 0.0 ? F / length : (double3)(0.0, 0.0, 1.0);
+    ClosestPoint c = closest_at(p, world->center.xyz + r * n, n);
+    c.d2 = (length - r) * (length - r);
+    return c;
+}
+
+inline int sphere_inside(__global const SphereWorld* world, const double3 p)
+{
+    const double3 F = p - world->center.xyz;
+    const double r = world->center.w;
+    return closest_norm2(F) <= r * r;
+}
 #endif

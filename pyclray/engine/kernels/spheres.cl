@@ -10,7 +10,7 @@ inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT 
 
 #endif
 
-#ifndef PYCLRAY_REBASE
+#if !defined(PYCLRAY_REBASE) && !defined(PYCLRAY_CLOSEST)  /* the ray tests (none in the closest-point query) */
 
 #define PYCLRAY_FLAT_spheres 0  /* each primitive a sphere: convex */
 
@@ -28,4 +28,10 @@ inline void spheres_hits(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray,
 }
 #endif
 
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* each primitive a sphere (sphere.cl's functions) */
+inline ClosestPoint spheres_closest(__global const SphereWorld* world, const double3 p) { return sphere_closest(world, p); }
+inline int spheres_inside(__global const SphereWorld* world, const double3 p) { return sphere_inside(world, p); }
 #endif

@@ -23,13 +23,14 @@ from ...model.lights import STRUCTS as SHADING_STRUCTS
 from ...model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
 from ..bvh.tree import NODE
 from ..bvh.wide import WIDE_NODE
+from ..bvh.winding import WINDING_BETA, WINDING_SLOT
 from ..opencl.device import DeviceContext, is_pocl_cpu
 from ..opencl.pocl_cpu import named_cpu
 from .signatures import SIGNATURES, c_defines
 
 # each query's kernel file (the kernel of that name is in it; its signature: engine/launch/signatures.py)
 QUERY_FILES = {"render": "render.cl", "cast": "cast.cl", "occluded": "anyhit.cl", "count_hits": "allhits.cl",
-               "all_hits": "allhits.cl"}
+               "all_hits": "allhits.cl", "closest": "closest.cl"}
 # the queries of rays given in world coordinates, one at a time (kernels/rays.h)
 RAY_QUERIES = ("cast", "occluded", "count_hits", "all_hits")
 # the queries of every hit along a ray (kernels/allhits.cl: each type's <type>_hits, the mesh's tie rule)
@@ -232,6 +233,8 @@ class Variant:
         shapes = [REGISTRY[t] for t in self.shape_types]
         if self.query == "rebase":
             return self._rebase_source(shapes, inline_builtins)
+        if self.query == "closest":
+            return self._closest_source(shapes, inline_builtins)
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
         parts = ["\n".join(["/* pyclray program variant */"] + defines)]
         parts += [_read("common.h")]
@@ -263,6 +266,32 @@ class Variant:
                 parts.append(_read("shading.h"))
             parts += [_read(name) for name in ("entries.h", "nearest.h", "images.h")]
         parts.append(_read(QUERY_FILES[self.query]))  # pops the always_inline attribute before its kernels
+        return "\n".join(parts)
+
+    def _closest_source(self, shapes, inline_builtins: bool = False) -> str:
+        """The closest-point query's program (kernels/closest.cl): float64 throughout, one point per
+        work-item, each type's world entries and its kernel file's closest-point part alone
+        (PYCLRAY_CLOSEST: no ray test is compiled in); the analytic solids' inside tests, the
+        winding number's expansions only where asked (the "inside" and "winding" outputs)."""
+
+        def listed(types):
+            return " ".join(f"X({REGISTRY[t].c_type}, {t})" for t in types)
+
+        bounded = self.bounded_types()
+        defines = ["#pragma OPENCL EXTENSION cl_khr_fp64 : enable", "#define PYCLRAY_CLOSEST 1",
+                   f"#define PYCLRAY_SOLID(X) {listed(t for t in bounded if REGISTRY[t].inside_test)}",
+                   f"#define PYCLRAY_WINDING_TYPES(X) {listed(t for t in bounded if REGISTRY[t].winding_number)}",
+                   f"#define WINDING_BETA {WINDING_BETA!r}"]
+        if any(REGISTRY[t].inside_test for t in bounded):  # the traversal of the boxes holding a point
+            defines.append("#define PYCLRAY_HAS_SOLID 1")
+        defines += self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
+        parts = ["\n".join(["/* pyclray program variant */"] + defines), _read("common.h")]
+        if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
+            parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
+        structs = _unique([WIDE_NODE] + [s.world for s in shapes] + ([WINDING_SLOT] if "winding" in self.aovs else []))
+        parts += [_read("lanes.h"), c_header(structs, self.precision), _read("shapes.h"), _read("bvh.h"), _read("closest.h")]
+        parts += [_read(name) for name in _kernel_files(shapes)]
+        parts.append(_read(QUERY_FILES[self.query]))
         return "\n".join(parts)
 
     def _rebase_source(self, shapes, inline_builtins: bool = False) -> str:

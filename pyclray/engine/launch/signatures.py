@@ -221,6 +221,39 @@ CAST = (
 
 OCCLUDED = (*RAYS, Parameter("occluded_out", "__global char*"))
 
+# the closest-point query (kernels/closest.cl): the points (3 doubles each, in the order given, read
+# in order where ordered is 1), the squared distance a surface point must be within (inf: the
+# nearest; 0: only whether the point lies on a surface), the wide BVH around the scene's anchor and
+# its refs, per type its float64 world entries, ids, primitive indices and count; the winding
+# number's expansions per wide child slot; the outputs asked for (distance alone, or with the
+# nearest point's position, normal, id, primitive and barycentrics; inside an analytic solid; the
+# meshes' winding number)
+CLOSEST = (
+    Parameter("n_points", "const int"),
+    Parameter("order", "__global const int*"),
+    Parameter("ordered", "const int"),
+    Parameter("points", "__global const double*"),
+    Parameter("within", "const double"),
+    Parameter("scene_anchor", "const double4"),
+    Parameter("nodes", "__global const WideNode*", (_bounded,)),
+    Parameter("refs", "__global const int*", (_bounded,)),
+    EachType((
+        Parameter("{type}_worlds", "__global const {World}*"),
+        Parameter("{type}_ids", "__global const int*"),
+        Parameter("{type}_primitives", "__global const int*"),
+        Parameter("n_{type}s", "const int"),
+    )),
+    Parameter("winding_slots", "__global const WindingSlot*", (_asked("winding"),)),
+    Parameter("distance_out", "__global double*", (_asked("distance"),)),
+    _image("position", "__global real*"),
+    _image("normal", "__global real*"),
+    _image("id", "__global int*"),
+    _image("primitive", "__global int*"),
+    _image("barycentric", "__global real*"),
+    Parameter("inside_out", "__global uchar*", (_asked("inside"),)),
+    Parameter("winding_out", "__global double*", (_asked("winding"),)),
+)
+
 # count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
 # (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
 COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
@@ -235,7 +268,8 @@ ALL_HITS = (
 )
 
 # each query's kernel (programs.QUERY_FILES) and its signature
-SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED, "count_hits": COUNT_HITS, "all_hits": ALL_HITS}
+SIGNATURES = {"render": RENDER, "cast": CAST, "occluded": OCCLUDED, "count_hits": COUNT_HITS, "all_hits": ALL_HITS,
+              "closest": CLOSEST}
 
 
 def _templates(variant, type_: str) -> dict:

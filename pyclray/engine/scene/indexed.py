@@ -48,6 +48,8 @@ class IndexedEntries:
         # each shape's vertices (by its index in the scene): where they start, how many (an animation's moves)
         counts = [len(shape.vertices) for shape in shapes]
         self.vertex_range = dict(zip(shape_ids, zip(np.cumsum([0] + counts[:-1]).tolist(), counts)))
+        # each shape's place among the type's shapes (Kind.shapes, which cast packs its entries from)
+        self.slots = {index: slot for slot, index in enumerate(shape_ids)}
         self.world_vertices = aligned(np.ascontiguousarray(vertices, np.float64))
         # the faces in leaf order, gathered straight into aligned memory (no copy after)
         self.faces = aligned_empty(faces.shape, np.int32)

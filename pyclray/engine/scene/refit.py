@@ -64,7 +64,7 @@ class Refit:
             if kind.indexed is not None:  # shared vertices (engine/scene/indexed.py): each shape's rewritten, its faces' bounds
                 for i, shape, mine_where in zip(at, mine, where):
                     world, bounds = kind.indexed.moved_bounds(i, shape, mine_where)
-                    moved.append((kind, i, world))
+                    moved.append((kind, i, world, shape))
                     positions.append(state.leaf_positions(kind, mine_where))
                     bounds_rows.append(bounds)
                 continue
@@ -81,8 +81,16 @@ class Refit:
             if refitted is None:
                 return False
         shared = shares_host_memory(self.ctx)
-        for kind, i, world in moved:  # (brought to the view the view buffers hold, if any)
+        replaced: dict[str, dict] = {}
+        for kind, i, world, shape in moved:  # (brought to the view the view buffers hold, if any)
             kind.indexed.move(self, i, world, shared)
+            replaced.setdefault(kind.name, {})[kind.indexed.slots[i]] = shape
+        for name, slots in replaced.items():  # the type's shapes too: cast packs its world entries from them
+            kind = self.kinds[name]
+            items = list(kind.shapes)
+            for slot, shape in slots.items():
+                items[slot] = shape
+            kind.shapes = tuple(items)
         # the world entries; on another device, written to it before the next whole pass or render that
         # reads them (flush_world): while the camera stays, a frame writes only the view buffers
         for name, (where, rows) in packed.items():

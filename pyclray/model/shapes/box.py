@@ -13,6 +13,7 @@ from ..layout import Struct
 from .base import Shape, to_world, distance
 from .device import in_frame, padded_bounds
 from .rotations import axis_angle, rotation, rotation_axis_angle
+from .reference import exact_at_most, plain_closest, rational
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,7 @@ class Box(Shape):
         "A box in world coordinates: centre, half sizes and its three unit axes.",
     )
     kernel_files = ("box.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -165,6 +167,32 @@ class Box(Shape):
         beyond = np.abs(self._local(points)) - self.half()
         outside = np.linalg.norm(np.maximum(beyond, 0), axis=-1)
         return np.abs(outside + np.minimum(beyond.max(axis=-1), 0))
+
+
+    def oracle_closest(self, points):
+        """Outside: each box coordinate clamped to the half sizes; inside: onto the nearest face. The
+        normal: the face along which the point lies farthest beyond (least within) it, the lowest
+        axis on a tie (as kernels/box.cl)."""
+        points = np.asarray(points, np.float64)
+        local, half = self._local(points), self.half()
+        beyond = np.abs(local) - half
+        face = beyond.argmax(axis=-1)
+        rows = np.arange(len(points))
+        sign = np.where(local[rows, face] < 0, -1.0, 1.0)
+        inside = (beyond <= 0).all(axis=-1)
+        q = np.clip(local, -half, half)
+        q[rows[inside], face[inside]] = sign[inside] * half[face[inside]]
+        axes = self.axes()
+        position = np.array(self.center) + q @ axes.T
+        normal = sign[:, None] * axes.T[face]
+        distance = np.where(inside, -beyond[rows, face], np.linalg.norm(np.maximum(beyond, 0), axis=-1))
+        out = plain_closest(points, position, normal)
+        return out[:4] + (distance,)
+
+    def oracle_inside(self, points, sign="parity"):
+        """|(p - C) . e_k| <= h_k on each of its axes (float64: its axes are rounded already)."""
+        points = np.asarray(points, np.float64)
+        return (np.abs(self._local(points)) <= self.half()).all(axis=-1)
 
     def edge_distance(self, points):
         """For points on the surface: the distance to the nearest edge, where two of the three

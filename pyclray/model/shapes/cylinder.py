@@ -12,7 +12,7 @@ from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
 from .base import Shape, flag, frame_columns, to_world, distance
 from .device import in_frame, padded_bounds
-from .reference import dot_rows
+from .reference import dot_rows, exact_at_most, plain_closest, rational
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,7 @@ class Cylinder(Shape):
         "A cylinder in world coordinates: p0.w = radius, p1.w = length, unit axis.",
     )
     kernel_files = ("cylinder.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         object.__setattr__(self, "p0", vector3("p0", self.p0))
@@ -224,6 +225,58 @@ class Cylinder(Shape):
             outside = np.hypot(np.maximum(out_radial, 0), np.maximum(out_axial, 0))
             return np.abs(outside + np.minimum(np.maximum(out_radial, out_axial), 0))
         return np.hypot(out_radial, np.maximum(out_axial, 0))
+
+
+    def oracle_closest(self, points):
+        """The nearest of the side's point and, capped, the two caps' (the side first on a tie)."""
+        points = np.asarray(points, np.float64)
+        A, length = self.axis()
+        z, radial = self._local(points)
+        rho = np.linalg.norm(radial, axis=-1)
+        other = np.array([1.0, 0.0, 0.0]) if abs(A[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
+        spare = np.cross(A, other)
+        spare /= np.linalg.norm(spare)
+        out = np.where(rho[:, None] > 0, radial / np.where(rho > 0, rho, 1.0)[:, None], spare)
+        p0, p1 = np.array(self.p0), np.array(self.p1)
+        candidates = [(p0 + np.clip(z, 0, length)[:, None] * A + self.radius * out, out)]
+        if self.caps:
+            on_cap = np.minimum(rho, self.radius)[:, None] * out
+            candidates += [(p0 + on_cap, np.broadcast_to(-A, points.shape)), (p1 + on_cap, np.broadcast_to(A, points.shape))]
+        position, normal = candidates[0]
+        best = np.linalg.norm(points - position, axis=-1)
+        for q, n in candidates[1:]:
+            d = np.linalg.norm(points - q, axis=-1)
+            nearer = d < best
+            position, normal, best = np.where(nearer[:, None], q, position), np.where(nearer[:, None], n, normal), np.minimum(d, best)
+        result = plain_closest(points, position, normal)
+        return result[:4] + (best,)
+
+    def oracle_inside(self, points, sign="parity"):
+        """Capped: 0 <= (p - p0).(p1 - p0) <= |p1 - p0|^2 and |(p - p0) x (p1 - p0)|^2 <= r^2 |p1 - p0|^2,
+        exactly; an open tube has no inside."""
+        points = np.asarray(points, np.float64)
+        if not self.caps:
+            return np.zeros(len(points), bool)
+        p0, d = np.array(self.p0), np.subtract(self.p1, self.p0)
+        P = points - p0
+        along, dd = P @ d, d @ d
+        cross = np.cross(P, d)
+        radial = (cross * cross).sum(axis=-1) - self.radius ** 2 * dd
+        size_a = np.abs(P) @ np.abs(d) + dd
+        size_r = (np.abs(P) @ np.abs(d)) ** 2 + self.radius ** 2 * dd
+
+        def parts(i):
+            a, b, r = rational(points[i]), rational(self.p0), rational([self.radius])[0]
+            e = [x - y for x, y in zip(rational(self.p1), b)]
+            q = [x - y for x, y in zip(a, b)]
+            c = [q[1] * e[2] - q[2] * e[1], q[2] * e[0] - q[0] * e[2], q[0] * e[1] - q[1] * e[0]]
+            ee = sum(x * x for x in e)
+            return sum(x * y for x, y in zip(q, e)), ee, sum(x * x for x in c) - r * r * ee
+
+        low = exact_at_most(-along, size_a, lambda i: -parts(i)[0])
+        high = exact_at_most(along - dd, size_a, lambda i: parts(i)[0] - parts(i)[1])
+        within = exact_at_most(radial, size_r, lambda i: parts(i)[2])
+        return low & high & within
 
     def edge_distance(self, points):
         """Distance to the nearer rim circle (the caps' borders, or an open tube's ends)."""

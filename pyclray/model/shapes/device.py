@@ -44,8 +44,9 @@ class DevicePacking:
     ``cast_anchors`` (where cast frames each entry: the centre of its box), ``world_within`` (an
     unbounded type's range check), ``entries_of`` (the id and primitive index of each entry),
     ``barycentric`` (its kernel file has ``<type>_barycentric``), ``frames_in_render`` (a large
-    scene frames it where tested), ``leaf_size`` (entries per BVH leaf) and ``kernel_structs`` (the
-    structs of other types its kernel file uses).
+    scene frames it where tested), ``leaf_size`` (entries per BVH leaf), ``kernel_structs`` (the
+    structs of other types its kernel file uses), and for the closest-point query ``inside_test`` and
+    ``winding_number`` (how its inside is decided).
     """
 
     required_members: ClassVar[tuple[str, ...]] = ("c_type", "struct", "world", "kernel_files", "_pack_world", "_rebase")
@@ -67,6 +68,13 @@ class DevicePacking:
     leaf_size: ClassVar[int | None] = None
     # the structs of other types its kernel file uses (mesh instances: the mesh's triangles)
     kernel_structs: ClassVar[tuple] = ()
+    # The closest-point query (kernels/closest.cl): every type's kernel file has <type>_closest and
+    # <type>_inside (kernels/closest.h); inside_test is True for a type whose <type>_inside decides
+    # its inside (an analytic solid: a sphere, a box, a capped cylinder, a plane's half-space), False
+    # for one without an inside (disks, rectangles) or decided otherwise; winding_number is True for a
+    # type whose inside is its triangles' parity or generalized winding number (<type>_solid_angle: meshes)
+    inside_test: ClassVar[bool] = False
+    winding_number: ClassVar[bool] = False
 
     # -- world entries ---------------------------------------------------------------------------
     @classmethod

@@ -10,7 +10,7 @@ from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
 from .base import Shape, distance, frame_columns, to_world, unit_rows
 from .device import padded_bounds, rebase_flat
-from .reference import dot_rows, flat_hits
+from .reference import dot_rows, flat_hits, exact_at_most, plain_closest, rational
 
 
 @dataclass(frozen=True)
@@ -104,6 +104,18 @@ class Disk(Shape):
     def surface_distance(self, points):
         height, rho = self._plane_coordinates(points)
         return np.hypot(height, np.maximum(rho - self.radius, 0.0))
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        n = self.unit_normal()
+        P = points - np.array(self.center)
+        height = P @ n
+        rho_vector = P - height[:, None] * n
+        rho = np.linalg.norm(rho_vector, axis=-1)
+        scale = np.where(rho > self.radius, self.radius / np.where(rho > 0, rho, 1.0), 1.0)
+        out = plain_closest(points, np.array(self.center) + scale[:, None] * rho_vector, n)
+        return out[:4] + (self.surface_distance(points),)
 
     def edge_distance(self, points):
         height, rho = self._plane_coordinates(points)

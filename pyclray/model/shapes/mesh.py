@@ -94,6 +94,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         "A triangle's unit world vertex normals for smooth shading (zero for a flat mesh's triangles).",
     )
     barycentric = True
+    winding_number = True  # inside: its triangles' parity or winding number (the closest-point query)
     mitsuba_primitives = True
 
     def __post_init__(self):
@@ -146,6 +147,17 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.faces)} triangles, {len(self.vertices)} vertices, name={self.name!r})"
+
+    @property
+    def closed(self) -> bool:
+        """Whether the mesh is closed: every edge is shared by exactly two faces, which run along it
+        in opposite directions (consistently oriented, no border, no edge of three faces). A closed
+        mesh has an inside (signed_distance and occupancy with sign="parity"). From its faces alone,
+        found once (its faces are fixed) and kept."""
+        closed = self._cache.get("closed")
+        if closed is None:
+            closed = self._cache["closed"] = edges_closed(self.faces, len(self.vertices))
+        return closed
 
     def describe(self) -> str:
         return f"mesh '{self.name}' ({len(self.faces)} triangles)"
@@ -407,6 +419,32 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         points = np.asarray(points, np.float64)
         return self._hierarchy().nearest(points.reshape(-1, 3))[0].reshape(points.shape[:-1])
 
+    def oracle_closest(self, points):
+        """The nearest triangle (the lowest index on an exact tie) and its point nearest each point."""
+        from .mesh_oracle import closest_on_triangles
+
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        distance, which, _ = self._hierarchy().nearest(points)
+        a, b, c = self.corners()
+        position, uv = closest_on_triangles(points, a[which], b[which], c[which])
+        return position, self.face_normals()[which], which, uv, distance
+
+    def oracle_winding(self, points) -> np.ndarray:
+        """The generalized winding number of its triangles at each point (float64, all triangles summed)."""
+        from .mesh_oracle import winding_numbers
+
+        return winding_numbers(np.asarray(points, np.float64).reshape(-1, 3), *self.corners())
+
+    def oracle_inside(self, points, sign: str = "parity"):
+        """sign "winding": its winding number >= 1/2; "parity": a closed mesh's winding number odd
+        (the parity of any ray's crossings; an integer up to rounding away from its surface), an
+        open mesh never."""
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        if sign == "parity" and not self.closed:
+            return np.zeros(len(points), bool)
+        w = self.oracle_winding(points)
+        return w >= 0.5 if sign == "winding" else (np.rint(w).astype(np.int64) % 2 == 1)
+
     def oracle_shading_normal(self, points, normals):
         """Smooth: the vertex normals interpolated at the barycentrics of each point's nearest
         triangle (float64), normalized; the geometric normal where the mesh is flat or the
@@ -513,6 +551,22 @@ def _read_mesh(*args):
     from . import mesh_io
 
     return mesh_io.read_mesh(*args)
+
+
+def edges_closed(faces: np.ndarray, vertex_count: int) -> bool:
+    """Whether each directed edge (a, b) of the faces occurs once and its reverse (b, a) once: every
+    edge shared by exactly two faces with opposite orientations."""
+    if not len(faces):
+        return False
+    faces = np.asarray(faces, np.int64)
+    start = faces.reshape(-1)
+    end = faces[:, [1, 2, 0]].reshape(-1)
+    keys = np.sort(start * vertex_count + end)
+    if (keys[1:] == keys[:-1]).any():  # a directed edge of two faces: three or more faces, or flipped ones
+        return False
+    reverse = end * vertex_count + start
+    found = np.searchsorted(keys, reverse)
+    return bool((keys[np.minimum(found, len(keys) - 1)] == reverse).all())
 
 
 def _read_mesh_objects(*args):

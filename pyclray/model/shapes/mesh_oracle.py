@@ -185,6 +185,44 @@ def point_triangle(P, a, b, c):
     return np.where(inside, plane, edges), edges
 
 
+def closest_on_triangles(P, a, b, c):
+    """(position, (u, v)) per row: the point of triangle a, b, c nearest P (float64), position =
+    (1 - u - v) a + u b + v c: the projection where it falls inside, else the nearest point of
+    the three edges (a zero-area triangle: its edges alone)."""
+    u, v = barycentrics(P, a, b, c)
+    n = _cross(b - a, c - a)
+    inside = (_dot(n, n) > 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    best = np.full(len(P), np.inf)
+    uv = np.zeros((len(P), 2))
+    for X, Y, weights in ((a, b, lambda s: (s, 0 * s)), (b, c, lambda s: (1 - s, s)), (c, a, lambda s: (0 * s, 1 - s))):
+        d = Y - X
+        length2 = _dot(d, d)
+        s = np.clip(np.where(length2 > 0, _dot(P - X, d) / np.where(length2 > 0, length2, 1), 0.0), 0.0, 1.0)
+        r = P - (X + s[:, None] * d)
+        dist = _dot(r, r)
+        nearer = dist < best
+        best = np.where(nearer, dist, best)
+        su, sv = weights(s)
+        uv[nearer] = np.stack([su, sv], axis=1)[nearer]
+    uv[inside] = np.stack([u, v], axis=1)[inside]
+    position = a + uv[:, :1] * (b - a) + uv[:, 1:] * (c - a)
+    return position, uv
+
+
+def winding_numbers(P, a, b, c, chunk: int = 1 << 22) -> np.ndarray:
+    """The generalized winding number of the triangles at each point (float64): the sum of their
+    solid angles (van Oosterom and Strackee) over 4 pi, every triangle for every point."""
+    out = np.zeros(len(P))
+    step = max(1, chunk // max(len(a), 1))
+    for start in range(0, len(P), step):
+        Q = P[start:start + step, None, :]
+        A, B, C = a[None] - Q, b[None] - Q, c[None] - Q
+        la, lb, lc = (np.linalg.norm(X, axis=-1) for X in (A, B, C))
+        numerator = np.einsum("pti,pti->pt", A, np.cross(B, C))
+        denominator = (la * lb * lc + np.einsum("pti,pti->pt", A, B) * lc + np.einsum("pti,pti->pt", B, C) * la
+                       + np.einsum("pti,pti->pt", C, A) * lb)
+        out[start:start + step] = 2.0 * np.arctan2(numerator, denominator).sum(axis=1) / (4 * np.pi)
+    return out
 # -- every crossing, with the tie rule (the float64 oracle of count_hits and all_hits) -------------
 def _projected(A, D, kx, ky, kz):
     """The homogeneous shear of kernels/mesh.cl: each vertex A (from the origin) to

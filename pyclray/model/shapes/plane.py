@@ -11,6 +11,7 @@ from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, frame_columns, to_world
 from .device import in_frame
+from .reference import exact_at_most, plain_closest, rational
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
 # disk's error does not depend on its size; a rectangle's, two float32 triangles, does)
@@ -47,6 +48,7 @@ class Plane(Shape):
         "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
     )
     kernel_files = ("plane.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)
@@ -140,6 +142,23 @@ class Plane(Shape):
     def surface_distance(self, points):
         n, h = self.unit()
         return np.abs(np.asarray(points, np.float64) @ n + h)
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        n, h = self.unit()
+        s = points @ n + h
+        out = plain_closest(points, points - s[:, None] * n, n)
+        return out[:4] + (np.abs(s),)
+
+    def oracle_inside(self, points, sign="parity"):
+        """The half-space behind it: normal . p + offset <= 0."""
+        points = np.asarray(points, np.float64)
+        normal = np.array(self.normal)
+        value = points @ normal + self.offset
+        size = np.abs(points) @ np.abs(normal) + abs(self.offset)
+        exact = lambda i: sum(a * b for a, b in zip(rational(points[i]), rational(normal))) + rational([self.offset])[0]
+        return exact_at_most(value, size, exact)
 
     # -- the error model -----------------------------------------------------------------------
     def foot(self, point) -> np.ndarray:

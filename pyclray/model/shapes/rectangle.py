@@ -10,7 +10,7 @@ from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
 from .base import Shape, distance, to_world, unit_rows
 from .device import in_frame, padded_bounds, rebase_flat
-from .reference import flat_hits
+from .reference import flat_hits, exact_at_most, plain_closest, rational
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
 ORTHOGONAL = 1e-6
@@ -140,6 +140,14 @@ class Rectangle(Shape):
     def surface_distance(self, points):
         height, qa, qb = self._border(points)
         return np.hypot(height, np.hypot(np.maximum(qa, 0), np.maximum(qb, 0)))
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        _, a, b = self._coordinates(points)
+        position = np.array(self.center) + np.clip(a, -1, 1)[:, None] * np.array(self.u) + np.clip(b, -1, 1)[:, None] * np.array(self.v)
+        out = plain_closest(points, position, self.unit_normal())
+        return out[:4] + (self.surface_distance(points),)
 
     def edge_distance(self, points):
         height, qa, qb = self._border(points)

@@ -22,12 +22,14 @@ class ReferenceShape:
     - ``oracle_distance(origins, directions)``: the float64 distance to the nearest crossing;
     - ``oracle_normal(points)``: the float64 unit world normal (outward, never flipped);
     - ``surface_distance(points)``: the unsigned distance of points to the surface;
+    - ``oracle_closest(points)``: the nearest surface point, its normal, primitive and barycentrics;
     - ``anchor(point)``: the point its intersection measures coordinates from (the error model's
       coordinate size);
     - ``mitsuba_shapes(scene)``: its Mitsuba counterpart, one or more Mitsuba shapes that all map
       back to its id.
 
-    Optional, with defaults here: ``oracle_primitives`` (a shape of many primitives: which one a
+    Optional, with defaults here: ``oracle_inside`` (a solid's inside, exact; none by default),
+    ``oracle_primitives`` (a shape of many primitives: which one a
     ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``hit_normals`` and
     ``hit_barycentrics`` (all_hits' per-hit normal and barycentrics: oracle_normal, and 0, 0), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
     ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
@@ -36,7 +38,7 @@ class ReferenceShape:
     """
 
     required_members: ClassVar[tuple[str, ...]] = ("oracle_distance", "oracle_normal", "surface_distance", "anchor",
-                                                   "mitsuba_shapes")
+                                                   "mitsuba_shapes", "oracle_closest")
 
     # -- the float64 oracle --------------------------------------------------------------------
     def oracle_distance(self, origins, directions) -> np.ndarray:
@@ -55,6 +57,18 @@ class ReferenceShape:
         """The index of the primitive each ray's nearest hit is on (-1 on a miss), float64; None for
         a shape of one primitive."""
         return None
+
+    def oracle_closest(self, points) -> tuple:
+        """The nearest point of the surface to each of points (N, 3), float64: (position (N, 3),
+        normal (N, 3), primitive (N,) int, barycentric (N, 2), distance (N,)). The normal is the
+        surface's unit geometric normal there (outward); where that is ambiguous (a box's edge) the
+        same rule as the kernel's <type>_closest."""
+        raise NotImplementedError
+
+    def oracle_inside(self, points, sign: str = "parity") -> np.ndarray:
+        """Whether each point lies in the shape's solid (its surface included), decided exactly
+        where float64 cannot (exact_at_most): False for a shape without an inside."""
+        return np.zeros(np.shape(points)[:-1], bool)
 
     def oracle_crossings(self, origins, directions) -> tuple[np.ndarray, np.ndarray]:
         """(t, primitive): every crossing t > 0 of each ray (unit directions (N, 3)) as (N, K) float64
@@ -139,3 +153,29 @@ def flat_hits(center, normal, origins, directions, inside) -> np.ndarray:
 
 def dot_rows(a, b) -> np.ndarray:
     return np.einsum("...k,...k", a, b)
+
+
+def exact_at_most(value, size, exact) -> np.ndarray:
+    """value <= 0 per row, from float64 where |value| exceeds 1e-10 of size (its rounding is far
+    smaller), else from exact(i), the row's value in exact rational arithmetic (fractions.Fraction
+    of the float64 inputs)."""
+    value, size = np.asarray(value, np.float64), np.asarray(size, np.float64)
+    out = value <= 0
+    for i in np.flatnonzero(~(np.abs(value) > 1e-10 * np.broadcast_to(size, value.shape))):
+        out.flat[i] = exact(i) <= 0
+    return out
+
+
+def rational(values):
+    """The float64 values as exact fractions."""
+    from fractions import Fraction
+
+    return [Fraction(float(v)) for v in np.ravel(values)]
+
+
+def plain_closest(points, position, normal) -> tuple:
+    """oracle_closest's tuple for a shape of one primitive without barycentrics."""
+    points = np.asarray(points, np.float64)
+    count = len(points)
+    return (position, np.broadcast_to(normal, points.shape).copy(), np.zeros(count, np.int64), np.zeros((count, 2)),
+            np.linalg.norm(points - position, axis=-1))

@@ -11,6 +11,7 @@ from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, distance
 from .device import in_frame
+from .reference import exact_at_most, plain_closest, rational
 
 
 def eye_term(F, radius):
@@ -49,6 +50,7 @@ class Sphere(Shape):
         "A sphere in world coordinates: center.xyz, center.w = radius.",
     )
     kernel_files = ("sphere.cl",)
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
     frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
 
     def __post_init__(self):
@@ -120,6 +122,28 @@ class Sphere(Shape):
 
     def surface_distance(self, points):
         return np.abs(np.linalg.norm(np.asarray(points, np.float64) - np.array(self.center), axis=-1) - self.radius)
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        F = points - np.array(self.center)
+        length = np.linalg.norm(F, axis=-1)
+        n = np.where(length[:, None] > 0, F / np.where(length > 0, length, 1.0)[:, None], [0.0, 0.0, 1.0])
+        out = plain_closest(points, np.array(self.center) + self.radius * n, n)
+        return out[:4] + (np.abs(length - self.radius),)
+
+    def oracle_inside(self, points, sign="parity"):
+        """|p - C|^2 <= r^2."""
+        points = np.asarray(points, np.float64)
+        F = points - np.array(self.center)
+        value = (F * F).sum(axis=-1) - self.radius ** 2
+        size = (F * F).sum(axis=-1) + self.radius ** 2
+
+        def exact(i):
+            c, r = rational(self.center), rational([self.radius])[0]
+            return sum((p - q) ** 2 for p, q in zip(rational(points[i]), c)) - r * r
+
+        return exact_at_most(value, size, exact)
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod

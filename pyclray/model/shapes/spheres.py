@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import SceneError, _shown
 from .base import Shape
 from .sphere import Sphere
+from .reference import exact_at_most, plain_closest, rational
 
 
 def _array(key: str, value, shape_tail: tuple, what: str) -> np.ndarray:
@@ -48,6 +49,7 @@ class Spheres(Shape):
     struct = Sphere.struct
     world = Sphere.world
     kernel_files = ("sphere.cl", "spheres.cl")
+    inside_test = True  # its inside: <type>_inside (the closest-point query)
     frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
     reads_files = True
 
@@ -179,6 +181,29 @@ class Spheres(Shape):
 
     def surface_distance(self, points):
         return self._nearest_surface(points)[1]
+
+
+    def oracle_closest(self, points):
+        points = np.asarray(points, np.float64)
+        F = points[:, None, :] - self.centers
+        length = np.linalg.norm(F, axis=-1)
+        gap = np.abs(length - self.radii)
+        index = gap.argmin(axis=-1)  # the lowest primitive on an exact tie
+        rows = np.arange(len(points))
+        f, l = F[rows, index], length[rows, index]
+        n = np.where(l[:, None] > 0, f / np.where(l > 0, l, 1.0)[:, None], [0.0, 0.0, 1.0])
+        position = self.centers[index] + self.radii[index][:, None] * n
+        return position, n, index.astype(np.int64), np.zeros((len(points), 2)), gap[rows, index]
+
+    def oracle_inside(self, points, sign="parity"):
+        """In any of its spheres (each |p - C|^2 <= r^2, exactly)."""
+        from .sphere import Sphere
+
+        points = np.asarray(points, np.float64)
+        out = np.zeros(len(points), bool)
+        for center, radius in zip(self.centers, self.radii):
+            out |= Sphere(center=tuple(center), radius=float(radius)).oracle_inside(points)
+        return out
 
     @classmethod
     def random(cls, rng, shift=0.0):

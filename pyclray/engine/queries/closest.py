@@ -1,0 +1,340 @@
+"""Closest points, distances, signed distances and occupancy of points (kernels/closest.cl): for each
+point the nearest point of any shape's surface, found through the scene's BVH pruned by the best
+distance so far, in float64 from the point as given; and whether the point is inside a solid.
+
+Inside means inside any solid: an analytic one (a sphere, a box, a capped cylinder, the half-space
+behind a plane: its kernel file's <type>_inside), or a mesh by one of two rules (``sign``):
+"parity", the exact count of one ray's crossings of each closed mesh (Mesh.closed; the count_hits
+query's tie rule makes it exact for every ray), or "winding", the meshes' generalized winding number
+>= 1/2 (Jacobson et al. 2013), summed hierarchically (Barill et al. 2018: engine/bvh/winding.py), which
+also gives open, self-intersecting and multi-part meshes an inside. A point on a surface (distance
+0) is inside.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pyopencl as cl
+
+from ...model.errors import RequestError
+from ...model.shapes import REGISTRY
+from ..bvh.scene import primitives_bvh
+from ..bvh.winding import winding_slots
+from ..launch.programs import Variant, kernel_for
+from ..launch.run import REAL, input_buffer
+from ..launch.signatures import arguments
+from ..opencl.device import launch
+
+SIGNS = ("parity", "winding")
+
+# the nearest point's outputs (with "distance"), the kernel's names
+CLOSEST_OUTPUTS = ("position", "normal", "id", "primitive", "barycentric")
+
+# Points are visited in the order of a Morton code of their positions when there are at least this
+# many: neighbouring work-items then walk the same nodes and triangles, which stay in cache. Each
+# point is computed on its own, so the order changes no bit.
+COHERENT_FROM = 4096
+
+# the direction of the parity rays: any direction is exact (count_hits' tie rule); one along no axis
+# and no simple diagonal meets a mesh's axis-aligned edges and faces edge-on less often
+PARITY_DIRECTION = np.array([0.5773502691896258, 0.6172133998483676, 0.5345224838248488])
+
+WORK_GROUP = 64
+
+
+def check_points(points, name: str = "points") -> tuple[np.ndarray, tuple]:
+    """(points (N, 3) float64 C-contiguous, leading shape): the points as given (float32 widened
+    exactly), checked: shape (..., 3), finite; a RequestError naming the argument and the first bad row."""
+    try:
+        array = np.asarray(points)
+        if array.dtype.kind not in "fiub":
+            raise TypeError
+        array = array.astype(np.float64, copy=False)
+    except (TypeError, ValueError, OverflowError):
+        raise RequestError(f"{name}: expected an array of shape (..., 3) of numbers") from None
+    if array.size == 0 and array.ndim == 1:  # an empty list: no points
+        array = array.reshape(0, 3)
+    if array.ndim == 0 or array.shape[-1] != 3:
+        raise RequestError(f"{name}: expected an array of shape (..., 3), got shape {array.shape}")
+    shape = array.shape[:-1]
+    flat = np.ascontiguousarray(array.reshape(-1, 3))
+    finite = np.isfinite(flat).all(axis=1)
+    if not finite.all():
+        row = int(np.argmin(finite))
+        index = np.unravel_index(row, shape)
+        where = str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index))
+        raise RequestError(f"{name}: row {where} is not finite: {flat[row]}")
+    return flat, shape
+
+
+def check_sign(sign) -> str:
+    if not isinstance(sign, str) or sign not in SIGNS:
+        raise RequestError(f"sign: expected one of {', '.join(map(repr, SIGNS))}, got {sign!r}")
+    return sign
+
+
+class ClosestInputs:
+    """What the closest-point query needs of a scene, made at its first call and kept by the handle
+    until its shapes change: per type its world entries (float64), ids and primitive indices in the
+    BVH's leaf order, the wide BVH around the scene's anchor and its refs, on the device; the winding
+    number's expansions when first asked for."""
+
+    def __init__(self, prepared, shapes: tuple):
+        ctx = self.ctx = prepared.ctx
+        kinds = prepared.kinds
+        if all(t in REGISTRY for t in prepared.types):  # the prepared scene's own BVH and entries
+            self.types, self.bvh = prepared.types, prepared.bvh
+            worlds = {t: kinds[t].world for t in self.types}
+            ids = {t: kinds[t].ids for t in self.types}
+            primitives = {t: kinds[t].primitives for t in self.types}
+        else:  # shapes packed as another kind (meshes sharing arrays as instances): each shape's own entries
+            self.types, self.bvh, worlds, ids, primitives = _own_entries(shapes)
+        self.worlds = worlds
+        tree = self.bvh
+        self.anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
+        if not np.isfinite(self.anchor).all():
+            self.anchor = np.zeros(3)
+        self.args = {"scene_anchor": np.append(self.anchor, 0.0).view(cl.cltypes.double4)[0]}
+        if tree.types:
+            self.args.update(nodes=input_buffer(ctx, tree.nodes(self.anchor)), refs=input_buffer(ctx, tree.refs(self.types)))
+        for t in self.types:
+            world = worlds[t] if len(worlds[t]) else np.zeros(1, worlds[t].dtype)
+            self.args.update({f"{t}_worlds": input_buffer(ctx, np.ascontiguousarray(world)),
+                              f"{t}_ids": input_buffer(ctx, _int32(ids[t])),
+                              f"{t}_primitives": input_buffer(ctx, _int32(primitives[t])),
+                              f"n_{t}s": np.int32(len(worlds[t]))})
+        self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
+        self._winding = None
+
+    def winding(self):
+        """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
+        if self._winding is None:
+            tree = self.bvh
+            count = len(tree.leaf_type)
+            triangles = np.zeros((max(count, 1), 3, 3))
+            for position, t in enumerate(tree.types):
+                if REGISTRY[t].winding_number:
+                    mine = tree.leaf_type == position
+                    world = self.worlds[t][tree.leaf_index[mine]]
+                    triangles[:count][mine] = np.stack([world[v][:, :3] for v in ("a", "b", "c")], axis=1)
+            slots = winding_slots(tree.tree, tree.wide, triangles)
+            self._winding = input_buffer(self.ctx, np.ascontiguousarray(slots))
+            self.nbytes += self._winding.size
+        return self._winding
+
+
+def _int32(a) -> np.ndarray:
+    a = np.ascontiguousarray(a, np.int32)
+    return a if len(a) else np.zeros(1, np.int32)
+
+
+def _own_entries(shapes: tuple):
+    """(types, BVH, worlds, ids, primitives) of the shapes by their own types (REGISTRY), each
+    bounded type's entries in leaf order."""
+    by_type: dict = {}
+    for index, shape in enumerate(shapes):
+        by_type.setdefault(shape.type, ([], []))
+        by_type[shape.type][0].append(shape)
+        by_type[shape.type][1].append(index)
+    types = tuple(t for t in REGISTRY if t in by_type)
+    worlds, ids, primitives, bounds = {}, {}, {}, {}
+    for t in types:
+        cls = REGISTRY[t]
+        mine, indices = by_type[t]
+        ids[t], primitives[t] = cls.entries_of(mine, indices)
+        worlds[t] = cls.pack_world(mine)
+        if cls.bounded:
+            with np.errstate(over="ignore", invalid="ignore"):
+                bounds[t] = cls.bounds_of(worlds[t])
+    with np.errstate(over="ignore", invalid="ignore"):
+        bvh = primitives_bvh(bounds)
+    for t, order in bvh.order.items():
+        worlds[t], ids[t], primitives[t] = worlds[t][order], ids[t][order], primitives[t][order]
+    return types, bvh, worlds, ids, primitives
+
+
+def coherent_order(points: np.ndarray) -> np.ndarray:
+    """int32 positions of the points in the order of a 30-bit Morton code of their coordinates in
+    their box (10 bits per axis)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    scale = np.where(hi > lo, 1023.0 / np.where(hi > lo, hi - lo, 1.0), 0.0)
+    cells = np.minimum((points - lo) * scale, 1023.0).astype(np.uint32)
+    code = np.zeros(len(points), np.uint32)
+    for axis in range(3):
+        v = cells[:, axis]
+        v = (v | (v << 16)) & np.uint32(0x030000FF)
+        v = (v | (v << 8)) & np.uint32(0x0300F00F)
+        v = (v | (v << 4)) & np.uint32(0x030C30C3)
+        v = (v | (v << 2)) & np.uint32(0x09249249)
+        code |= v << np.uint32(axis)
+    return np.argsort(code, kind="stable").astype(np.int32)
+
+
+def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.inf) -> dict:
+    """The kernel's outputs for the checked points (N, 3): "distance" (float64, inf where no shape),
+    with it CLOSEST_OUTPUTS, "inside" (uint8: an analytic solid's inside, or on a surface; with
+    within=0 the distance search stops at any surface point at distance 0) and "winding" (float64)."""
+    ctx, precision = tracer.ctx, tracer.precision
+    inputs = tracer.closest_inputs()
+    count = len(points)
+    dtypes = {"distance": np.float64, "position": REAL[precision], "normal": REAL[precision], "id": np.int32,
+              "primitive": np.int32, "barycentric": REAL[precision], "inside": np.uint8, "winding": np.float64}
+    widths = {"position": 3, "normal": 3, "barycentric": 2}
+    results = {k: np.empty((count, widths[k]) if k in widths else (count,), dtypes[k]) for k in outputs}
+    if count == 0:
+        return results
+    if "winding" in outputs and not inputs.bvh.types:  # no bounded shape: no triangle
+        results["winding"][:] = 0.0
+        outputs = tuple(k for k in outputs if k != "winding")
+        if not outputs:
+            return results
+    variant = Variant("closest", inputs.types, tuple(outputs), precision)
+    ordered = count >= COHERENT_FROM
+    order = coherent_order(points) if ordered else np.zeros(1, np.int32)
+    args = {"n_points": np.int32(count), "order": input_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
+            "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
+    if "winding" in outputs:
+        args["winding_slots"] = inputs.winding()
+    flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
+    cpu = bool(ctx.device.type & cl.device_type.CPU)
+    buffers = {k: (cl.Buffer(ctx.context, flags, hostbuf=results[k]) if cpu
+                   else cl.Buffer(ctx.context, cl.mem_flags.WRITE_ONLY, results[k].nbytes)) for k in outputs}
+    args.update({f"{k}_out": buffers[k] for k in outputs})
+    kernel = kernel_for(ctx, variant)
+    size = -(-count // WORK_GROUP) * WORK_GROUP
+    launch(ctx, kernel, (size,), (WORK_GROUP,), arguments(variant, args))
+    for k in outputs:
+        if cpu:  # written in place: a map makes it current
+            mapped = cl.enqueue_map_buffer(ctx.queue, buffers[k], cl.map_flags.READ, 0, results[k].shape,
+                                           results[k].dtype, is_blocking=True)[0]
+            mapped.base.release()
+        else:
+            cl.enqueue_copy(ctx.queue, results[k], buffers[k])
+    ctx.queue.finish()
+    return results
+
+
+# -- the queries -----------------------------------------------------------------------------------
+def closest_points(tracer, points) -> dict:
+    """position, distance, id, primitive, barycentric, normal per point (see Tracer.closest_points)."""
+    flat, shape = check_points(points)
+    out = run_closest(tracer, flat, ("distance",) + CLOSEST_OUTPUTS)
+    return {k: v.reshape(shape + v.shape[1:]) for k, v in out.items()}
+
+
+def distance(tracer, points) -> np.ndarray:
+    flat, shape = check_points(points)
+    return run_closest(tracer, flat, ("distance",))["distance"].reshape(shape)
+
+
+def signed_distance(tracer, points, sign: str = "parity") -> np.ndarray:
+    sign = check_sign(sign)
+    flat, shape = check_points(points)
+    out = run_closest(tracer, flat, ("distance", "inside"))
+    inside = _inside(tracer, flat, out, sign)
+    d = out["distance"]
+    return np.where(inside & (d > 0), -d, d).reshape(shape)
+
+
+def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
+    sign = check_sign(sign)
+    flat, shape = check_points(points)
+    # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
+    # solids and whether the point lies on a surface: only a surface point at distance 0 is looked
+    # for (within = 0), a traversal of the boxes that hold the point
+    inside = _mesh_inside(tracer, flat, sign)
+    rest = ~inside
+    if rest.any():
+        inside[rest] = run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
+    return inside.astype(np.uint8).reshape(shape)
+
+
+def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
+    """The generalized winding number of all the scene's meshes at each point (float64): the open
+    meshes' summed hierarchically (the kernel's expansions, within 1e-3), the closed meshes' exactly,
+    as the signed count of one ray's crossings (a closed mesh's winding number is the number of times
+    a ray from the point leaves it less the times it enters, for any ray: count_hits' tie rule counts
+    each crossing once)."""
+    total = np.zeros(len(points))
+    if not len(points):
+        return total
+    open_meshes = tracer.mesh_handle(closed=False)
+    if open_meshes is not None:
+        total += run_closest(open_meshes, points, ("winding",))["winding"]
+    closed = tracer.mesh_handle(closed=True)
+    if closed is not None:
+        total += _signed_crossings(closed, points)
+    return total
+
+
+def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
+    """Per point, the crossings of its parity ray out of its closed meshes less those into them: +1
+    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
+    the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
+    directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
+    one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
+    hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
+    ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
+    ids = np.zeros_like(ray) if one else np.asarray(hits["id"]).astype(np.int64)
+    signs = np.zeros(len(ray))
+    for index, mesh in enumerate(closed.shapes):
+        mine = ids == index
+        if not mine.any():
+            continue
+        a, b, c = (corner[primitive[mine]] for corner in mesh.corners())
+        normal = np.cross(b - a, c - a)
+        along = normal @ PARITY_DIRECTION
+        doubt = np.abs(along) <= 1e-10 * np.abs(normal) @ np.abs(PARITY_DIRECTION)
+        for i in np.flatnonzero(doubt):
+            along[i] = _exact_along(a[i], b[i], c[i])
+        signs[mine] = np.sign(along)
+    return np.bincount(ray, weights=signs, minlength=len(points))
+
+
+def _exact_along(a, b, c) -> float:
+    """The sign of cross(b - a, c - a) . PARITY_DIRECTION in exact rational arithmetic."""
+    from fractions import Fraction
+
+    a, b, c, d = ([Fraction(float(x)) for x in v] for v in (a, b, c, PARITY_DIRECTION))
+    e, f = [y - x for x, y in zip(a, b)], [y - x for x, y in zip(a, c)]
+    n = (e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0])
+    value = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+    return float((value > 0) - (value < 0))
+
+
+def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
+    """Inside any solid: the kernel's analytic solids and surface points (out["inside"]), and for
+    the other points the meshes' inside (_mesh_inside)."""
+    inside = out["inside"].astype(bool)
+    rest = ~inside
+    if rest.any():
+        inside[rest] = _mesh_inside(tracer, points[rest], sign)
+    return inside
+
+
+def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
+    """Inside a mesh: by the winding number (>= 1/2), or by each closed mesh's parity."""
+    if sign == "winding":
+        return winding_numbers(tracer, points) >= 0.5
+    closed = tracer.mesh_handle(closed=True)
+    if closed is None or not len(points):
+        return np.zeros(len(points), bool)
+    directions = np.broadcast_to(PARITY_DIRECTION, points.shape)
+    if len(closed.shapes) == 1:
+        return (closed.count_hits(points, directions) & 1).astype(bool)
+    # several closed meshes: each one's own parity, from the hits' ids
+    hits = closed.all_hits(points, directions, aovs=("id",))
+    ray, ids = np.asarray(hits["ray"]), np.asarray(hits["id"]).astype(np.int64)
+    per = np.bincount(ray * len(closed.shapes) + ids, minlength=len(points) * len(closed.shapes))
+    return (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
+
+
+def meshes_scene(scene, closed: bool):
+    """The scene with only its closed meshes (closed=True) or its open ones (a type deciding its
+    inside by winding or parity, whose shape says whether it is closed), or None without any."""
+    shapes = tuple(s for s in scene.shapes if type(s).winding_number and bool(s.closed) == closed)
+    if not shapes:
+        return None
+    return replace(scene, shapes=shapes)
+
