@@ -97,7 +97,10 @@ def shade(tracer, view, origins: np.ndarray, directions: np.ndarray, hits: dict)
             start = shadow_origins[rows]
             if isinstance(light, PointLight):
                 toward = np.array(light.position) - start
-                blocked = tracer.occluded(start, toward, tmax=np.linalg.norm(toward, axis=1))
+                distance = np.linalg.norm(toward, axis=1)
+                # (a light exactly at a shadow ray's start: nothing lies between the two)
+                rows, start, toward, distance = (x[distance > 0] for x in (rows, start, toward, distance))
+                blocked = tracer.occluded(start, toward, tmax=distance)
             else:
                 blocked = tracer.occluded(start, np.ascontiguousarray(L[rows]))
             lit[rows[blocked]] = False
