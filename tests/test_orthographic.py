@@ -14,7 +14,8 @@ with PYCLRAY_LANES=1; per pixel in the model's field:
 - shaded: the float64 shading model (pyclray.reference.shading) at the oracle's hits, within
   shading.tolerance of the error model's bounds on the hit and the normal; terminators of the
   specular term and shadow edges (the float64 visibility changes within 4 times the larger of the
-  two shadow-ray offsets: the kernel's 16 eps |p|, the cast path's 16 (eps t + eps64 |p|_1)) left out.
+  two shadow-ray offsets: the kernel's 16 eps |p|, the cast path's 16 (eps t + eps64 (|p|_1 + R)),
+  R the hit shape's size) left out.
 Pixels beyond a model's field are misses in every image (the background in shaded)."""
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ import pytest
 
 import pyclray
 from pyclray.engine.queries.render import start_cast_view
-from pyclray.engine.queries.shade import shadow_offset
+from pyclray.engine.queries.shade import shadow_offset, shape_sizes
 from pyclray.engine.scene.lighting import shadow_reach
 from pyclray.model.aovs import RENDER_AOVS
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
@@ -77,11 +78,32 @@ def aovs_of(camera) -> tuple[str, ...]:
     return tuple(a for a in RENDER_AOVS if a != "zdepth" or camera.has_zdepth)
 
 
-def shadow_blur(camera, depth, points, origins, precision):
+def shadow_blur(scene, ids, depth, points, origins, precision):
     """4 x the larger of the two shadow-ray offsets at each hit (the kernel's, the cast path's)."""
     kernel = shadow_reach(np.linalg.norm(points - origins, axis=-1), EPS[precision])
-    cast = shadow_offset(depth, points, precision)
+    cast = shadow_offset(depth, points, shape_sizes(scene.shapes)[np.where(ids >= 0, ids, -1)], precision)
     return 4 * np.maximum(kernel, cast)
+
+
+def shaded_against_the_model(scene, O, D, mine, truth, judged, depth_tol, normal_tol, precision):
+    """shaded: the float64 shading model at the oracle's hits (truth) within shading.tolerance on the
+    judged rays, terminators and shadow edges left out; returns the counts of judged pixels lit by
+    some light and of those facing a light that a shape hides from them."""
+    hit = truth["id"] >= 0
+    points = O + np.where(hit, truth["depth"], 0.0)[:, None] * D
+    truth["points"] = points
+    blur = shadow_blur(scene, truth["id"], np.where(hit, truth["depth"], 0.0), points, O, precision)
+    V, edges = shading.reference_visibility(scene, points, truth["normal"], D, truth["id"], blur=blur)
+    expected = shading.reference_shading(scene, D, truth, V)
+    tolerance, jump = shading.tolerance(scene, D, truth, depth_tol, normal_tol, EPS[precision])
+    shaded_judged = judged & ~jump & ~np.any(edges, axis=0)
+    error = np.abs(mine["shaded"].astype(np.float64) - expected).max(axis=-1)
+    assert np.all(error[shaded_judged] <= tolerance[shaded_judged]), (error / tolerance)[shaded_judged].max()
+    lit = np.any([v > 0 for v in V], axis=0)
+    n_s = shading.facing_normals(shading.lighting_normals(scene, truth), D)
+    facing = [np.einsum("ij,ij->i", n_s, shading.light_terms(light, points)[0]) > 0 for light in scene.lights]
+    shadowed = np.any([f & (v == 0) for f, v in zip(facing, V)], axis=0)
+    return int((shaded_judged & hit & lit).sum()), int((shaded_judged & hit & shadowed).sum())
 
 
 def check_every_aov(scene, frame, precision):
@@ -132,21 +154,8 @@ def check_every_aov(scene, frame, precision):
         along = D @ camera.basis()[2]
         zdepth_error = np.abs(mine["zdepth"].astype(np.float64) - truth["depth"] * along)
         assert np.all(zdepth_error[judged] <= (slack * np.abs(along))[judged])
-    # shaded: the float64 shading model at the oracle's hits
-    truth["points"] = points
-    blur = shadow_blur(camera, np.where(hit, truth["depth"], 0.0), points, O, precision)
-    V, edges = shading.reference_visibility(scene, points, truth["normal"], D, truth["id"], blur=blur)
-    expected = shading.reference_shading(scene, D, truth, V)
-    tolerance, jump = shading.tolerance(scene, D, truth, depth_tol, normal_tol, EPS[precision])
-    shaded_judged = judged & ~jump & ~np.any(edges, axis=0)
-    error = np.abs(mine["shaded"].astype(np.float64) - expected).max(axis=-1)
-    assert np.all(error[shaded_judged] <= tolerance[shaded_judged]), (error / tolerance)[shaded_judged].max()
-    # counted: pixels lit by some light, and pixels that face a light which a shape hides from them
-    lit = np.any([v > 0 for v in V], axis=0)
-    n_s = shading.facing_normals(shading.lighting_normals(scene, truth), D)
-    facing = [np.einsum("ij,ij->i", n_s, shading.light_terms(light, points)[0]) > 0 for light in scene.lights]
-    shadowed = np.any([f & (v == 0) for f, v in zip(facing, V)], axis=0)
-    return int((shaded_judged & hit & lit).sum()), int((shaded_judged & hit & shadowed).sum()), int(out.sum())
+    lit, shadowed = shaded_against_the_model(scene, O, D, mine, truth, judged, depth_tol, normal_tol, precision)
+    return lit, shadowed, int(out.sum())
 
 
 @pytest.mark.parametrize("precision,lanes", [("fp32", None), ("fp64", None), ("fp32", "1")],
@@ -200,7 +209,7 @@ def test_shading_cast_hits_is_the_render_kernels_shading_on_the_same_rays(precis
     assert np.array_equal(rendered["id"].reshape(-1)[both], flat["id"][both])
     hit = truth["id"] >= 0
     truth["points"] = O + np.where(hit, truth["depth"], 0.0)[:, None] * D
-    blur = shadow_blur(scene.camera, np.where(hit, truth["depth"], 0.0), truth["points"], O, precision)
+    blur = shadow_blur(scene, truth["id"], np.where(hit, truth["depth"], 0.0), truth["points"], O, precision)
     V, edges = shading.reference_visibility(scene, truth["points"], truth["normal"], D, truth["id"], blur=blur)
     cast_tol, jump = shading.tolerance(scene, D, truth, cast_depth, cast_normal, EPS[precision])
     render_tol, jump2 = shading.tolerance(scene, D, truth, render_depth, render_normal, EPS[precision])
@@ -254,3 +263,44 @@ def test_an_orthographic_window_and_view_give_the_whole_images_pixels(tmp_path):
     assert picture.rgb.shape == (HEIGHT, WIDTH, 3) and picture.rgb.std() > 10
     assert "zdepth" in offered_aovs(scene, "shaded")
     assert "zdepth" not in offered_aovs(lit_scene(CAMERAS["equirectangular"]), "shaded")
+
+
+def stiff_scene(case):
+    """tests/test_shadows.py's stiff shadow scenes, seen by an orthographic camera: a ball and a small
+    ball on ground spheres of radius 1e4 and 1e8 (contact shadows an offset growing with the ground's
+    size would jump), moved 1e5 away, and a light inside a sphere of radius 20 (its inner wall lit:
+    the offset toward the viewer, not skipped)."""
+    from test_shading import ball, lit_scene
+    from test_shadows import on_ground_sphere
+
+    if case == "inside":
+        shapes = (ball((0.0, 0.0, 0.0), 20.0), ball((0.0, -3.0, -8.0), 2.0))
+        lights = ({"type": "point", "position": [0.0, 6.0, 0.0], "intensity": 400.0},)
+        scene, height = lit_scene(shapes, lights, ((0.0, 2.0, 12.0), (0.0, -6.0, -10.0)), size=64), 14.0
+    else:
+        radius, shift = {"ground 1e4": (1e4, (0.0, 0.0, 0.0)), "ground 1e8": (1e8, (0.0, 0.0, 0.0)),
+                         "ground 1e6 moved 1e5": (1e6, (1e5, 5e4, -1e5))}[case]
+        scene, height = lit_scene(*on_ground_sphere(radius), size=64, shift=shift), 2.5
+    camera = scene.camera
+    return dataclasses.replace(scene, camera=pyclray.Orthographic(camera.eye, camera.target, camera.up, height))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("case", ["ground 1e4", "ground 1e8", "ground 1e6 moved 1e5", "inside"])
+def test_orthographic_shadows_neither_acne_nor_leak(case, precision):
+    """The cast path's shadow rays (from p moved by 16 (eps t + eps64 (|p|_1 + R)) along n_s, cast from
+    their own float64 origins) on the stiff scenes: the shaded image within the float64 model's
+    bound on every judged pixel, with lit and shadowed pixels both present (acne would shadow the
+    lit ones, a leak light the shadowed ones)."""
+    if precision == "fp64":
+        needs_fp64()
+    scene = stiff_scene(case)
+    width, height = scene.image.width, scene.image.height
+    frame = pyclray.render(scene, aovs=("depth", "normal", "id", "shaded"), precision=precision)
+    origins, directions = scene.camera.rays(width, height)
+    O, D = origins.reshape(-1, 3), directions.reshape(-1, 3)
+    mine = {k: np.asarray(v).reshape((len(D),) + np.shape(v)[2:]) for k, v in frame.items()}
+    assert_agrees_with_oracle(scene, O, D, mine, precision)
+    truth, _, judged, _, depth_tol, normal_tol = judge(scene, O, D, mine, precision)
+    lit, shadowed = shaded_against_the_model(scene, O, D, mine, truth, judged, depth_tol, normal_tol, precision)
+    assert lit > 500 and shadowed > 40, (lit, shadowed)

@@ -12,8 +12,9 @@ own shaded image on a perspective camera's pixel rays (cast and shaded here) and
 reference (pyclray.reference.shading).
 
 Shadow rays: from the hit point p (float64: origin + t D) moved along n_s by
-SHADOW_OFFSET_K (eps t + eps64 |p|_1), over the rounding of t (the cast's depth, a few eps t along
-the ray: at most that across the surface) and of p's float64 coordinates, to each light
+SHADOW_OFFSET_K (eps t + eps64 (|p|_1 + R)), over the rounding of t (the cast's depth, a few eps t
+along the ray: at most that across the surface), of p's float64 coordinates and of the float64 terms
+(of the hit shape's size R) by which the shadow ray's own test decides its side, to each light
 (``occluded`` with tmax the distance to a point light: hits strictly before it): the surface at p
 never shadows p, an occluder touching it still does. The cast frames every shape on the ray's own
 float64 origin, so which side of a surface a shadow ray starts on is exact.
@@ -36,9 +37,20 @@ def shading_aovs(view) -> tuple[str, ...]:
     return ("depth", "normal", "id") + (("primitive", "barycentric") if smooth else ())
 
 
-def shadow_offset(depth, points, precision: str) -> np.ndarray:
-    """How far along n_s a shadow ray starts from the hit point (see the module's docstring)."""
-    size = np.abs(points).sum(axis=-1)
+def shape_sizes(shapes) -> np.ndarray:
+    """Per shape id (and -1 last: 0) the half diagonal of its box (0 for an unbounded shape): the
+    size of the float64 terms cast's test of it rounds from an origin near it (kernels/cast.h:
+    a sphere's c = |C - O|^2 - r^2 rounds eps64 |C - O|^2, which places O on the surface within
+    eps64 times the sphere's size)."""
+    return np.array([0.5 * float(np.linalg.norm(np.subtract(*s.box()[::-1]))) if s.bounded else 0.0 for s in shapes]
+                    + [0.0])
+
+
+def shadow_offset(depth, points, sizes, precision: str) -> np.ndarray:
+    """How far along n_s a shadow ray starts from the hit point (see the module's docstring): the
+    rounding of the hit's depth (eps t) and of the float64 terms of the shadow ray's test from there
+    (eps64 (|p|_1 + the hit shape's size: shape_sizes, per hit)), K = SHADOW_OFFSET_K times over."""
+    size = np.abs(points).sum(axis=-1) + np.asarray(sizes, np.float64)
     return SHADOW_OFFSET_K * (EPSILON[precision] * np.asarray(depth, np.float64) + EPSILON["fp64"] * size)
 
 
@@ -80,7 +92,8 @@ def shade(tracer, view, origins: np.ndarray, directions: np.ndarray, hits: dict)
     shading_normal = lighting_normals(view, hits, n)
     n_l = np.where((np.einsum("ij,ij->i", shading_normal, D) < 0)[:, None], shading_normal, -shading_normal)
     color = albedo * np.array(view.shading.ambient)
-    shadow_origins = p + shadow_offset(depth, p, precision)[:, None] * n_s
+    sizes = shape_sizes(shapes)[np.where(hit, ids, -1)]
+    shadow_origins = p + shadow_offset(depth, p, sizes, precision)[:, None] * n_s
     for light in effective_lights(view):
         if isinstance(light, PointLight):
             to = np.array(light.position) - p

@@ -22,7 +22,7 @@ two cameras); ``pyclray.reference.shading.tolerance`` turns each into a bound on
 add. Left out, each counted: silhouettes and pixels whose ids differ (the image check judges those),
 terminators, and shadow edges: where the float64 visibility changes when the hit point moves by
 SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps |p|, or for
-an orthographic camera, whose render casts its rays, 16 (eps t + eps64 |p|_1): engine/queries/shade.py;
+an orthographic camera, whose render casts its rays, 16 (eps t + eps64 (|p|_1 + R)): engine/queries/shade.py;
 Mitsuba's spawn_ray offset, RayEpsilon (1 + max |p_k|) with RayEpsilon = 1500 eps), or when it is
 lifted along the normal by either engine's own offset (where that offset decides the shadow).
 """
@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...engine.queries.shade import shadow_offset
+from ...engine.queries.shade import shadow_offset, shape_sizes
 from ...engine.scene.lighting import shadow_reach
 from ...model.lights import DirectionalLight, Material, Shading, effective_lights
 from .. import error_model, shading
@@ -127,7 +127,8 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None, truth=No
     if scene.camera.rays_from_eye:  # the render kernel's offset (kernels/shading.h)
         ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
     else:  # a render by casting (orthographic): engine/queries/shade.py's, its depth from the ray's origin
-        ours_offset = shadow_offset(np.where(hit, ref["depth"], 0.0), ref["points"], "fp32")
+        sizes = shape_sizes(scene.shapes)[np.where(hit, ref["id"], -1)]
+        ours_offset = shadow_offset(np.where(hit, ref["depth"], 0.0), ref["points"], sizes, "fp32")
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur,
