@@ -275,7 +275,8 @@ def test_o_exr_still_writes_exr_and_previews(tmp_path):
 
 @pytest.mark.parametrize("output,extra,needle", [
     ("out.tiff", [], "-o {out}: expected OUT.exr (OpenEXR channels), OUT.npz (numpy arrays, with the camera's K and "
-                     "pose) or OUT.png (the preview of one image); the format follows the extension"),
+                     "pose), OUT.png (the preview of one image) or OUT.ply (the hit pixels as a point cloud); the format "
+                     "follows the extension"),
     ("out", [], "expected OUT.exr"),
     ("out.exr.bak", [], "expected OUT.exr"),
     ("out.png", ["--png"], "--png: -o {out} is itself a preview"),

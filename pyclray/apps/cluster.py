@@ -141,12 +141,14 @@ class Job(WorkerPlugin):
 
     idempotent = False
 
-    def __init__(self, scene: Scene, aovs=AOVS, precision: str = "fp32", device: str | None = None, encode=None):
+    def __init__(self, scene: Scene, aovs=AOVS, precision: str = "fp32", device: str | None = None, encode=None,
+                 time=None):
         if device is not None and not isinstance(device, str):
             raise RequestError("device: on a cluster, give a selector string (P:D or a part of its name), "
                                f"not {type(device).__name__}: each worker picks its own device")
         self.name = f"pyclray-{uuid.uuid4().hex[:12]}"
         self.scene, self.aovs, self.precision, self.device, self.encode = scene, aovs, precision, device, encode
+        self.time = time  # the animated scene's time its views and windows are at (for flow), or None
 
     async def setup(self, worker=None):
         # in a thread: building a program takes seconds, and the worker's event loop keeps beating
@@ -155,21 +157,22 @@ class Job(WorkerPlugin):
     def warm(self):
         """The OpenCL context and the program, made before the first task (a one-pixel render of the
         scene: the frames, views and bands of a job all use its program); raises what a task would."""
-        self._render(self.scene, (0, 0, 1, 1))
+        self._render(self.scene, (0, 0, 1, 1), time=self.time or (0.0 if "flow" in self.aovs and self.scene.animation else None))
 
     def teardown(self, worker=None):
         self.scene = None
 
-    def _render(self, scene: Scene, window=None) -> Frame:
-        return render(scene, aovs=self.aovs, precision=self.precision, device=self.device, window=window)
+    def _render(self, scene: Scene, window=None, time=None) -> Frame:
+        return render(scene, aovs=self.aovs, precision=self.precision, device=self.device, window=window,
+                      time=self.time if time is None else time)
 
     def _out(self, frame: Frame):
         return frame if self.encode is None else self.encode(frame)
 
     # one method per kind of task; the argument is all that travels with a task
     def frame(self, k: int):
-        """Frame k of the scene's animation: exactly render(scene.at(k / fps))."""
-        return self._out(self._render(self.scene.at(self.scene.animation.frame_time(k))))
+        """Frame k of the scene's animation: exactly render(scene, time=k / fps) (scene.at(k / fps))."""
+        return self._out(self._render(self.scene, time=self.scene.animation.frame_time(k)))
 
     def view(self, view):
         """The scene seen by a camera, or a whole other scene (which travels with its task)."""
@@ -179,6 +182,34 @@ class Job(WorkerPlugin):
     def window(self, window):
         """The window (x0, y0, width, height) of the scene's image: its pixels in the whole image."""
         return self._out(self._render(self.scene, window))
+
+
+class Work(WorkerPlugin):
+    """A job of any picklable work object (a data set's views: pyclray.io.dataset.DatasetViews): it
+    travels once per worker, where work.prepare() builds its scene handles before the first task;
+    a task is work(argument); work.close() at the end."""
+
+    idempotent = False
+
+    def __init__(self, work):
+        self.name = f"pyclray-{uuid.uuid4().hex[:12]}"
+        self.work = work
+
+    async def setup(self, worker=None):
+        await asyncio.get_running_loop().run_in_executor(None, self.work.prepare)
+
+    def teardown(self, worker=None):
+        self.work.close()
+
+    def call(self, argument):
+        return self.work(argument)
+
+
+def map_work(client: Client, work, arguments, progress=None, what: str = "task"):
+    """Yield work(argument) for each argument, in order, from the cluster's workers, each of which
+    prepares the work once (Work)."""
+    for _, result in run(client, Work(work), "call", arguments, progress, what=what):
+        yield result
 
 
 def _task(job: str, method: str, argument):
@@ -277,7 +308,7 @@ def band_rows(width: int, height: int) -> int:
 
 
 def render_bands(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32", device=None,
-                 rows: int | None = None, progress=None):
+                 rows: int | None = None, progress=None, time=None):
     """Yield the scene's image in bands of `rows` whole rows (default band_rows), top to bottom,
     rendered on the cluster's workers: band j is render(scene, window=(0, j * rows, width, rows)),
     the whole image's pixels bit for bit. At most a few bands per worker thread are in flight."""
@@ -286,7 +317,7 @@ def render_bands(client: Client, scene: Scene, aovs=AOVS, precision: str = "fp32
     if not (isinstance(rows, int) and rows >= 1):
         raise RequestError(f"rows: expected a whole number of rows >= 1, got {rows!r}")
     windows = [(0, top, width, min(rows, height - top)) for top in range(0, height, rows)]
-    for _, band in run(client, Job(scene, aovs, precision, device), "window", windows, progress, what="band"):
+    for _, band in run(client, Job(scene, aovs, precision, device, time=time), "window", windows, progress, what="band"):
         yield band
 
 

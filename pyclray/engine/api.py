@@ -18,12 +18,13 @@ import numpy as np
 
 from ..model.animation import scene_at
 from ..model.aovs import AOVS, CAST_AOVS, RENDER_AOVS
-from ..model.errors import SceneError
+from ..model.errors import RequestError, SceneError
 from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count, checked_time
 from .opencl.device import context_for
 from .queries.cast import check_cast_device
+from .queries.motion import Motion
 from .queries.render import with_camera
 from .queries.requests import Frame, check_precision, check_request
 from .tracer import Tracer
@@ -78,7 +79,7 @@ def tracer_for(scene: Scene, ctx, precision: str) -> Tracer:
 
 # -- renders -------------------------------------------------------------------------------------
 def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window=None, acceleration: str = "auto",
-           camera=None) -> Frame:
+           camera=None, time=None) -> Frame:
     """Render the scene's depth, normal and id images (see Frame) with one ray per pixel centre.
 
     scene: a Scene or the path of a scene file; geometry beyond the precision's range is a
@@ -94,22 +95,42 @@ def render(scene: Scene, aovs=AOVS, precision: str = "fp32", device=None, window
     The images do not depend on it, bit for bit.
     camera: a pyclray.Camera to render the scene's shapes from instead of its own (the same as
     rendering ``dataclasses.replace(scene, camera=camera)``).
+    time: render the animated scene at time t (seconds): ``scene.at(t)``, and its `flow` to the next
+    frame, t + 1/fps (the shapes and camera there; a given ``camera`` stays). Without a time an
+    animated scene's flow is an error; a static scene's flow is 0.
 
     The scene's shapes are prepared on the device once and kept (a cached scene handle, see
     pyclray.prepare for one of your own): a view from another camera uploads the camera only,
     whatever the number of shapes.
     """
-    return _start(scene, aovs, precision, device, window, acceleration, camera)()
+    return _start(scene, aovs, precision, device, window, acceleration, camera, time)()
 
 
-def _start(scene, aovs, precision, device, window=None, acceleration="auto", camera=None):
+def _start(scene, aovs, precision, device, window=None, acceleration="auto", camera=None, time=None):
     """render's checks, in their order, and its start on the cached handle (Tracer.start_render)."""
     scene = as_scene(scene)
+    ctx = context_for(device)
+    asked = check_request(aovs, precision, ctx, RENDER_AOVS)
+    scene, motion = _at_time(scene, time, camera, "flow" in asked)
     if camera is not None:
         scene = with_camera(scene, camera)
-    ctx = context_for(device)
-    check_request(aovs, precision, ctx, RENDER_AOVS)
-    return tracer_for(scene, ctx, precision).start_render(scene, aovs, window, acceleration)
+    return tracer_for(scene, ctx, precision).start_render(scene, aovs, window, acceleration, motion)
+
+
+def _at_time(scene: Scene, time, camera, flow: bool):
+    """(the scene at `time`, the next frame's Motion for flow or None)."""
+    if time is None:
+        if flow and scene.animation is not None:
+            raise RequestError("flow: an animated scene's flow is to its next frame: give the time (render(..., time=t))")
+        return scene, None
+    if scene.animation is None:
+        raise RequestError(f"time: the scene has no [animation] to be at time {time!r}")
+    t = checked_time(time)
+    motion = None
+    if flow:
+        following = scene_at(scene, t + 1.0 / scene.animation.fps)
+        motion = Motion(following.shapes, camera if camera is not None else following.camera)
+    return scene_at(scene, t, lazy=True), motion
 
 
 def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", device=None, acceleration: str = "auto"):
@@ -130,7 +151,7 @@ def render_views(scene: Scene, cameras, aovs=AOVS, precision: str = "fp32", devi
 
 def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, frames=None):
     """Yield (t, Frame) for each frame of the scene's animation: frame k at t = k / fps is
-    exactly ``render(scene.at(t), aovs, precision, device)``. frames: the frame indices (a range
+    exactly ``render(scene, aovs, precision, device, time=t)`` (``scene.at(t)``; its flow to frame k + 1). frames: the frame indices (a range
     or any iterable of ints; default all of them)."""
     animation = scene.animation
     if animation is None:
@@ -138,7 +159,7 @@ def render_animation(scene, aovs=AOVS, precision: str = "fp32", device=None, fra
     for k in range(animation.frame_count()) if frames is None else frames:
         t = animation.frame_time(k)
         # scene.at(t) with its shapes held as the animated scene's and the changes (O(K) work)
-        yield t, render(scene_at(scene, checked_time(t), lazy=True), aovs=aovs, precision=precision, device=device)
+        yield t, render(scene, aovs=aovs, precision=precision, device=device, time=t)
 
 
 # -- casts ---------------------------------------------------------------------------------------

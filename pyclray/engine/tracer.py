@@ -127,24 +127,25 @@ class Tracer:
         device, window, acceleration, camera)`` (see there), without preparing anything again."""
         return self.start_render(self._view(camera), aovs, window, acceleration)()
 
-    def render_views(self, cameras, aovs=AOVS, acceleration: str = "auto"):
+    def render_views(self, cameras, aovs=AOVS, acceleration: str = "auto", motion=None):
         """Yield the Frame of each camera (a pyclray.Camera, or a Scene whose camera and image size
         are taken), in order: exactly ``pyclray.render_views(scene, cameras, ...)``. The next view is
         enqueued before a frame is returned (the host's work for it overlaps the device's run of this
-        one); an error of a view is raised after the frames before it."""
-        return self.views_of(self._scene, cameras, aovs, acceleration)
+        one); an error of a view is raised after the frames before it. motion: the next frame's
+        shapes for flow (engine/queries/motion.py: Motion, its camera None: each view's own)."""
+        return self.views_of(self._scene, cameras, aovs, acceleration, motion)
 
     def _view(self, camera) -> Scene:
         if camera is None:
             return self._scene
         return render_query.with_camera(self._scene, camera)
 
-    def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto"):
+    def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto", motion=None):
         """Enqueue a render of ``view`` (a Scene with this handle's shapes) and return a callable that
-        waits for it and returns its Frame (engine/queries/render.py: start)."""
-        return render_query.start(self, view, aovs, window, acceleration)
+        waits for it and returns its Frame (engine/queries/render.py: start; motion: for flow)."""
+        return render_query.start(self, view, aovs, window, acceleration, motion)
 
-    def views_of(self, scene: Scene, cameras, aovs=AOVS, acceleration: str = "auto"):
+    def views_of(self, scene: Scene, cameras, aovs=AOVS, acceleration: str = "auto", motion=None):
         """render_views of ``scene`` (this handle's shapes, its own lights and shading) from each camera."""
         pending = None
         try:
@@ -154,7 +155,7 @@ class Tracer:
                         view = replace(scene, camera=camera.camera, image=camera.image)
                     else:
                         view = render_query.with_camera(scene, camera)
-                    started = self.start_render(view, aovs, acceleration=acceleration)
+                    started = self.start_render(view, aovs, acceleration=acceleration, motion=motion)
                 except Exception:
                     if pending is not None:  # the frames before it first
                         frame, pending = pending(), None

@@ -56,7 +56,7 @@ def _interrupts_deferred():
 
 
 @contextmanager
-def replace_together(paths: Iterable) -> Iterator[list[str]]:
+def replace_together(paths: Iterable, durable: bool = True) -> Iterator[list[str]]:
     """Replace the files ``paths`` together or not at all.
 
     Yields one temporary path per target (same folder, hidden name, in the order given); the block
@@ -70,7 +70,9 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
     through after the clean-up.
 
     For a folder of frames, give one path per frame file (the folder must exist). Writers with a
-    callback per file use write_together.
+    callback per file use write_together. durable=False leaves out the flushes (fsync): the renames
+    still make the files appear complete or not at all to any reader and after a killed process, but
+    not after a crash of the machine (a data set's many small files: pyclray.io.dataset.run).
     """
     targets = [Path(p) for p in paths]
     if len({os.path.abspath(t) for t in targets}) != len(targets):
@@ -92,7 +94,8 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
         for target, tmp in zip(targets, temporaries):
             current = target
             os.chmod(tmp, 0o666 & ~umask)  # as an ordinary new file, not mkstemp's 0600
-            _fsync(tmp)
+            if durable:
+                _fsync(tmp)
         with _interrupts_deferred():
             _rename_all(targets, temporaries)
             temporaries = []
@@ -109,7 +112,7 @@ def replace_together(paths: Iterable) -> Iterator[list[str]]:
                 os.unlink(tmp)
             except FileNotFoundError:
                 pass
-    for folder in {t.parent for t in targets}:  # the renames themselves to disk (replaced by now)
+    for folder in {t.parent for t in targets} if durable else ():  # the renames themselves to disk
         try:
             _fsync(folder, folder=True)
         except OSError:
@@ -154,7 +157,7 @@ def _rename_all(targets, temporaries) -> None:
                     pass
 
 
-def write_together(outputs: Iterable[tuple[object, Callable[[str], None]]]) -> list[Path]:
+def write_together(outputs: Iterable[tuple[object, Callable[[str], None]]], durable: bool = True) -> list[Path]:
     """Write the files of one command, replaced together or not at all (see replace_together).
 
     outputs: (final path, write) pairs; write(tmp) writes the complete file at the temporary path
@@ -162,7 +165,7 @@ def write_together(outputs: Iterable[tuple[object, Callable[[str], None]]]) -> l
     cannot be written; then no target has changed.
     """
     outputs = list(outputs)
-    with replace_together([path for path, _ in outputs]) as temporaries:
+    with replace_together([path for path, _ in outputs], durable) as temporaries:
         for tmp, (_, write) in zip(temporaries, outputs):
             write(tmp)
     return [Path(path) for path, _ in outputs]

@@ -21,8 +21,8 @@ class Aov:
     miss: str  # what a pixel without a hit holds (for messages and the docs)
     exr: tuple[str, ...]  # its EXR channel names, one per channel
     cast: bool  # cast returns it too (the per-ray results)
-    # the kernel computes it; else the host derives it after the kernel from the AOV named here
-    from_aov: str | None = None
+    # the kernel computes it; else the host derives it after the kernel from the AOV (or AOVs) named here
+    from_aov: str | tuple[str, ...] | None = None
 
     def dtype(self, precision: str = "fp32") -> np.dtype:
         return np.dtype(_REAL[precision] if self.real else np.int32)
@@ -56,6 +56,12 @@ TABLE = {
         # the hit shape's `label` (class masks beside the instance ids): labels[id], -1 for a miss
         # or a shape without one
         Aov("label", 1, False, "-1", ("label",), False, from_aov="id"),
+        # data sets (engine/queries/motion.py, from the hit point, the shape and its primitive): the
+        # hit point in its shape's own frame (Shape.object_frames), and the forward optical flow in
+        # pixels to the next frame (t + 1/fps: the shapes moved, the camera there)
+        Aov("object_coordinates", 3, True, "(0, 0, 0)", ("O.X", "O.Y", "O.Z"), False,
+            from_aov=("position", "id", "primitive")),
+        Aov("flow", 2, True, "(0, 0)", ("flow.x", "flow.y"), False, from_aov=("position", "id", "primitive")),
     )
 }
 
@@ -69,7 +75,10 @@ CAST_AOVS = ("depth", "normal", "id", "position", "primitive", "barycentric", "l
 def kernel_aovs(aovs) -> tuple[str, ...]:
     """The images the kernel makes for a request (in the table's order): those asked that it
     computes, and those the others are derived from (label needs id)."""
-    needed = {TABLE[name].from_aov or name for name in aovs}
+    needed = set()
+    for name in aovs:
+        source = TABLE[name].from_aov or name
+        needed.update((source,) if isinstance(source, str) else source)
     return tuple(name for name in TABLE if name in needed)
 
 

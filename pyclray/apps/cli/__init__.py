@@ -1,4 +1,4 @@
-"""The command line: pyclray render | devices | check | stability | animate | view | export | scan | sample, one module per command.
+"""The command line: pyclray render | devices | check | stability | animate | view | export | scan | sample | dataset, one module per command.
 
 Exit status: 0 success; 1 a check outside its tolerance, or an unexpected error; 2 bad input (a
 scene, an option) or an output that cannot be written, reported as one line on stderr, with no
@@ -14,7 +14,7 @@ from .options import BadInput, Parser
 from .texts import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_STATUS_HELP
 
 # one module per command, each with add_command(subparsers); each imports its heavy parts lazily
-COMMANDS = ("render", "devices", "check", "stability", "animate", "view", "export", "scan", "sample")
+COMMANDS = ("render", "devices", "check", "stability", "animate", "view", "export", "scan", "sample", "dataset")
 
 
 def build_parser() -> argparse.ArgumentParser:

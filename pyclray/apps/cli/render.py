@@ -11,11 +11,12 @@ from .options import BadInput, add_cluster_options, aov_list, cluster_module, im
 from .texts import EXIT_STATUS_HELP
 
 
-def _band_renderer(scene, aovs, precision, device):
-    """window (x0, y0, w, h) -> the images of that part of the image (pyclray.render's window)."""
+def _band_renderer(scene, aovs, precision, device, time=None):
+    """window (x0, y0, w, h) -> the images of that part of the image (pyclray.render's window; time:
+    of the animated scene, for its flow)."""
     from ...engine.api import render
 
-    return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window)
+    return lambda window: render(scene, aovs=aovs, precision=precision, device=device, window=window, time=time)
 
 
 def _outputs(args) -> tuple[str, tuple[str, ...], list[Path]]:
@@ -93,10 +94,12 @@ def run(args) -> int:
     if on_cluster:
         cluster_module()  # installed? (says what to install before the scene is read)
     scene = load(args.scene, args.size, args.time)
+    # flow goes to the next frame: the animated scene and the time (scene.at(T) does not move)
+    moving = load(args.scene, args.size) if args.time is not None and "flow" in aovs else None
     width, height = scene.image.width, scene.image.height
     if on_cluster:
-        return _render_on_cluster(args, scene, out, aovs, kind)
-    render_band = _band_renderer(scene, aovs, args.precision, args.device)
+        return _render_on_cluster(args, scene, out, aovs, kind, moving)
+    render_band = _band_renderer(moving or scene, aovs, args.precision, args.device, args.time if moving else None)
     rows = band_rows(width)
     spent = {"render": 0.0}
     devices = []
@@ -174,7 +177,7 @@ def _band_rows(width: int) -> int:
     return band_rows(width)
 
 
-def _render_on_cluster(args, scene, out, aovs, kind) -> int:
+def _render_on_cluster(args, scene, out, aovs, kind, moving=None) -> int:
     """`pyclray render --workers N | --scheduler ADDRESS`: the image's bands of whole rows are the
     tasks (pyclray/apps/cluster.py); they come back in order and are streamed into the files as a local
     render streams its bands, so the files are the same bytes."""
@@ -192,7 +195,8 @@ def _render_on_cluster(args, scene, out, aovs, kind) -> int:
             devices = []
 
             def received():
-                for band in cluster.render_bands(client, scene, aovs, args.precision, args.device, rows, bar):
+                for band in cluster.render_bands(client, moving or scene, aovs, args.precision, args.device, rows, bar,
+                                                 time=args.time if moving else None):
                     devices.append(band.device)
                     yield band
 
@@ -237,8 +241,8 @@ def add_command(commands) -> None:
                         "default: SCENE's name with .exr, in the current folder (scenes/tp02.toml: ./tp02.exr)")
     render.add_argument(
         "--aov", type=aov_list, default=("depth", "normal", "id"), metavar="LIST",
-        help=f"comma-separated images to compute: {','.join(RENDER_AOVS)} (default: depth,normal,id); fewer is "
-        "faster",
+        help=f"comma-separated images to compute, of {', '.join(RENDER_AOVS)} (default: depth,normal,id; flow of an "
+        "animated scene needs --time); fewer is faster",
     )
     render.add_argument(
         "--png", action="store_true",

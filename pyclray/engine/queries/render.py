@@ -14,6 +14,7 @@ from ..bvh import tiles
 from ..launch.programs import Variant, lanes_for, packet_shape
 from ..launch.run import enqueue_kernel
 from .labels import with_labels
+from .motion import MOTION_AOVS, Motion, with_motion
 from .memory import check_images_fit
 from .requests import Frame, check_request
 
@@ -34,16 +35,20 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
-def start(tracer, view: Scene, aovs, window, acceleration: str):
+def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion | None = None):
     """A render's work up to the kernel's launch on a scene handle (engine/tracer.py), for a view of
     its shapes (view: a Scene with the handle's shapes and the camera, image, lights and shading to
     render; the checks, the per-view pass, the kernel, enqueued on the device's in-order queue): a
-    callable that waits for this view's kernel and returns its Frame."""
+    callable that waits for this view's kernel and returns its Frame. motion: the next frame, for
+    flow (engine/queries/motion.py; its camera None: the view's)."""
     ctx, precision = tracer.ctx, tracer.precision
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     if "zdepth" in asked and not view.camera.has_zdepth:
         raise RequestError(f"aovs: zdepth is the depth along the optical axis, which the {view.camera.model} camera "
                            "model has not; ask for depth")
+    if "flow" in asked and motion is None and view.animation is not None:  # (a handle of an animated scene)
+        raise RequestError("flow: an animated scene's flow is to its next frame: render the scene at a time "
+                           "(pyclray.render(scene, ..., time=t)), or give the handle's render_views a motion")
     if not view.camera.rays_from_eye:  # rays from many origins (orthographic): cast, not the camera packets
         return start_cast_view(tracer, view, asked, window)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
@@ -82,10 +87,16 @@ def start(tracer, view: Scene, aovs, window, acceleration: str):
     # closed or a cache cleared between two frames of render_views would otherwise free)
     pending.keep = (pending.keep, uploads, prepared, inputs, args)
 
+    if motion is not None and motion.camera is None:
+        motion = Motion(motion.shapes, view.camera)
+
     def frame() -> Frame:
         images = pending.result()
         if _all_missed(images) and _behind_the_camera(view.camera, prepared):
             warnings.warn(LOOKS_AWAY, PyclrayWarning, stacklevel=2)
+        if any(name in MOTION_AOVS for name in asked):  # derived on the host, then only what was asked
+            images = with_motion(view, images, motion, asked)
+            images = images if "label" in asked else {name: images[name] for name in asked}
         return Frame(with_labels(view, images, asked), precision=precision, device=ctx.device.name.strip(),
                      view=(view.camera, view.image.width, view.image.height, col0, row0))
 

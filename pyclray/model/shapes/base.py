@@ -122,6 +122,24 @@ class SceneShape:
         bounds = self.world_bounds([self])
         return np.stack([bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)])
 
+    # -- its own frame (data sets: object poses, models, object coordinates) -----------------
+    def object_frame(self) -> np.ndarray | None:
+        """The 4x4 float64 affine matrix world_from_object of the shape's own frame (a mesh's file
+        coordinates), or None for a type without one (the default)."""
+        return None
+
+    def object_frames(self) -> np.ndarray | None:
+        """(P, 4, 4) world_from_object per primitive (a batch: each sphere its own), or (1, 4, 4) for
+        one frame of every primitive; None where the type has no frame (object_frame)."""
+        frame = self.object_frame()
+        return None if frame is None else np.asarray(frame, np.float64)[None]
+
+    def object_model(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(vertices (V, 3) float64, faces (F, 3) int64): the shape as triangles in its own frame
+        (object_frame), the model a data set's object poses refer to; None (the default) where the
+        type has no triangle model."""
+        return None
+
     # -- Mitsuba's XML files -------------------------------------------------------------------
     # the <shape type=...> plugins of Mitsuba's XML read as this type (pyclray.model.mitsuba_xml),
     # each by from_mitsuba; none for a type Mitsuba has no plugin for
@@ -173,6 +191,15 @@ def frame_columns(normal) -> np.ndarray:
     t1 = np.cross(helper, n)
     t1 /= np.linalg.norm(t1)
     return np.stack([t1, np.cross(n, t1), n])
+
+
+def object_matrix(columns, origin) -> np.ndarray:
+    """The 4x4 world_from_object of a frame whose axes (world vectors, one per row of ``columns``)
+    start at ``origin``."""
+    out = np.eye(4)
+    out[:3, :3] = np.asarray(columns, np.float64).T
+    out[:3, 3] = origin
+    return out
 
 
 def to_world(columns, origin) -> np.ndarray:

@@ -62,6 +62,13 @@ class Box(Shape):
     kernel_files = ("box.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
+    def object_frame(self) -> np.ndarray:
+        """The box's own frame: its centre at 0, its edges along the axes (its rotation's columns)."""
+        out = np.eye(4)
+        out[:3, :3] = rotation(self.axis, self.angle)
+        out[:3, 3] = self.center
+        return out
+
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
         size = vector3("size", self.size)

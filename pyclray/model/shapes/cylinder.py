@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, flag, frame_columns, to_world, distance
+from .base import Shape, distance, flag, frame_columns, object_matrix, to_world
 from .device import in_frame, padded_bounds
 from .reference import dot_rows, exact_at_most, plain_closest, rational
 
@@ -54,6 +54,11 @@ class Cylinder(Shape):
     )
     kernel_files = ("cylinder.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
+
+    def object_frame(self) -> np.ndarray:
+        """The cylinder's own frame: p0 at 0, z along p1 - p0 (x, y: frame_columns')."""
+        axis = np.subtract(self.p1, self.p0, dtype=np.float64)
+        return object_matrix(frame_columns(axis / np.linalg.norm(axis)), self.p0)
 
     def __post_init__(self):
         object.__setattr__(self, "p0", vector3("p0", self.p0))

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
-from .base import Shape, distance, frame_columns, to_world, unit_rows
+from .base import Shape, distance, frame_columns, object_matrix, to_world, unit_rows
 from .device import padded_bounds, rebase_flat
 from .reference import dot_rows, flat_hits, exact_at_most, plain_closest, rational
 
@@ -44,6 +44,10 @@ class Disk(Shape):
         "A disk in world coordinates: center.xyz, center.w = radius, normal.xyz unit.",
     )
     kernel_files = ("disk.cl",)
+
+    def object_frame(self) -> np.ndarray:
+        """The disk's own frame: its centre at 0, z along its normal (x, y: frame_columns')."""
+        return object_matrix(frame_columns(self.unit_normal()), self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

@@ -226,6 +226,14 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         out[:3, 3] = self.translate
         return out
 
+    def object_frame(self) -> np.ndarray:
+        """world_from_object: the placement (transform) of the file's coordinates."""
+        return self.transform()
+
+    def object_model(self) -> tuple[np.ndarray, np.ndarray]:
+        """The file's vertices and the faces (the mesh in its own frame)."""
+        return self.vertices, self.faces
+
     def world_vertices(self) -> np.ndarray:
         """(V, 3) float64: translate + R (scale p) (or the matrix's), per vertex (computed once)."""
         if "vertices" not in self._cache:

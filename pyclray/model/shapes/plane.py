@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, frame_columns, to_world
+from .base import Shape, frame_columns, object_matrix, to_world
 from .device import in_frame
 from .reference import exact_at_most, plain_closest, rational
 
@@ -49,6 +49,12 @@ class Plane(Shape):
     )
     kernel_files = ("plane.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
+
+    def object_frame(self) -> np.ndarray:
+        """The plane's own frame: the point nearest the world's origin at 0, z along its normal."""
+        n = np.asarray(self.normal, np.float64)
+        length = np.linalg.norm(n)
+        return object_matrix(frame_columns(n / length), -self.offset * n / length**2)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
-from .base import Shape, distance, to_world, unit_rows
+from .base import Shape, distance, object_matrix, to_world, unit_rows
 from .device import in_frame, padded_bounds, rebase_flat
 from .reference import flat_hits, exact_at_most, plain_closest, rational
 
@@ -53,6 +53,15 @@ class Rectangle(Shape):
         "A rectangle in world coordinates: centre, unit normal, the dual vectors of u and v, u and v.",
     )
     kernel_files = ("rectangle.cl",)
+
+    def object_frame(self) -> np.ndarray:
+        """The rectangle's own frame: its centre at 0, x along u, y along v, z along u x v (unit
+        axes: coordinates in scene units)."""
+        u, v = np.asarray(self.u, np.float64), np.asarray(self.v, np.float64)
+        x = u / np.linalg.norm(u)
+        z = np.cross(u, v)
+        z /= np.linalg.norm(z)
+        return object_matrix([x, np.cross(z, x), z], self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))

@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, distance
+from .base import Shape, distance, object_matrix
 from .device import in_frame
 from .reference import exact_at_most, plain_closest, rational
 
@@ -52,6 +52,10 @@ class Sphere(Shape):
     kernel_files = ("sphere.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
     frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
+
+    def object_frame(self) -> np.ndarray:
+        """The sphere's own frame: its centre at 0, the world's axes."""
+        return object_matrix(np.eye(3), self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
