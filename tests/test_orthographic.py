@@ -154,6 +154,18 @@ def check_every_aov(scene, frame, precision):
         along = D @ camera.basis()[2]
         zdepth_error = np.abs(mine["zdepth"].astype(np.float64) - truth["depth"] * along)
         assert np.all(zdepth_error[judged] <= (slack * np.abs(along))[judged])
+    # object_coordinates: the hit point in its shape's own frame (carried back to the world, the
+    # oracle's hit point); flow: 0 in a scene that does not move; both 0 on a miss
+    if "object_coordinates" in frame:
+        from pyclray.engine.queries.motion import _world_points
+
+        rows = np.flatnonzero(judged)
+        back = _world_points(scene.shapes, mine["id"][rows], mine["primitive"][rows],
+                             mine["object_coordinates"][rows].astype(np.float64))
+        assert np.all(np.linalg.norm(back - points[rows], axis=-1) <= 2 * slack[rows])
+        assert not mine["object_coordinates"][mine["id"] < 0].any()
+    if "flow" in frame:
+        assert not mine["flow"].any()
     lit, shadowed = shaded_against_the_model(scene, O, D, mine, truth, judged, depth_tol, normal_tol, precision)
     return lit, shadowed, int(out.sum())
 
