@@ -152,7 +152,8 @@ def check_every_aov(scene, frame, precision):
     assert np.all(position_error[judged] <= slack[judged])
     if "zdepth" in frame:
         along = D @ camera.basis()[2]
-        zdepth_error = np.abs(mine["zdepth"].astype(np.float64) - truth["depth"] * along)
+        with np.errstate(invalid="ignore"):  # inf - inf where both miss (judged rays hit)
+            zdepth_error = np.abs(mine["zdepth"].astype(np.float64) - truth["depth"] * along)
         assert np.all(zdepth_error[judged] <= (slack * np.abs(along))[judged])
     # object_coordinates: the hit point in its shape's own frame (carried back to the world, the
     # oracle's hit point); flow: 0 in a scene that does not move; both 0 on a miss
