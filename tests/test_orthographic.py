@@ -317,3 +317,33 @@ def test_orthographic_shadows_neither_acne_nor_leak(case, precision):
     truth, _, judged, _, depth_tol, normal_tol = judge(scene, O, D, mine, precision)
     lit, shadowed = shaded_against_the_model(scene, O, D, mine, truth, judged, depth_tol, normal_tol, precision)
     assert lit > 500 and shadowed > 40, (lit, shadowed)
+
+
+def test_an_orthographic_cameras_flow_lands_where_the_point_is_in_the_next_frame(tmp_path):
+    """tests/test_dataset_flow.py's moving scene (the camera, a cube, a ball and a crate keyed) seen
+    by an orthographic camera: each hit point projects back onto its own pixel's centre
+    (Orthographic.project inverts its rays), and its flow lands where the point, carried by its
+    shape's motion, projects in the next frame's camera (float64 here, from the object coordinates)."""
+    from test_dataset_flow import FPS, SCENE, T
+
+    path = tmp_path / "moving.toml"
+    path.write_text(SCENE.replace("fov = 45.0", 'model = "orthographic"\nheight = 3.0'))
+    scene = pyclray.load_scene(path)
+    width, height = scene.image.width, scene.image.height
+    now, then = scene.at(T), scene.at(T + 1 / FPS)
+    assert isinstance(now.camera, pyclray.Orthographic) and now.camera.eye != then.camera.eye
+    frame = pyclray.render(scene, aovs=("flow", "object_coordinates", "position", "id"), time=T)
+    hit = frame["id"] >= 0
+    assert hit.mean() > 0.9 and not frame["flow"][~hit].any()
+    j, i = np.nonzero(hit)
+    pixels, z = now.camera.project(frame["position"][hit].astype(np.float64), width, height)
+    assert np.abs(pixels - np.stack([i, j], axis=-1)).max() < 1e-3 and (z > 0).all()
+    X = frame["object_coordinates"].astype(np.float64)
+    expected = np.full((height, width, 2), np.nan)
+    for shape_id, shape in enumerate(then.shapes):
+        chosen = frame["id"] == shape_id
+        F = shape.object_frames()[0]
+        expected[chosen] = then.camera.project(X[chosen] @ F[:3, :3].T + F[:3, 3], width, height)[0]
+    landed = np.stack([i, j], axis=-1) + frame["flow"][hit]
+    assert np.abs(landed - expected[hit]).max() <= 1e-3
+    assert np.abs(frame["flow"][hit]).max() > 1  # things move by pixels
