@@ -17,7 +17,7 @@ def judge(scene, origins, directions, result, precision, reference_point=None):
         farthest = np.fmax(np.where(np.isfinite(truth["depth"]), truth["depth"], 0.0),
                            np.where(np.isfinite(result["depth"]), result["depth"].astype(np.float64), 0.0))
     band, _ = error_model.pyclray_tolerances(scene, {"depth": farthest, "id": truth["id"]}, cos, origins, precision,
-                                          reference_point, unit)
+                                          reference_point, unit, flat=False)  # edges: the position error
     edge = error_model.at_edges(scene, origins, unit, [(truth["id"], truth["depth"]), (result["id"], result["depth"])],
                              band * cos)
     truth["cos"] = cos

@@ -20,6 +20,11 @@ seen from a centre of curvature of radius r it turns the normal by that error ov
   it next to each bounded shape, relative to the shape's box centre (``cast_frames``); Mitsuba works in
   float32 world coordinates: L = max(|eye|, |anchor|, |eye - anchor|). The anchor is the point a
   shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
+- the flat law: where a render's camera ray hits a shape of flat faces whose distance the kernel
+  takes as the host's exact offset over an error-free n . d (``Shape.flat_camera_depth``: plane,
+  disk, rectangle, box; the kernel's pixel_dot, below |n . d| = 1/8), the ray is not moved
+  sideways: the engine's own term is k eps (t + L) / max(cos, FLAT_COS) (the oracle's term keeps
+  its 1 / cos). A grazing ground then holds a few ulps of t, as cast of an axis-aligned plane does;
 - k: K_ORACLE = 4 against the oracle (measured <= 2.4 for depths over random scenes of every
   shape, tests/test_cast.py and tests/test_shapes.py), K_MITSUBA = 6 against Mitsuba (measured
   <= 2.8 over 75 random scenes moved up to 1000 units off the origin).
@@ -47,6 +52,9 @@ EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}  # unit roundoff: half an ulp of 
 ORACLE_EPSILON = EPSILON["fp64"]
 SILHOUETTE_COS = 0.02
 K_ORACLE = 4.0
+# the flat law's floor of cos: above it a render's flat shapes follow the sideways law, below it
+# their depth error stops growing as 1 / cos (kernels/lanes.h: PIXEL_EXACT_COS, a half of it)
+FLAT_COS = 0.25
 K_MITSUBA = 6.0
 CAMERA_K = 3.0  # Mitsuba's camera rays: angle <= CAMERA_K eps (1 + S)
 ORIGIN_K = 2.0  # Mitsuba's camera rays: origin off our ray <= ORIGIN_K eps max(|eye|, 1)
@@ -99,11 +107,12 @@ def world_sizes(scene: Scene, point) -> np.ndarray:
 
 
 # -- the bounds ------------------------------------------------------------------------------------
-def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach=0.0, travelled=None):
+def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach=0.0, travelled=None, flat=None):
     """(depth tolerance, normal angle tolerance in radians) per ray: the formula of the module's
     docstring. t, cos, radius, scale (L), oracle_scale (W) and camera_reach are per ray; travelled:
     how far the engine moved the ray's origin along it (in float64) before intersecting (cast), so
-    that its own rounding, and the normal's angle, grow with t - travelled only."""
+    that its own rounding, and the normal's angle, grow with t - travelled only; flat: the rays
+    the flat law holds for (per ray), whose own depth term is divided by max(cos, FLAT_COS), not cos."""
     t = np.where(np.isfinite(t), t, 0.0)
     local = t if travelled is None else np.maximum(t - travelled, 0.0)
     reach = k * eps * (t + scale)
@@ -118,6 +127,9 @@ def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach
     with np.errstate(invalid="ignore", divide="ignore"):
         depth = reach / cos
         normal = angle + reach_local / cos / radius
+        if flat is not None:
+            own = k * eps * (t + scale)
+            depth = np.where(flat, own / np.maximum(cos, FLAT_COS) + (reach - own) / cos, depth)
     return depth, normal
 
 
@@ -146,11 +158,22 @@ def cast_frames(scene: Scene, origins, directions, ids):
     return frame, s0, A
 
 
-def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None):
+def flat_camera_depths(scene: Scene) -> np.ndarray:
+    """Per shape id: whether the flat law holds for a render's camera rays (Shape.flat_camera_depth),
+    which the kernel computes from the pinhole's image plane itself (a camera whose rays come as a
+    table, a lens or a panorama, or start off the eye, has the sideways law everywhere)."""
+    camera = scene.camera
+    pinhole = camera.rays_from_eye and camera.frame_directions(scene.image.width, scene.image.height) is None
+    return np.array([pinhole and shape.flat_camera_depth for shape in scene.shapes] or [False], bool)
+
+
+def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None,
+                       flat: bool = True):
     """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
     for rays from ``origins``. A render's kernel works in a frame centred on ``reference_point``
     (the eye); without one, the rays are a cast's, each traced on its own (``cast_frames``, which
-    needs their unit ``directions``)."""
+    needs their unit ``directions``). A render's depth bound on the flat shapes follows the flat
+    law (``flat``; False: the sideways law everywhere, the position error that decides edges)."""
     origins = np.asarray(origins, np.float64)
     index = np.maximum(truth["id"], 0)
     if reference_point is not None:
@@ -161,8 +184,9 @@ def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, 
     else:
         frame, travelled, anchor = cast_frames(scene, origins, directions, truth["id"])
     world = np.linalg.norm(origins, axis=-1) + np.linalg.norm(anchor, axis=-1)
+    along = flat_camera_depths(scene)[index] if flat and reference_point is not None else None
     return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=frame,
-                      k=K_ORACLE, oracle_scale=world, travelled=travelled)
+                      k=K_ORACLE, oracle_scale=world, travelled=travelled, flat=along)
 
 
 def camera_size(scene: Scene) -> float:

@@ -28,6 +28,9 @@ inline void box_rebase(__global const BoxWorld* world, PYCLRAY_FRAME_OUT Box* ou
     out->high = (real4)((real)dot2_4((double4)(F, h.x), (double4)(e0, 1.0)),
                         (real)dot2_4((double4)(F, h.y), (double4)(e1, 1.0)),
                         (real)dot2_4((double4)(F, h.z), (double4)(e2, 1.0)), 0);
+    out->axis_low0 = (real4)(to_frame_low(frame, e0), 0);
+    out->axis_low1 = (real4)(to_frame_low(frame, e1), 0);
+    out->axis_low2 = (real4)(to_frame_low(frame, e2), 0);
     out->world_axis0 = (real4)(convert_real3(e0), 0);
     out->world_axis1 = (real4)(convert_real3(e1), 0);
     out->world_axis2 = (real4)(convert_real3(e2), 0);
@@ -76,7 +79,10 @@ inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
     const vec3v D = ray->dir;
     const vec3v e0 = v3_splat(box->axis0), e1 = v3_splat(box->axis1), e2 = v3_splat(box->axis2);
     BoxSlabs slabs;
-    slabs.along = v3(v3_dot(D, e0), v3_dot(D, e1), v3_dot(D, e2));
+    /* D . e_k: exact for camera rays (a face seen at a grazing angle keeps its distance's digits) */
+    slabs.along = v3(PIXEL_DOT(ray, box->axis0, box->axis_low0, v3_dot(D, e0)),
+                     PIXEL_DOT(ray, box->axis1, box->axis_low1, v3_dot(D, e1)),
+                     PIXEL_DOT(ray, box->axis2, box->axis_low2, v3_dot(D, e2)));
     /* camera rays (from the frame's origin): the offsets as packed; cast and shadow rays: their origin's */
     const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     const vec3v F = FROM_EYE(ray) ? v3_splat(box->center) : v3_sub(v3_splat(box->center), ray->origin);

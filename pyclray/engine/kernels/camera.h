@@ -32,19 +32,44 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     const intv i = SPLAT_INT(i0) + PYCLRAY_LANE_COLUMN, j = SPLAT_INT(j0) + PYCLRAY_LANE_ROW;
     /* pixel centres on the image plane at distance 1 (pyclray/model/camera.py): the integer part of
      * the numerator 2 cx - 1 - 2 i is exact and its fraction (0 for a centred camera, whose numerator
-     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings and
-     * keeps its relative precision even for a tiny fov or next to the principal point */
+     * is width - 1 - 2 i as ever) adds one rounding, so each coordinate carries three roundings (fp64;
+     * fp32's is exact, below) and keeps its relative precision even for a tiny fov or next to the
+     * principal point */
+#ifdef PYCLRAY_PIXEL_EXACT
+    /* fp32: sx = (tan_x / width) N as a float pair, N = 2 cx - 1 - 2 i = whole + fraction: tan_x / width
+     * from the host as a high part of 11 bits and the rest (pixel_step), so that high x whole is
+     * exact (|whole| < 2^13: an image up to 8192 pixels across about its principal point), and the
+     * rest's product and the fraction's term (a camera constant, below a pixel's width) are small
+     * numbers whose rounding is far below what n . d needs; alike in y. sx and sy are then the
+     * float64 ray's to about eps^2 relative, as kernels/lanes.h's pixel_dot needs (a rounding of sx is
+     * a direction error of eps |sx|: eps / |n . d| relative in a grazing n . d) */
+    const real4 step = camera->pixel_step;
+    RayPacket ray;
+    const realv whole_x = TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i);
+    const realv whole_y = TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j);
+    ray.x = SPLAT(step.x) * whole_x;
+    ray.x_low = SPLAT(step.y) * whole_x + SPLAT((step.x + step.y) * camera->centre_x_low);
+    ray.x_high = pixel_split_high_v(ray.x);
+    ray.y = SPLAT(step.z) * whole_y;
+    ray.y_low = SPLAT(step.w) * whole_y + SPLAT((step.z + step.w) * camera->centre_y_low);
+    ray.y_high = pixel_split_high_v(ray.y);
+    const realv sx = ray.x + ray.x_low, sy = ray.y + ray.y_low;
+#else
     const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))
                                             / SPLAT((real)width));
     const realv sy = SPLAT(camera->tan_y) * ((TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j) + SPLAT(camera->centre_y_low))
                                             / SPLAT((real)height));
+    RayPacket ray;
+#endif
     /* normalized in the camera frame, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
-    RayPacket ray;
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);
     ray.a = v3_dot(ray.dir, ray.dir);
+#ifdef PYCLRAY_PIXEL_EXACT
+    ray.length = length;
+#endif
 #ifdef PYCLRAY_SHADOWS
     ray.from_eye = 1;
 #endif

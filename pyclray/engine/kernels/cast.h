@@ -41,6 +41,9 @@ typedef struct {
 /* the frame has the world's axes: a vector's coordinates are its own, rounded */
 inline real3 to_frame(const Frame* frame, const double3 x) { return convert_real3(x); }
 
+/* what to_frame's rounding left out, rounded (kernels/frame.h; cast's rays do not use it) */
+inline real3 to_frame_low(const Frame* frame, const double3 x) { return convert_real3(x - convert_double3(convert_real3(x))); }
+
 inline double dot2_3(const double3 x, const double3 y) { return (x.x * y.x + x.y * y.y) + x.z * y.z; }
 
 inline double dot2_4(const double4 x, const double4 y) { return ((x.x * y.x + x.y * y.y) + x.z * y.z) + x.w * y.w; }

@@ -26,6 +26,7 @@ inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_O
     out->p0 = (real4)(to_frame(frame, p0), (real)(r * r));
     out->p1 = (real4)(to_frame(frame, p1), (real)world->p1.w);
     out->axis = (real4)(to_frame(frame, A), (real)cross_norm2_minus(p0, A, r));
+    out->axis_low = (real4)(to_frame_low(frame, A), 0);
     out->world_axis = (real4)(convert_real3(A), (real)dot2_3(p0, A));
     out->d1 = (real)dot2_3(p1, A);
     out->caps = world->caps;
@@ -91,7 +92,7 @@ inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, cons
     const realv ac = a * c;
     const intv from_b = b * b + v_abs(ac) < a * r2 + perp2;
     hit.disc = from_b ? b * b - ac : a * r2 - perp2;
-    const realv dA = v3_dot(D, A);
+    const realv dA = PIXEL_DOT(ray, cylinder->axis, cylinder->axis_low, v3_dot(D, A));  /* exact for camera rays: a grazing cap */
     hit.best = hit.best_key = SPLAT(MISS);
     hit.kind = SPLAT_INT(0);
     /* side: the stable roots (NaN where disc < 0), kept between the end planes. A root's axial

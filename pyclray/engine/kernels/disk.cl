@@ -14,6 +14,7 @@ inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk*
     const double r = world->center.w;
     out->center = (real4)(to_frame(frame, F), (real)(r * r));
     out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
+    out->normal_low = (real4)(to_frame_low(frame, n), 0);
     out->world_normal = (real4)(convert_real3(n), 0);
 }
 
@@ -31,9 +32,10 @@ inline realv disk_hit(SHAPE_SPACE const Disk* disk, const RayPacket* ray)
     /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
     const vec3v F = FROM_EYE(ray) ? v3_splat(disk->center) : v3_sub(v3_splat(disk->center), ray->origin);
     const realv h = FROM_EYE(ray) ? SPLAT(disk->normal.w) : SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
-    /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit */
-    const realv s = -h / v3_dot(n, ray->dir);
-    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
+    /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit; n . d exact for camera rays */
+    const realv along = PIXEL_DOT(ray, disk->normal, disk->normal_low, v3_dot(n, ray->dir));
+    const realv s = -h / along;
+    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / along);
     return (s > 0 && v3_dot(P, P) <= SPLAT(disk->center.w)) ? s : SPLAT(MISS);
 }
 

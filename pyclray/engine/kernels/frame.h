@@ -12,12 +12,23 @@ typedef struct {
 /* a vector's coordinates along the frame's axes, rounded to the kernel's precision: per axis
  * (u.x x.x + u.y x.y) + u.z x.z (pyclray.model.shapes.base.in_frame), written by the frame's columns,
  * three vector products and two sums with the same roundings (a framed render frames at each test) */
-inline real3 to_frame(const Frame* frame, const double3 x)
+inline double3 frame_coordinates(const Frame* frame, const double3 x)
 {
     const double3 c0 = (double3)(frame->u.x, frame->v.x, frame->w.x);
     const double3 c1 = (double3)(frame->u.y, frame->v.y, frame->w.y);
     const double3 c2 = (double3)(frame->u.z, frame->v.z, frame->w.z);
-    return convert_real3((c0 * x.x + c1 * x.y) + c2 * x.z);
+    return (c0 * x.x + c1 * x.y) + c2 * x.z;
+}
+
+inline real3 to_frame(const Frame* frame, const double3 x) { return convert_real3(frame_coordinates(frame, x)); }
+
+/* what to_frame's rounding left out (its float64 coordinates minus their rounding, itself rounded):
+ * with to_frame, a unit direction of a flat shape as a float pair for the fp32 camera rays' exact
+ * n . d (kernels/lanes.h: pixel_dot; pyclray.model.shapes.device.in_frame_low); 0 in fp64 */
+inline real3 to_frame_low(const Frame* frame, const double3 x)
+{
+    const double3 f = frame_coordinates(frame, x);
+    return convert_real3(f - convert_double3(convert_real3(f)));
 }
 
 /* a b = p + e exactly (pyclray.model.exact.two_prod): on PoCL's CPU device with the fused multiply-add

@@ -18,6 +18,9 @@
 
 inline double instance_dot(const double4 row, const double3 x) { return (row.x * x.x + row.y * x.y) + row.z * x.z; }
 
+/* x minus its rounding to the kernel's precision, rounded (0 in fp64) */
+inline real instance_low(const double x) { return (real)(x - (double)(real)x); }
+
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
 /* an instance in a camera's frame: the same float64 operations, in the same order, as
@@ -46,6 +49,13 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
                       (real)(instance_dot(world->inverse1, w) / k), 0);
     out->m2 = (real4)((real)(instance_dot(world->inverse2, u) / k), (real)(instance_dot(world->inverse2, v) / k),
                       (real)(instance_dot(world->inverse2, w) / k), 0);
+    /* and what their rounding left out, rounded (the fp32 camera rays' exact object direction) */
+    out->m_low0 = (real4)(instance_low(instance_dot(world->inverse0, u) / k), instance_low(instance_dot(world->inverse0, v) / k),
+                          instance_low(instance_dot(world->inverse0, w) / k), 0);
+    out->m_low1 = (real4)(instance_low(instance_dot(world->inverse1, u) / k), instance_low(instance_dot(world->inverse1, v) / k),
+                          instance_low(instance_dot(world->inverse1, w) / k), 0);
+    out->m_low2 = (real4)(instance_low(instance_dot(world->inverse2, u) / k), instance_low(instance_dot(world->inverse2, v) / k),
+                          instance_low(instance_dot(world->inverse2, w) / k), 0);
     /* the eye from the tree's anchor, rounded to float, and a margin over that rounding (as the camera's) */
     const float3 box = convert_float3(eye - world->anchor.xyz);
     const double3 size = convert_double3(box < (float3)(0.0f) ? -box : box);
@@ -76,9 +86,13 @@ inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket*
     const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
     RayPacket r;
     r.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
-    r.dir = v3((SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z,
-               (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z,
-               (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z);
+    /* a camera ray's object direction is the float64 pixel ray's, rounded once (object_from_frame's
+     * rows as float pairs times the exact pixel point: pixel_dot), as a copy's camera-frame direction
+     * is: a float32 product of the rounded rows and the rounded direction turns it by a few eps,
+     * enough to move a contour pixel's ray across the edge it passes within a few eps of */
+    r.dir = v3(PIXEL_DOT_ALWAYS(ray, m0, inst->m_low0, (SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z),
+               PIXEL_DOT_ALWAYS(ray, m1, inst->m_low1, (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z),
+               PIXEL_DOT_ALWAYS(ray, m2, inst->m_low2, (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z));
     r.a = v3_dot(r.dir, r.dir);
 #ifdef PYCLRAY_SHADOWS
     r.from_eye = 1;

@@ -20,6 +20,14 @@
 #endif
 #define LANES PYCLRAY_LANES
 
+/* A render's fp32 pinhole camera rays carry their image-plane point as float pairs, for the flat
+ * shapes' n . d (pixel_dot below); cast traces the caller's rays, a camera table's rays (a lens, a
+ * panorama: kernels/camera.h) come rounded from the host, the closest-point query has no rays, and
+ * fp64 has the digits without it. */
+#if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE) && !defined(PYCLRAY_CLOSEST)
+#define PYCLRAY_PIXEL_EXACT 1
+#endif
+
 #define PYCLRAY_CAT_(a, b) a##b
 #define PYCLRAY_CAT(a, b) PYCLRAY_CAT_(a, b)
 
@@ -232,6 +240,13 @@ typedef struct {
 #ifdef PYCLRAY_SHADOWS
     int from_eye;  /* 1: camera rays; 0: shadow rays, from points of the scene (kernels/shading.h) */
 #endif
+#ifdef PYCLRAY_PIXEL_EXACT
+    /* a camera ray's point (sx, sy, 1) on the image plane as float pairs, sx = x + x_low (x an exact
+     * product, x_low its rest: kernels/camera.h), x_high the upper half of x's bits (Veltkamp's
+     * split, for pixel_dot's error-free products), the same in y; and the point's length |(sx, sy, 1)|
+     * (dir is the point over it) */
+    realv x, x_high, x_low, y, y_high, y_low, length;
+#endif
 } RayPacket;
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
@@ -254,4 +269,75 @@ typedef struct {
 #define FROM_EYE(ray) ((ray)->from_eye)
 #else
 #define FROM_EYE(ray) 1
+#endif
+
+#ifdef PYCLRAY_PIXEL_EXACT
+/* Error-free float arithmetic (Dekker 1971, Knuth): a b = p + e and a + b = s + e exactly, in float
+ * operations only (contraction is off: each rounding is the one written). Veltkamp's split of a
+ * float into halves of 12 bits (with 2^12 + 1) makes the halves' products exact. */
+inline float pixel_split_high(const float a)
+{
+    const float t = 4097.0f * a;
+    return t - (t - a);
+}
+
+inline realv pixel_split_high_v(const realv a)
+{
+    const realv t = SPLAT(4097.0f) * a;
+    return t - (t - a);
+}
+
+/* a b - p for p = a b rounded, a a shape's constant and b split by the camera (b_high) */
+inline realv pixel_product_error(const float a, const realv b, const realv b_high, const realv p)
+{
+    const float a_high = pixel_split_high(a), a_low = a - a_high;
+    const realv b_low = b - b_high;
+    return ((SPLAT(a_high) * b_high - p) + SPLAT(a_high) * b_low + SPLAT(a_low) * b_high) + SPLAT(a_low) * b_low;
+}
+
+inline realv pixel_sum_error(const realv a, const realv b, const realv s)
+{
+    const realv z = s - a;
+    return (a - (s - z)) + (b - z);
+}
+
+/* Below this |n . d| the fp32 dot product of the rounded frame normal and pixel direction, whose
+ * error is about eps / |n . d| relative, gives way to pixel_dot's (lane by lane); above it that
+ * error is within the error model's flat law
+ * (pyclray/reference/error_model.py: FLAT_COS). */
+#define PIXEL_EXACT_COS 0.125f
+
+/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame as a float
+ * pair from float64: kernels/frame.h's to_frame and to_frame_low): n . (sx, sy, 1) with its two
+ * products and two sums error-free, their errors and the low parts' terms added, over the point's
+ * length. Within a few roundings of the exact n . d relative to itself, also where the terms cancel
+ * (a grazing ray: n . d near 0); that relative error, times the distance, is a flat shape's depth
+ * error, where the plain dot product's eps / |n . d| is one of a sideways move. */
+inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
+{
+    const realv px = SPLAT(high.x) * ray->x, py = SPLAT(high.y) * ray->y, nz = SPLAT(high.z);
+    const realv ex = pixel_product_error(high.x, ray->x, ray->x_high, px);
+    const realv ey = pixel_product_error(high.y, ray->y, ray->y_high, py);
+    const realv s1 = px + py, s2 = s1 + nz;
+    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, nz, s2);
+    const realv rest = (SPLAT(high.x) * ray->x_low + SPLAT(high.y) * ray->y_low)
+                       + ((SPLAT(low.x) * ray->x + SPLAT(low.y) * ray->y) + SPLAT(low.z));
+    return (s2 + (((ex + ey) + (e1 + e2)) + rest)) / ray->length;
+}
+
+/* n . dir: the plain dot product, or pixel_dot in the lanes of camera rays below PIXEL_EXACT_COS
+ * (computed where a packet has any: a lane's bits never depend on the other lanes' rays) */
+inline realv pixel_along(const RayPacket* ray, const real4 high, const real4 low, const realv plain)
+{
+    if (!FROM_EYE(ray)) return plain;
+    const intv grazing = v_abs(plain) < SPLAT(PIXEL_EXACT_COS);
+    return ANY(grazing) ? (grazing ? pixel_dot(ray, high, low) : plain) : plain;
+}
+#define PIXEL_DOT(ray, high, low, plain) pixel_along((ray), (high), (low), (plain))
+/* pixel_dot for every packet of camera rays (a direction's every component, not a cosine: an
+ * instance's object-space direction, kernels/instance.cl) */
+#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
+#else
+#define PIXEL_DOT(ray, high, low, plain) (plain)
+#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (plain)
 #endif

@@ -10,6 +10,7 @@ inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_FRAME_OUT Pla
 {
     const double4 n_h = world->normal;
     out->normal = (real4)(to_frame(frame, n_h.xyz), (real)dot2_4(n_h, (double4)(frame->origin, 1.0)));
+    out->normal_low = (real4)(to_frame_low(frame, n_h.xyz), 0);
     out->world_normal = (real4)(convert_real3(n_h.xyz), 0);
     out->exact = as_ulong4(n_h);
 }
@@ -27,8 +28,8 @@ inline realv plane_hit(SHAPE_SPACE const Plane* plane, const RayPacket* ray)
     const vec3v n = v3_splat(plane->normal);
     /* the signed distance of the ray's origin (the host's, for camera rays from the frame's origin) */
     const realv h = FROM_EYE(ray) ? SPLAT(plane->normal.w) : SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
-    /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit */
-    const realv s = -h / v3_dot(n, ray->dir);
+    /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit; n . d exact for camera rays */
+    const realv s = -h / PIXEL_DOT(ray, plane->normal, plane->normal_low, v3_dot(n, ray->dir));
     return s > 0 ? s : SPLAT(MISS);
 }
 

@@ -13,6 +13,7 @@ inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME
     const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
     out->center = (real4)(to_frame(frame, F), 0);
     out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
+    out->normal_low = (real4)(to_frame_low(frame, n), 0);
     out->u_dual = (real4)(to_frame(frame, world->u_dual.xyz), 0);
     out->v_dual = (real4)(to_frame(frame, world->v_dual.xyz), 0);
     out->world_normal = (real4)(convert_real3(n), 0);
@@ -32,8 +33,10 @@ inline realv rectangle_hit(SHAPE_SPACE const Rectangle* rectangle, const RayPack
     /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
     const vec3v F = FROM_EYE(ray) ? v3_splat(rectangle->center) : v3_sub(v3_splat(rectangle->center), ray->origin);
     const realv h = FROM_EYE(ray) ? SPLAT(rectangle->normal.w) : SPLAT(rectangle->normal.w) + v3_dot(n, ray->origin);
-    const realv s = -h / v3_dot(n, ray->dir);  /* +-inf or NaN for a parallel ray: not a hit */
-    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / v3_dot(n, ray->dir));
+    /* +-inf or NaN for a parallel ray: not a hit; n . d exact for camera rays */
+    const realv along = PIXEL_DOT(ray, rectangle->normal, rectangle->normal_low, v3_dot(n, ray->dir));
+    const realv s = -h / along;
+    const vec3v P = v3_scale(v3_cross(n, v3_cross(ray->dir, F)), SPLAT(1) / along);
     const realv a = v3_dot(P, v3_splat(rectangle->u_dual)), b = v3_dot(P, v3_splat(rectangle->v_dual));
     return (s > 0 && v_abs(a) <= 1 && v_abs(b) <= 1) ? s : SPLAT(MISS);
 }

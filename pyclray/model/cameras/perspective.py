@@ -68,6 +68,9 @@ CAMERA = Struct(
         ("height", "int"),
         ("centre_x", "int"),  # 2 cx and 2 cy rounded to integers: width and height for a centred camera
         ("centre_y", "int"),
+        # tan_x / width and tan_y / height each as a high part of 11 significant bits and the rest
+        # (x, x's rest, y, y's rest; fp64: (value, 0)): the fp32 kernel's exact sx, sy (kernels/camera.h)
+        ("pixel_step", "real4"),
     ),
     "The camera frame (world_from_camera columns) and the image plane (its pixel-centre rays).",
 )
@@ -162,6 +165,14 @@ def packed_frame(rows, plane: ImagePlane, width: int, height: int, precision: st
     camera["box_origin"][0, 3] = 2.0**-20 * float(np.abs(origin).sum())
     camera["tan_x"], camera["tan_y"] = plane.tan_x, plane.tan_y
     camera["width"], camera["height"] = width, height
+    real = camera["pixel_step"].dtype.type
+    for k, step in enumerate((plane.tan_x / width, plane.tan_y / height)):
+        if real is np.float32:  # 11 bits: its product with a pixel's integer numerator is exact in float
+            mantissa, exponent = math.frexp(step)
+            high = math.ldexp(round(mantissa * 2.0**11), exponent - 11)
+        else:
+            high = step
+        camera["pixel_step"][0, 2 * k: 2 * k + 2] = high, step - high
     for axis, c in (("x", plane.cx), ("y", plane.cy)):
         whole = round(2 * c)
         camera[f"centre_{axis}"] = whole

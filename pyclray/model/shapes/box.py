@@ -11,7 +11,7 @@ from ..errors import SceneError, vector3
 from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, to_world, distance
-from .device import in_frame, padded_bounds
+from .device import in_frame, in_frame_low, padded_bounds
 from .rotations import axis_angle, rotation, rotation_axis_angle
 from .reference import exact_at_most, plain_closest, rational
 
@@ -38,6 +38,9 @@ class Box(Shape):
             ("high", "real4"),  # the three slabs' high offsets
             ("center", "real4"),  # the centre in the frame; w unused
             ("half_size", "real4"),  # half the edge lengths
+            ("axis_low0", "real4"),  # the rest of each frame axis, rounded (axis = axisK + axis_lowK: fp32 camera rays)
+            ("axis_low1", "real4"),
+            ("axis_low2", "real4"),
             ("world_axis0", "real4"),  # the box's axes in world space (the faces' normals)
             ("world_axis1", "real4"),
             ("world_axis2", "real4"),
@@ -60,6 +63,7 @@ class Box(Shape):
         "A box in world coordinates: centre, half sizes and its three unit axes.",
     )
     kernel_files = ("box.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def object_frame(self) -> np.ndarray:
@@ -120,6 +124,7 @@ class Box(Shape):
         for axis in range(3):
             e = world[f"axis{axis}"][:, :3]
             out[f"axis{axis}"][:, :3] = in_frame(e, rotation_rows)
+            out[f"axis_low{axis}"][:, :3] = in_frame_low(e, rotation_rows, out[f"axis{axis}"][:, :3])
             out[f"world_axis{axis}"][:, :3] = e
             # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
             ones = np.ones((len(e), 1))

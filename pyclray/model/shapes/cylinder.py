@@ -11,7 +11,7 @@ from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
 from .base import Shape, distance, flag, frame_columns, object_matrix, to_world
-from .device import in_frame, padded_bounds
+from .device import in_frame, in_frame_low, padded_bounds
 from .reference import dot_rows, exact_at_most, plain_closest, rational
 
 
@@ -33,6 +33,7 @@ class Cylinder(Shape):
             ("p0", "real4"),  # centre of one end in the frame; w: radius squared
             ("p1", "real4"),  # centre of the other end in the frame; w: the length |p1 - p0|
             ("axis", "real4"),  # unit axis (p1 - p0) / length in the frame; w: c, see below
+            ("axis_low", "real4"),  # the rest of the frame axis, rounded (axis + axis_low: fp32 camera rays' D . A)
             ("world_axis", "real4"),  # the unit axis in world space (the caps' normals); w: d0
             ("d1", "real"),  # (p1 - frame origin) . axis
             ("caps", "int"),  # 1: closed by its two caps (a solid), 0: an open tube
@@ -114,6 +115,7 @@ class Cylinder(Shape):
         out["p1"][:, :3] = in_frame(p1, rotation)
         out["p1"][:, 3] = world["p1"][:, 3]
         out["axis"][:, :3] = in_frame(A, rotation)
+        out["axis_low"][:, :3] = in_frame_low(A, rotation, out["axis"][:, :3])
         # what every ray from the frame origin shares, from error-free products and sums
         out["axis"][:, 3] = cross_norm2_minus(p0, A, radius)
         out["world_axis"][:, :3] = A

@@ -182,6 +182,14 @@ def in_frame(x, rotation) -> np.ndarray:
     return (x[:, 0:1] * rotation[:, 0] + x[:, 1:2] * rotation[:, 1]) + x[:, 2:3] * rotation[:, 2]
 
 
+def in_frame_low(x, rotation, rounded) -> np.ndarray:
+    """What the rounding of in_frame(x, rotation) to the kernel's precision (``rounded``, the
+    packed coordinates) left out, in float64 (rounded again where it is packed): a frame direction
+    as a float pair, for the fp32 camera rays' exact n . d (kernels/lanes.h: pixel_dot; the
+    device's to_frame_low, the same bits); 0 in fp64."""
+    return in_frame(x, rotation) - np.asarray(rounded, np.float64)
+
+
 def rebase_flat(out, world, origin, rotation) -> None:
     """The fields a flat shape (disk, rectangle) rebases alike: its centre and unit normal in the
     frame, the frame origin's signed distance to its plane (normal.w, from float64 with an exact
@@ -190,6 +198,7 @@ def rebase_flat(out, world, origin, rotation) -> None:
     F = center - origin
     out["center"][:, :3] = in_frame(F, rotation)
     out["normal"][:, :3] = in_frame(normal, rotation)
+    out["normal_low"][:, :3] = in_frame_low(normal, rotation, out["normal"][:, :3])
     out["normal"][:, 3] = -dot2(normal, F)
     out["world_normal"][:, :3] = normal
 

@@ -29,6 +29,7 @@ class Disk(Shape):
         (
             ("center", "real4"),  # centre in the frame; w: radius squared
             ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
+            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
             ("primitive", "int"),  # 0
@@ -44,6 +45,7 @@ class Disk(Shape):
         "A disk in world coordinates: center.xyz, center.w = radius, normal.xyz unit.",
     )
     kernel_files = ("disk.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def object_frame(self) -> np.ndarray:
         """The disk's own frame: its centre at 0, z along its normal (x, y: frame_columns')."""

@@ -82,6 +82,11 @@ class Instances(SharedArrays, SmoothShading, Shape):
             ("m0", "real4"),  # rows of object_from_frame / k, rounded once; m0.w: k
             ("m1", "real4"),
             ("m2", "real4"),
+            # what rounding m0, m1, m2 left out, rounded (row + row_low: the fp32 camera rays' object
+            # directions from an error-free product, kernels/lanes.h's pixel_dot)
+            ("m_low0", "real4"),
+            ("m_low1", "real4"),
+            ("m_low2", "real4"),
             ("root", "int"),
             ("first", "int"),
             ("id", "int"),
@@ -155,8 +160,9 @@ class Instances(SharedArrays, SmoothShading, Shape):
         scale = world["anchor"][:, 3]
         for r in range(3):  # object_from_frame = object_from_world world_from_frame, over k (exact)
             row = world[f"inverse{r}"][:, :3]
-            out[f"m{r}"][:, :3] = np.stack([_dot3(row, np.broadcast_to(axis, row.shape)) for axis in rotation_rows],
-                                           axis=1) / scale[:, None]
+            exact = np.stack([_dot3(row, np.broadcast_to(axis, row.shape)) for axis in rotation_rows], axis=1) / scale[:, None]
+            out[f"m{r}"][:, :3] = exact
+            out[f"m_low{r}"][:, :3] = exact - out[f"m{r}"][:, :3].astype(np.float64)
         out["m0"][:, 3] = scale
         box = (eye - world["anchor"][:, :3]).astype(np.float32)
         out["box"][:, :3] = box

@@ -10,7 +10,7 @@ from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, frame_columns, object_matrix, to_world
-from .device import in_frame
+from .device import in_frame, in_frame_low
 from .reference import exact_at_most, plain_closest, rational
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
@@ -33,6 +33,7 @@ class Plane(Shape):
         "Plane",
         (
             ("normal", "real4"),  # unit normal in the frame; w: signed distance of the frame origin
+            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
             ("primitive", "int"),  # 0
@@ -48,6 +49,7 @@ class Plane(Shape):
         "A plane in world coordinates: n.p + h = 0 with normal.xyz = n (unit), normal.w = h.",
     )
     kernel_files = ("plane.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
     def object_frame(self) -> np.ndarray:
@@ -123,6 +125,7 @@ class Plane(Shape):
         # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
         origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(n), 1))], axis=1)
         out["normal"][:, :3] = in_frame(n, rotation)
+        out["normal_low"][:, :3] = in_frame_low(n, rotation, out["normal"][:, :3])
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
         out["exact"] = np.ascontiguousarray(n_h).view(np.uint64)

@@ -32,6 +32,7 @@ class Rectangle(Shape):
         (
             ("center", "real4"),  # centre in the frame
             ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
+            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("u_dual", "real4"),  # (P - centre) . u_dual = a: the dual basis of (u, v) in the plane
             ("v_dual", "real4"),  # (P - centre) . v_dual = b
             ("world_normal", "real4"),  # normalize(u x v) in world space
@@ -53,6 +54,7 @@ class Rectangle(Shape):
         "A rectangle in world coordinates: centre, unit normal, the dual vectors of u and v, u and v.",
     )
     kernel_files = ("rectangle.cl",)
+    flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
     def object_frame(self) -> np.ndarray:
         """The rectangle's own frame: its centre at 0, x along u, y along v, z along u x v (unit

@@ -33,7 +33,8 @@ class ReferenceShape:
     ray hits), ``oracle_crossings`` (every crossing of a ray: one, a flat shape's), ``hit_normals`` and
     ``hit_barycentrics`` (all_hits' per-hit normal and barycentrics: oracle_normal, and 0, 0), ``edge_distance`` (where a ray within rounding may go either way: inf, no edges),
     ``curvature_radius`` (inf: flat), ``silhouette_radius`` (the curvature radius),
-    ``extent_from`` (from its box), ``mitsuba_error_scale`` (1), ``mitsuba_primitives`` (False)
+    ``extent_from`` (from its box), ``flat_camera_depth`` (False), ``mitsuba_error_scale`` (1),
+    ``mitsuba_primitives`` (False)
     and ``mitsuba_covers`` (everywhere: no stand-in).
     """
 
@@ -102,6 +103,12 @@ class ReferenceShape:
         (the sphere's centre, a plane's foot of the point, a cylinder's farther end ...): the error
         model's coordinate size is max(|point|, |anchor|, |point - anchor|)."""
         raise NotImplementedError
+
+    # True for a shape of flat faces whose fp32 and fp64 render takes a camera ray's distance as the
+    # host's exact offset over an error-free n . d (kernels/lanes.h: pixel_dot): its depth errs by
+    # the roundings of a quotient, K eps (t + L), not by a sideways move over |cos| (the error
+    # model's flat law: error_model.tolerances)
+    flat_camera_depth: ClassVar[bool] = False
 
     # how much larger than the model's K eps (t + L) its Mitsuba counterpart's error may be (the
     # engine's own formulas are the shape's business: see the cylinder)

@@ -1,0 +1,90 @@
+"""Render workloads with this checkout's kernels against another checkout's kernels, in one process,
+alternating (issue 42: the exact pixel rays' cost on flat shapes and mesh instances).
+
+    .venv/bin/python bench/kernels_ab.py --against /path/to/other/checkout [--rounds 6] [--block 7]
+
+The host side (scenes, structs, the per-view pass) is this checkout's; only the kernels/ folder is
+swapped (pyclray.engine.launch.programs.kernel_dir), so the other checkout's kernels must read the
+structs this one packs (fields this one added are ignored there). Each round builds both kernel
+sets afresh (in alternating order) and times each workload in a block of renders (median wall and
+process CPU time); the report is the median over the rounds and the ratio this / other. bench/engine_ab.py
+is the whole-engine comparison (other processes, other host code); this one isolates the kernels
+on the workloads engine_ab has none of: flat shapes in numbers and mesh instances. 512x512, fp32,
+depth, normal and id:
+
+- tp02: scenes/tp02.toml (a ground plane and three balls);
+- 100k spheres: bench/engine_ab.py's field (a ground plane and a batch of 100,000 spheres);
+- boxes and disks: a ground plane, 121 boxes and 121 disks seen from 3 units above it;
+- 20 instances: scenes/meshes/bunny.ply placed 20 times on a ground plane (mesh instances).
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+import pyclray
+from pyclray.engine.launch import programs
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def workloads(size: int = 512) -> dict:
+    tp02 = pyclray.load_scene(REPO / "scenes" / "tp02.toml").with_size(size, size)
+    rng = np.random.default_rng(0)
+    centers = rng.uniform((-50.0, 0.0, -50.0), (50.0, 4.0, 50.0), (100_000, 3))
+    radii = rng.uniform(0.05, 0.3, 100_000)
+    field = pyclray.Scene(pyclray.Camera((0.0, 30.0, 80.0), (0.0, 0.0, 0.0), fov=50.0), pyclray.Image(size, size),
+                          (pyclray.Plane((0.0, 1.0, 0.0), 0.0), pyclray.Spheres(centers, radii)))
+    boxes = [pyclray.Box(center=(float(x), 0.5, float(z)), size=(0.8, 1.0, 0.8), axis=(0, 1, 0), angle=float(x * 7 + z))
+             for x in range(-10, 11, 2) for z in range(-10, 11, 2)]
+    disks = [pyclray.Disk(center=(x + 1.0, 0.01, z + 1.0), normal=(0, 1, 0), radius=0.4)
+             for x in range(-10, 11, 2) for z in range(-10, 11, 2)]
+    flat = pyclray.Scene(pyclray.Camera((0.0, 3.0, 14.0), (0.0, 0.0, 0.0), fov=60.0), pyclray.Image(size, size),
+                         [pyclray.Plane((0.0, 1.0, 0.0), 0.0)] + boxes + disks)
+    bunny = pyclray.Mesh.load(REPO / "scenes" / "meshes" / "bunny.ply")
+    instances = pyclray.Scene(pyclray.Camera((0.0, 0.3, 0.5), (0.0, 0.1, 0.0), fov=40.0), pyclray.Image(size, size),
+                              [pyclray.Plane((0.0, 1.0, 0.0), 0.033)]
+                              + [bunny.placed(translate=(0.2 * i - 0.4, 0.0, -0.2 * j)) for i in range(5) for j in range(4)])
+    return {"tp02": tp02, "100k spheres": field, "boxes and disks": flat, "20 instances": instances}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--against", required=True, help="the other checkout's root (its pyclray/engine/kernels/ is read)")
+    parser.add_argument("--rounds", type=int, default=6)
+    parser.add_argument("--block", type=int, default=7)
+    args = parser.parse_args(argv)
+    folders = {"this": programs.kernel_dir(), "other": Path(args.against) / "pyclray" / "engine" / "kernels"}
+    scenes = workloads()
+    aovs = ("depth", "normal", "id")
+    times = {(w, side): [] for w in scenes for side in folders}
+    for r in range(args.rounds):
+        for side in (("this", "other") if r % 2 == 0 else ("other", "this")):
+            programs.kernel_dir = lambda folder=folders[side]: folder
+            programs.clear()
+            pyclray.clear_cache()
+            for name, scene in scenes.items():
+                pyclray.render(scene, aovs=aovs)  # built and prepared: not timed
+                wall, cpu = [], []
+                for _ in range(args.block):
+                    c0, w0 = time.process_time(), time.perf_counter()
+                    pyclray.render(scene, aovs=aovs)
+                    cpu.append(time.process_time() - c0)
+                    wall.append(time.perf_counter() - w0)
+                times[(name, side)].append((statistics.median(wall) * 1e3, statistics.median(cpu) * 1e3))
+                time.sleep(0.2)
+    print("| workload | this: wall ms (CPU) | other: wall ms (CPU) | this / other: wall | CPU |")
+    print("|---|---|---|---|---|")
+    for name in scenes:
+        this = np.median(np.array(times[(name, "this")]), axis=0)
+        other = np.median(np.array(times[(name, "other")]), axis=0)
+        print(f"| {name} | {this[0]:.2f} ({this[1]:.2f}) | {other[0]:.2f} ({other[1]:.2f}) | "
+              f"{this[0] / other[0]:.3f} | {this[1] / other[1]:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
