@@ -24,6 +24,7 @@ from ..model.frames import derivation
 from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
 from .launch.run import OutputBuffers
+from .opencl.buffers import KeptBuffers
 from .opencl.device import context_for
 from .queries import cast as cast_queries
 from .queries import closest as closest_queries
@@ -59,6 +60,7 @@ class Tracer:
         self._mesh_handles: dict = {}
         self._scan_still = None  # (shapes, Tracer): a sweeping scan's still shapes, prepared once (see scan)
         self.outputs = OutputBuffers()
+        self.ray_buffers = KeptBuffers()  # small casts' rays and results (engine/queries/cast.py: run_cast)
 
     # -- its life --------------------------------------------------------------------------------
     def close(self) -> None:
@@ -73,6 +75,7 @@ class Tracer:
                 self._scan_still[1].close()
                 self._scan_still = None
             self.outputs.buffers.clear()
+            self.ray_buffers.clear()
 
     @property
     def closed(self) -> bool:
@@ -113,7 +116,7 @@ class Tracer:
         with self.lock:
             if self._prepared is None:
                 return 0
-            total = self._prepared.nbytes() + self.outputs.nbytes()
+            total = self._prepared.nbytes() + self.outputs.nbytes() + self.ray_buffers.nbytes()
             total += 0 if self._scan_still is None else self._scan_still[1].nbytes
             total += sum(state.nbytes() for state in self._views.values())
             total += 0 if self._closest_inputs is None else self._closest_inputs.nbytes
@@ -188,18 +191,21 @@ class Tracer:
             return state
 
     # -- casts -----------------------------------------------------------------------------------
-    def cast(self, origins, directions, aovs=AOVS, tmin=0.0, tmax=None):
+    def cast(self, origins, directions, aovs=AOVS, tmin=0.0, tmax=None, out="host"):
         """The nearest hit t in (tmin, tmax) of each ray: exactly ``pyclray.cast(scene, origins,
-        directions, aovs, precision, device, tmax, tmin)`` (see there)."""
+        directions, aovs, precision, device, tmax, tmin)`` (see there). origins and directions may
+        also be pyopencl arrays (float32 or float64) on this handle's context, used where they are;
+        out="device" returns the Frame's arrays as pyopencl arrays on it (docs/python.md)."""
         aovs = check_request(aovs, self.precision, self.ctx, CAST_AOVS)
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs, tmin)
+        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs, tmin, out)
 
-    def occluded(self, origins, directions, tmin=0.0, tmax=None):
+    def occluded(self, origins, directions, tmin=0.0, tmax=None, out="host"):
         """Whether each ray hits any shape at t in (tmin, tmax): exactly ``pyclray.occluded(scene,
-        origins, directions, tmax, precision, device, tmin)`` (see there)."""
+        origins, directions, tmax, precision, device, tmin)`` (see there); device arrays and out as
+        for cast."""
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, (), tmin)
+        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, (), tmin, out)
 
     # -- hit counts ------------------------------------------------------------------------------
     def count_hits(self, origins, directions, tmin=0.0, tmax=None):

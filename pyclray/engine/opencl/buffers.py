@@ -1,6 +1,8 @@
 """The prepared scene's host arrays and their device buffers (a CPU device uses the arrays' own memory)."""
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyopencl as cl
 
@@ -41,3 +43,65 @@ def shares_host_memory(ctx) -> bool:
     """Whether device_buffer's buffers are their arrays' own memory (a CPU device): a row written
     into the array while no command that uses the buffer is queued is what the next kernel reads."""
     return bool(ctx.device.type & cl.device_type.CPU)
+
+
+class KeptBuffers:
+    """A scene handle's device buffers by name, kept from call to call and grown (at least doubled)
+    when a call needs more: a small cast writes its rays into them and reads its results out of them
+    instead of making new buffers per call (a buffer's creation and its first use cost a device more
+    than a cast of a few rays: docs/benchmarks.md, "The host path of a cast"). On a device that
+    shares host memory (shares_host_memory) each is an aligned host array's own memory, which the
+    call writes and reads itself (an enqueued copy cost PoCL 30 us each); elsewhere copies are
+    enqueued. A call holds ``lock`` from its first write to its last read, so one call's results are
+    read before the next writes."""
+
+    SMALLEST = 256  # bytes
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.buffers: dict = {}  # name -> (buffer, its host array (uint8) or None)
+        self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
+        self.device_kernels = None  # (engine/queries/cast_device.py: DeviceKernels)
+
+    def get(self, ctx, name: str, nbytes: int) -> tuple:
+        """(buffer, host): the buffer called name, of at least nbytes (read and written by the
+        kernels), and where it is host memory its bytes as an array (uint8), else None."""
+        kept = self.buffers.get(name)
+        if kept is None or kept[0].size < nbytes:
+            size = max(nbytes, self.SMALLEST, 2 * kept[0].size if kept is not None else 0)
+            if shares_host_memory(ctx):
+                host = aligned_empty((size,), np.uint8)
+                buffer = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR, hostbuf=host)
+            else:
+                host, buffer = None, cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, size)
+            kept = self.buffers[name] = (buffer, host)
+        return kept
+
+    def write(self, ctx, name: str, array: np.ndarray) -> cl.Buffer:
+        """The buffer called name with array's bytes at its start: copied into its host memory
+        (no command that uses it is queued: the lock), else by a copy enqueued (the caller waits for
+        its results, after which the array may go)."""
+        array = np.ascontiguousarray(array)
+        buffer, host = self.get(ctx, name, array.nbytes)
+        if host is not None:
+            host[:array.nbytes] = array.reshape(-1).view(np.uint8)
+        else:
+            cl.enqueue_copy(ctx.queue, buffer, array, is_blocking=False)
+        return buffer
+
+    def read(self, ctx, name: str, out: np.ndarray) -> None:
+        """Into out, the first out.nbytes bytes of the buffer called name, the kernel that writes it
+        done: from its host memory (a CPU device's kernel wrote the array itself), else by a copy
+        enqueued (current after the queue's finish)."""
+        buffer, host = self.buffers[name]
+        if host is not None:
+            out.reshape(-1).view(np.uint8)[:] = host[:out.nbytes]
+        else:
+            cl.enqueue_copy(ctx.queue, out, buffer, is_blocking=False)
+
+    def clear(self) -> None:
+        self.buffers.clear()
+        self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
+
+    def nbytes(self) -> int:
+        return sum(buffer.size for buffer, _ in self.buffers.values())

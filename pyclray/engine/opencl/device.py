@@ -93,7 +93,7 @@ def context_for(device: cl.Device | str | None = None) -> DeviceContext:
         return _contexts[key]
 
 
-def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> None:
+def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> cl.Event:
     """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument (a number, or a
     struct such as a double4) through its slow generic path; declared once per kernel as scalar types (a
     kernel's arguments keep their types), its invoker packs them quickly (docs/benchmarks.md, "Why the
@@ -105,7 +105,7 @@ def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args)
             kernel.set_scalar_arg_dtypes(
                 [a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iufV" else None for a in args])
             kernel._pyclray_scalar_types_set = True
-        kernel(ctx.queue, global_size, local_size, *args)
+        return kernel(ctx.queue, global_size, local_size, *args)  # its event (bench/cast_host.py profiles it)
 
 
 def list_devices() -> list[dict]:

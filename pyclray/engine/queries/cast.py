@@ -12,13 +12,17 @@ from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer, run_kernel
-from ..launch.signatures import arguments, shared_arguments
+from ..launch.signatures import arguments, image_parameter, shared_arguments
+from ..opencl.buffers import shares_host_memory
 from ..opencl.device import has_fp64, launch
 from ..scene.prepared import PreparedScene
 from .requests import Frame
 
 
 def _ray_array(name: str, value) -> np.ndarray:
+    if type(value).__module__.startswith("pyopencl"):  # (cast and occluded take them: cast_device.py)
+        raise RequestError(f"{name}: a pyopencl array is taken by cast and occluded only; pass a numpy array here "
+                           "(the device array's .get())")
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -43,6 +47,9 @@ def _distances(name: str, value, shape: tuple, default: float, good, expected: s
     leading shape; a value that is not good is a RequestError naming its index."""
     if value is None:
         return np.full(1, default)
+    if type(value).__module__.startswith("pyopencl"):
+        raise RequestError(f"{name}: expected a number or a numpy array (pyopencl arrays are taken for origins and "
+                           "directions only)")
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -240,7 +247,7 @@ class RayBatch:
     COHERENT_FROM rays or more are traced in a coherent order where _orders says so, or always with
     order_always."""
 
-    def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False):
+    def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False, kept=None):
         ctx, precision = tracer.ctx, tracer.precision
         real = REAL[precision]
         inputs = tracer.cast_inputs()
@@ -280,12 +287,18 @@ class RayBatch:
             order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
         else:
             order = np.zeros(1, np.int32)
+        # the rays' buffers: new ones (on a CPU device the arrays' own memory), or the handle's kept
+        # ones (kept: a small cast, run_cast's KEPT_BELOW), the rays copied into them (KeptBuffers.write)
+        rays = {"order": order, "origins": origins, "directions": directions, "limits": tmax, "starts": tmin}
+        if kept is None:
+            buffers = {name: _ray_buffer(ctx, array) for name, array in rays.items()}
+        else:
+            buffers = {name: kept.write(ctx, name, array) for name, array in rays.items()}
         # the kernel's arguments by name (engine/launch/signatures.py: the rays), but for the results
-        self.args = {"n_rays": np.int32(count), "order": _ray_buffer(ctx, order), "ordered": np.int32(1 if ordered else 0),
-                     "origins": _ray_buffer(ctx, origins), "origin_stride": np.int32(1 if len(origins) > 1 else 0),
-                     "directions": _ray_buffer(ctx, directions), "limits": _ray_buffer(ctx, tmax),
-                     "limit_stride": np.int32(1 if len(tmax) > 1 else 0), "starts": _ray_buffer(ctx, tmin),
-                     "start_stride": np.int32(1 if len(tmin) > 1 else 0),
+        self.args = {"n_rays": np.int32(count), "ordered": np.int32(1 if ordered else 0),
+                     "origin_stride": np.int32(1 if len(origins) > 1 else 0),
+                     "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
+                     "start_stride": np.int32(1 if len(tmin) > 1 else 0), **buffers,
                      "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
         groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
         self.sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
@@ -303,19 +316,50 @@ class RayBatch:
         return origins + t[:, None] * self.unit_directions()[rows]
 
 
-def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
+def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None, out: str = "host"):
     """The nearest hit of each ray ("cast": a Frame of the aovs) or whether any ("occluded": a bool
-    array), on a scene handle (engine/tracer.py) whose request and device were checked."""
+    array), on a scene handle (engine/tracer.py) whose request and device were checked. Rays given as
+    pyopencl arrays, or results asked for on the device (out="device"), go through
+    engine/queries/cast_device.py."""
+    from .cast_device import check_out, is_device_array, run_cast_device
+
+    if check_out(out) == "device" or is_device_array(origins) or is_device_array(directions):
+        return run_cast_device(tracer, query, origins, directions, tmax, aovs, tmin, out)
+    kept = tracer.ray_buffers
+    if _ray_count(directions) < KEPT_BELOW or not shares_host_memory(tracer.ctx):
+        with kept.lock:  # from the rays' writes to the results' reads
+            return _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept)
+    return _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, None)
+
+
+def _ray_count(directions) -> int:
+    """The number of rays directions holds, for choosing a path (exact for an array, else 0: a list
+    is small enough for the kept buffers' path in any case a user writes by hand)."""
+    size = getattr(directions, "size", None)
+    return size // 3 if isinstance(size, int) else 0
+
+
+# A cast of fewer rays than this (or any on a device whose buffers are not host memory) writes its rays
+# into its handle's kept buffers and reads its results out of them (engine/opencl/buffers.py:
+# KeptBuffers): a copy of its arrays each way, where a larger one's buffers are its arrays' own
+# memory on a CPU device (no copy of 24 MB per million rays; docs/benchmarks.md, "The host path of a cast").
+KEPT_BELOW = 1 << 16
+
+
+def _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept):
     ctx, precision = tracer.ctx, tracer.precision
     real = REAL[precision]
-    batch = RayBatch(tracer, origins, directions, tmin, tmax)
+    batch = RayBatch(tracer, origins, directions, tmin, tmax, kept=kept)
     shape, count = batch.shape, batch.count
     if query == "occluded":
         if count == 0:
             return np.zeros(shape, bool)
         variant = Variant("occluded", tracer.prepared.types, (), precision)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
-        _run_into(ctx, variant, batch.sizes, batch.args, out)
+        if kept is None:
+            _run_into(ctx, variant, batch.sizes, batch.args, out)
+        else:
+            _run_kept(ctx, variant, batch, kept, {"occluded_out": out})
         return out.reshape(shape)
     # what the kernel makes (in the table's order): label comes from id, position from depth (on the host)
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
@@ -324,8 +368,12 @@ def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
         results = {k: TABLE[k].empty((0,), precision) for k in kernel_aovs}
     else:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
-        results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
-                             tracer.outputs, local_size=batch.sizes[1])
+        if kept is None:
+            results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
+                                 tracer.outputs, local_size=batch.sizes[1])
+        else:
+            results = {k: TABLE[k].empty((count,), precision) for k in kernel_aovs}
+            _run_kept(ctx, variant, batch, kept, {image_parameter(k): v for k, v in results.items()})
     if "primitive" in results:
         results["primitive"] = _block_primitives(tracer, batch, results["primitive"])
     out = {}
@@ -359,6 +407,23 @@ def _block_primitives(tracer, batch, primitive: np.ndarray) -> np.ndarray:
     return primitive
 
 
+def _block_lanes_table(tracer, block_lanes: dict, queue) -> tuple:
+    """(places, first, primitives) on the device: the block lanes' tables (RayBatch.block_lanes) with
+    each lane's entry as its triangle's primitive, for cast_device's block_primitives; uploaded once
+    per cast inputs (kept beside them on the handle's kept buffers)."""
+    import pyopencl.array as cl_array
+
+    kept = tracer.ray_buffers
+    cached = getattr(kept, "block_tables", None)
+    if cached is None or cached[0] is not block_lanes:
+        (name, (places, first, entries)), = block_lanes.items()  # one type is cast in blocks: meshes
+        primitives = np.asarray(tracer.prepared.kinds[name].primitives)[entries].astype(np.int32)
+        tables = tuple(cl_array.to_device(queue, np.ascontiguousarray(a))
+                       for a in (np.asarray(places, np.int64), np.asarray(first, np.int64), primitives))
+        cached = kept.block_tables = (block_lanes, tables)
+    return cached[1]
+
+
 def label_of(tracer, ids: np.ndarray) -> np.ndarray:
     """int32: each id's shape's label (-1 for a miss and for a shape without one)."""
     return np.append(labels_of(tracer.shapes), np.int32(-1))[ids]
@@ -372,6 +437,21 @@ def _ray_buffer(ctx, array: np.ndarray):
     if ctx.device.type & cl.device_type.CPU:
         return cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=array)
     return input_buffer(ctx, array)
+
+
+def _run_kept(ctx, variant, batch: RayBatch, kept, outputs: dict) -> None:
+    """Run the kernel over the batch (its rays in the kept buffers) with kept buffers for its results
+    (outputs: parameter name -> the array each is read back into, once, at the end), and wait."""
+    buffers = {name: kept.get(ctx, name, out.nbytes)[0] for name, out in outputs.items()}
+    done = launch(ctx, kernel_for(ctx, variant), *batch.sizes, arguments(variant, {**batch.args, **buffers}))
+    if shares_host_memory(ctx):
+        done.wait()  # then the results are in the kept arrays, each copied out
+        for name, out in outputs.items():
+            kept.read(ctx, name, out)
+    else:  # the copies out enqueued behind the kernel, then one wait for all
+        for name, out in outputs.items():
+            kept.read(ctx, name, out)
+        ctx.queue.finish()
 
 
 def _run_into(ctx, variant, sizes, args: dict, out: np.ndarray) -> None:

@@ -47,7 +47,7 @@ class Instances(SharedArrays, SmoothShading, Shape):
     type = "instance"
     c_type = "Instance"
     keys = ()
-    kernel_files = ("mesh.cl", "instance.cl")
+    kernel_files = ("mesh.cl", "mesh_blocks.cl", "mesh_closest.cl", "instance.cl")
     shared = SHARED
     kernel_structs = (Mesh.struct, Mesh.world, Mesh.smooth_struct)
     # smooth shading: per instance whether it is smooth (its mesh's vertex normals are shared: SHARED)

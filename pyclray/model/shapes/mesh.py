@@ -79,7 +79,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         ),
         "A triangle in world coordinates: vertices a, b, c and (in w) its unit normal.",
     )
-    kernel_files = ("mesh.cl",)
+    kernel_files = ("mesh.cl", "mesh_blocks.cl", "mesh_closest.cl")  # the ray tests, cast's blocks, the closest point
     # Triangles per BVH leaf at most: 7, the most the wide BVH's leaf code holds (engine/bvh/wide.py:
     # count < 8), about a packet's 8 lanes: a triangle test is cheap next to a node's box test and the
     # stack (docs/benchmarks.md, "Why the engine does what it does": Mesh.leaf_size)
