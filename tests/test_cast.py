@@ -301,7 +301,7 @@ def test_any_leading_shape():
 
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 def test_tmax_turns_farther_hits_into_misses(precision):
-    """A hit counts when its distance is at most tmax (the same float64 distance that cast
+    """A hit counts when its distance is below tmax (the same float64 distance that cast
     reports): per ray or one number, the results are the unlimited cast's where it hits within
     tmax, misses elsewhere."""
     need_precision(precision)

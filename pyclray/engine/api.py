@@ -215,7 +215,7 @@ def scan(scene: Scene, lidar=None, time=None, precision: str = "fp32", device=No
 
 def occluded(scene: Scene, origins, directions, tmax=None, precision: str = "fp32", device=None,
              tmin=0.0) -> np.ndarray:
-    """Whether each ray hits any shape at a distance up to tmax (None: any distance): a bool array
+    """Whether each ray hits any shape at a distance below tmax (None: any distance): a bool array
     of the rays' leading shape. The any-hit query of shadow rays: the search stops at the first
     hit found. The same rays, arguments and exactness as cast: occluded is true exactly where
     cast(..., tmax=tmax) finds a hit, up to hits within rounding of tmax."""

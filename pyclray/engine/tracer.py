@@ -27,6 +27,7 @@ from .launch.run import OutputBuffers
 from .opencl.buffers import KeptBuffers
 from .opencl.device import context_for
 from .queries import cast as cast_queries
+from .queries import cast_device as device_casts
 from .queries import closest as closest_queries
 from .queries import hits as hit_queries
 from .queries import render as render_query
@@ -198,14 +199,22 @@ class Tracer:
         out="device" returns the Frame's arrays as pyopencl arrays on it (docs/python.md)."""
         aovs = check_request(aovs, self.precision, self.ctx, CAST_AOVS)
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "cast", origins, directions, tmax, aovs, tmin, out)
+        return self._run_cast("cast", origins, directions, tmax, aovs, tmin, out)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=None, out="host"):
         """Whether each ray hits any shape at t in (tmin, tmax): exactly ``pyclray.occluded(scene,
         origins, directions, tmax, precision, device, tmin)`` (see there); device arrays and out as
         for cast."""
         cast_queries.check_cast_device(self.ctx)
-        return cast_queries.run_cast(self, "occluded", origins, directions, tmax, (), tmin, out)
+        return self._run_cast("occluded", origins, directions, tmax, (), tmin, out)
+
+    def _run_cast(self, query, origins, directions, tmax, aovs, tmin, out):
+        """Rays given as pyopencl arrays, or results asked for on the device (out="device"), go
+        through engine/queries/cast_device.py; host arrays to host results through cast.py."""
+        if device_casts.check_out(out) == "device" or device_casts.is_device_array(origins) \
+                or device_casts.is_device_array(directions):
+            return device_casts.run_cast_device(self, query, origins, directions, tmax, aovs, tmin, out)
+        return cast_queries.run_cast(self, query, origins, directions, tmax, aovs, tmin)
 
     # -- hit counts ------------------------------------------------------------------------------
     def count_hits(self, origins, directions, tmin=0.0, tmax=None):

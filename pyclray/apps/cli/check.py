@@ -75,7 +75,7 @@ def run(args) -> int:
         rays = ray_level(scene, args.variant, args.rays, args.seed, device=args.device)
         hits = all_hits_check(scene, args.variant, min(args.rays, ALL_HITS_RAYS), args.seed, device=args.device)
         shaded = None
-        if scene.shading.shadows and scene.camera.rays_from_eye:  # (an orthographic render has no shaded image)
+        if scene.shading.shadows:
             shaded = cross_check_shaded(scene, args.variant, device=args.device, truth=images.truth)
         closest = closest_check(scene, args.points, args.seed, device=args.device)
     print(
@@ -90,8 +90,7 @@ def run(args) -> int:
     print()
     print(format_hits_check(hits))
     print()
-    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)"
-          if scene.camera.rays_from_eye else f"shaded: not compared (the {scene.camera.model} camera renders no shaded image)")
+    print(format_shaded_check(shaded) if shaded else "shaded: not compared (shadows = false; Mitsuba's direct integrator always casts them)")
     print()
     print(format_closest_check(closest))
     print()

@@ -6,7 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
-from .options import BadInput, add_cluster_options, aov_list, cluster_module, count, image_size, load, time_value
+from .options import (BadInput, add_cluster_options, aov_list, cluster_module, count, image_size, load, positive, seed,
+                      time_value)
 from .texts import EXIT_STATUS_HELP
 
 
@@ -32,26 +33,6 @@ def radius_range(text: str) -> tuple[float, float]:
 
 def elevation_range(text: str) -> tuple[float, float]:
     return _range(text, "an elevation in degrees", -90.0, 90.0)
-
-
-def positive(text: str) -> float:
-    try:
-        value = float(text)
-        if not 0 < value < float("inf"):
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    return value
-
-
-def seed_value(text: str) -> int:
-    try:
-        value = int(text)
-        if value < 0:
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    return value
 
 
 def add_command(commands) -> None:
@@ -81,7 +62,7 @@ def add_command(commands) -> None:
                         help="distance from the centre, scene units (default: the scene camera's)")
     parser.add_argument("--elevation", type=elevation_range, metavar="MIN:MAX",
                         help="degrees above the horizon (orthogonal to the scene camera's up), default 10:80")
-    parser.add_argument("--seed", type=seed_value, default=0, metavar="S", help="the hemisphere's random seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, metavar="S", help="the hemisphere's random seed (default 0)")
     parser.add_argument("--format", choices=("bop", "npz", "exr"), default="bop", help="default bop")
     parser.add_argument("--aov", type=aov_list, metavar="LIST", help="npz/exr: the images of each view (default depth,normal,id)")
     parser.add_argument("--unit", type=positive, default=1.0, metavar="M", help="bop: metres per scene unit (default 1)")

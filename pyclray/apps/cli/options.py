@@ -61,6 +61,26 @@ def count(text: str) -> int:
     return value
 
 
+def positive(text: str, what: str = "a number > 0") -> float:
+    try:
+        value = float(text)
+        if not 0 < value < float("inf"):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    return value
+
+
+def seed(text: str) -> int:
+    try:
+        value = int(text)
+        if value < 0:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    return value
+
+
 def aov_list(text: str) -> tuple[str, ...]:
     from ...model.aovs import RENDER_AOVS
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .options import BadInput, count
+from .options import BadInput, count, positive, seed
 
 # the bounds' margin on each side, a share of their largest side (DeepSDF samples a box a little
 # larger than the shape)
@@ -16,23 +16,7 @@ CHUNK = 1 << 16
 
 
 def _sigma(text: str) -> float:
-    try:
-        value = float(text)
-        if not (value > 0 and value < float("inf")):
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance > 0 (scene units), got {text!r}") from None
-    return value
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-        if value < 0:
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    return value
+    return positive(text, "a distance > 0 (scene units)")
 
 
 def add_command(subparsers) -> None:
@@ -51,7 +35,7 @@ def add_command(subparsers) -> None:
     parser.add_argument("--points", type=count, required=True, metavar="N", help="how many points")
     parser.add_argument("--near-surface", type=_sigma, metavar="SIGMA",
                         help="half the points jittered about the surfaces by this standard deviation (scene units)")
-    parser.add_argument("--seed", type=_seed, default=0, metavar="S", help="the random generator's seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, metavar="S", help="the random generator's seed (default 0)")
     parser.add_argument("--sign", choices=("parity", "winding"), default="parity",
                         help="how a mesh's inside is decided: parity (closed meshes) or winding (any mesh)")
     parser.add_argument("--precision", choices=("fp32", "fp64"), default="fp32",

@@ -25,6 +25,8 @@ def offered_aovs(scene, asked: str) -> tuple[str, ...]:
             return any(shape.primitive_count() > 1 for shape in scene.shapes)
         if name == "label":
             return any(shape.label is not None for shape in scene.shapes)
+        if name == "zdepth":  # the depth along an optical axis: not a panorama's nor a wide fisheye's
+            return scene.camera.has_zdepth
         return True
 
     return tuple(name for name in AOVS if name == asked or offered(name))

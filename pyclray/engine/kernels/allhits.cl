@@ -178,36 +178,12 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
 }
 
 PYCLRAY_KERNELS_BEGIN
-/* one work-item per group of CAST_GROUP places of the order, interleaved as cast's (kernels/cast.cl:
- * cast_group) where leaves are blocks on PoCL's CPU device, else one ray after the other */
+/* one work-item per group of CAST_GROUP places of the order, as cast's (kernels/rays.h:
+ * PYCLRAY_GROUP_TRAVERSAL) */
 PYCLRAY_WORK_ITEM_FUNCTION void hits_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
-#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
-    HitsRay state[CAST_GROUP];
-    for (int l = 0; l < in_group; ++l)
-        hits_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-    for (bool going = true; going;) {
-        going = false;
-        for (int l = 0; l < in_group; ++l) {
-            if (state[l].top_ > 0) {
-                hits_step(&state[l], PYCLRAY_ARGUMENTS);
-                going = true;
-            }
-        }
-    }
-    for (int l = 0; l < in_group; ++l)
-        hits_end(&state[l], PYCLRAY_ARGUMENTS);
-#else
-    for (int l = 0; l < in_group; ++l) {
-        HitsRay one;
-        hits_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-#ifdef PYCLRAY_HAS_BOUNDED
-        while (one.top_ > 0) hits_step(&one, PYCLRAY_ARGUMENTS);
-#endif
-        hits_end(&one, PYCLRAY_ARGUMENTS);
-    }
-#endif
+    PYCLRAY_GROUP_TRAVERSAL(HitsRay, hits_start, hits_step, hits_end)
 }
 
 #ifdef PYCLRAY_STORE_HITS

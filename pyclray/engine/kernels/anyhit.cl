@@ -3,8 +3,9 @@
  * the generated struct header, shapes.h, the BVH's headers, cast.h, the file of each shape
  * type present and rays.h. */
 
-/* Whether any shape is hit at a distance up to t_max: the search stops at the first such hit. */
-#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) <= t_max && (t) < INFINITY);
+/* Whether any shape is hit at a distance below t_max (tmin < t < tmax, open at both ends): the
+ * search stops at the first such hit. */
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) found = found || ((t) < t_max && (t) > t_min);
 #define PYCLRAY_CAST_LIMIT if (found) limit = -INFINITY;
 #define PYCLRAY_CAST_REACH t_max
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)  /* no winner is kept */

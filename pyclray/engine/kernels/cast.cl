@@ -20,8 +20,9 @@
     }
 #define PYCLRAY_CAST_TAKE(t, id, kind, k, q)                                        \
     {                                                                               \
-        bool take = (t) < best;                                                     \
-        if (!take && (t) == best && (t) < INFINITY) {                               \
+        /* t > t_min: a shape's s > 0 from the ray's start may still round t_min + s to t_min */ \
+        bool take = (t) < best && (t) > t_min;                                      \
+        if (!take && (t) == best && (t) < INFINITY && (t) > t_min) {                               \
             int best_id;                                                            \
             PYCLRAY_CAST_ID(best_id, best_kind, best_k)                             \
             take = (id) < best_id;                                                  \
@@ -34,7 +35,7 @@
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
     if (best_kind == KIND_##type && best_k == (k)) { CAST_PREFETCH(&type##s[k], sizeof(Type)) }
 #else
-#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best ? (t) : best;
+#define PYCLRAY_CAST_TAKE(t, id, kind, k, q) best = (t) < best && (t) > t_min ? (t) : best;
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)
 #endif
 #define PYCLRAY_CAST_LIMIT limit = float_above_wide(best);
@@ -101,8 +102,9 @@ typedef struct {
 inline void cast_start(CastRay* S, const int r, const CastDirection* direction, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_RAY
-    /* hits up to t_max count: best starts just above it */
-    double best = t_max < INFINITY ? as_double(as_long(t_max) + 1) : t_max;  /* nextafter up, t_max > 0 */
+    /* hits below t_max count (tmin < t < tmax, open at both ends): best starts at t_max, and a hit
+     * replaces it only where nearer (an exact tie with t_max has no winner to beat: KIND_NONE's id) */
+    double best = t_max;
     int best_kind = KIND_NONE, best_k = 0, best_q = -1;
     PYCLRAY_UNBOUNDED(PYCLRAY_CAST_LINEAR)
 #ifdef PYCLRAY_HAS_BOUNDED
@@ -165,7 +167,7 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
     RayPacket ray = S->ray_;
     const double best = S->best_, t_max = S->t_max_;
     const int best_kind = S->best_kind_, best_k = S->best_k_, best_q = S->best_q_;
-    const bool hit = best <= t_max && best < INFINITY;
+    const bool hit = best < t_max;  /* (t_max may be inf: a hit is finite) */
     const size_t index = (size_t)S->r_;
 #ifdef PYCLRAY_AOV_DEPTH
     depth_out[index] = hit ? (real)best : MISS;
@@ -219,41 +221,11 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 }
 
 PYCLRAY_KERNELS_BEGIN
-/* one work-item per group of CAST_GROUP places of the order: its rays' traversals interleaved where
- * the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py), on PoCL's
- * CPU device (PYCLRAY_INLINE_BUILTINS): a GPU hides a ray's misses behind its other work-items', and
- * the group's 8 states (17 KB with their stacks) would not fit its private memory */
+/* one work-item per group of CAST_GROUP places of the order (kernels/rays.h: PYCLRAY_GROUP_TRAVERSAL) */
 PYCLRAY_WORK_ITEM_FUNCTION void cast_group(const int group, PYCLRAY_PARAMETERS)
 {
     PYCLRAY_CAST_GROUP_SETUP
-#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
-    CastRay state[CAST_GROUP];
-    for (int l = 0; l < in_group; ++l)
-        cast_start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-    /* a step of each ray still traversing, until none is (cast's limit never falls below 0) */
-    for (bool going = true; going;) {
-        going = false;
-        for (int l = 0; l < in_group; ++l) {
-            if (state[l].top_ > 0) {
-                cast_step(&state[l], PYCLRAY_ARGUMENTS);
-                going = true;
-            }
-        }
-    }
-    for (int l = 0; l < in_group; ++l)
-        cast_end(&state[l], PYCLRAY_ARGUMENTS);
-#else
-    /* one ray after the other (no block types: spheres' short paths through data that the caches
-     * hold lose by interleaving; docs/benchmarks.md, "Mesh cast's traversal") */
-    for (int l = 0; l < in_group; ++l) {
-        CastRay one;
-        cast_start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);
-#ifdef PYCLRAY_HAS_BOUNDED
-        while (one.top_ > 0) cast_step(&one, PYCLRAY_ARGUMENTS);
-#endif
-        cast_end(&one, PYCLRAY_ARGUMENTS);
-    }
-#endif
+    PYCLRAY_GROUP_TRAVERSAL(CastRay, cast_start, cast_step, cast_end)
 }
 
 __kernel void cast(PYCLRAY_PARAMETERS)

@@ -250,6 +250,44 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     CAST_LOAD_DIRECTIONS4(0)                                                        \
     CAST_LOAD_DIRECTIONS4(4)
 
+/* A group's rays through one traversal (State: its per-ray state; start, step, end: its functions),
+ * after PYCLRAY_CAST_GROUP_SETUP: interleaved, a step of each ray still traversing until none is,
+ * where the program has a type whose leaves are blocks (PYCLRAY_CAST_INTERLEAVE: programs.py) on
+ * PoCL's CPU device (PYCLRAY_INLINE_BUILTINS): a GPU hides a ray's misses behind its other
+ * work-items', and the group's 8 states (17 KB with their stacks) would not fit its private memory;
+ * else one ray after the other (spheres' short paths through data that the caches hold lose by
+ * interleaving; docs/benchmarks.md, "Mesh cast's traversal"). Cast, occluded and the hit counts. */
+#ifdef PYCLRAY_HAS_BOUNDED
+#define PYCLRAY_TRAVERSE_ALL(one, step) while ((one).top_ > 0) step(&(one), PYCLRAY_ARGUMENTS);
+#else
+#define PYCLRAY_TRAVERSE_ALL(one, step)
+#endif
+#if defined(PYCLRAY_CAST_INTERLEAVE) && defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
+#define PYCLRAY_GROUP_TRAVERSAL(State, start, step, end)                            \
+    State state[CAST_GROUP];                                                        \
+    for (int l = 0; l < in_group; ++l)                                              \
+        start(&state[l], rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);            \
+    for (bool going = true; going;) {                                               \
+        going = false;                                                              \
+        for (int l = 0; l < in_group; ++l) {                                        \
+            if (state[l].top_ > 0) {                                                \
+                step(&state[l], PYCLRAY_ARGUMENTS);                                 \
+                going = true;                                                       \
+            }                                                                       \
+        }                                                                           \
+    }                                                                               \
+    for (int l = 0; l < in_group; ++l)                                              \
+        end(&state[l], PYCLRAY_ARGUMENTS);
+#else
+#define PYCLRAY_GROUP_TRAVERSAL(State, start, step, end)                            \
+    for (int l = 0; l < in_group; ++l) {                                            \
+        State one;                                                                  \
+        start(&one, rays[l], &directions_of[l], PYCLRAY_ARGUMENTS);                 \
+        PYCLRAY_TRAVERSE_ALL(one, step)                                             \
+        end(&one, PYCLRAY_ARGUMENTS);                                               \
+    }
+#endif
+
 /* the setup shared by cast, occluded and the hit counts: ray r (origins: 3 doubles per ray; one
  * origin for every ray where origin_stride is 0), its direction, set up by its group, and the
  * distances its hits lie between: t_min (starts, hits beyond it; 0: from the origin) and t_max */

@@ -316,15 +316,10 @@ class RayBatch:
         return origins + t[:, None] * self.unit_directions()[rows]
 
 
-def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None, out: str = "host"):
+def run_cast(tracer, query: str, origins, directions, tmax, aovs, tmin=None):
     """The nearest hit of each ray ("cast": a Frame of the aovs) or whether any ("occluded": a bool
-    array), on a scene handle (engine/tracer.py) whose request and device were checked. Rays given as
-    pyopencl arrays, or results asked for on the device (out="device"), go through
-    engine/queries/cast_device.py."""
-    from .cast_device import check_out, is_device_array, run_cast_device
-
-    if check_out(out) == "device" or is_device_array(origins) or is_device_array(directions):
-        return run_cast_device(tracer, query, origins, directions, tmax, aovs, tmin, out)
+    array), on a scene handle (engine/tracer.py) whose request and device were checked, for rays
+    given as host arrays (device arrays: engine/queries/cast_device.py)."""
     kept = tracer.ray_buffers
     if _ray_count(directions) < KEPT_BELOW or not shares_host_memory(tracer.ctx):
         with kept.lock:  # from the rays' writes to the results' reads

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...model.camera import Camera
 from ...model.errors import RequestError
 
 MOTION_AOVS = ("object_coordinates", "flow")
@@ -64,17 +63,15 @@ def _world_points(shapes, ids, primitives, local) -> np.ndarray:
 
 
 def _project(camera, width: int, height: int, points) -> tuple[np.ndarray, np.ndarray]:
-    """(pixel coordinates (N, 2), depth along the optical axis (N,)) of world points, by K and the pose."""
-    # a pinhole's projection (K and the pose): the perspective camera without a lens's distortion
-    if not isinstance(camera, Camera) or camera.distortion is not None:
-        raise RequestError(f"flow: needs a pinhole camera (pyclray.Camera without distortion), not this {camera.model} "
-                           f"camera{' with a distortion' if isinstance(camera, Camera) else ''}")
-    K, pose = camera.intrinsics(width, height), camera.pose()
-    in_camera = (points - pose[:3, 3]) @ pose[:3, :3]
-    z = in_camera[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        pixels = (in_camera @ K.T)[:, :2] / z[:, None]
-    return pixels, z
+    """(pixel coordinates (N, 2), depth along the optical axis (N,)) of world points: the camera
+    model's own projection (CameraModel.project: a pinhole's K and pose, an orthographic camera's
+    plane)."""
+    found = camera.project(points, width, height)
+    if found is None:
+        raise RequestError(f"flow: needs a pinhole camera (pyclray.Camera without distortion) or an orthographic one, "
+                           f"not this {camera.model} camera"
+                           f"{' with a distortion' if getattr(camera, 'distortion', None) is not None else ''}")
+    return found
 
 
 def with_motion(view, images: dict, motion: Motion | None, asked) -> dict:

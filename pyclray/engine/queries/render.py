@@ -50,7 +50,7 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
         raise RequestError("flow: an animated scene's flow is to its next frame: render the scene at a time "
                            "(pyclray.render(scene, ..., time=t)), or give the handle's render_views a motion")
     if not view.camera.rays_from_eye:  # rays from many origins (orthographic): cast, not the camera packets
-        return start_cast_view(tracer, view, asked, window)
+        return start_cast_view(tracer, view, asked, window, motion)
     aovs = kernel_aovs(asked)  # what the kernel makes (label comes from id, after it: with_labels)
     prepared = tracer.prepared
     state = tracer.view_state(view)
@@ -134,44 +134,48 @@ def _behind_the_camera(camera, prepared) -> bool:
         return bool((terms.sum(axis=1) <= 0).all())
 
 
-# the images a render by casting (a camera whose rays start apart) makes: cast's own, and those
-# derived from them on the host
-CAST_VIEW_AOVS = ("depth", "normal", "id", "zdepth", "position", "label")
-
-
-def start_cast_view(tracer, view: Scene, asked, window):
+def start_cast_view(tracer, view: Scene, asked, window, motion: Motion | None = None):
     """A render of a camera whose rays do not share the eye (orthographic): its float64 pixel-centre
     rays (CameraModel.rays) cast on the handle (the same exact tests as any cast ray), the images
-    assembled: depth, normal, id from cast; zdepth (depth along the view direction: the same, the
-    rays being parallel to it), position (origin + depth dir, float64) and label on the host."""
-    other = [aov for aov in asked if aov not in CAST_VIEW_AOVS]
-    if other:
-        raise RequestError(f"aovs: the {view.camera.model} camera model renders {', '.join(CAST_VIEW_AOVS)}; "
-                           f"not {', '.join(other)}")
+    assembled: depth, normal, id, primitive, barycentric and label from cast; zdepth (depth along the
+    view direction: the same, the rays being parallel to it), position (origin + depth dir, float64)
+    and shaded (the shading model of the hits, its shadow rays cast: engine/queries/shade.py) on the
+    host; object_coordinates and flow from position, id and primitive as a render's
+    (engine/queries/motion.py)."""
+    from .shade import shade, shading_aovs
+
     col0, row0, cols, rows = _window(view, window)
     state = tracer.view_state(view)
     state.check_renderable(view, tracer.precision, tracer.prepared)
     check_images_fit(asked, tracer.precision, cols, rows)
+    if motion is not None and motion.camera is None:
+        motion = Motion(motion.shapes, view.camera)
+    # the images to make: those asked, and what the motion images are derived from
+    making = tuple(dict.fromkeys(tuple(a for a in asked if a not in MOTION_AOVS)
+                                 + (("position", "id", "primitive") if any(a in MOTION_AOVS for a in asked) else ())))
     origins, directions = view.camera.rays(view.image.width, view.image.height, (col0, row0, cols, rows))
-    cast_aovs = tuple(dict.fromkeys(("depth",) + tuple("id" if a == "label" else a for a in asked
-                                                       if a in ("normal", "id", "label"))))
-    hits = tracer.cast(origins.reshape(-1, 3), directions.reshape(-1, 3), aovs=cast_aovs)
+    origins, directions = origins.reshape(-1, 3), directions.reshape(-1, 3)
+    cast_aovs = ("depth",) + tuple(a for a in making if a in ("normal", "id", "label", "primitive", "barycentric"))
+    if "shaded" in making:
+        cast_aovs += shading_aovs(view)
+    hits = tracer.cast(origins, directions, aovs=tuple(dict.fromkeys(cast_aovs)))
     images = {}
     depth = hits["depth"].reshape(rows, cols)
-    for aov in asked:
+    for aov in making:
         if aov in ("depth", "zdepth"):
             images[aov] = depth.copy() if aov == "zdepth" else depth
-        elif aov in ("normal", "id"):
-            images[aov] = hits[aov].reshape((rows, cols) + hits[aov].shape[1:])
         elif aov == "position":
             hit = np.isfinite(depth)[..., None]
-            points = origins + np.where(hit, depth[..., None], 0.0) * directions
+            points = origins.reshape(rows, cols, 3) + np.where(hit, depth[..., None], 0.0) * directions.reshape(rows, cols, 3)
             images[aov] = np.where(hit, points, 0.0).astype(depth.dtype)
-    if "label" in asked and "id" not in asked:
-        images["id"] = hits["id"].reshape(rows, cols)
-    images = with_labels(view, images, asked)
-    frame = Frame(images, precision=tracer.precision, device=tracer.ctx.device.name.strip(),
-                  view=(view.camera, view.image.width, view.image.height, col0, row0))
+        elif aov == "shaded":
+            images[aov] = shade(tracer, view, origins, directions, hits).reshape(rows, cols, 3)
+        else:  # cast's own (label: cast's too)
+            images[aov] = hits[aov].reshape((rows, cols) + hits[aov].shape[1:])
+    if any(a in MOTION_AOVS for a in asked):
+        images = with_motion(view, images, motion, asked)
+    frame = Frame({name: images[name] for name in asked}, precision=tracer.precision,
+                  device=tracer.ctx.device.name.strip(), view=(view.camera, view.image.width, view.image.height, col0, row0))
     return lambda: frame
 
 

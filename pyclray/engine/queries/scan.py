@@ -105,7 +105,7 @@ def _split_sweep(scene, handles, runs, step_times, column_step, origins_per_colu
     skip = set(moving_ids)
     still_ids = np.array([i for i in range(len(scene.shapes)) if i not in skip], np.int64)
     moving_ids = np.array(moving_ids, np.int64)
-    tmax = None if math.isinf(range_max) else range_max
+    tmax = _cast_limit(range_max)
     columns = world_directions.shape[1]
     origins_all = poses[0, :3, 3] if not lidar_tracks else np.broadcast_to(origins_per_column, world_directions.shape)
     # every column at the still shapes, once (their handle kept: the still scene is prepared once)
@@ -245,10 +245,15 @@ def run_scan(tracer, scene, lidar, t, handles) -> Scan:
         tracer.update(frame)
     range_max = lidar.range[1]
     origins = poses[0, :3, 3] if not lidar_tracks else np.broadcast_to(origins_per_column, world_directions.shape)
-    hits = tracer.cast(origins, world_directions, aovs=("depth", "normal", "id"),
-                       tmax=None if math.isinf(range_max) else range_max)
+    hits = tracer.cast(origins, world_directions, aovs=("depth", "normal", "id"), tmax=_cast_limit(range_max))
     return _assembled(scene, lidar, first, t, tracer, hits["depth"], hits["normal"], hits["id"], step_times,
                       column_step, poses, origins_per_column, world_directions, sensor_directions)
+
+
+def _cast_limit(range_max: float):
+    """cast's tmax for returns up to range_max, inclusive as the scan's [min, max] (cast counts hits
+    below its tmax: the next float64 above range_max); None for no limit."""
+    return None if math.isinf(range_max) else float(np.nextafter(range_max, np.inf))
 
 
 def _assembled(scene, lidar, first, t, handle, depth, normal, ids, step_times, column_step, poses, origins_per_column,

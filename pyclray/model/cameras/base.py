@@ -119,6 +119,13 @@ class CameraModel(ABC):
         centres at integer coordinates); None for a model without one (orthographic, panoramas)."""
         return None
 
+    def project(self, points, width: int, height: int):
+        """(pixel coordinates (N, 2) in OpenCV's convention (pixel centres at integers), depth along
+        the optical axis (N,)) of world points (N, 3) float64, the inverse of this model's pixel rays
+        at this image size (for flow: engine/queries/motion.py); None for a model without one here
+        (a lens, a panorama)."""
+        return None
+
     @abstractmethod
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the camera's axes in world coordinates, float64."""

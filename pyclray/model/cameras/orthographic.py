@@ -71,6 +71,16 @@ class Orthographic(CameraModel):
         oy = (height / 2 - 0.5 - np.arange(row0, row0 + rows)) * size
         return ox, oy
 
+    def project(self, points, width: int, height: int):
+        """The pixel whose ray passes through each point (offsets' inverse: column width / 2 - 0.5 -
+        (p - eye).u / s, row height / 2 - 0.5 - (p - eye).v / s, s the pixel's size) and its depth
+        along w from the plane through the eye."""
+        u, v, w = self.basis()
+        relative = np.asarray(points, np.float64) - np.array(self.eye)
+        size = self.height / height
+        pixels = np.stack([width / 2 - 0.5 - relative @ u / size, height / 2 - 0.5 - relative @ v / size], axis=-1)
+        return pixels, relative @ w
+
     def rays(self, width: int, height: int, window=None):
         u, v, w = self.basis()
         ox, oy = self.offsets(width, height, window)

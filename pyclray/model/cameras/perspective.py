@@ -348,6 +348,17 @@ class Camera(CameraModel):
         return look_at_rows(self.eye, self.target, self.up)
 
 
+    def project(self, points, width: int, height: int):
+        """A pinhole's projection by K and the pose (None with a lens's distortion)."""
+        if self.distortion is not None:
+            return None
+        K, pose = self.intrinsics(width, height), self.pose()
+        in_camera = (np.asarray(points, np.float64) - pose[:3, 3]) @ pose[:3, :3]
+        z = in_camera[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pixels = (in_camera @ K.T)[:, :2] / z[:, None]
+        return pixels, z
+
     def intrinsics(self, width: int, height: int) -> np.ndarray:
         """K (3x3 float64): the pinhole intrinsics of this camera's pixel-centre rays at this image
         size, in OpenCV's convention (x right, y down, z forward; pixel (row j, column i) looks

@@ -86,7 +86,7 @@ class SmoothShading:
     asks for it, and ``<type>_shading_normal`` in its kernel file.
 
     A type with it defines ``smooth_struct`` (one entry's shading data), ``pack_smooth`` and, for
-    the float64 reference, ``oracle_shading_normal``."""
+    the float64 reference, ``oracle_shading_normal``; for a render by casting, ``shading_normals``."""
 
     smooth_shading: ClassVar[bool] = True
     smooth_struct: ClassVar[Struct]
@@ -100,6 +100,12 @@ class SmoothShading:
     def oracle_shading_normal(self, points, normals) -> np.ndarray:
         """The float64 normal the shaded image lights with at these points of the surface, whose
         geometric normals are ``normals`` (where the shape shades with them, else ``normals``)."""
+        raise NotImplementedError
+
+    def shading_normals(self, primitives, barycentrics, normals) -> np.ndarray:
+        """The float64 normals the shaded image lights with at the hits a cast reports (their
+        ``primitive`` and ``barycentric``, geometric ``normals``): the shaded image of a render by
+        casting (engine/queries/shade.py), as its kernel's ``<type>_shading_normal`` does."""
         raise NotImplementedError
 
 

@@ -470,6 +470,20 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         good = np.isfinite(length) & (length > 0)
         return np.where(good, n / np.where(good, length, 1.0), np.asarray(normals).reshape(-1, 3)).reshape(np.shape(normals))
 
+    def shading_normals(self, primitives, barycentrics, normals):
+        """Smooth: the vertex normals of each hit's triangle (``primitives``) interpolated at its
+        (u, v) (``barycentrics``), normalized; the geometric normal where the mesh is flat or the
+        interpolation is zero (as kernels/mesh.cl's mesh_shading_normal)."""
+        normals = np.asarray(normals, np.float64)
+        if not self.smooth:
+            return normals
+        vertex = self.vertex_normals()[self.faces[np.asarray(primitives)]]  # (N, 3 corners, 3)
+        u, v = (np.asarray(barycentrics, np.float64)[:, k] for k in (0, 1))
+        n = (1 - u - v)[:, None] * vertex[:, 0] + u[:, None] * vertex[:, 1] + v[:, None] * vertex[:, 2]
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        good = np.isfinite(length) & (length > 0)
+        return np.where(good, n / np.where(good, length, 1.0), normals)
+
     def edge_distance(self, points):
         """Distance to the nearest edge of the nearest triangle: at every edge (shared or not) a ray
         within rounding may meet either triangle (another normal, another primitive)."""

@@ -21,7 +21,8 @@ bounds, pyclray's against the float64 oracle (K = 4) and Mitsuba's (K = 6, plus 
 two cameras); ``pyclray.reference.shading.tolerance`` turns each into a bound on the colour, and the two bounds
 add. Left out, each counted: silhouettes and pixels whose ids differ (the image check judges those),
 terminators, and shadow edges: where the float64 visibility changes when the hit point moves by
-SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps |p|;
+SHADOW_EDGE_K times the larger of the two engines' shadow-ray offsets (pyclray's 16 eps |p|, or for
+an orthographic camera, whose render casts its rays, 16 (eps t + eps64 (|p|_1 + R)): engine/queries/shade.py;
 Mitsuba's spawn_ray offset, RayEpsilon (1 + max |p_k|) with RayEpsilon = 1500 eps), or when it is
 lifted along the normal by either engine's own offset (where that offset decides the shadow).
 """
@@ -32,6 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ...engine.queries.shade import shadow_offset, shape_sizes
 from ...engine.scene.lighting import shadow_reach
 from ...model.lights import DirectionalLight, Material, Shading, effective_lights
 from .. import error_model, shading
@@ -122,13 +124,19 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None, truth=No
     ref["points"] = O + np.where(np.isfinite(ref["depth"]), ref["depth"], 0)[..., None] * D
     hit = ref["id"] >= 0
     # per pixel: the larger of the two engines' shadow-ray offsets at its hit point
-    ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
+    if scene.camera.rays_from_eye:  # the render kernel's offset (kernels/shading.h)
+        ours_offset = shadow_reach(np.linalg.norm(ref["points"] - O, axis=-1), EPSILON)
+    else:  # a render by casting (orthographic): engine/queries/shade.py's, its depth from the ray's origin
+        sizes = shape_sizes(scene.shapes)[np.where(hit, ref["id"], -1)]
+        ours_offset = shadow_offset(np.where(hit, ref["depth"], 0.0), ref["points"], sizes, "fp32")
     theirs_offset = MITSUBA_RAY_EPSILON * (1 + np.abs(ref["points"]).max(axis=-1))
     blur = SHADOW_EDGE_K * np.maximum(ours_offset, theirs_offset)
     V, edges = shading.reference_visibility(scene, ref["points"], ref["normal"], D, ref["id"], blur=blur,
                                             lifts=(ours_offset, theirs_offset))
     # the error model's bounds on each engine's hit point and normal, made bounds on the colour
-    our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", scene.camera.eye)
+    # (a render by casting: each ray traced on its own, cast's bounds)
+    frame_point = scene.camera.eye if scene.camera.rays_from_eye else None
+    our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", frame_point, D)
     their_depth, their_normal = error_model.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
     ours_tol, jump = shading.tolerance(scene, D, ref, our_depth, our_normal, EPSILON)
     theirs_tol, jump2 = shading.tolerance(scene, D, ref, their_depth, their_normal, EPSILON)
