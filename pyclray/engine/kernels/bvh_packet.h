@@ -8,6 +8,7 @@
  * from the scene's anchor, rounded to float) with a margin over its rounding (w). */
 typedef struct {
     vec3v near_inverse, far_inverse, far_add;
+    vec3v flat_inverse;  /* sign / (|d| - widen) where |d| <= widen, else 0 (see box_ray) */
     intv negative_x, negative_y, negative_z;
     float4 from;
     /* whether the lanes' direction signs agree on every axis (a camera packet's almost always do),
@@ -17,11 +18,14 @@ typedef struct {
     int3 negative;
     /* whether also no lane runs flat along an axis (|d| <= widen: far_add is 0 in every lane) */
     int steep;
+    /* whether some lane runs flat along some axis: flat_inverse's far-face entries are taken too */
+    int flat;
     /* the origin moved by the margin, toward -inf (for the boxes' low faces) and +inf (high faces) */
     float3 from_low, from_high;
 } BoxPacket;
 
-inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, intv* negative)
+inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, realv* far_add, realv* flat_inverse,
+                     intv* negative)
 {
     *negative = d < SPLAT(0);
     const realv s = *negative ? SPLAT(-1) : SPLAT(1);
@@ -30,24 +34,42 @@ inline void box_axis(const realv d, realv* near_inverse, realv* far_inverse, rea
     *near_inverse = s / (size + SPLAT(BVH_WIDEN));
     *far_inverse = steep ? s / (size - SPLAT(BVH_WIDEN)) : SPLAT(0);
     *far_add = steep ? SPLAT(0) : SPLAT(INFINITY);
+    const realv flat_rise = size - SPLAT(BVH_WIDEN);  /* <= 0 where not steep */
+    *flat_inverse = steep ? SPLAT(0) : s / (flat_rise < SPLAT(-FLT_MIN) ? flat_rise : SPLAT(-FLT_MIN));
 }
 
 inline BoxPacket box_packet(const vec3v d, const float4 from)
 {
     BoxPacket b;
     b.from = from;
-    box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.negative_x);
-    box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.negative_y);
-    box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.negative_z);
+    box_axis(d.x, &b.near_inverse.x, &b.far_inverse.x, &b.far_add.x, &b.flat_inverse.x, &b.negative_x);
+    box_axis(d.y, &b.near_inverse.y, &b.far_inverse.y, &b.far_add.y, &b.flat_inverse.y, &b.negative_y);
+    box_axis(d.z, &b.near_inverse.z, &b.far_inverse.z, &b.far_add.z, &b.flat_inverse.z, &b.negative_z);
     const bool all_x = !ANY(!b.negative_x), all_y = !ANY(!b.negative_y), all_z = !ANY(!b.negative_z);
     b.same_signs = (all_x || !ANY(b.negative_x)) && (all_y || !ANY(b.negative_y)) && (all_z || !ANY(b.negative_z));
     b.negative = (int3)(all_x ? -1 : 0, all_y ? -1 : 0, all_z ? -1 : 0);
-    b.steep = b.same_signs && !ANY(b.far_add.x > SPLAT(0) || b.far_add.y > SPLAT(0) || b.far_add.z > SPLAT(0));
+    b.flat = ANY(b.far_add.x > SPLAT(0) || b.far_add.y > SPLAT(0) || b.far_add.z > SPLAT(0));
+    b.steep = b.same_signs && !b.flat;
     /* o + m and o - m round by at most an ulp of o, under 2^-4 m (m = 2^-20 |o|_1 >= 2^-20 |o_k|):
      * the faces stay widened by more than the rounding of o (see box_entries) */
     b.from_low = from.xyz + from.w;
     b.from_high = from.xyz - from.w;
     return b;
+}
+
+/* enter (per lane, from the faces relative to the widened origin) raised to the far faces' entries
+ * of the axes a lane runs flat along (box_ray: the cone reaches such a slab from beyond its far
+ * face too; 0 on the other axes, below enter's own 0) */
+inline realv flat_entries(realv enter, const realv far_x, const realv far_y, const realv far_z, const BoxPacket* b)
+{
+    if (b->flat) {  /* compared so that a NaN product would keep enter (never drops a box) */
+        const realv flat_x = far_x * b->flat_inverse.x, flat_y = far_y * b->flat_inverse.y;
+        const realv flat_z = far_z * b->flat_inverse.z;
+        enter = flat_x > enter ? flat_x : enter;
+        enter = flat_y > enter ? flat_y : enter;
+        enter = flat_z > enter ? flat_z : enter;
+    }
+    return enter;
 }
 
 /* x kept within the float range (a face beyond it is as good as there; a box test then never
@@ -85,8 +107,8 @@ inline realv box_entries_of(const float3 low, const float3 high, const BoxPacket
         near_y = b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y), far_y = b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y);
         near_z = b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z), far_z = b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z);
     }
-    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
-                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv enter = flat_entries(v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                                           v_max(near_z * b->near_inverse.z, SPLAT(0))), far_x, far_y, far_z, b);
     const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
                               v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
     return enter <= leave ? enter : SPLAT(INFINITY);

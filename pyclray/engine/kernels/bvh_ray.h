@@ -7,13 +7,21 @@ typedef struct {
     float3 near_origin, far_origin;   /* origin moved by the margin toward each slab's near and far face */
     float3 near_inverse, far_inverse; /* sign / (|d| + widen) and sign / (|d| - widen) (0 where |d| <= widen) */
     float3 far_add;                    /* +inf where |d| <= widen: the cone never leaves that slab */
+    float3 flat_inverse;               /* sign / (|d| - widen) where |d| <= widen (see box_ray), else 0 */
     int3 negative;                     /* direction component < 0: the near face is hi */
+    int flat;                          /* some |d| <= widen: flat_inverse's entries are taken too */
 } BoxRay;
 
 /* The box ray of origin o and direction d (unit or nearly) in the box frame, with an absolute
  * margin (the rounding of o). With s = sign(d_k), a point o + t d lies within margin + BVH_WIDEN t
  * of the slab [near, far] (in s's direction) when
- *   t (|d_k| + BVH_WIDEN) >= s (near - o) - margin   and   t (|d_k| - BVH_WIDEN) <= s (far - o) + margin. */
+ *   t (|d_k| + BVH_WIDEN) >= s (near - o) - margin   and   t (|d_k| - BVH_WIDEN) <= s (far - o) + margin.
+ * Where |d_k| <= BVH_WIDEN (a ray along or nearly along the other axes) the cone widens faster than
+ * it moves on axis k: it never leaves the slab, and the second condition is an entry as well,
+ * t >= (s (far - o) + margin) / (|d_k| - BVH_WIDEN), the cone reaching the slab from beyond its far
+ * face (without it, every box on that side of an axis-aligned ray was entered at 0: issue 38's
+ * 200x slower casts; docs/benchmarks.md). The divisor is kept at most -FLT_MIN (|d_k| = BVH_WIDEN:
+ * a finite, later entry than the exact one, never infinite times 0). */
 inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
 {
     BoxRay b;
@@ -28,6 +36,9 @@ inline BoxRay box_ray(const float3 o, const float3 d, const float margin)
     const int3 steep = size > (float3)(BVH_WIDEN);
     b.far_inverse = steep ? s / (size - BVH_WIDEN) : (float3)(0.0f);
     b.far_add = steep ? (float3)(0.0f) : (float3)(INFINITY);
+    const float3 flat_rise = size - BVH_WIDEN;  /* <= 0 where not steep */
+    b.flat_inverse = steep ? (float3)(0.0f) : s / (flat_rise < (float3)(-FLT_MIN) ? flat_rise : (float3)(-FLT_MIN));
+    b.flat = !(steep.x && steep.y && steep.z);
     return b;
 }
 
@@ -47,9 +58,17 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     const float8 near_x = b->negative.x ? node->hi_x : node->lo_x, far_x = b->negative.x ? node->lo_x : node->hi_x;
     const float8 near_y = b->negative.y ? node->hi_y : node->lo_y, far_y = b->negative.y ? node->lo_y : node->hi_y;
     const float8 near_z = b->negative.z ? node->hi_z : node->lo_z, far_z = b->negative.z ? node->lo_z : node->hi_z;
-    const float8 enter_x = (near_x - b->near_origin.x) * b->near_inverse.x;
-    const float8 enter_y = (near_y - b->near_origin.y) * b->near_inverse.y;
-    const float8 enter_z = (near_z - b->near_origin.z) * b->near_inverse.z;
+    float8 enter_x = (near_x - b->near_origin.x) * b->near_inverse.x;
+    float8 enter_y = (near_y - b->near_origin.y) * b->near_inverse.y;
+    float8 enter_z = (near_z - b->near_origin.z) * b->near_inverse.z;
+    if (b->flat) {  /* the far faces' entries of the flat axes (0 on the others: box_ray) */
+        const float8 flat_x = (far_x - b->far_origin.x) * b->flat_inverse.x;
+        const float8 flat_y = (far_y - b->far_origin.y) * b->flat_inverse.y;
+        const float8 flat_z = (far_z - b->far_origin.z) * b->flat_inverse.z;
+        enter_x = flat_x > enter_x ? flat_x : enter_x;
+        enter_y = flat_y > enter_y ? flat_y : enter_y;
+        enter_z = flat_z > enter_z ? flat_z : enter_z;
+    }
     const float8 leave_x = (far_x - b->far_origin.x) * b->far_inverse.x + b->far_add.x;
     const float8 leave_y = (far_y - b->far_origin.y) * b->far_inverse.y + b->far_add.y;
     const float8 leave_z = (far_z - b->far_origin.z) * b->far_inverse.z + b->far_add.z;
@@ -66,7 +85,11 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
 {
     const float3 lo = box.s012, hi = box.s345;
     const float3 near = b->negative ? hi : lo, far = b->negative ? lo : hi;
-    const float3 enter = (near - b->near_origin) * b->near_inverse;
+    float3 enter = (near - b->near_origin) * b->near_inverse;
+    if (b->flat) {
+        const float3 flat = (far - b->far_origin) * b->flat_inverse;
+        enter = flat > enter ? flat : enter;
+    }
     const float3 leave = (far - b->far_origin) * b->far_inverse + b->far_add;
     float entry = enter.y > enter.x ? enter.y : enter.x;
     entry = enter.z > entry ? enter.z : entry;

@@ -156,8 +156,8 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     const realv far_x = (b->negative_x ? SPLAT(lo.x) : SPLAT(hi.x)) - s->far_origin.x;
     const realv far_y = (b->negative_y ? SPLAT(lo.y) : SPLAT(hi.y)) - s->far_origin.y;
     const realv far_z = (b->negative_z ? SPLAT(lo.z) : SPLAT(hi.z)) - s->far_origin.z;
-    const realv enter = v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
-                              v_max(near_z * b->near_inverse.z, SPLAT(0)));
+    const realv enter = flat_entries(v_max(v_max(near_x * b->near_inverse.x, near_y * b->near_inverse.y),
+                                           v_max(near_z * b->near_inverse.z, SPLAT(0))), far_x, far_y, far_z, b);
     const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
                               v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
     return enter <= leave ? enter : SPLAT(INFINITY);
