@@ -1,5 +1,6 @@
 """Rays along an axis (issue 38): the BVH's box test of one ray (kernels/bvh_ray.h's box_ray and
-box_entered, as cast, occluded, count_hits and all_hits use it) widens the ray into a cone of slope
+box_entered, as cast, occluded, count_hits and all_hits use it; bvh_packet.h's box_entries_of
+for mesh instances' trees and shadow rays likewise) widens the ray into a cone of slope
 BVH_WIDEN. Along an axis k where |d_k| <= BVH_WIDEN the cone never leaves a slab it reaches, but it
 reaches one beyond its far face only after a while too: a test that took such a slab as entered at 0
 entered every box on that side of an axis-aligned ray, which then visited much of the tree (casts
@@ -12,8 +13,10 @@ twice the slope and margin misses by far (the work the traversal does on such ra
 any other ray: a box beyond an axis-aligned ray's far side is not visited)."""
 import numpy as np
 import pyopencl as cl
+import pytest
 
 import pyclray
+from pyclray.engine.bvh.tree import NODE
 from pyclray.engine.bvh.wide import WIDE_NODE
 from pyclray.engine.launch.programs import kernel_dir
 from pyclray.engine.opencl.device import context_for
@@ -28,19 +31,28 @@ __kernel void entered(__global const float* rays, __global const float* boxes, _
 {
     const int r = get_global_id(0), k = get_global_id(1);
     __global const float* ray = rays + 7 * r;
-    const BoxRay b = box_ray((float3)(ray[0], ray[1], ray[2]), (float3)(ray[3], ray[4], ray[5]), ray[6]);
     __global const float* box = boxes + 6 * k;
+#ifdef PACKET  /* kernels/bvh_packet.h's test (mesh instances' trees, shadow rays), one lane */
+    const BoxPacket b = box_packet(v3(ray[3], ray[4], ray[5]), (float4)(ray[0], ray[1], ray[2], ray[6]));
+    const float entry = box_entries_of((float3)(box[0], box[1], box[2]), (float3)(box[3], box[4], box[5]), &b, INFINITY);
+    out[r * n_boxes + k] = entry < INFINITY ? 1 : 0;
+#else  /* kernels/bvh_ray.h's (cast, occluded, count_hits, all_hits) */
+    const BoxRay b = box_ray((float3)(ray[0], ray[1], ray[2]), (float3)(ray[3], ray[4], ray[5]), ray[6]);
     const float8 lohi = (float8)(box[0], box[1], box[2], box[3], box[4], box[5], 0.0f, 0.0f);
     out[r * n_boxes + k] = box_entered(lohi, &b, INFINITY) ? 1 : 0;
+#endif
 }
 """
 
 
-def box_test(origins, directions, margins, lo, hi):
-    """(rays, boxes) 0/1: the kernel's box_entered of each ray and box, with no limit."""
+def box_test(origins, directions, margins, lo, hi, test):
+    """(rays, boxes) 0/1: whether the kernel's box test (test: "ray" or "packet") enters each box,
+    with no limit."""
     ctx = context_for()
-    source = (kernel_dir().joinpath("common.h").read_text() + c_header([WIDE_NODE], "fp32")
-              + kernel_dir().joinpath("bvh.h").read_text() + kernel_dir().joinpath("bvh_ray.h").read_text() + SOURCE)
+    files = ("common.h", "lanes.h", "bvh.h", "bvh_ray.h" if test == "ray" else "bvh_packet.h")
+    source = ("#define PACKET 1\n" if test == "packet" else "") + c_header([WIDE_NODE, NODE], "fp32")
+    source = "\n".join(kernel_dir().joinpath(name).read_text() for name in files[:2]) + source
+    source += "\n".join(kernel_dir().joinpath(name).read_text() for name in files[2:]) + SOURCE
     program = cl.Program(ctx.context, source).build()
     rays = np.ascontiguousarray(np.column_stack([origins, directions, margins]), np.float32)
     boxes = np.ascontiguousarray(np.column_stack([lo, hi]), np.float32)
@@ -91,11 +103,12 @@ def rays_and_boxes(rng):
     return origins.astype(np.float32).astype(np.float64), directions, margins, lo, hi
 
 
-def test_the_box_test_of_flat_axes_is_the_cone():
+@pytest.mark.parametrize("test", ["ray", "packet"])
+def test_the_box_test_of_flat_axes_is_the_cone(test):
     """The kernel's box test enters every box the exact cone meets and none that twice the cone
     misses (a flat axis's far face: the test of that side)."""
     origins, directions, margins, lo, hi = rays_and_boxes(np.random.default_rng(38))
-    entered = box_test(origins, directions, margins, lo, hi)
+    entered = box_test(origins, directions, margins, lo, hi, test)
     exact = cone_meets(origins, directions, margins, lo, hi, WIDEN)
     assert not (exact & ~entered).any(), f"{(exact & ~entered).sum()} boxes the cone meets were not entered"
     wide = cone_meets(origins, directions, 2 * margins, lo, hi, 2 * WIDEN)
