@@ -74,7 +74,7 @@ def test_frames_a_million_units_off_are_the_fresh_frames_bit_for_bit(precision, 
     need(precision)
     scene = far_field(1e6, orbit=orbit)
     kept = frames_equal_fresh(scene, precision)
-    assert kept.on_device and not kept.framed  # the per-view pass on the device, a view buffer: what this covers
+    assert kept.on_device and not kept.from_world  # the per-view pass on the device, a view buffer: what this covers
 
 
 def test_frames_written_through_scatter_launches_are_the_fresh_frames(monkeypatch):

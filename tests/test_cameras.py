@@ -133,7 +133,7 @@ def test_rays_are_the_kernels_depth_of_a_plane_at_a_known_distance(model, index,
     frame = pyclray.render(scene, aovs=("depth", "position"), precision=precision)
     origins, directions = camera.rays(*SIZE)
     cos = directions @ axis
-    field = camera.frame_directions(*SIZE)
+    field = camera.space_directions(*SIZE)
     reached = (cos > 1e-3) & (np.ones(cos.shape, bool) if field is None else field[1])
     assert reached.mean() > 0.3
     assert np.all(np.isinf(frame["depth"][~reached & (cos < -1e-3)]))

@@ -212,7 +212,7 @@ def test_camera_rays_match_render(scene):
     ids = image["id"].ravel()
     # a lens's pixels outside its field (a camera of the sensors issue: scenes/lens.toml) are render's
     # misses whatever their stand-in ray meets: only the field's rays are the same in both
-    table = scene.camera.frame_directions(scene.image.width, scene.image.height)
+    table = scene.camera.space_directions(scene.image.width, scene.image.height)
     field = np.ones(ids.shape, bool) if table is None else table[1].ravel()
     assert np.all(ids[~field] == -1)
     explained |= ~field

@@ -161,7 +161,7 @@ def test_flow_lands_where_the_point_is_in_the_next_frame(scene):
     expected = np.full((height, width, 2), np.nan)
     for shape_id, shape in enumerate(then.shapes):
         chosen = ids == shape_id
-        F = shape.object_frames()[0]
+        F = shape.object_poses()[0]
         expected[chosen] = project(then.camera, width, height, X[chosen] @ F[:3, :3].T + F[:3, 3])
     landed = pixel_centres(now.camera, width, height) + frame["flow"]
     error = np.abs(landed - expected)[hit]
@@ -179,7 +179,7 @@ def test_flow_lands_where_the_point_is_in_the_next_frame(scene):
         if np.abs(centres[nearest] - target).max() > 0.5 or following["id"][nearest] != ids[j, i]:
             continue  # out of the image, or hidden in the next frame
         shape = then.shapes[ids[j, i]]
-        F = shape.object_frames()[0]
+        F = shape.object_poses()[0]
         seen = project(then.camera, width, height, following["object_coordinates"][nearest].astype(np.float64)
                        @ F[:3, :3].T + F[:3, 3])
         assert np.abs(seen - target).max() <= 0.5 + 1e-3
@@ -239,7 +239,7 @@ def test_every_shape_type_has_its_own_frame():
     for shape_id, shape in enumerate(scene.shapes):
         chosen = frame["id"] == shape_id
         assert chosen.any(), shape.type
-        frames = shape.object_frames()
+        frames = shape.object_poses()
         assert frames.ndim == 3 and frames.shape[1:] == (4, 4) and len(frames) in (1, shape.primitive_count())
         F = frames[frame["primitive"][chosen] if len(frames) > 1 else np.zeros(chosen.sum(), int)]
         X = frame["object_coordinates"][chosen].astype(np.float64)

@@ -37,7 +37,7 @@ def test_normal_never_flipped_and_parallel_rays_miss(precision):
 def test_both_sides_of_the_rim(precision):
     disk = Disk((0.4, 0.2, -0.3), (0.3, 1.0, 0.2), 1.3)
     n = disk.unit_normal()
-    t1, t2, _ = pyclray.model.shapes.base.frame_columns(n)
+    t1, t2, _ = pyclray.model.shapes.base.space_columns(n)
     angle = np.linspace(0, 2 * np.pi, 32, endpoint=False)
     radial = np.cos(angle)[:, None] * t1 + np.sin(angle)[:, None] * t2
     rim = np.array(disk.center) + 1.3 * radial

@@ -7,7 +7,7 @@ tests/oracle_checks.py). For the flat shapes (plane, disk, rectangle, box: Shape
 it is the flat law, K eps (t + L) / max(cos, 1/4), not the sideways law's / cos: the kernel
 takes a camera ray's distance as the host's exact offset over an error-free n . d, so a ground
 pixel 1000 units away at |cos| 0.02 holds a few ulps of t, as cast of that pixel's float64 ray
-does. Before that (a float32 n . d of the rounded frame normal and pixel direction), such pixels
+does. Before that (a float32 n . d of the rounded space normal and pixel direction), such pixels
 erred by ~1 ulp / |cos| (2e-5 relative), 3.3 times that bound. The curved shapes and the meshes keep
 the sideways law (a rounded vertex or a curved surface moves the hit sideways). fp32, fp64, and
 fp32 with one lane (PYCLRAY_LANES=1: the scalar build of the same code)."""

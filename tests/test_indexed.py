@@ -100,7 +100,7 @@ def test_the_compiled_wide_node_packing_keeps_numpys_bits(monkeypatch):
 
 
 def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
-    """Issue 23's memory target for every mesh, not only those of framed scenes: a
+    """Issue 23's memory target for every mesh, not only those of from_world scenes: a
     closed mesh of 57,120 triangles (half as many vertices, as a scan) on a ground plane, counted as
     PreparedScene.nbytes counts (vertices in the world and in the frame, faces, ids, BVH nodes,
     materials; no refs: the plane is unbounded, the mesh the one bounded type). python -m
@@ -112,7 +112,7 @@ def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
     pyclray.clear_cache()
     pyclray.render(scene, aovs=("depth",))
     held = api.tracer_for(scene, context_for(None), "fp32").prepared
-    assert held.kinds["mesh"].indexed is not None and not held.framed  # indexed without being framed
+    assert held.kinds["mesh"].indexed is not None and not held.from_world  # indexed without being from_world
     assert held.nbytes() / len(mesh.faces) <= 64
 
 
@@ -120,7 +120,7 @@ def test_a_mesh_beside_a_few_shapes_holds_at_most_64_bytes_a_triangle():
 @pytest.mark.parametrize("count", [20, 2000])
 def test_a_moved_indexed_mesh_is_refitted_in_place(monkeypatch, shared, count):
     """An animation that moves a mesh rewrites its shared vertices in place (the world's, and the
-    held view's: the host's in_frame, the device pass's bits) and refits the tree above its faces,
+    held view's: the host's in_space, the device pass's bits) and refits the tree above its faces,
     on a device whose buffers are the host's arrays and (shared False) on one they are copied to:
     each frame is its scene prepared from nothing, bit for bit."""
     need_fp64()

@@ -5,7 +5,7 @@ every pixel (pyclray.reference.error_model through tests/oracle_checks.py: a ray
 of an edge or a silhouette may go either way, nothing else); and rays swept 1e-7 apart across the
 shared edges of its front-facing triangles all meet one of the edge's two triangles: watertight in
 object space, no ray let through to the surface behind (the issue's symptom: 2.742310 where the
-oracle and a copy give 2.69438). A vertex framed differently by its two triangles fails it. fp32,
+oracle and a copy give 2.69438). A vertex from_world differently by its two triangles fails it. fp32,
 and fp32 with one lane (PYCLRAY_LANES=1)."""
 from __future__ import annotations
 

@@ -94,7 +94,7 @@ def test_instances_agree_with_the_oracle(precision, offset):
     flat = pyclray.render(flattened(scene), aovs=AOVS, precision=precision, acceleration="bvh")
     same = (flat["primitive"] == frame["primitive"]) & (frame["id"] >= 0)
     eps = np.finfo(np.float32 if precision == "fp32" else np.float64).eps
-    # (u, v) of the same triangle: the vertices framed in object space instead of world space; the
+    # (u, v) of the same triangle: the vertices from_world in object space instead of world space; the
     # flattened meshes' world vertices carry float64 rounding of their coordinates' size (offset),
     # about 2^-53 offset / (a triangle's size, > 0.01 here) in (u, v)
     tolerance = 1e4 * eps + 100 * 2.0**-53 * offset / 0.01
@@ -122,7 +122,7 @@ def test_same_images_as_the_flattened_meshes(acceleration):
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 @pytest.mark.parametrize("offset", [0.0, 1e6])
 def test_cast_and_occluded_through_instances(precision, offset):
-    """cast and occluded enter the instances too (each ray framed on its own origin in object
+    """cast and occluded enter the instances too (each ray from_world on its own origin in object
     space): the oracle's hits within the error model, the flattened meshes' ids and occlusion,
     and a ray stopped short of its hit is not occluded."""
     need(precision)

@@ -113,7 +113,7 @@ def test_distorted_hits_project_back_onto_their_pixel_centres_with_opencv(name, 
     scene = pyclray.Scene(camera, pyclray.Image(WIDTH, HEIGHT), enclosed(shift))
     frame = pyclray.render(scene, aovs=("depth", "normal", "id", "position"), precision="fp64")
     off, hit = projected_offsets(camera, frame, opencv(LENSES[name]))
-    _, field = camera.frame_directions(WIDTH, HEIGHT)
+    _, field = camera.space_directions(WIDTH, HEIGHT)
     assert np.array_equal(hit, field)  # the room is closed: every pixel in the field hits, the others miss
     assert off.max() < PIXEL, f"{name}: a hit {off.max():.3g} px from its pixel's centre"
     if name.startswith("barrel"):  # its radial map folds at r = 1 / sqrt(1.2): the image's corners are beyond
@@ -145,7 +145,7 @@ def test_fp32_distorted_renders_meet_opencv_and_the_oracle(name, lanes, offset, 
         frame = dict(frame)
         frame["position"] = origins + np.where(frame["id"] >= 0, frame["depth"], 0.0)[..., None] * directions
     off, hit = projected_offsets(camera, frame, opencv(LENSES[name]))
-    assert np.array_equal(hit, camera.frame_directions(WIDTH, HEIGHT)[1]) and off.max() < PIXEL
+    assert np.array_equal(hit, camera.space_directions(WIDTH, HEIGHT)[1]) and off.max() < PIXEL
     mine = hit.reshape(-1)
     result = {k: np.asarray(frame[k]).reshape(len(mine), -1).squeeze()[mine] for k in ("depth", "normal", "id")}
     assert_agrees_with_oracle(scene, origins.reshape(-1, 3)[mine], directions.reshape(-1, 3)[mine], result, "fp32",
@@ -175,7 +175,7 @@ def test_a_190_degree_fisheye_reaches_behind_its_plane_and_no_further(precision,
         off, hit = projected_offsets(camera, frame, opencv_fisheye(distortion, camera))
     finally:
         K = saved
-    _, field = camera.frame_directions(WIDTH, HEIGHT)
+    _, field = camera.space_directions(WIDTH, HEIGHT)
     assert np.array_equal(hit, field) and off.max() < PIXEL, off.max()
     # the field's edge: theta_d(95 degrees) from the principal point
     j, i = np.mgrid[0:HEIGHT, 0:WIDTH]

@@ -112,7 +112,7 @@ def check_every_aov(scene, frame, precision):
     camera = scene.camera
     origins, directions = camera.rays(WIDTH, HEIGHT)
     O, D = origins.reshape(-1, 3), directions.reshape(-1, 3)
-    table = camera.frame_directions(WIDTH, HEIGHT)
+    table = camera.space_directions(WIDTH, HEIGHT)
     field = np.ones(len(D), bool) if table is None else np.asarray(table[1]).reshape(-1)
     flat = {k: np.asarray(v).reshape((len(D),) + np.shape(v)[2:]) for k, v in frame.items()}
     # beyond the field: a miss in every image
@@ -342,7 +342,7 @@ def test_an_orthographic_cameras_flow_lands_where_the_point_is_in_the_next_frame
     expected = np.full((height, width, 2), np.nan)
     for shape_id, shape in enumerate(then.shapes):
         chosen = frame["id"] == shape_id
-        F = shape.object_frames()[0]
+        F = shape.object_poses()[0]
         expected[chosen] = then.camera.project(X[chosen] @ F[:3, :3].T + F[:3, 3], width, height)[0]
     landed = np.stack([i, j], axis=-1) + frame["flow"][hit]
     assert np.abs(landed - expected[hit]).max() <= 1e-3

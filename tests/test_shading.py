@@ -174,7 +174,7 @@ def test_a_depth_only_render_has_no_shading_code():
     variant = Variant("render", ("plane", "sphere"), ("depth",), "fp32", 8)
     source = code(variant.source())
     # no material or light struct, no shading function, no shading macro, no shadow switch
-    for word in ("} Material;", "} Light;", "shade_light(", "frame_from_world(", "PYCLRAY_WRITE_SHADED(index, first, end)  ",
+    for word in ("} Material;", "} Light;", "shade_light(", "space_from_world(", "PYCLRAY_WRITE_SHADED(index, first, end)  ",
                  "#define PYCLRAY_SHADOWS"):
         assert word not in source, word
     assert "#define PYCLRAY_WRITE_SHADED(index, first, end)\n" in source  # the empty one

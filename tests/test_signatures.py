@@ -15,7 +15,7 @@ ALL = ("plane", "sphere", "cylinder", "disk", "rectangle", "box", "spheres", "me
 IMAGES = ("depth", "normal", "id", "zdepth", "position", "shaded", "primitive", "barycentric")
 
 # each query; with and without shadows, tile lists and the BVH, both precisions, several shape sets
-# (meshes, mesh instances, unbounded planes alone), the framed, copied and indexed entries, smooth types
+# (meshes, mesh instances, unbounded planes alone), the from_world, copied and indexed entries, smooth types
 VARIANTS = [
     Variant("render", ("plane", "sphere"), ("depth", "normal", "id"), "fp32", 8),
     Variant("render", ("plane", "sphere"), ("depth", "normal", "id"), "fp32", 8, bvh=True),
@@ -23,7 +23,7 @@ VARIANTS = [
     Variant("render", ("sphere",), ("depth",), "fp32", 1),
     Variant("render", ("plane", "mesh"), IMAGES, "fp32", 8, shadows=True, smooth=("mesh",)),
     Variant("render", ("plane", "mesh"), IMAGES, "fp64", 4, shadows=True, bvh=True, smooth=("mesh",), indexed=True),
-    Variant("render", ("plane", "sphere", "mesh"), ("shaded",), "fp32", 8, shadows=False, bvh=True, framed=True,
+    Variant("render", ("plane", "sphere", "mesh"), ("shaded",), "fp32", 8, shadows=False, bvh=True, from_world=True,
             indexed=True),
     Variant("render", ("mesh", "instance"), IMAGES, "fp32", 8, shadows=True, bvh=True, smooth=("mesh", "instance")),
     Variant("render", ALL, ("depth", "normal", "id", "shaded"), "fp64", 4, shadows=True),
@@ -62,7 +62,7 @@ def declared(variant: Variant) -> list[tuple[str, str, bool]]:
 
 
 @pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: f"{v.query}-{'-'.join(v.shape_types)}-{v.precision}"
-                         f"{'-bvh' if v.bvh else ''}{'-shadows' if v.shadows else ''}{'-framed' if v.framed else ''}"
+                         f"{'-bvh' if v.bvh else ''}{'-shadows' if v.shadows else ''}{'-from_world' if v.from_world else ''}"
                          f"{'-indexed' if v.indexed else ''}-{len(v.aovs)}")
 def test_the_declared_parameters_are_the_built_kernels(variant):
     if variant.precision == "fp64" and not has_fp64(context_for().device):
@@ -92,7 +92,7 @@ def test_what_each_condition_adds():
     assert set(names(shadows=True, bvh=True)) - set(names(bvh=True)) == {"nodes"}
     assert "wide_nodes" not in names(shape_types=("plane",), bvh=True)
     assert set(names(aovs=("shaded", "position"))) - set(names()) == {"eye_high", "eye_low", "position_out"}
-    assert "sphere_worlds" in names(framed=True) and "spheres" in names()
+    assert "sphere_worlds" in names(from_world=True) and "spheres" in names()
 
 
 def test_arguments_come_in_the_signatures_order():

@@ -142,7 +142,7 @@ def test_a_moved_camera_uploads_no_shapes(monkeypatch):
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 def test_the_host_rebase_of_devices_without_fp64_gives_the_same_images(monkeypatch, precision):
     """A device without float64 rebases on the host (Shape.rebase, numpy float64) what others rebase
-    on the device (kernels/rebase.cl): the same formulas in the same order (pyclray.model.shapes.device.in_frame),
+    on the device (kernels/rebase.cl): the same formulas in the same order (pyclray.model.shapes.device.in_space),
     so the same images to the last bit."""
     need(precision)
     scene = every_shape((1e4, 0.0, 0.0))
@@ -239,7 +239,7 @@ def test_an_animation_frame_that_changes_no_shape_updates_nothing():
 
 def test_render_views_of_a_mesh_equal_fresh_renders():
     """render_views enqueues view i+1 (its per-view pass included) while view i's kernel may still
-    run: a mesh's shared vertices must be framed in the queue's order, not under the running kernel
+    run: a mesh's shared vertices must be from_world in the queue's order, not under the running kernel
     (each view equals a fresh render)."""
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 40, endpoint=False), np.linspace(0.2, np.pi - 0.2, 20))
     vertices = np.stack([np.sin(v) * np.cos(u), np.cos(v) + 1.0, np.sin(v) * np.sin(u)], -1).reshape(-1, 3)

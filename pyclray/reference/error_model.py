@@ -163,7 +163,7 @@ def flat_camera_depths(scene: Scene) -> np.ndarray:
     which the kernel computes from the pinhole's image plane itself (a camera whose rays come as a
     table, a lens or a panorama, or start off the eye, has the sideways law everywhere)."""
     camera = scene.camera
-    pinhole = camera.rays_from_eye and camera.frame_directions(scene.image.width, scene.image.height) is None
+    pinhole = camera.rays_from_eye and camera.space_directions(scene.image.width, scene.image.height) is None
     return np.array([pinhole and shape.flat_camera_depth for shape in scene.shapes] or [False], bool)
 
 

@@ -56,7 +56,7 @@ class SceneBVH:
         return (refs if refs.size else np.zeros(1, np.int64)).astype(np.int32)
 
     def anchors(self, positions=None) -> np.ndarray:
-        """(N, 4) float64 per leaf position: the centre A of the primitive's box (its packing frame
+        """(N, 4) float64 per leaf position: the centre A of the primitive's box (its packing space
         in cast) and a bounding radius R about it: half the box's diagonal, with a margin over the
         shape test's rounding (no hit the test reports lies nearer than (A - O).D - R). Of the
         given positions only, where given (their bounds gathered without keeping them)."""

@@ -16,7 +16,7 @@ TILE = 16  # pixels per tile side, a power of two (and the render kernel's work-
 ENABLED = True  # False: every tile visits every shape (tests compare the two)
 
 # The kernel's float32 test accepts a ray whose true squared distance to the centre exceeds r^2
-# by at most a few dozen ulps of |F|^2 (F: centre in the camera frame); 256 float32 ulps bound
+# by at most a few dozen ulps of |F|^2 (F: centre in the camera space); 256 float32 ulps bound
 # that with room to spare, so the radius is widened by sqrt(256 eps) |F| = 3.9e-3 |F| (an angle
 # of 3.9e-3 radians, a couple of pixels at usual fields of view), plus rounding of the centre.
 _WIDEN = 16.0 * np.sqrt(np.finfo(np.float32).eps)
@@ -24,9 +24,9 @@ _WIDEN = 16.0 * np.sqrt(np.finfo(np.float32).eps)
 
 def sphere_bounds(center, radius, origin, rotation):
     """(N, 4) bounds (sx_lo, sx_hi, sy_lo, sy_hi) of the image-plane coordinates (x/z, y/z in the
-    camera frame) of the rays that can meet each sphere (centres (N, 3), radii (N,)); NaN rows:
+    camera space) of the rays that can meet each sphere (centres (N, 3), radii (N,)); NaN rows:
     anywhere (the sphere reaches the eye's plane); +inf lo rows: nowhere (wholly behind the eye)."""
-    F = (np.asarray(center, np.float64) - origin) @ np.asarray(rotation, np.float64).T  # camera frame: x left, y up, z forward
+    F = (np.asarray(center, np.float64) - origin) @ np.asarray(rotation, np.float64).T  # camera space: x left, y up, z forward
     r = np.asarray(radius, np.float64)
     distance = np.linalg.norm(F, axis=1)
     r = r * (1 + 1e-6) + _WIDEN * distance
@@ -98,8 +98,8 @@ def tile_lists(bounded, spheres, n, origin, rotation, plane, width, height, tile
 
 def table_rects(directions, valid, tile=TILE) -> np.ndarray:
     """(tiles_y * tiles_x, 4) rectangles (sx_lo, sx_hi, sy_lo, sy_hi) of the image-plane coordinates
-    (x / z, y / z in the camera frame) of each tile's rays, for a camera whose rays are a table (a
-    lens, a panorama: CameraModel.frame_directions; directions (height, width, 3), valid (height,
+    (x / z, y / z in the camera space) of each tile's rays, for a camera whose rays are a table (a
+    lens, a panorama: CameraModel.space_directions; directions (height, width, 3), valid (height,
     width)): a ray that meets a sphere has its coordinates in the sphere's sphere_bounds, and in its
     tile's rectangle, so a tile visits the spheres whose bounds meet its rectangle. A tile with a
     ray at or behind the eye's plane (a fisheye's rim, a panorama) is NaN: it visits every shape;

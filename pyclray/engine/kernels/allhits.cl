@@ -44,14 +44,14 @@
 #undef PYCLRAY_CAST_TEST_ENTRY
 #define PYCLRAY_CAST_TEST_ENTRY(Type, type)                                         \
     {                                                                               \
-        PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
-        PYCLRAY_ALL_HITS_##type(&framed, &moved, s0, KIND_##type, k)                \
+        PYCLRAY_CAST_REBASED(Type, type, k, moved.world)                            \
+        PYCLRAY_ALL_HITS_##type(&rebased, &moved, s0, KIND_##type, k)               \
     }
 #undef PYCLRAY_CAST_LINEAR
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
-        PYCLRAY_CAST_FRAMED(Type, type, q, start.world)                             \
-        PYCLRAY_ALL_HITS_##type(&framed, &start, t_min, KIND_##type, q)             \
+        PYCLRAY_CAST_REBASED(Type, type, q, start.world)                            \
+        PYCLRAY_ALL_HITS_##type(&rebased, &start, t_min, KIND_##type, q)            \
     }
 /* an entry's two candidates (<type>_hits: MISS where there is none), from the ray at distance from */
 #define ALLHITS_TWO(type, shape, ray, from, kind, k)                                \

@@ -1,6 +1,6 @@
 /* Box: the slab test in the box's own axes e_k. A ray origin + s D is inside slab k where
  * lo_k <= s (D . e_k) <= hi_k, with lo_k, hi_k = (C - origin) . e_k -+ size_k / 2 computed on the
- * host in float64 for the frame origin (an eye next to a face keeps its distance to it). The
+ * host in float64 for the space origin (an eye next to a face keeps its distance to it). The
  * entry is the largest slab entry, the exit the smallest slab exit: which slabs those are, and
  * whether the ray meets the box, is decided from the ray's point nearest the centre (see
  * box_slabs); the distances come from the packed offsets.
@@ -13,24 +13,24 @@
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The box in the camera's frame: its centre and axes along the frame's axes, and its slabs'
+/* The box in the camera's space: its centre and axes along the space's axes, and its slabs'
  * offsets (C - origin) . e_k -+ h_k from error-free sums (an eye next to a face keeps its distance). */
-inline void box_rebase(__global const BoxWorld* world, PYCLRAY_FRAME_OUT Box* out, const Frame* frame)
+inline void box_rebase(__global const BoxWorld* world, PYCLRAY_REBASE_OUT Box* out, const Space* space)
 {
-    const double3 F = world->center.xyz - frame->origin;
+    const double3 F = world->center.xyz - space->origin;
     const double3 h = world->half_size.xyz;
     const double3 e0 = world->axis0.xyz, e1 = world->axis1.xyz, e2 = world->axis2.xyz;
-    out->center = (real4)(to_frame(frame, F), 0);
+    out->center = (real4)(to_space(space, F), 0);
     out->half_size = (real4)(convert_real3(h), 0);
-    out->axis0 = (real4)(to_frame(frame, e0), (real)dot2_4((double4)(F, -h.x), (double4)(e0, 1.0)));
-    out->axis1 = (real4)(to_frame(frame, e1), (real)dot2_4((double4)(F, -h.y), (double4)(e1, 1.0)));
-    out->axis2 = (real4)(to_frame(frame, e2), (real)dot2_4((double4)(F, -h.z), (double4)(e2, 1.0)));
+    out->axis0 = (real4)(to_space(space, e0), (real)dot2_4((double4)(F, -h.x), (double4)(e0, 1.0)));
+    out->axis1 = (real4)(to_space(space, e1), (real)dot2_4((double4)(F, -h.y), (double4)(e1, 1.0)));
+    out->axis2 = (real4)(to_space(space, e2), (real)dot2_4((double4)(F, -h.z), (double4)(e2, 1.0)));
     out->high = (real4)((real)dot2_4((double4)(F, h.x), (double4)(e0, 1.0)),
                         (real)dot2_4((double4)(F, h.y), (double4)(e1, 1.0)),
                         (real)dot2_4((double4)(F, h.z), (double4)(e2, 1.0)), 0);
-    out->axis_low0 = (real4)(to_frame_low(frame, e0), 0);
-    out->axis_low1 = (real4)(to_frame_low(frame, e1), 0);
-    out->axis_low2 = (real4)(to_frame_low(frame, e2), 0);
+    out->axis_low0 = (real4)(to_space_low(space, e0), 0);
+    out->axis_low1 = (real4)(to_space_low(space, e1), 0);
+    out->axis_low2 = (real4)(to_space_low(space, e2), 0);
     out->world_axis0 = (real4)(convert_real3(e0), 0);
     out->world_axis1 = (real4)(convert_real3(e1), 0);
     out->world_axis2 = (real4)(convert_real3(e2), 0);
@@ -83,13 +83,13 @@ inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
     slabs.along = v3(PIXEL_DOT(ray, box->axis0, box->axis_low0, v3_dot(D, e0)),
                      PIXEL_DOT(ray, box->axis1, box->axis_low1, v3_dot(D, e1)),
                      PIXEL_DOT(ray, box->axis2, box->axis_low2, v3_dot(D, e2)));
-    /* camera rays (from the frame's origin): the offsets as packed; cast and shadow rays: their origin's */
+    /* camera rays (from the space's origin): the offsets as packed; cast and shadow rays: their origin's */
     const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     const vec3v F = FROM_EYE(ray) ? v3_splat(box->center) : v3_sub(v3_splat(box->center), ray->origin);
     const vec3v o = FROM_EYE(ray) ? zero : v3(v3_dot(ray->origin, e0), v3_dot(ray->origin, e1), v3_dot(ray->origin, e2));
     /* Which faces the ray enters and leaves by, and whether it meets the box at all, decided from
      * the ray's point nearest the centre, P = -D x (F x D) / a (from the centre): small coordinates
-     * that keep the camera frame's digits, where the slab offsets of a far box are large numbers
+     * that keep the camera space's digits, where the slab offsets of a far box are large numbers
      * whose rounding would blur its edges. */
     const vec3v P = v3_scale(v3_cross(D, v3_cross(F, D)), SPLAT(-1) / ray->a);
     const vec3v nearest = v3(v3_dot(P, e0), v3_dot(P, e1), v3_dot(P, e2));

@@ -10,7 +10,7 @@
  *
  * A wide node holds up to 8 children's boxes (float, rounded outward from float64 and kept
  * within the float range, so that no test meets inf - inf or 0 * inf; an empty slot has lo > hi)
- * in the box frame (world axes around the scene's anchor),
+ * in the box space (world axes around the scene's anchor),
  * and their codes: a wide node's index, or ~(first * 8 + count) for a leaf of count shapes at
  * positions first .. first + count - 1 of refs (ref = index in its type's array * 8 + kind). All
  * eight boxes are tested at once, in float8 lanes.
@@ -31,7 +31,7 @@
 
 /* Per child of a wide node, the slab test's end: the entry (the axes' latest, from 0) where it is no
  * later than the exit (the axes' earliest, limit at most, widened by 1 + 2 gamma(3): the products'
- * rounding), else +inf. Max and min by comparison: no NaN reaches here (the box frame above). */
+ * rounding), else +inf. Max and min by comparison: no NaN reaches here (the box space above). */
 inline float8 wide_slabs(const float8 enter_x, const float8 enter_y, const float8 enter_z, const float8 leave_x,
                          const float8 leave_y, const float8 leave_z, const float limit)
 {

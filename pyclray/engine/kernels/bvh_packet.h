@@ -4,7 +4,7 @@
  * (kernels/bvh_wide_packet.h). */
 
 /* A packet's rays from one origin (the eye), per axis: sign / (|d| + widen), sign / (|d| - widen)
- * or 0, and +inf where |d| <= widen (see box_ray); and that origin in the box frame (xyz: the eye
+ * or 0, and +inf where |d| <= widen (see box_ray); and that origin in the box space (xyz: the eye
  * from the scene's anchor, rounded to float) with a margin over its rounding (w). */
 typedef struct {
     vec3v near_inverse, far_inverse, far_add;

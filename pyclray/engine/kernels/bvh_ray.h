@@ -1,5 +1,5 @@
 /* One ray through the wide tree (cast and any-hit: kernels/cast.cl, kernels/anyhit.cl), its box tests
- * in float against the nodes' boxes in the box frame (world axes around the scene's anchor). */
+ * in float against the nodes' boxes in the box space (world axes around the scene's anchor). */
 
 /* A ray for box tests: per axis, the entry and exit distances of a slab are
  * (face - origin -+ margin) * inverse (+ exit_add): see box_ray. */
@@ -12,7 +12,7 @@ typedef struct {
     int flat;                          /* some |d| <= widen: flat_inverse's entries are taken too */
 } BoxRay;
 
-/* The box ray of origin o and direction d (unit or nearly) in the box frame, with an absolute
+/* The box ray of origin o and direction d (unit or nearly) in the box space, with an absolute
  * margin (the rounding of o). With s = sign(d_k), a point o + t d lies within margin + BVH_WIDEN t
  * of the slab [near, far] (in s's direction) when
  *   t (|d_k| + BVH_WIDEN) >= s (near - o) - margin   and   t (|d_k| - BVH_WIDEN) <= s (far - o) + margin.

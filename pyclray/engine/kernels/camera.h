@@ -1,4 +1,4 @@
-/* The pinhole camera of a render (pyclray/model/camera.py; its struct, Camera, from the host): its frame
+/* The pinhole camera of a render (pyclray/model/camera.py; its struct, Camera, from the host): its space
  * (origin the eye, axes u (left), v (up) and w (forward): the columns of world_from_camera) and the
  * rays of a packet of its pixels. */
 
@@ -11,14 +11,14 @@ inline Basis camera_basis(__global const Camera* camera)
     return basis;
 }
 
-/* a direction of the camera's frame in world coordinates */
-inline vec3v world_from_frame(__global const Camera* camera, const vec3v n)
+/* a direction of the camera's space in world coordinates */
+inline vec3v world_from_space(__global const Camera* camera, const vec3v n)
 {
     return world_from_axes(camera->u, camera->v, camera->w, n);
 }
 
 /* The camera rays of a packet: its PYCLRAY_PACKET_W x PYCLRAY_PACKET_H pixels from column i0 and
- * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera frame. */
+ * row j0 on (lane l: column i0 + l % W, row j0 + l / W), in the camera space. */
 #if PYCLRAY_PACKET_H == 1
 #define PYCLRAY_LANE_COLUMN LANE_INDEX
 #define PYCLRAY_LANE_ROW SPLAT_INT(0)
@@ -61,7 +61,7 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
                                             / SPLAT((real)height));
     RayPacket ray;
 #endif
-    /* normalized in the camera frame, where each component is divided on its own: the tiny
+    /* normalized in the camera space, where each component is divided on its own: the tiny
      * lateral components of a narrow field of view keep their relative precision */
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
@@ -78,8 +78,8 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
 
 #ifdef PYCLRAY_CAMERA_TABLE
 /* The rays of a camera model whose pixels do not lie on a pinhole's image plane (a lens's distortion,
- * a fisheye, a panorama: pyclray/model/cameras/, CameraModel.frame_directions): each pixel's ray in
- * the camera's frame, solved on the host in float64 once per camera and image size and rounded once,
+ * a fisheye, a panorama: pyclray/model/cameras/, CameraModel.space_directions): each pixel's ray in
+ * the camera's space, solved on the host in float64 once per camera and image size and rounded once,
  * read here. The table is in packet order (engine/scene/views.py: packet_table), a packet's lanes
  * contiguous: per packet, the lanes' image-plane coordinates x / z, y / z (PYCLRAY_CAMERA_PLANE:
  * every ray ahead of the eye's plane, normalized here as a pinhole's) or unit x, y, z, then one
@@ -104,7 +104,7 @@ inline RayPacket camera_table_rays(__global const Camera* camera, __global const
     RayPacket ray;
     ray.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
 #ifdef PYCLRAY_CAMERA_PLANE
-    /* as camera_rays: normalized in the camera frame, each component divided on its own */
+    /* as camera_rays: normalized in the camera space, each component divided on its own */
     const realv sx = PYCLRAY_TABLE_LANES(p), sy = PYCLRAY_TABLE_LANES(p + LANES);
     const realv length = v_sqrt((sx * sx + sy * sy) + SPLAT(1));
     ray.dir = v3(sx / length, sy / length, SPLAT(1) / length);

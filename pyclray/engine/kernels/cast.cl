@@ -30,7 +30,7 @@
         if (take) { best = (t); best_kind = (kind); best_k = (k); best_q = (q); }   \
     }
 /* The packed entry of a new nearest hit, asked for from memory: the traversal reads only the
- * world entries, and the id (and the normal's frame) read from it at the end would otherwise miss
+ * world entries, and the id (and the normal's space) read from it at the end would otherwise miss
  * the cache (docs/benchmarks.md: PYCLRAY_CAST_PREFETCH_WINNER) */
 #define PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
     if (best_kind == KIND_##type && best_k == (k)) { CAST_PREFETCH(&type##s[k], sizeof(Type)) }
@@ -44,8 +44,8 @@
     if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_NORMAL_, type)(Type, type) }
 #define PYCLRAY_CAST_NORMAL_ENTRY(Type, type)                                       \
     {                                                                               \
-        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        normal = PYCLRAY_NORMAL_##type(&framed, &ray, &world_axes, MISS, 1);        \
+        PYCLRAY_CAST_REBASED(Type, type, best_k, ray.world)                         \
+        normal = PYCLRAY_NORMAL_##type(&rebased, &ray, &world_axes, MISS, 1);       \
     }
 /* the winner's index within its shape (PYCLRAY_CAST_PRIMITIVE_OF_<type>: its packed entry's, or a
  * mesh instance's triangle); in blocks its key, -2 - key, which the host turns into the triangle's
@@ -54,8 +54,8 @@
     if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_PRIMITIVE_, type)(Type, type) }
 #define PYCLRAY_CAST_PRIMITIVE_ENTRY(Type, type)                                    \
     {                                                                               \
-        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        primitive = PYCLRAY_CAST_PRIMITIVE_OF_##type(&framed, &ray);                \
+        PYCLRAY_CAST_REBASED(Type, type, best_k, ray.world)                         \
+        primitive = PYCLRAY_CAST_PRIMITIVE_OF_##type(&rebased, &ray);               \
     }
 #define PYCLRAY_CAST_PRIMITIVE_BLOCKS(Type, type) primitive = -2 - best_k;
 /* the winner's barycentrics (a triangle's; 0, 0 for other shapes) */
@@ -63,8 +63,8 @@
     if (best_kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_BARYCENTRIC_, type)(Type, type) }
 #define PYCLRAY_CAST_BARYCENTRIC_ENTRY(Type, type)                                  \
     {                                                                               \
-        PYCLRAY_CAST_FRAMED(Type, type, best_k, ray.world)                          \
-        PYCLRAY_CAST_BARYCENTRIC_OF_##type(&framed, &ray, &u, &v);                  \
+        PYCLRAY_CAST_REBASED(Type, type, best_k, ray.world)                         \
+        PYCLRAY_CAST_BARYCENTRIC_OF_##type(&rebased, &ray, &u, &v);                 \
     }
 #define PYCLRAY_CAST_BARYCENTRIC_BLOCKS(Type, type)                                 \
     mesh_block_barycentric(MESH_BLOCKS(type) + 8 * (size_t)(best_k >> 3), best_k & 7, &ray, &u, &v);
@@ -188,7 +188,7 @@ inline void cast_end(const CastRay* S, PYCLRAY_PARAMETERS)
 #ifdef PYCLRAY_AOV_NORMAL
     {
         vec3v normal = v3(0, 0, 0);
-        /* each shape is framed on the world's axes (kernels/cast.h): its normal is turned by them */
+        /* each shape is rebased on the world's axes (kernels/cast.h): its normal is turned by them */
         const Basis world_axes = {(real4)(1, 0, 0, 0), (real4)(0, 1, 0, 0), (real4)(0, 0, 1, 0)};
         if (hit) { PYCLRAY_SHAPES(PYCLRAY_CAST_NORMAL) }
         normal_out[3 * index] = normal.x;

@@ -73,7 +73,7 @@ PYCLRAY_WORK_ITEM_FUNCTION void closest_point(const int i, PYCLRAY_PARAMETERS)
     const int r = ordered ? order[i] : i;
     const double3 p = (double3)(points[3 * r], points[3 * r + 1], points[3 * r + 2]);
 #ifdef PYCLRAY_HAS_BOUNDED
-    /* the point in the boxes' frame, rounded (a relative 2^-24 per coordinate, which the margin covers) */
+    /* the point in the boxes' space, rounded (a relative 2^-24 per coordinate, which the margin covers) */
     const double3 relative = p - scene_anchor.xyz;
     const float3 pf = convert_float3(relative);
     const float margin = (fabs(pf.x) + fabs(pf.y) + fabs(pf.z)) * 0x1p-22f;

@@ -1,6 +1,6 @@
 /* What every shape's closest-point function returns, and the helpers they share (the closest-point
  * query: kernels/closest.cl, pyclray/engine/queries/closest.py). Float64 throughout, from the point
- * as given and the shapes' float64 world entries: no frame, no lanes (one point per work-item).
+ * as given and the shapes' float64 world entries: no rebasing, no lanes (one point per work-item).
  *
  * Each shape's kernel file defines, under PYCLRAY_CLOSEST,
  *   ClosestPoint type_closest(__global const TypeWorld* world, double3 p)   the nearest point of its surface

@@ -1,7 +1,7 @@
 /* pyclray: types and helpers shared by every shape and kernel.
  *
  * Precision: `real` is float (fp32) or double (fp64, -D PYCLRAY_FP64).
- * Frames: the render kernel works in the camera's frame (origin at the eye, axes u, v, w), the cast
+ * Spaces: the render kernel works in the camera's space (origin at the eye, axes u, v, w), the cast
  * kernel in the world's axes around each shape's own anchor. The host subtracts that origin in
  * float64 before packing (and cast subtracts its rays' origins in float64 on the device), so no
  * large coordinate ever reaches a shape's test: far or translated scenes keep float32's full
@@ -28,9 +28,9 @@ typedef float4 real4;
 
 #define MISS ((real)INFINITY)
 
-#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED) || defined(PYCLRAY_INDEXED)
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FROM_WORLD) || defined(PYCLRAY_INDEXED)
 /* cast takes the differences of its rays' and shapes' world coordinates in float64 (kernels/rays.h),
- * a framed render frames each shape on the eye from its float64 world entry, and an indexed mesh's
+ * a from-world render rebases each shape on the eye from its float64 world entry, and an indexed mesh's
  * winner has its world normal from its float64 vertices (kernels/mesh.cl) */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif

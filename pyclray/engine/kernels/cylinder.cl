@@ -16,17 +16,17 @@
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The cylinder in the camera's frame: both ends and the axis along the frame's axes, and what every
- * ray from the frame's origin shares, from error-free products and sums: c = |(p0 - o) x A|^2 - r^2,
+/* The cylinder in the camera's space: both ends and the axis along the space's axes, and what every
+ * ray from the space's origin shares, from error-free products and sums: c = |(p0 - o) x A|^2 - r^2,
  * d0 = (p0 - o) . A and d1 = (p1 - o) . A. */
-inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_FRAME_OUT Cylinder* out, const Frame* frame)
+inline void cylinder_rebase(__global const CylinderWorld* world, PYCLRAY_REBASE_OUT Cylinder* out, const Space* space)
 {
-    const double3 p0 = world->p0.xyz - frame->origin, p1 = world->p1.xyz - frame->origin, A = world->axis.xyz;
+    const double3 p0 = world->p0.xyz - space->origin, p1 = world->p1.xyz - space->origin, A = world->axis.xyz;
     const double r = world->p0.w;
-    out->p0 = (real4)(to_frame(frame, p0), (real)(r * r));
-    out->p1 = (real4)(to_frame(frame, p1), (real)world->p1.w);
-    out->axis = (real4)(to_frame(frame, A), (real)cross_norm2_minus(p0, A, r));
-    out->axis_low = (real4)(to_frame_low(frame, A), 0);
+    out->p0 = (real4)(to_space(space, p0), (real)(r * r));
+    out->p1 = (real4)(to_space(space, p1), (real)world->p1.w);
+    out->axis = (real4)(to_space(space, A), (real)cross_norm2_minus(p0, A, r));
+    out->axis_low = (real4)(to_space_low(space, A), 0);
     out->world_axis = (real4)(convert_real3(A), (real)dot2_3(p0, A));
     out->d1 = (real)dot2_3(p1, A);
     out->caps = world->caps;
@@ -66,7 +66,7 @@ inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, cons
     const realv r2 = SPLAT(cylinder->p0.w);
     vec3v F, FxA;
     realv c, d0, d1;
-    if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: the host's terms */
+    if (FROM_EYE(ray)) {  /* the ray's origin is the space's: the host's terms */
         F = v3_splat(cylinder->p0);
         FxA = v3_cross(F, A);
         c = SPLAT(cylinder->axis.w);
@@ -98,7 +98,7 @@ inline CylinderHit cylinder_intersect(SHAPE_SPACE const Cylinder* cylinder, cons
     /* side: the stable roots (NaN where disc < 0), kept between the end planes. A root's axial
      * coordinate from p0, s (D . A) - d0, cancels for a far cylinder (both terms large); from the
      * ray's point nearest the axis it is z* -+ sqrt(disc) (D . A) / a, z* = -A . (D x (F x D)) / a,
-     * whose cross products keep the camera frame's digits, but which cancels for a ray along the
+     * whose cross products keep the camera space's digits, but which cancels for a ray along the
      * axis (a small). Each lane takes the form whose terms are smaller. */
     const realv q = b + v_copysign(v_sqrt(hit.disc), b);
     const realv s_q = q / a, s_c = c / q;
@@ -153,7 +153,7 @@ inline vec3v cylinder_normal(SHAPE_SPACE const Cylinder* cylinder, const RayPack
 
 #ifdef PYCLRAY_ALL_HITS
 /* Every hit s > 0 along the ray (count_hits, all_hits: kernels/allhits.cl), from the ray's origin
- * (cast's frame: FROM_EYE). Capped: the solid is convex, the points within r of the axis (between
+ * (cast's space: FROM_EYE). Capped: the solid is convex, the points within r of the axis (between
  * the side's roots, everywhere for a ray along the axis inside it) and between the end planes (the
  * caps' distances, everywhere for a ray parallel to them between them): the entry and exit of
  * those two intervals' overlap where entry < exit, else none (a ray grazing the side or a rim

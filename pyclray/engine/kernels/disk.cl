@@ -1,20 +1,20 @@
-/* Disk: n . (p - C) = 0 and |p - C| <= r. In the frame, h = n . (origin - C) comes from the host in
+/* Disk: n . (p - C) = 0 and |p - C| <= r. In the space, h = n . (origin - C) comes from the host in
  * float64 (normal.w); a ray origin + s D meets the disk's plane at s = -h / (n . D). The hit point
  * from the centre, s D - F (F = C - origin), cancels for a far disk (s D and F are large, their
  * difference small); it equals n x (D x F) / (n . D), whose cross product keeps the digits of the
- * small sideways offsets of the camera frame, so the border is as sharp far away as near. */
+ * small sideways offsets of the camera space, so the border is as sharp far away as near. */
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The disk in the camera's frame (rebase_flat: its centre, normal and the origin's distance to its
+/* The disk in the camera's space (rebase_flat: its centre, normal and the origin's distance to its
  * plane), and r^2. */
-inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk* out, const Frame* frame)
+inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_REBASE_OUT Disk* out, const Space* space)
 {
-    const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
+    const double3 F = world->center.xyz - space->origin, n = world->normal.xyz;
     const double r = world->center.w;
-    out->center = (real4)(to_frame(frame, F), (real)(r * r));
-    out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
-    out->normal_low = (real4)(to_frame_low(frame, n), 0);
+    out->center = (real4)(to_space(space, F), (real)(r * r));
+    out->normal = (real4)(to_space(space, n), (real)(-dot2_3(n, F)));
+    out->normal_low = (real4)(to_space_low(space, n), 0);
     out->world_normal = (real4)(convert_real3(n), 0);
 }
 
@@ -29,7 +29,7 @@ inline void disk_rebase(__global const DiskWorld* world, PYCLRAY_FRAME_OUT Disk*
 inline realv disk_hit(SHAPE_SPACE const Disk* disk, const RayPacket* ray)
 {
     const vec3v n = v3_splat(disk->normal);
-    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    /* from the eye (the space's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
     const vec3v F = FROM_EYE(ray) ? v3_splat(disk->center) : v3_sub(v3_splat(disk->center), ray->origin);
     const realv h = FROM_EYE(ray) ? SPLAT(disk->normal.w) : SPLAT(disk->normal.w) + v3_dot(n, ray->origin);
     /* a ray parallel to the disk gives +-inf or NaN here: neither is a hit; n . d exact for camera rays */

@@ -166,7 +166,7 @@ inline void write_vec3s(const vec3v v, const PacketPlace place, const int first,
 #define PYCLRAY_WRITE_ID(index, first, end)
 #endif
 
-/* depth along the optical axis, the frame's z axis (w): the ray's s times its z */
+/* depth along the optical axis, the space's z axis (w): the ray's s times its z */
 #ifdef PYCLRAY_AOV_ZDEPTH
 #define PYCLRAY_WRITE_ZDEPTH(index, first, end) \
     write_reals(best < MISS ? best * ray.dir.z : SPLAT(MISS), index, first, end, zdepth_out);
@@ -174,14 +174,14 @@ inline void write_vec3s(const vec3v v, const PacketPlace place, const int first,
 #define PYCLRAY_WRITE_ZDEPTH(index, first, end)
 #endif
 
-/* the world hit point, eye + world_from_frame(s D). The eye comes as a float64 sum
+/* the world hit point, eye + world_from_space(s D). The eye comes as a float64 sum
  * eye_high + eye_low of two reals, added to the (small) offset from the eye high part first, so that
  * a scene far from the world's origin loses no more than the output's own rounding. */
 #ifdef PYCLRAY_AOV_POSITION
 #define PYCLRAY_WRITE_POSITION(index, first, end)                                     \
     {                                                                                 \
         const intv hit = best < MISS;                                                 \
-        const vec3v offset = world_from_frame(camera, v3_scale(ray.dir, hit ? best : SPLAT(0))); \
+        const vec3v offset = world_from_space(camera, v3_scale(ray.dir, hit ? best : SPLAT(0))); \
         const vec3v world = v3_add(v3_add(v3_splat(eye_high), offset), v3_splat(eye_low)); \
         const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));                          \
         write_vec3s(v3_select(zero, world, hit), index, first, end, position_out);    \

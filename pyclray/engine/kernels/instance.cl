@@ -5,11 +5,11 @@
  * triangle's three vertices and its index in its mesh, ~index where it has zero area, from the
  * instance's first, in its tree's leaf order; instance_nodes from the instance's root), shared by all
  * its instances (engine/scene/instances.py). A packet enters an instance through its
- * per-view entry: the eye in object space (float64) and the frame's directions there (the rows of
- * object_from_frame / k, k a power of two, rounded once). Each triangle it visits is framed on that
+ * per-view entry: the eye in object space (float64) and the space's directions there (the rows of
+ * object_from_space / k, k a power of two, rounded once). Each triangle it visits is rebased on that
  * object-space eye (its float64 vertices minus the eye, rounded once: the same bits for a vertex
  * shared by two triangles, as a mesh's world triangles get from the per-view pass) and tested by
- * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_frame d
+ * kernels/mesh.cl's watertight test. The tree is traversed in units u = s k along object_from_space d
  * / k (exact: k is a power of two), whose length is at most 1, so that kernels/bvh.h's cone is at
  * least as wide in the object's units as in the world's. Each lane's nearest triangle is kept with
  * its hit (kernels/nearest.h's best_sub): the winners' normals (the object normal through
@@ -23,24 +23,24 @@ inline real instance_low(const double x) { return (real)(x - (double)(real)x); }
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* an instance in a camera's frame: the same float64 operations, in the same order, as
+/* an instance in a camera's space: the same float64 operations, in the same order, as
  * pyclray.model.shapes.instance.Instances._rebase (a test holds the two to the same bits); in cast,
  * on the ray's origin with the world's axes (kernels/cast.h) */
-inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_OUT Instance* out, const Frame* frame)
+inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_REBASE_OUT Instance* out, const Space* space)
 {
     /* the eye in object space: object_from_world (eye - translate) */
-    const double3 F = frame->origin - world->translate.xyz;
+    const double3 F = space->origin - world->translate.xyz;
     const double3 eye = (double3)(instance_dot(world->inverse0, F), instance_dot(world->inverse1, F),
                                   instance_dot(world->inverse2, F));
     out->eye = (double4)(eye, 0.0);
     out->normal0 = world->normal0;
     out->normal1 = world->normal1;
     out->normal2 = world->normal2;
-    /* object_from_frame = object_from_world world_from_frame (the frame's axes are its columns), over k */
+    /* object_from_space = object_from_world world_from_space (the space's axes are its columns), over k */
 #ifdef PYCLRAY_CAST
     const double3 u = (double3)(1, 0, 0), v = (double3)(0, 1, 0), w = (double3)(0, 0, 1);
 #else
-    const double3 u = frame->u, v = frame->v, w = frame->w;
+    const double3 u = space->u, v = space->v, w = space->w;
 #endif
     const double k = world->anchor.w;
     out->m0 = (real4)((real)(instance_dot(world->inverse0, u) / k), (real)(instance_dot(world->inverse0, v) / k),
@@ -72,22 +72,22 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_FRAME_O
  * meshes as their own triangles, though (engine/queries/render.py), so this only completes the type */
 #define PYCLRAY_FLAT_instance 1
 
-/* a face's corners framed on the object-space eye: each vertex's float64 difference rounded once; w
+/* a face's corners rebased on the object-space eye: each vertex's float64 difference rounded once; w
  * 1, or 0 for a zero-area triangle (kernels/mesh.cl then never hits it) */
 #define INSTANCE_CORNERS(vertices, f, eye)                                                            \
     (real4)(convert_real3(vertices[(f).x].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
     (real4)(convert_real3(vertices[(f).y].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
     (real4)(convert_real3(vertices[(f).z].xyz - (eye)), (f).w >= 0 ? 1 : 0)
 
-/* the packet in object space: from the eye (where its triangles are framed), along object_from_frame d / k */
+/* the packet in object space: from the eye (where its triangles are rebased), along object_from_space d / k */
 inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
 {
     const vec3v d = ray->dir;
     const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
     RayPacket r;
     r.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
-    /* a camera ray's object direction is the float64 pixel ray's, rounded once (object_from_frame's
-     * rows as float pairs times the exact pixel point: pixel_dot), as a copy's camera-frame direction
+    /* a camera ray's object direction is the float64 pixel ray's, rounded once (object_from_space's
+     * rows as float pairs times the exact pixel point: pixel_dot), as a copy's camera-space direction
      * is: a float32 product of the rounded rows and the rounded direction turns it by a few eps,
      * enough to move a contour pixel's ray across the edge it passes within a few eps of */
     r.dir = v3(PIXEL_DOT_ALWAYS(ray, m0, inst->m_low0, (SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z),
@@ -184,8 +184,8 @@ inline void instance_barycentric(SHAPE_SPACE const Instance* inst, const RayPack
 }
 
 #ifdef PYCLRAY_SHADOWS
-/* Shadow packets (kernels/shading.h): each lane from its own point p of the eye's frame, which is
- * k object_from_frame p / k from the object-space eye: the triangles framed on that eye as for
+/* Shadow packets (kernels/shading.h): each lane from its own point p of the eye's space, which is
+ * k object_from_space p / k from the object-space eye: the triangles rebased on that eye as for
  * camera rays, each lane's origin subtracted in the shape test (kernels/mesh.cl, as a mesh's shadow
  * rays do), and the tree's boxes tested from each lane's origin with a margin over its rounding (as
  * shading.h's shadow_box_entries). The skip-self rule is per triangle: the lanes whose winner is this
@@ -223,7 +223,7 @@ inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPack
     RayPacket object = instance_ray(inst, ray);
     const vec3v p = ray->origin;
     const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
-    /* the lanes' origins from the object-space eye: k (object_from_frame / k) p, k a power of two */
+    /* the lanes' origins from the object-space eye: k (object_from_space / k) p, k a power of two */
     object.origin = v3_scale(v3((SPLAT(m0.x) * p.x + SPLAT(m0.y) * p.y) + SPLAT(m0.z) * p.z,
                                 (SPLAT(m1.x) * p.x + SPLAT(m1.y) * p.y) + SPLAT(m1.z) * p.z,
                                 (SPLAT(m2.x) * p.x + SPLAT(m2.y) * p.y) + SPLAT(m2.z) * p.z), SPLAT(scale));
@@ -316,8 +316,8 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
 #ifdef PYCLRAY_ALL_HITS
 /* every triangle the ray crosses (count_hits, all_hits: kernels/allhits.cl), each one's distance
  * ALLHITS_TAKE'n with its index in its mesh: the instance's tree traversed to its end, each triangle
- * framed on the object-space eye and tested by kernels/mesh.cl (with its tie rule); from is the
- * distance of the ray's start, where the instance was framed, k the instance's index */
+ * rebased on the object-space eye and tested by kernels/mesh.cl (with its tie rule); from is the
+ * distance of the ray's start, where the instance was rebased, k the instance's index */
 #define INSTANCE_ALL_VISIT(q)                                                                         \
     {                                                                                                 \
         const int4 f_ = own_[q];                                                                      \

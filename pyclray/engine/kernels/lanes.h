@@ -225,7 +225,7 @@ inline vec3v v3_normalize(vec3v v)
     return v3_scale(v, SPLAT(1) / v_sqrt(l2));
 }
 
-/* A packet of rays s -> origin + s * dir in the current frame; dir need not be unit, a = dir . dir.
+/* A packet of rays s -> origin + s * dir in the current space; dir need not be unit, a = dir . dir.
  * cast traces one ray at a time (LANES 1; a work-item traces CAST_GROUP of them) from each shape's own anchor (kernels/rays.h) and
  * keeps the ray as given in float64: its world origin (unbounded shapes, which have no anchor, read
  * it) and its unit direction, of which dir is the rounding. */
@@ -250,21 +250,21 @@ typedef struct {
 } RayPacket;
 
 /* SHAPE_SPACE: where the shape functions read a shape from: the kernel's buffers, or in cast the
- * private copy framed on the ray's origin (kernels/cast.h), in a framed render the one framed on the
+ * private copy rebased on the ray's origin (kernels/cast.h), in a from-world render the one rebased on the
  * eye (kernels/entries.h) */
-#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FRAMED)
+#if defined(PYCLRAY_CAST) || defined(PYCLRAY_FROM_WORLD)
 #define SHAPE_SPACE
 #else
 #define SHAPE_SPACE __global
 #endif
 
-/* FROM_EYE(ray): whether the packet starts at the frame's origin, the eye, where the terms the host
+/* FROM_EYE(ray): whether the packet starts at the space's origin, the eye, where the terms the host
  * computed once in float64 for every camera ray hold (a sphere's c, a plane's h). A render's camera
- * rays always do, and its shadow rays (only compiled with shadows) never; cast frames every shape on
+ * rays always do, and its shadow rays (only compiled with shadows) never; cast rebases every shape on
  * its ray's origin first (kernels/cast.h), so its rays always do: a constant wherever the shape
  * functions are inlined into the kernel. */
 #if defined(PYCLRAY_CAST)
-#define FROM_EYE(ray) 1  /* each shape is framed on the ray's own origin (kernels/cast.h) */
+#define FROM_EYE(ray) 1  /* each shape is rebased on the ray's own origin (kernels/cast.h) */
 #elif defined(PYCLRAY_SHADOWS)
 #define FROM_EYE(ray) ((ray)->from_eye)
 #else
@@ -301,14 +301,14 @@ inline realv pixel_sum_error(const realv a, const realv b, const realv s)
     return (a - (s - z)) + (b - z);
 }
 
-/* Below this |n . d| the fp32 dot product of the rounded frame normal and pixel direction, whose
+/* Below this |n . d| the fp32 dot product of the rounded space normal and pixel direction, whose
  * error is about eps / |n . d| relative, gives way to pixel_dot's (lane by lane); above it that
  * error is within the error model's flat law
  * (pyclray/reference/error_model.py: FLAT_COS). */
 #define PIXEL_EXACT_COS 0.125f
 
-/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's frame as a float
- * pair from float64: kernels/frame.h's to_frame and to_frame_low): n . (sx, sy, 1) with its two
+/* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's space as a float
+ * pair from float64: kernels/space.h's to_space and to_space_low): n . (sx, sy, 1) with its two
  * products and two sums error-free, their errors and the low parts' terms added, over the point's
  * length. Within a few roundings of the exact n . d relative to itself, also where the terms cancel
  * (a grazing ray: n . d near 0); that relative error, times the distance, is a flat shape's depth

@@ -1,4 +1,4 @@
-/* Triangle (one entry of pyclray.Mesh): vertices a, b, c in the frame, its unit world normal in w.
+/* Triangle (one entry of pyclray.Mesh): vertices a, b, c in the space, its unit world normal in w.
  *
  * The watertight test of Woop, Benthin and Wald (2013), as pbrt-v4's IntersectTriangle: the vertices
  * relative to the ray's origin, the axes permuted (per lane) so that the ray's largest component is
@@ -15,19 +15,19 @@
  * the same quotient as pbrt's (e0 a'z + e1 b'z + e2 c'z) / det with a'z = a.z / dz. The projection
  * of a vertex depends on the vertex and the ray only, which is what watertightness needs.
  *
- * The vertices come from float64 world coordinates minus the frame's origin (the eye, or a cast's
+ * The vertices come from float64 world coordinates minus the space's origin (the eye, or a cast's
  * anchor of the whole mesh), rounded once: far from the world's origin a triangle keeps float32's
  * relative precision, and a vertex shared by two triangles has the same bits in both. */
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* the triangle in a frame: the per-view pass's (the eye, the camera's axes) or a cast's (the ray's
+/* the triangle in a space: the per-view pass's (the eye, the camera's axes) or a cast's (the ray's
  * origin moved next to the mesh's anchor, the same for all its triangles: kernels/cast.h) */
-inline void mesh_rebase(__global const TriangleWorld* world, PYCLRAY_FRAME_OUT Triangle* out, const Frame* frame)
+inline void mesh_rebase(__global const TriangleWorld* world, PYCLRAY_REBASE_OUT Triangle* out, const Space* space)
 {
-    out->a = (real4)(to_frame(frame, world->a.xyz - frame->origin), (real)world->a.w);
-    out->b = (real4)(to_frame(frame, world->b.xyz - frame->origin), (real)world->b.w);
-    out->c = (real4)(to_frame(frame, world->c.xyz - frame->origin), (real)world->c.w);
+    out->a = (real4)(to_space(space, world->a.xyz - space->origin), (real)world->a.w);
+    out->b = (real4)(to_space(space, world->b.xyz - space->origin), (real)world->b.w);
+    out->c = (real4)(to_space(space, world->c.xyz - space->origin), (real)world->c.w);
 }
 
 #endif
@@ -156,11 +156,11 @@ typedef struct {
 #endif
 } MeshEdges;
 
-/* (the triangle's vertices by value: mesh instances frame theirs in private memory, kernels/instance.cl) */
+/* (the triangle's vertices by value: mesh instances rebase theirs in private memory, kernels/instance.cl) */
 inline MeshEdges mesh_edges_of(const real4 a, const real4 b, const real4 c, const RayPacket* ray)
 {
     vec3v A = v3_splat(a), B = v3_splat(b), C = v3_splat(c), D = ray->dir;
-    if (!FROM_EYE(ray)) {  /* camera rays start at the frame's origin: the vertices are relative to it */
+    if (!FROM_EYE(ray)) {  /* camera rays start at the space's origin: the vertices are relative to it */
         A = v3_sub(A, ray->origin);
         B = v3_sub(B, ray->origin);
         C = v3_sub(C, ray->origin);
@@ -252,8 +252,8 @@ inline realv mesh_hit(MESH_SPACE const Triangle* tri, const RayPacket* ray)
 }
 
 #ifdef PYCLRAY_INDEXED
-/* An indexed triangle (pyclray/engine/scene/indexed.py) in the frame: its face's vertices as the per-view
- * pass framed them, w 1 (0 for a zero-area triangle, whose face holds ~index: never hit); the world
+/* An indexed triangle (pyclray/engine/scene/indexed.py) in the space: its face's vertices as the per-view
+ * pass rebased them, w 1 (0 for a zero-area triangle, whose face holds ~index: never hit); the world
  * normal in w is the winner's only (mesh_world_normal). */
 inline void mesh_assemble(const int4 face, __global const real4* vertices, Triangle* out)
 {

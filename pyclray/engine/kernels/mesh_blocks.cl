@@ -12,7 +12,7 @@
  * each: a vertex its triangles share is stored once), then the corners (rows a, b, c of count bytes:
  * each triangle's vertices among those). 44 bytes a triangle on a closed mesh (a leaf of 5 triangles
  * has about 7 vertices), read in 3 to 4 cache lines. Each lane is the triangle's test of
- * kernels/mesh.cl as cast runs it on a framed copy: its vertices minus the ray's moved origin in
+ * kernels/mesh.cl as cast runs it on a rebased copy: its vertices minus the ray's moved origin in
  * float64, rounded once (the same bits for a vertex shared with a triangle of another block), then
  * the watertight test with its exact fallback, the same operations in the same order (no
  * contraction: kernels/lanes.h), so every lane's s has the bits of the triangle's own test. A ref of

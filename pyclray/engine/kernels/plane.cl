@@ -1,16 +1,16 @@
-/* Plane: n . p + h = 0 in the frame, n unit (normal.xyz) and h (normal.w) the signed distance of the
- * frame's origin, both computed on the host in float64; exact: n and h in the world, float64 bits
+/* Plane: n . p + h = 0 in the space, n unit (normal.xyz) and h (normal.w) the signed distance of the
+ * space's origin, both computed on the host in float64; exact: n and h in the world, float64 bits
  * (cast only, where the plane is tested from each ray's own origin). */
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The plane in the camera's frame: its normal along the frame's axes and the frame origin's signed
+/* The plane in the camera's space: its normal along the space's axes and the space origin's signed
  * distance n . origin + h, compensated (a far origin cancels); its world normal and exact bits. */
-inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_FRAME_OUT Plane* out, const Frame* frame)
+inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_REBASE_OUT Plane* out, const Space* space)
 {
     const double4 n_h = world->normal;
-    out->normal = (real4)(to_frame(frame, n_h.xyz), (real)dot2_4(n_h, (double4)(frame->origin, 1.0)));
-    out->normal_low = (real4)(to_frame_low(frame, n_h.xyz), 0);
+    out->normal = (real4)(to_space(space, n_h.xyz), (real)dot2_4(n_h, (double4)(space->origin, 1.0)));
+    out->normal_low = (real4)(to_space_low(space, n_h.xyz), 0);
     out->world_normal = (real4)(convert_real3(n_h.xyz), 0);
     out->exact = as_ulong4(n_h);
 }
@@ -26,7 +26,7 @@ inline void plane_rebase(__global const PlaneWorld* world, PYCLRAY_FRAME_OUT Pla
 inline realv plane_hit(SHAPE_SPACE const Plane* plane, const RayPacket* ray)
 {
     const vec3v n = v3_splat(plane->normal);
-    /* the signed distance of the ray's origin (the host's, for camera rays from the frame's origin) */
+    /* the signed distance of the ray's origin (the host's, for camera rays from the space's origin) */
     const realv h = FROM_EYE(ray) ? SPLAT(plane->normal.w) : SPLAT(plane->normal.w) + v3_dot(n, ray->origin);
     /* a ray parallel to the plane gives +-inf or NaN here: neither is a hit; n . d exact for camera rays */
     const realv s = -h / PIXEL_DOT(ray, plane->normal, plane->normal_low, v3_dot(n, ray->dir));
@@ -34,7 +34,7 @@ inline realv plane_hit(SHAPE_SPACE const Plane* plane, const RayPacket* ray)
 }
 
 /* The plane's own normalized normal in world space (packed as is, not rotated back from the
- * frame, so an axis-aligned floor gives exactly (0, 1, 0)), never flipped toward the viewer. */
+ * camera's space, so an axis-aligned floor gives exactly (0, 1, 0)), never flipped toward the viewer. */
 inline vec3v plane_normal(SHAPE_SPACE const Plane* plane, const RayPacket* ray, const Basis* basis)
 {
     return v3_splat(plane->world_normal);

@@ -17,17 +17,17 @@
  * Exact and independent of the other rays: each shape is tested from a point of the ray just
  * before it, as a camera there would test it. For a bounded shape of anchor A and bounding radius
  * R, the ray's origin O moves along the unit direction D to O' = O + s0 D, s0 = max(0, (A - O).D - R),
- * which no point of the shape precedes (float64); the shape is then framed on O' from its float64
+ * which no point of the shape precedes (float64); the shape is then rebased on O' from its float64
  * world entry (kernels/cast.h: its coordinates relative to O' rounded once, and the terms O' decides,
- * such as a sphere's c = |C - O'|^2 - r^2, in float64) and tested from the frame's origin. A ray
+ * such as a sphere's c = |C - O'|^2 - r^2, in float64) and tested from the space's origin. A ray
  * from 1e8 away thus meets a sphere of radius 1e-4 with errors relative to the sphere's size, and a
  * ray starting on a surface, or 1e-9 off it, knows which side it starts on; its distance is s0 + s
- * (s: the shape's own, from O'). Unbounded shapes (planes) are framed on the ray's own origin. */
-#define PYCLRAY_CAST_FRAMED(Type, type, k, from)                                    \
-    Type framed = type##s[k];                                                       \
+ * (s: the shape's own, from O'). Unbounded shapes (planes) are rebased on the ray's own origin. */
+#define PYCLRAY_CAST_REBASED(Type, type, k, from)                                   \
+    Type rebased = type##s[k];                                                      \
     {                                                                               \
-        const Frame frame = {(from)};                                               \
-        type##_rebase(&type##_worlds[k], &framed, &frame);                          \
+        const Space space = {(from)};                                               \
+        type##_rebase(&type##_worlds[k], &rebased, &space);                         \
     }
 /* A type's entries are tested one by one (PYCLRAY_CAST_MODE_<type> ENTRY), or in blocks of a leaf's
  * entries that its kernel file tests at once (BLOCKS: a mesh's triangles, kernels/mesh.cl); the
@@ -37,8 +37,8 @@
     if (kind == KIND_##type) { PYCLRAY_CAST_MODE(PYCLRAY_CAST_TEST_, type)(Type, type) }
 #define PYCLRAY_CAST_TEST_ENTRY(Type, type)                                         \
     {                                                                               \
-        PYCLRAY_CAST_FRAMED(Type, type, k, moved.world)                             \
-        const real s = PYCLRAY_HIT_##type(&framed, &moved, MISS);                   \
+        PYCLRAY_CAST_REBASED(Type, type, k, moved.world)                            \
+        const real s = PYCLRAY_HIT_##type(&rebased, &moved, MISS);                  \
         const double t = s < MISS ? s0 + (double)s * ray_length : INFINITY;         \
         PYCLRAY_CAST_TAKE(t, type##s[k].id, KIND_##type, k, q)                      \
         PYCLRAY_CAST_PREFETCH_WINNER(Type, type, k)                                 \
@@ -81,11 +81,11 @@
         const int leaf_kind = refs[first] & 15, leaf_k = refs[first] >> 4;          \
         PYCLRAY_BOUNDED(PYCLRAY_CAST_PREFETCH_KIND)                                 \
     }
-/* (unbounded shapes: framed on the ray's start, O + t_min D, which is O itself where t_min is 0) */
+/* (unbounded shapes: rebased on the ray's start, O + t_min D, which is O itself where t_min is 0) */
 #define PYCLRAY_CAST_LINEAR(Type, type)                                             \
     for (int q = 0; q < n_##type##s; ++q) {                                         \
-        PYCLRAY_CAST_FRAMED(Type, type, q, start.world)                             \
-        const real s = PYCLRAY_HIT_##type(&framed, &start, MISS);                   \
+        PYCLRAY_CAST_REBASED(Type, type, q, start.world)                            \
+        const real s = PYCLRAY_HIT_##type(&rebased, &start, MISS);                  \
         const double t = s < MISS ? t_min + (double)s * ray_length : INFINITY;      \
         PYCLRAY_CAST_TAKE(t, type##s[q].id, KIND_##type, q, -1)                     \
     }
@@ -129,7 +129,7 @@ inline RayPacket moved_ray(const RayPacket* ray, const double4 anchor, const dou
     const double3 GxD = (double3)(G.y * D.z - G.z * D.y, G.z * D.x - G.x * D.z, G.x * D.y - G.y * D.x);
     *near = (GxD.x * GxD.x + GxD.y * GxD.y) + GxD.z * GxD.z <= anchor.w * anchor.w;
     RayPacket moved = *ray;
-    moved.world = O + *s0 * D;  /* where the shape is framed */
+    moved.world = O + *s0 * D;  /* where the shape is rebased */
     return moved;
 }
 
@@ -297,7 +297,7 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
     ray.dir_exact = direction->unit;                                                \
     ray.dir = direction->dir;                                                       \
     ray.a = direction->a;                                                           \
-    ray.origin = v3(0, 0, 0);  /* each shape is framed on the ray's origin */       \
+    ray.origin = v3(0, 0, 0);  /* each shape is rebased on the ray's origin */      \
     const real ray_length = direction->ray_length;                                  \
     const double t_max = limits[(size_t)r * (size_t)limit_stride];                  \
     const double t_min = starts[(size_t)r * (size_t)start_stride];                  \

@@ -1,4 +1,4 @@
-/* Rectangle: the points C + a u + b v with |a| <= 1 and |b| <= 1. In the frame, h = n . (origin - C)
+/* Rectangle: the points C + a u + b v with |a| <= 1 and |b| <= 1. In the space, h = n . (origin - C)
  * comes from the host in float64 (normal.w), and a, b of a point P - C are its dot products with the
  * dual vectors of u and v (host-side float64: exact for sides orthogonal within 1e-6). The hit
  * point from the centre is n x (D x F) / (n . D) rather than s D - F, which cancels far away (see
@@ -6,16 +6,16 @@
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The rectangle in the camera's frame: its centre, normal and the origin's distance to its plane,
- * and the dual vectors of its sides along the frame's axes. */
-inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME_OUT Rectangle* out, const Frame* frame)
+/* The rectangle in the camera's space: its centre, normal and the origin's distance to its plane,
+ * and the dual vectors of its sides along the space's axes. */
+inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_REBASE_OUT Rectangle* out, const Space* space)
 {
-    const double3 F = world->center.xyz - frame->origin, n = world->normal.xyz;
-    out->center = (real4)(to_frame(frame, F), 0);
-    out->normal = (real4)(to_frame(frame, n), (real)(-dot2_3(n, F)));
-    out->normal_low = (real4)(to_frame_low(frame, n), 0);
-    out->u_dual = (real4)(to_frame(frame, world->u_dual.xyz), 0);
-    out->v_dual = (real4)(to_frame(frame, world->v_dual.xyz), 0);
+    const double3 F = world->center.xyz - space->origin, n = world->normal.xyz;
+    out->center = (real4)(to_space(space, F), 0);
+    out->normal = (real4)(to_space(space, n), (real)(-dot2_3(n, F)));
+    out->normal_low = (real4)(to_space_low(space, n), 0);
+    out->u_dual = (real4)(to_space(space, world->u_dual.xyz), 0);
+    out->v_dual = (real4)(to_space(space, world->v_dual.xyz), 0);
     out->world_normal = (real4)(convert_real3(n), 0);
 }
 
@@ -30,7 +30,7 @@ inline void rectangle_rebase(__global const RectangleWorld* world, PYCLRAY_FRAME
 inline realv rectangle_hit(SHAPE_SPACE const Rectangle* rectangle, const RayPacket* ray)
 {
     const vec3v n = v3_splat(rectangle->normal);
-    /* from the eye (the frame's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
+    /* from the eye (the space's origin) the host's h; from elsewhere (cast, shadow rays) the origin's */
     const vec3v F = FROM_EYE(ray) ? v3_splat(rectangle->center) : v3_sub(v3_splat(rectangle->center), ray->origin);
     const realv h = FROM_EYE(ray) ? SPLAT(rectangle->normal.w) : SPLAT(rectangle->normal.w) + v3_dot(n, ray->origin);
     /* +-inf or NaN for a parallel ray: not a hit; n . d exact for camera rays */

@@ -12,13 +12,13 @@
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_ONE_BOUNDED) && defined(PYCLRAY_INLINE_BUILTINS)
 /* One bounded type (PYCLRAY_ONE_BOUNDED): leaf position q is entry q of its arrays, so a leaf's
  * entries are asked for at once where the traversal first meets the leaf
- * (kernels/bvh_wide_packet.h): the entries its tests read, in the frame (COPIED), in the world (FRAMED), or its faces (INDEXED: the
+ * (kernels/bvh_wide_packet.h): the entries its tests read, in the space (COPIED), in the world (FROM_WORLD), or its faces (INDEXED: the
  * vertices they name follow when read). PoCL's CPU device only: elsewhere OpenCL's prefetch is a
  * call, or nothing. */
 #define PYCLRAY_PREFETCH_RANGE(p, bytes) \
     for (int byte = 0; byte < (bytes); byte += 64) __builtin_prefetch((__global const char*)(p) + byte);
 #define PYCLRAY_PREFETCH_COPIED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##s[leaf_first], leaf_count * (int)sizeof(Type))
-#define PYCLRAY_PREFETCH_FRAMED(Type, type) \
+#define PYCLRAY_PREFETCH_FROM_WORLD(Type, type) \
     PYCLRAY_PREFETCH_RANGE(&type##_worlds[leaf_first], leaf_count * (int)sizeof(Type##World))
 #define PYCLRAY_PREFETCH_INDEXED(Type, type) PYCLRAY_PREFETCH_RANGE(&type##_faces[leaf_first], leaf_count * (int)sizeof(int4))
 #define PYCLRAY_PACKET_PREFETCH_TYPE(Type, type) PYCLRAY_CAT(PYCLRAY_PREFETCH_, PYCLRAY_MODE_##type)(Type, type)
@@ -58,14 +58,14 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYC
 #else
     const RayPacket ray = camera_rays(camera, i0, j0);
 #endif
-#ifdef PYCLRAY_FRAMED
-    const Frame view_frame = {frame_origin.xyz, frame_u.xyz, frame_v.xyz, frame_w.xyz};  /* the eye's */
+#ifdef PYCLRAY_FROM_WORLD
+    const Space view_space = {space_origin.xyz, space_u.xyz, space_v.xyz, space_w.xyz};  /* the eye's */
 #endif
 
     PYCLRAY_FIND_NEAREST
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
     /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
-    const BoxPacket box = box_packet(world_from_frame(camera, ray.dir), camera->box_origin);
+    const BoxPacket box = box_packet(world_from_space(camera, ray.dir), camera->box_origin);
     PYCLRAY_TRAVERSE_PACKET_WIDE(wide_nodes, box, best, PYCLRAY_VISIT)
 #endif
 #ifdef PYCLRAY_CAMERA_TABLE

@@ -2,9 +2,9 @@
  * rays only with PYCLRAY_SHADOWS. The host puts this file before kernels/render.cl, whose render
  * kernel expands the macros below (they use the kernel's arguments: the shapes, the camera).
  *
- * Everything is computed in the camera's frame, where the hit point is p = s D (D the camera ray's
+ * Everything is computed in the camera's space, where the hit point is p = s D (D the camera ray's
  * direction, s its distance): the host packs the lights there (in float64), and each winner's world
- * normal is turned into the frame. At a hit with normal n seen along the unit direction D:
+ * normal is turned into the space. At a hit with normal n seen along the unit direction D:
  *   n_s = n if n.D < 0 else -n                                    (the side facing the viewer)
  *   shaded = albedo ambient + sum over lights of V E (albedo max(0, n_s.L)
  *            + (specular max(0, n_s.H)^shininess if n_s.L > 0 else 0)),   H = normalize(L - D),
@@ -20,7 +20,7 @@
  *   moved or skipped: an occluder touching p (a ball on the ground) still shadows it.
  * - otherwise (a convex shape's inner side, where the ray may meet the opposite wall), pbrt-v4's
  *   OffsetRayOrigin: p moved along n_s by d = |n_s| . e, e the rounding bound of p's coordinates
- *   and of the shadow test's own roundings. The hit is p = s D in the eye's frame, with s from the
+ *   and of the shadow test's own roundings. The hit is p = s D in the eye's space, with s from the
  *   host's exact terms: s and each D_i carry a relative error of a few eps (the render's depth is
  *   within a few ulps of t), so p is off by a few eps |p|; the shadow ray's test of the surface from
  *   p rounds terms of about eps |p| too where it takes the better of two forms (a sphere's c directly
@@ -41,7 +41,7 @@
 /* Smooth shading (PYCLRAY_SMOOTH: a shape of a type in PYCLRAY_SMOOTH_TYPES, a smooth mesh, is
  * present): the winner's shading normal, <type>_shading_normal (world, unit; (0, 0, 0) where the
  * shape is flat), lights the hit instead of the geometric normal, turned toward the viewer as n_s
- * is (as Mitsuba's two-sided BSDF does in its shading frame). The geometric normal still decides
+ * is (as Mitsuba's two-sided BSDF does in its shading space). The geometric normal still decides
  * the side (front), and the shadow ray starts on the geometric surface: at p, the triangle itself
  * skipped (flat), so a shading normal never moves a shadow ray's origin. */
 #ifdef PYCLRAY_SMOOTH
@@ -56,7 +56,7 @@
 #define PYCLRAY_SMOOTH_NORMALS PYCLRAY_SMOOTH_TYPES(PYCLRAY_SMOOTH_OF)
 /* n_l: the normal that lights, facing the viewer: the shading normal where there is one, else n_s */
 #define PYCLRAY_LIGHTING_NORMAL                                                       \
-    const vec3v n_shading = frame_from_world(camera, shading_normal);                 \
+    const vec3v n_shading = space_from_world(camera, shading_normal);                 \
     const intv has_shading = v3_dot(n_shading, n_shading) > 0;                        \
     const vec3v n_facing = v3_select(v3_scale(n_shading, SPLAT(-1)), n_shading, v3_dot(n_shading, D) < 0); \
     const vec3v n_l = v3_select(n_s, n_facing, has_shading);
@@ -84,8 +84,8 @@
 
 inline vec3v v3_mul(const vec3v a, const vec3v b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
 
-/* a world direction in the camera's frame: its components along u, v, w */
-inline vec3v frame_from_world(__global const Camera* camera, const vec3v n)
+/* a world direction in the camera's space: its components along u, v, w */
+inline vec3v space_from_world(__global const Camera* camera, const vec3v n)
 {
     return v3(v3_dot(n, v3_splat(camera->u)), v3_dot(n, v3_splat(camera->v)), v3_dot(n, v3_splat(camera->w)));
 }
@@ -120,7 +120,7 @@ inline vec3v shade_light(const vec3v albedo, const realv specular, const realv s
         open = open && (PYCLRAY_SELF_##type(self) || !(s < limit));                   \
     }
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
-/* The shadow packet for box tests, in the BVH's frame (world axes around the scene's anchor): its
+/* The shadow packet for box tests, in the BVH's space (world axes around the scene's anchor): its
  * unit directions, its per-lane origins, and a margin over their rounding and over a shape test's
  * error from an origin of that size (2^-20 |o|_1, as cast's box rays), and over the rounding of
  * the eye from the anchor (the camera's box origin). */
@@ -183,7 +183,7 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
  * box ray runs from the light along -dir_i over [0, limit_i], the segment the shape tests cover
  * from the lane's own origin (they are still made from there: their exactness does not change).
  * A point the shape test puts at s along dir_i from the origin o_i lies at limit_i - s from the
- * light along -dir_i, up to the roundings of the light in the box frame, of o_i and of dir_i limit_i:
+ * light along -dir_i, up to the roundings of the light in the box space, of o_i and of dir_i limit_i:
  * a few eps of |light| + |o_i| (limit_i <= their sum) and of the direction's length, which the cone
  * covers (t BVH_WIDEN >> eps t). The margin is the one of the origin-wise test, taken at the largest
  * lane, plus that of the light: 2^-20 (|light|_1 + |light from the eye|_1 + max_i (|o_i|_1 + |o_i from
@@ -210,7 +210,7 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
                         + camera->box_origin.w;
     /* rounded up to float: a margin never shrinks */
     const float m = (float)margin;
-    return box_packet(v3_scale(world_from_frame(camera, dir), SPLAT(-1)),
+    return box_packet(v3_scale(world_from_space(camera, dir), SPLAT(-1)),
                       (float4)(from, (real)m < margin ? m * (1.0f + 0x1p-23f) : m));
 }
 
@@ -218,13 +218,13 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
     if (point && ANY(open)) {                                                         \
         const BoxPacket from_light = shadow_light_packet(camera, light.position, shadow.dir, \
-                                                         world_from_frame(camera, shadow.origin), open); \
+                                                         world_from_space(camera, shadow.origin), open); \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
         PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &from_light, reach, PYCLRAY_SHADOW_VISIT) \
     } else if (ANY(open)) {                                                           \
         ShadowBoxes boxes;                                                            \
-        boxes.box = box_packet(world_from_frame(camera, shadow.dir), camera->box_origin); \
-        const vec3v from_eye = world_from_frame(camera, shadow.origin);               \
+        boxes.box = box_packet(world_from_space(camera, shadow.dir), camera->box_origin); \
+        const vec3v from_eye = world_from_space(camera, shadow.origin);               \
         const vec3v origin = v3_add(from_eye, v3_splat((real4)(convert_real3(camera->box_origin.xyz), 0))); \
         shadow_box_origins(&boxes, origin,                                            \
                            SPLAT(0x1p-20) * ((v_abs(origin.x) + v_abs(origin.y)) + v_abs(origin.z)) \
@@ -270,7 +270,7 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
         const intv hit = best < MISS;                                                 \
         const vec3v p = v3_scale(ray.dir, hit ? best : SPLAT(0));                     \
         const vec3v D = v3_scale(ray.dir, SPLAT(1) / v_sqrt(ray.a));                  \
-        const vec3v n = frame_from_world(camera, normal);                             \
+        const vec3v n = space_from_world(camera, normal);                             \
         const intv front = v3_dot(n, D) < 0;                                          \
         const vec3v n_s = v3_select(v3_scale(n, SPLAT(-1)), n, front);                \
         PYCLRAY_LIGHTING_NORMAL                                                       \

@@ -12,14 +12,14 @@
 #define PYCLRAY_KIND(Type, type) KIND_##type,
 enum { KIND_NONE = 0, PYCLRAY_SHAPES(PYCLRAY_KIND) KIND_COUNT };
 
-/* The axes of the frame a shape is tested in, in world coordinates (the columns of world_from_frame):
+/* The axes of the space a shape is tested in, in world coordinates (the columns of world_from_space):
  * a render's are the camera's (kernels/camera.h: camera_basis), cast's and any-hit's the world's own
- * (kernels/cast.h). A normal function turns what it computes in the frame into the world with them. */
+ * (kernels/cast.h). A normal function turns what it computes in the space into the world with them. */
 typedef struct {
     real4 u, v, w;
 } Basis;
 
-/* n (a direction of the frame of axes u, v, w) in world coordinates */
+/* n (a direction of the space of axes u, v, w) in world coordinates */
 inline vec3v world_from_axes(const real4 u, const real4 v, const real4 w, const vec3v n)
 {
     return v3((n.x * u.x + n.y * v.x) + n.z * w.x,

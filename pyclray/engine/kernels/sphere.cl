@@ -1,20 +1,20 @@
 /* Sphere: |p - C|^2 = r^2.
  *
  * With F = C - origin, the ray origin + s*D meets it where a s^2 - 2 b s + c = 0,
- * a = D.D, b = F.D, c = F.F - r^2. For camera rays the origin is the frame's origin, so c is the
+ * a = D.D, b = F.D, c = F.F - r^2. For camera rays the origin is the space's origin, so c is the
  * same for every pixel: the host computes it once in float64 with error-free products (it is the
  * eye's squared distance to the surface, exact even for a huge sphere just below the camera).
  */
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-/* The sphere in the camera's frame, from its world centre and radius: F = C - origin (float64),
- * its coordinates along the frame's axes, r^2, and c = |F|^2 - r^2 from error-free sums. */
-inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT Sphere* out, const Frame* frame)
+/* The sphere in the camera's space, from its world centre and radius: F = C - origin (float64),
+ * its coordinates along the space's axes, r^2, and c = |F|^2 - r^2 from error-free sums. */
+inline void sphere_rebase(__global const SphereWorld* world, PYCLRAY_REBASE_OUT Sphere* out, const Space* space)
 {
-    const double3 F = world->center.xyz - frame->origin;
+    const double3 F = world->center.xyz - space->origin;
     const double r = world->center.w;
-    out->center = (real4)(to_frame(frame, F), (real)(r * r));
+    out->center = (real4)(to_space(space, F), (real)(r * r));
     out->c = (real)dot2_4((double4)(F, r), (double4)(F, -r));
 }
 
@@ -36,7 +36,7 @@ inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacke
 {
     SphereTerms t;
     const realv r2 = SPLAT(sphere->center.w);
-    if (FROM_EYE(ray)) {  /* the ray's origin is the frame's: c from the host, exact */
+    if (FROM_EYE(ray)) {  /* the ray's origin is the space's: c from the host, exact */
         t.F = v3_splat(sphere->center);
         t.c = SPLAT(sphere->c);
     } else {  /* a shadow ray from a point p of the scene */
@@ -69,7 +69,7 @@ inline SphereTerms sphere_terms(SHAPE_SPACE const Sphere* sphere, const RayPacke
 /* Nearest root s > 0 per lane, or MISS. */
 inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
 {
-#if !defined(PYCLRAY_FRAMED) && !defined(PYCLRAY_CAST)
+#if !defined(PYCLRAY_FROM_WORLD) && !defined(PYCLRAY_CAST)
     /* From the eye with the per-view pass's entry, c is read, not computed: a packet whose b^2 - a c
      * < -2^-10 (b^2 + |a c|) in every lane misses (five products instead of the cross product's
      * twelve below; docs/benchmarks.md, "Why the engine does what it does"). sphere_terms takes b^2 - a c there (the
@@ -83,7 +83,7 @@ inline realv sphere_hit(SHAPE_SPACE const Sphere* sphere, const RayPacket* ray)
         if (!ANY(b2 - ac >= SPLAT(-0x1p-10) * (b2 + v_abs(ac)))) return SPLAT(MISS);
     } else
 #endif
-    /* A packet that passes far from the sphere misses it without c (a framed render's costliest
+    /* A packet that passes far from the sphere misses it without c (a from-world render's costliest
      * term): where a r^2 - |F x D|^2 < -2^-10 (a r^2 + |F x D|^2 + b^2) in every lane, b^2 - a c,
      * the same quantity (Lagrange's identity) computed from c within rounding errors of a few eps
      * (a r^2 + a |F|^2) = a few eps (a r^2 + |F x D|^2 + b^2) (c's chosen form has terms of at most

@@ -3,9 +3,9 @@
 
 #if defined(PYCLRAY_REBASE) || defined(PYCLRAY_CAST)
 
-inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_FRAME_OUT Sphere* out, const Frame* frame)
+inline void spheres_rebase(__global const SphereWorld* world, PYCLRAY_REBASE_OUT Sphere* out, const Space* space)
 {
-    sphere_rebase(world, out, frame);
+    sphere_rebase(world, out, space);
 }
 
 #endif

@@ -106,7 +106,7 @@ class Variant:
 
     query: str  # "render" (camera rays, a packet of pixels per work-item), "cast" (rays given, traced one
     # at a time, CAST_GROUP of them per work-item: engine/queries/cast.py), "occluded" (cast's any-hit query) or "rebase" (the scene's per-view pass into a
-    # camera's frame: kernels/rebase.cl)
+    # camera's space: kernels/rebase.cl)
     shape_types: tuple[str, ...]
     aovs: tuple[str, ...]
     precision: str
@@ -114,11 +114,11 @@ class Variant:
     shadows: bool = False  # with "shaded": cast shadow rays (none are compiled in without it)
     bvh: bool = False  # render: the bounded shapes through the BVH instead of tile lists (cast: always)
     smooth: tuple[str, ...] = ()  # with "shaded": the types with a shape lit by its own normals (a smooth mesh)
-    # render: each shape framed on the eye from its float64 world entry where it is tested (devices
+    # render: each shape rebased on the eye from its float64 world entry where it is tested (devices
     # with float64), instead of read from the per-view pass's buffers (pyclray.engine.scene.prepared)
-    framed: bool = False
+    from_world: bool = False
     # render: the indexed types' entries (meshes) assembled from shared vertices and faces (devices with
-    # float64, engine/scene/indexed.py), framed or not
+    # float64, engine/scene/indexed.py), rebased or not
     indexed: bool = False
     # render: the camera's rays read from a table (a lens or a panorama: kernels/camera.h,
     # camera_table_rays) instead of the pinhole's image plane: "plane" (each ray's image-plane
@@ -169,13 +169,13 @@ class Variant:
                 lines.append("#define PYCLRAY_CAST_INTERLEAVE 1")
         if self.query == "rebase":
             lines.append("#define PYCLRAY_REBASE 1")
-        if self.framed and self.query == "render":
-            lines.append("#define PYCLRAY_FRAMED 1")
+        if self.from_world and self.query == "render":
+            lines.append("#define PYCLRAY_FROM_WORLD 1")
         if any(self.mode(t) == "INDEXED" for t in self.shape_types):
             lines.append("#define PYCLRAY_INDEXED 1")
         if self.query == "render" and len(bounded) == 1:  # its leaf position is its index: no refs read
             lines.append(f"#define PYCLRAY_ONE_BOUNDED KIND_{bounded[0]}")
-        # where a render reads each type's shapes (kernels/entries.h): framed where tested, or copied
+        # where a render reads each type's shapes (kernels/entries.h): rebased where tested, or copied
         lines += [f"#define PYCLRAY_MODE_{t} {self.mode(t)}" for t in self.shape_types]
         if self.shadows and "shaded" in self.aovs:
             lines.append("#define PYCLRAY_SHADOWS 1")
@@ -214,12 +214,12 @@ class Variant:
         return lines
 
     def mode(self, t: str) -> str:
-        """Where a render reads the shapes of type t (kernels/entries.h): framed where tested from their
+        """Where a render reads the shapes of type t (kernels/entries.h): rebased where tested from their
         world entries, assembled from shared vertices and faces, or the per-view pass's copy."""
         shape = REGISTRY[t]
         if self.indexed and self.query == "render" and shape.indexed:
             return "INDEXED"
-        return "FRAMED" if self.framed and self.query == "render" and shape.frames_in_render else "COPIED"
+        return "FROM_WORLD" if self.from_world and self.query == "render" and shape.tested_from_world else "COPIED"
 
     def source(self, inline_builtins: bool = False) -> str:
         """The whole program: only the shape types present and the images asked for.
@@ -241,9 +241,9 @@ class Variant:
         if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
         shading = "shaded" in self.aovs
-        cast = self.query in RAY_QUERIES  # frames each shape on its ray's origin: the world entries too
-        framed = self.framed and self.query == "render"
-        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or framed else [])
+        cast = self.query in RAY_QUERIES  # rebases each shape on its ray's origin: the world entries too
+        from_world = self.from_world and self.query == "render"
+        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or from_world else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
@@ -255,9 +255,9 @@ class Variant:
             parts += [_read(name) for name in ("camera.h", "bvh.h", "bvh_packet.h")]
             if self.bvh and self.bounded_types():
                 parts.append(_read("bvh_wide_packet.h"))
-        if framed:  # each framed type's <type>_rebase (the per-view pass's, to the same bits), then its tests
-            parts += [FRAMING_BEGIN, _read("frame.h"), "#define PYCLRAY_REBASE 1"]
-            parts += [_read(name) for name in _kernel_files([s for s in shapes if s.frames_in_render])] + [FRAMING_END]
+        if from_world:  # each rebased type's <type>_rebase (the per-view pass's, to the same bits), then its tests
+            parts += [FROM_WORLD_BEGIN, _read("space.h"), "#define PYCLRAY_REBASE 1"]
+            parts += [_read(name) for name in _kernel_files([s for s in shapes if s.tested_from_world])] + [FROM_WORLD_END]
         parts += [_read(name) for name in _kernel_files(shapes)]
         if cast:
             parts.append(_read("rays.h"))
@@ -295,10 +295,10 @@ class Variant:
         return "\n".join(parts)
 
     def _rebase_source(self, shapes, inline_builtins: bool = False) -> str:
-        """The per-view pass: each type's world struct and frame struct, its <type>_rebase, and the
+        """The per-view pass: each type's world struct and space struct, its <type>_rebase, and the
         kernels of kernels/rebase_kernels.cl. float64 throughout (the device needs cl_khr_fp64).
         inline_builtins (PoCL's CPU device), as for the render's program: the error-free product
-        with the fused multiply-add (kernels/frame.h: the same exact error as Dekker's) and every
+        with the fused multiply-add (kernels/space.h: the same exact error as Dekker's) and every
         function inlined into the kernels, so that PoCL vectorizes the pass across work-items
         (the same bits, tests/test_views.py; docs/benchmarks.md: Variant._rebase_source)."""
         defines = self.defines() + (["#define PYCLRAY_INLINE_BUILTINS 1"] if inline_builtins else [])
@@ -308,7 +308,7 @@ class Variant:
         parts += [_read("common.h"), c_header(structs, self.precision), _read("rebase.cl")]
         if inline_builtins:
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        parts += [_read("frame.h")] + [_read(name) for name in _kernel_files(shapes)]
+        parts += [_read("space.h")] + [_read(name) for name in _kernel_files(shapes)]
         if inline_builtins:
             parts.append("#pragma clang attribute pop")
         parts.append(_read("rebase_kernels.cl"))
@@ -318,15 +318,15 @@ class Variant:
         return list(BUILD_OPTIONS)
 
 
-# A framed render compiles each shape file twice: its <type>_rebase first (PYCLRAY_REBASE selects that
+# A from-world render compiles each shape file twice: its <type>_rebase first (PYCLRAY_REBASE selects that
 # part), then its tests. Both, and the rest of the program, without contraction of a * b + c into an
-# fma, as the per-view pass (kernels/rebase.cl): a shape framed where it is tested has the bits the
+# fma, as the per-view pass (kernels/rebase.cl): a shape rebased where it is tested has the bits the
 # pass gives it. Measured on PoCL: with contraction back on (DEFAULT or ON) after the framing code,
 # the images differ from the pass's in a few pixels (tests/test_views.py: a device without float64).
-FRAMING_BEGIN = """#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+FROM_WORLD_BEGIN = """#pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
-#define PYCLRAY_FRAME_OUT"""
-FRAMING_END = "#undef PYCLRAY_REBASE"
+#define PYCLRAY_REBASE_OUT"""
+FROM_WORLD_END = "#undef PYCLRAY_REBASE"
 
 
 def _unique(items) -> list:

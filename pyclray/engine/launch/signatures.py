@@ -45,9 +45,9 @@ def _shadows(variant, _type=None) -> bool:
     return variant.shadows and "shaded" in variant.aovs
 
 
-def _framed(variant, _type=None) -> bool:
-    """A render that frames its shapes on the eye where it tests them (kernels/entries.h)."""
-    return variant.framed
+def _from_world(variant, _type=None) -> bool:
+    """A render that rebases its shapes on the eye where it tests them (kernels/entries.h)."""
+    return variant.from_world
 
 
 def _camera_table(variant, _type=None) -> bool:
@@ -116,7 +116,7 @@ def _image(aov: str, c_type: str) -> Parameter:
     return Parameter(image_parameter(aov), c_type, (_asked(aov),))
 
 
-_FRAMED, _COPIED, _INDEXED = _mode("FRAMED"), _mode("COPIED"), _mode("INDEXED")
+_FROM_WORLD, _COPIED, _INDEXED = _mode("FROM_WORLD"), _mode("COPIED"), _mode("INDEXED")
 
 RENDER = (
     Parameter("camera", "__global const Camera*"),
@@ -129,11 +129,11 @@ RENDER = (
     Parameter("rows", "const int"),
     Parameter("tile_shift", "const int"),
     Parameter("tiles_x", "const int"),
-    # a framed render's eye frame, float64: its origin and axes (kernels/entries.h)
-    Parameter("frame_origin", "const double4", (_framed,)),
-    Parameter("frame_u", "const double4", (_framed,)),
-    Parameter("frame_v", "const double4", (_framed,)),
-    Parameter("frame_w", "const double4", (_framed,)),
+    # a from-world render's eye space, float64: its origin and axes (kernels/entries.h)
+    Parameter("space_origin", "const double4", (_from_world,)),
+    Parameter("space_u", "const double4", (_from_world,)),
+    Parameter("space_v", "const double4", (_from_world,)),
+    Parameter("space_w", "const double4", (_from_world,)),
     # the wide BVH (camera packets: kernels/bvh_wide_packet.h), the binary one of the same boxes for
     # shadow rays (kernels/shading.h), the leaves' refs
     Parameter("wide_nodes", "__global const WideNode*", (_through_bvh, _bounded)),
@@ -141,9 +141,9 @@ RENDER = (
     Parameter("refs", "__global const int*", (_through_bvh, _bounded)),
     EachType((
         # its entries, where the render reads them (kernels/entries.h)
-        Parameter("{type}_worlds", "__global const {World}*", (_FRAMED,)),
-        Parameter("{type}_ids", "__global const int*", (_FRAMED,)),
-        Parameter("{type}_primitives", "__global const int*", (_FRAMED,)),
+        Parameter("{type}_worlds", "__global const {World}*", (_FROM_WORLD,)),
+        Parameter("{type}_ids", "__global const int*", (_FROM_WORLD,)),
+        Parameter("{type}_primitives", "__global const int*", (_FROM_WORLD,)),
         Parameter("{type}s", "__global const {Type}*", (_COPIED,)),
         Parameter("{type}_faces", "__global const int4*", (_INDEXED,)),
         Parameter("{type}_vertices", "__global const real4*", (_INDEXED,)),
@@ -166,7 +166,7 @@ RENDER = (
     Parameter("eye_high", "const real4", (_asked("position"),)),
     Parameter("eye_low", "const real4", (_asked("position"),)),
     _image("position", "__global real*"),
-    # the shaded image's materials, lights in the camera's frame, ambient, background and the smooth
+    # the shaded image's materials, lights in the camera's space, ambient, background and the smooth
     # types' shading normals (kernels/shading.h)
     Parameter("materials", "__global const Material*", (_asked("shaded"),)),
     Parameter("lights", "__global const Light*", (_asked("shaded"),)),

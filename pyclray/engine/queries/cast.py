@@ -144,7 +144,7 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([points[:, i].min() for i in range(3)]), np.array([points[:, i].max() for i in range(3)]))
 
 
-# -- the inputs of casts: each bounded entry in its own frame (its anchor), the BVH around the scene's anchor
+# -- the inputs of casts: each bounded entry in its own space (its anchor), the BVH around the scene's anchor
 def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict]:
     """(arguments by name, anchor, size, bytes, block lanes): the BVH around the scene's anchor (its root box's
     centre), its refs and the entries' anchors, and per packed kind its buffer (each bounded entry
@@ -203,7 +203,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
             packed = kind.cls.rebase(worlds[name], origin, identity, precision, kind.ids, kind.primitives)
         if not all(np.isfinite(packed[field]).all() for field in packed.dtype.names if packed[field].dtype.kind == "f"):
             raise RequestError(f"the scene's {name}s are too large for {precision}: their packed values overflow")
-        # the packed entries (their ids) and the float64 world entries the kernel frames on each ray
+        # the packed entries (their ids) and the float64 world entries the kernel rebases on each ray
         args.update({f"{name}s": input_buffer(ctx, packed if len(packed) else np.zeros(1, packed.dtype)),
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
                      **shared_arguments(name, kind.shared), f"n_{name}s": np.int32(kind.count)})

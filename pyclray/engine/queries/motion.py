@@ -1,6 +1,6 @@
 """The data sets' images derived on the host after the kernel, from the hit point (`position`), the
 shape (`id`) and its primitive: `object_coordinates`, the hit point in its shape's own frame
-(Shape.object_frames), and `flow`, the forward optical flow in pixels.
+(Shape.object_poses), and `flow`, the forward optical flow in pixels.
 
 Flow is exact per pixel, not estimated from images: the hit point X in its shape's frame at t is
 carried by the shape's rigid motion to the next frame (t + 1/fps: world_from_object there, the same
@@ -33,7 +33,7 @@ def _object_points(shapes, ids, primitives, points) -> np.ndarray:
     frames; world coordinates for a shape without a frame."""
     out = np.array(points, np.float64)
     for shape_id in np.unique(ids):
-        frames = shapes[shape_id].object_frames()
+        frames = shapes[shape_id].object_poses()
         if frames is None:
             continue
         chosen = ids == shape_id
@@ -50,7 +50,7 @@ def _world_points(shapes, ids, primitives, local) -> np.ndarray:
     """The inverse of _object_points with these shapes (at another time)."""
     out = np.array(local, np.float64)
     for shape_id in np.unique(ids):
-        frames = shapes[shape_id].object_frames()
+        frames = shapes[shape_id].object_poses()
         if frames is None:
             continue
         chosen = ids == shape_id

@@ -3,7 +3,7 @@ shading model (scene-format.md, "Shading") of cast's hits, on the host, its shad
 ``occluded`` query.
 
 Why on the host, beside kernels/shading.h: the render kernel shades inside its packets, in the eye's
-frame, its shadow rays leaving from points of that frame; a cast view has no eye, and its hits are
+space, its shadow rays leaving from points of that space; a cast view has no eye, and its hits are
 already here (cast's float64 origins and unit directions, its depth, normal, id, primitive and
 barycentric). What remains is a per-pixel formula of a few numpy operations, written here term by
 term as kernels/shading.h's PYCLRAY_WRITE_SHADED writes it (n_s, the lighting normal, E, L, cos, H,

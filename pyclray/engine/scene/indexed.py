@@ -1,21 +1,21 @@
 """Meshes as shared vertices and faces (the capability "indexed": IndexedTriangles.pack_indexed), on every device with float64: the render
 kernel assembles each triangle it tests from its face and the per-view pass's vertices in the eye's
-frame (kernels/entries.h, INDEXED), and computes the winner's world normal from the float64 vertices.
+space (kernels/entries.h, INDEXED), and computes the winner's world normal from the float64 vertices.
 
 A closed mesh has about half as many vertices as triangles, so per triangle this holds a face (16
 bytes: three vertex indices and its primitive index, ~index for a zero-area triangle), half a
-float64 vertex (32 bytes each) and half a vertex in the frame (16 bytes each in fp32), and its id
+float64 vertex (32 bytes each) and half a vertex in the space (16 bytes each in fp32), and its id
 (4 bytes): 44 bytes, against the per-view copy's 64 and the world entry's 96 (and the BVH's nodes
-either way). The per-view pass frames vertices, not triangles: a vertex shared by two triangles is
+either way). The per-view pass rebases vertices, not triangles: a vertex shared by two triangles is
 one vertex, the same bits in both (watertightness), as in the copy, which rounds each corner of each
-triangle alike. A scene's few vertices are framed on the host (the same float64 operations: no
+triangle alike. A scene's few vertices are rebased on the host (the same float64 operations: no
 rebase program to build for a small scene's first view); many, on the device."""
 from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
 
-from ...model.shapes.device import in_frame
+from ...model.shapes.device import in_space
 from ..opencl.buffers import aligned, aligned_empty, device_buffer as _buffer
 
 # entries from which the bounds are computed by the compiled loop (numba is imported by then anyway:
@@ -40,7 +40,7 @@ def indexed_bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 class IndexedEntries:
-    """One type's shared vertices (world, float64 (V, 4); in the frame of the last view, real (V, 4))
+    """One type's shared vertices (world, float64 (V, 4); in the space of the last view, real (V, 4))
     and its faces in the BVH's leaf order ((F, 4) int32), on the host and the device."""
 
     def __init__(self, prepared, cls, shapes, vertices, faces, shape_ids, order, ids):
@@ -80,15 +80,15 @@ class IndexedEntries:
         return self.world_vertices.nbytes + self.faces.nbytes + self.ids.nbytes + self.vertices_host.nbytes
 
     def rebase(self, prepared, eye, rows) -> None:
-        """The per-view pass over the vertices: each in the eye's frame, on the device
+        """The per-view pass over the vertices: each in the eye's space, on the device
         (kernels/rebase_kernels.cl; indexed entries exist on devices with float64 only)."""
         from ..launch.programs import Variant, kernels_for
 
         count = len(self.world_vertices)
         kernels = kernels_for(prepared.ctx, Variant("rebase", prepared.types, (), prepared.precision))
-        frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
+        space = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         kernels["rebase_vertices"](prepared.ctx.queue, *prepared._groups(count), self.world_buffer, self.vertices,
-                                   np.int32(count), *frame)
+                                   np.int32(count), *space)
 
     # -- an animation's frame (pyclray.engine.scene.refit) ---------------------------------------------
     def holds(self, index: int, shape) -> bool:
@@ -107,7 +107,7 @@ class IndexedEntries:
 
     def move(self, prepared, index: int, world: np.ndarray, shared: bool) -> None:
         """Write a moved shape's world vertices, on the host and the device, and, where the prepared
-        scene holds a view, its vertices in that view's frame (in_frame: the device pass's bits)."""
+        scene holds a view, its vertices in that view's space (in_space: the device pass's bits)."""
         start, count = self.vertex_range[index]
         self.world_vertices[start:start + count] = world
         queue = prepared.ctx.queue
@@ -115,7 +115,7 @@ class IndexedEntries:
             cl.enqueue_copy(queue, self.world_buffer, self.world_vertices[start:start + count], dst_offset=start * 32)
         if prepared.view is not None:
             eye, rows = prepared.view
-            self.vertices_host[start:start + count, :3] = in_frame(world[:, :3] - eye, rows)
+            self.vertices_host[start:start + count, :3] = in_space(world[:, :3] - eye, rows)
             if not shared:
                 cl.enqueue_copy(queue, self.vertices, self.vertices_host[start:start + count],
                                 dst_offset=start * self.vertices_host.itemsize * 4)

@@ -1,5 +1,5 @@
 """The shaded image: what the kernel needs of the scene's materials and lights (packed in the
-camera's frame; kernels/shading.h). Its float64 reference is pyclray.reference.shading.
+camera's space; kernels/shading.h). Its float64 reference is pyclray.reference.shading.
 """
 from __future__ import annotations
 
@@ -29,9 +29,9 @@ def pack_materials(shapes, precision: str) -> np.ndarray:
 
 
 def pack_lights(scene, precision: str) -> np.ndarray:
-    """The scene's lights (or its headlight) in the camera's frame, computed in float64."""
+    """The scene's lights (or its headlight) in the camera's space, computed in float64."""
     lights = effective_lights(scene)
-    rotation = scene.camera.basis()  # rows u, v, w: frame_from_world
+    rotation = scene.camera.basis()  # rows u, v, w: space_from_world
     eye = np.array(scene.camera.eye)
     out = np.zeros(len(lights), dtype=layout(LIGHT, precision).dtype)
     for index, light in enumerate(lights):

@@ -4,16 +4,16 @@ A PreparedScene holds a scene's shapes on one device at one precision: per shape
 entries (float64, camera-independent: ``Shape.pack_world``; a batch contributes one entry per
 primitive, never a Python object per primitive), the BVH over the bounded entries (each bounded
 type's entries in leaf order), the refs, the materials, and per type a buffer of the entries in a
-camera's frame, which is what the render kernel's shape tests read. A view rebases that buffer
+camera's space, which is what the render kernel's shape tests read. A view rebases that buffer
 from the world entries for its camera (kernels/rebase.cl: the differences of coordinates in
 float64, what every ray from the eye shares from error-free sums) on the device; the BVH's boxes
 stay around the scene's anchor (the kernel takes the eye relative to it); a view with the same
 camera as the last rebases nothing. Devices
 without float64 rebase on the host (``Shape.rebase``, the same formulas) and upload the result.
 So a moved camera uploads the camera only, whatever the number of shapes. A large scene on a device
-with float64 is framed (FRAMED_FROM): its spheres have no view buffer, the render kernel frames each
+with float64 is rebased (FROM_WORLD_FROM): its spheres have no view buffer, the render kernel rebases each
 where it tests it from its world entry (the same bits). Meshes on a device with float64 are shared
-vertices and faces whose vertices the per-view pass frames (INDEXED, engine/scene/indexed.py), in any scene.
+vertices and faces whose vertices the per-view pass rebases (INDEXED, engine/scene/indexed.py), in any scene.
 
 A scene handle (engine/tracer.py) owns one: nothing here is kept between calls. A frame of an
 animation (the same shapes, a few moved) updates it in place (``update``): only those entries are
@@ -50,11 +50,11 @@ class Kind:
     ids: np.ndarray
     stored_primitives: np.ndarray | None  # None for indexed entries: their faces hold them
     world_buffer: cl.Buffer | None  # the world entries on the device (devices with float64)
-    # a framed scene's (devices with float64): its entries' ids and primitive indices, read by the
-    # render kernel, which frames each entry from its world entry where it tests it
+    # a from-world scene's (devices with float64): its entries' ids and primitive indices, read by the
+    # render kernel, which rebases each entry from its world entry where it tests it
     ids_buffer: cl.Buffer | None
     primitives_buffer: cl.Buffer | None
-    # elsewhere: the entries in the frame of the last view (the render kernel's shape array), and
+    # elsewhere: the entries in the space of the last view (the render kernel's shape array), and
     # that buffer's memory on a CPU device (its bytes, elsewhere)
     in_view: cl.Buffer | None
     in_view_host: np.ndarray | None
@@ -62,7 +62,7 @@ class Kind:
     smooth_host: np.ndarray | None = None
     shared: tuple = ()  # the arrays its entries share (SharedArrays.shared: mesh instances' triangles and BVHs)
     shared_host: tuple = ()
-    indexed: IndexedEntries | None = None  # a framed scene's triangles: shared vertices and faces
+    indexed: IndexedEntries | None = None  # a from-world scene's triangles: shared vertices and faces
     shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
     order: np.ndarray | None = None
 
@@ -81,8 +81,8 @@ class Kind:
         return self.stored_primitives if self.indexed is None else self.indexed.primitives
 
     @property
-    def framed(self) -> bool:
-        """Whether the render kernel frames its entries where it tests them (no view buffer)."""
+    def from_world(self) -> bool:
+        """Whether the render kernel rebases its entries where it tests them (no view buffer)."""
         return self.in_view is None
 
     @property
@@ -90,11 +90,11 @@ class Kind:
         return len(self.ids)
 
 
-# Scenes of at least this many entries of the types framed where tested (Shape.frames_in_render) are
-# framed so; smaller ones keep the per-view copy, which is faster while it fits the caches; framed
+# Scenes of at least this many entries of the types rebased where tested (Shape.tested_from_world) are
+# rebased so; smaller ones keep the per-view copy, which is faster while it fits the caches; rebased
 # entries hold a third less memory (docs/benchmarks.md, "Why the engine does what it does":
-# FRAMED_FROM). Meshes do not depend on it (INDEXED below).
-FRAMED_FROM = 524_288
+# FROM_WORLD_FROM). Meshes do not depend on it (INDEXED below).
+FROM_WORLD_FROM = 524_288
 
 # Meshes (the capability "indexed") are kept as shared vertices and faces on every device with float64 (engine/
 # indexed.py), whatever the scene's size: 44 bytes a triangle and the BVH's share, against 160 for the
@@ -132,7 +132,7 @@ class PreparedScene(Refit):
         # Meshes are shared vertices and faces wherever the device has float64 (engine/scene/indexed.py):
         # their world entries are never packed, their bounds come from the vertices and faces
         self.indexed = has_fp64(ctx.device) and INDEXED
-        # the others, a per-view pass rebases into the camera's frame: on the device (kernels/rebase.cl,
+        # the others, a per-view pass rebases into the camera's space: on the device (kernels/rebase.cl,
         # float64) where it has float64, else on the host (Shape.rebase, the same operations)
         self.on_device = has_fp64(ctx.device)
         worlds, bounds, shared, counts = {}, {}, {}, {}
@@ -158,11 +158,11 @@ class PreparedScene(Refit):
                     bounds[t] = cls.bounds_of(world)
         with np.errstate(over="ignore", invalid="ignore"):  # geometry beyond range: refused by the range check
             self.bvh: SceneBVH = primitives_bvh(bounds)
-        # Large scenes on devices with float64 frame each shape of the types that allow it on the eye
-        # where the render kernel tests it, from its world entry (Variant.framed, Shape.frames_in_render):
-        # no per-view copy of those entries, no pass over them for a new camera (see FRAMED_FROM).
-        framable = sum(counts[t] for t in self.types if KINDS[t].frames_in_render)
-        self.framed = has_fp64(ctx.device) and framable >= FRAMED_FROM
+        # Large scenes on devices with float64 rebase each shape of the types that allow it on the eye
+        # where the render kernel tests it, from its world entry (Variant.from_world, Shape.tested_from_world):
+        # no per-view copy of those entries, no pass over them for a new camera (see FROM_WORLD_FROM).
+        from_world_entries = sum(counts[t] for t in self.types if KINDS[t].tested_from_world)
+        self.from_world = has_fp64(ctx.device) and from_world_entries >= FROM_WORLD_FROM
         self.kinds: dict[str, Kind] = {}
         for t in self.types:
             world, ids, primitives, smooth = worlds[t]
@@ -245,15 +245,15 @@ class PreparedScene(Refit):
             return Kind(t, cls, None, indexed.ids, None, None, None, None, None, None, indexed=indexed, shapes=shapes,
                         order=order)
         world = aligned(world)
-        framed = self.framed and cls.frames_in_render
-        world_buffer = _buffer(self.ctx, world) if self.on_device or framed else None
-        if framed:
+        from_world = self.from_world and cls.tested_from_world
+        world_buffer = _buffer(self.ctx, world) if self.on_device or from_world else None
+        if from_world:
             ids, primitives = aligned(np.ascontiguousarray(ids, np.int32)), aligned(np.ascontiguousarray(primitives, np.int32))
             return Kind(t, cls, world, ids, primitives, world_buffer, _buffer(self.ctx, ids), _buffer(self.ctx, primitives),
                         None, None)
-        frame = aligned(np.zeros(len(world), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
-        frame["id"], frame["primitive"] = ids, primitives
-        return Kind(t, cls, world, ids, primitives, world_buffer, None, None, _buffer(self.ctx, frame, writable=True), frame)
+        rebased = aligned(np.zeros(len(world), dtype=cls.rebase(world[:0], np.zeros(3), np.eye(3), self.precision).dtype))
+        rebased["id"], rebased["primitive"] = ids, primitives
+        return Kind(t, cls, world, ids, primitives, world_buffer, None, None, _buffer(self.ctx, rebased, writable=True), rebased)
 
     def nbytes(self) -> int:
         """The bytes this scene holds (host arrays shared with a CPU device counted once)."""
@@ -261,7 +261,7 @@ class PreparedScene(Refit):
         for kind in self.kinds.values():
             if kind.indexed is not None:
                 total += kind.indexed.nbytes()
-            elif kind.framed:
+            elif kind.from_world:
                 total += kind.world.nbytes + kind.ids.nbytes + kind.primitives.nbytes
             else:
                 total += kind.world.nbytes + kind.in_view_host.nbytes
@@ -308,24 +308,24 @@ class PreparedScene(Refit):
         eye = np.asarray(eye, np.float64)
         rows = np.asarray(rows, np.float64)
         key = (eye.tobytes(), rows.tobytes())
-        self.flush_world()  # the world entries animation frames changed (framed types read them)
+        self.flush_world()  # the world entries animation frames changed (from-world types read them)
         if key == self.view_key:
             return []
         queue = self.ctx.queue
         uploads = []
         if self.on_device:
             kernels = kernels_for(self.ctx, Variant("rebase", self.types, (), self.precision))
-            frame = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
+            space = [np.append(v, 0.0).view(cl.cltypes.double4)[0] for v in (eye, *rows)]
         for kind in self.kinds.values():
             if kind.indexed is not None:  # the shared vertices
                 kind.indexed.rebase(self, eye, rows)
                 continue
-            if not kind.count or kind.framed:  # framed: the kernel frames each entry on this eye itself
+            if not kind.count or kind.from_world:  # rebased: the kernel rebases each entry on this eye itself
                 continue
             if self.on_device:
                 # its scalars' types declared once (device.launch)
                 launch(self.ctx, kernels[f"rebase_{kind.name}"], *self._groups(kind.count),
-                       [kind.world_buffer, kind.in_view, np.int32(kind.count), *frame])
+                       [kind.world_buffer, kind.in_view, np.int32(kind.count), *space])
             else:  # a device without float64
                 packed = kind.cls.rebase(kind.world, eye, rows, self.precision, kind.ids, kind.primitives)
                 uploads.append(cl.enqueue_copy(queue, kind.in_view, packed, is_blocking=False))

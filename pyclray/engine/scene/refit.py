@@ -96,7 +96,7 @@ class Refit:
         for name, (where, rows) in packed.items():
             kind = self.kinds[name]
             kind.world[where] = rows
-            if not shared and (self.on_device or kind.framed):
+            if not shared and (self.on_device or kind.from_world):
                 self.stale.setdefault(name, set()).update(where.tolist())
         if refitted is not None and len(refitted):
             # the boxes around the scene's anchor, as built (prepared.py): written now, whatever the view;
@@ -127,13 +127,13 @@ class Refit:
             eye, rows = self.view
             for name, (where, _) in packed.items():
                 kind = self.kinds[name]
-                if kind.framed:  # no view buffer: its world entries are what the kernel reads
+                if kind.from_world:  # no view buffer: its world entries are what the kernel reads
                     continue
-                framed = kind.cls.rebase(kind.world[where], eye, rows, self.precision, kind.ids[where], kind.primitives[where])
+                rebased = kind.cls.rebase(kind.world[where], eye, rows, self.precision, kind.ids[where], kind.primitives[where])
                 if shared:
-                    kind.in_view_host[where] = framed
+                    kind.in_view_host[where] = rebased
                 else:
-                    self.scatter(kind.in_view, where, framed)
+                    self.scatter(kind.in_view, where, rebased)
         # materials (an animated colour or size): the rows of the shapes whose material is another object
         materials = [(i, shape) for i, shape, before in zip(indices, new, old) if shape.material is not before.material]
         if materials:

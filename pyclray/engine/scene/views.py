@@ -1,4 +1,4 @@
-"""What a view of a prepared scene needs besides the shapes: the camera, the lights in its frame,
+"""What a view of a prepared scene needs besides the shapes: the camera, the lights in its space,
 the tile lists, the acceleration choice and the range check. A scene handle (engine/tracer.py) keeps
 one ViewState per view it renders (camera, image, lights and shading), dropping them when its shapes
 change."""
@@ -65,7 +65,7 @@ def view_tile_lists(prepared: PreparedScene, kind, scene: Scene):
     rectangles its tiles' rays span on that plane (tiles.table_rects, once per camera and size)."""
     width, height = scene.image.width, scene.image.height
     camera = scene.camera
-    table = camera.frame_directions(width, height)
+    table = camera.space_directions(width, height)
     if table is None:
         return prepared.tile_lists(kind, camera.eye, camera.basis(), camera.image_plane(width, height), width, height)
     rects = table.derived.get("tile_rects")
@@ -157,7 +157,7 @@ class ViewState:
 
 class ViewInputs:
     """What a view of a prepared scene needs besides the shapes: the camera, the lights in its
-    frame, the eye for the position image, and (tiles) the tile lists."""
+    space, the eye for the position image, and (tiles) the tile lists."""
 
     def __init__(self, ctx, scene: Scene, prepared: PreparedScene, acceleration: str):
         precision = prepared.precision
@@ -168,7 +168,7 @@ class ViewInputs:
         self.tiles = {}
         # a lens's or panorama's rays (kernels/camera.h: camera_table_rays): the camera's float64 table,
         # and its device buffer in the packet order of a lane count (directions_for)
-        self.table = scene.camera.frame_directions(width, height)
+        self.table = scene.camera.space_directions(width, height)
         self.table_format = None if self.table is None else table_format(*self.table)
         self.directions = None
         if acceleration == "tiles":
@@ -212,7 +212,7 @@ class ViewInputs:
 
     def lighting(self, prepared: PreparedScene) -> dict:
         """The shaded image's arguments by name (kernels/shading.h): materials, the lights in the
-        camera's frame, their count, ambient and background; made when a view first asks for that
+        camera's space, their count, ambient and background; made when a view first asks for that
         image (a view of depth, normal and id packs no lights: render_views' host work per view)."""
         if self._lighting is None:
             ctx, camera, lights, shades, precision = self._made
@@ -224,12 +224,12 @@ class ViewInputs:
         return self._lighting
 
     def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> dict:
-        """The render kernel's shape arguments by name (engine/launch/signatures.py): a framed scene's eye
-        frame; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
+        """The render kernel's shape arguments by name (engine/launch/signatures.py): a from-world scene's eye
+        space; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
         entries and count, or per type its entries and tile lists (and with shadows its count)."""
         args = {}
-        if prepared.framed:  # the eye's frame (the eye, the camera's axes), float64: each shape is framed on it
-            for name, v in zip(("frame_origin", "frame_u", "frame_v", "frame_w"), (self.eye, *self.rows)):
+        if prepared.from_world:  # the eye's space (the eye, the camera's axes), float64: each shape is rebased on it
+            for name, v in zip(("space_origin", "space_u", "space_v", "space_w"), (self.eye, *self.rows)):
                 args[name] = np.append(v, 0.0).view(cl.cltypes.double4)[0]
         if acceleration == "bvh" and prepared.bvh.types:
             args["wide_nodes"], args["refs"] = prepared.wide_nodes, prepared.refs
@@ -237,11 +237,11 @@ class ViewInputs:
                 args["nodes"] = prepared.nodes
         for t, kind in prepared.kinds.items():
             # its entries: the faces and vertices (indexed), the world entries, ids and primitive
-            # indices (framed), or the view buffer; then the arrays its entries share
+            # indices (rebased), or the view buffer; then the arrays its entries share
             if kind.indexed is not None:
                 args.update({f"{t}_faces": kind.indexed.faces_buffer, f"{t}_vertices": kind.indexed.vertices,
                              f"{t}_world_vertices": kind.indexed.world_buffer, f"{t}_ids": kind.indexed.ids_buffer})
-            elif kind.framed:
+            elif kind.from_world:
                 args.update({f"{t}_worlds": kind.world_buffer, f"{t}_ids": kind.ids_buffer,
                              f"{t}_primitives": kind.primitives_buffer})
             else:

@@ -36,7 +36,7 @@ def rigid_split(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def model_pose(shape) -> tuple[np.ndarray, np.ndarray]:
     """(world_from_model 4x4 rigid, S): the shape's frame without the part S baked into its model."""
-    frame = shape.object_frame()
+    frame = shape.object_pose()
     R, S = rigid_split(frame)
     pose = np.eye(4)
     pose[:3, :3] = R
@@ -51,7 +51,7 @@ def object_models(shapes, millimetres: float) -> dict[int, ObjectModel]:
     models: dict[int, ObjectModel] = {}
     for shape in shapes:
         model = shape.object_model()
-        if model is None or shape.object_frame() is None:
+        if model is None or shape.object_pose() is None:
             raise RequestError(f"--format bop: {shape.describe()} has label {shape.label} but no triangle model (BOP "
                                "objects are meshes); remove its label to make it scenery, or make it a mesh")
         vertices, faces = model

@@ -46,8 +46,8 @@ class MitsubaSensor:
 
 
 class RayTable:
-    """A camera's rays where they are not a pinhole's image plane (CameraModel.frame_directions):
-    ``directions`` (height, width, 3) unit float64 in the camera's frame (u left, v up, w forward),
+    """A camera's rays where they are not a pinhole's image plane (CameraModel.space_directions):
+    ``directions`` (height, width, 3) unit float64 in the camera's space (u left, v up, w forward),
     ``valid`` (height, width): the pixels in the model's field; both read-only. It unpacks as
     (directions, valid). ``derived`` keeps what the engine makes of it once (its tiles' bounds), for
     as long as the table is kept."""
@@ -99,7 +99,7 @@ class CameraModel(ABC):
     @abstractmethod
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """The kernel's struct (one element of layout(struct, precision).dtype) for an image of
-        width x height; box_origin: the eye in the render BVH's frame (the eye minus the scene's
+        width x height; box_origin: the eye in the render BVH's space (the eye minus the scene's
         anchor, float64)."""
 
     @abstractmethod
@@ -130,9 +130,9 @@ class CameraModel(ABC):
     def basis(self) -> np.ndarray:
         """Rows u (left), v (up), w (forward): the camera's axes in world coordinates, float64."""
 
-    def frame_directions(self, width: int, height: int):
+    def space_directions(self, width: int, height: int):
         """(directions, valid) of a model whose rays are not a pinhole's image plane (a lens, a
-        panorama): unit directions (height, width, 3) in the camera's frame (u, v, w components),
+        panorama): unit directions (height, width, 3) in the camera's space (u, v, w components),
         float64, and whether each pixel is in the model's field (a miss where not); None for a
         pinhole (the kernel computes those rays itself: kernels/camera.h)."""
         return None

@@ -76,8 +76,8 @@ class Equirectangular(CameraModel):
             object.__setattr__(self, "_basis", cached)
         return cached
 
-    def frame_directions(self, width: int, height: int):
-        """Each pixel's unit direction in the camera's frame (u left, v up, w forward), all in the
+    def space_directions(self, width: int, height: int):
+        """Each pixel's unit direction in the camera's space (u left, v up, w forward), all in the
         field (a RayTable), once per ranges and size."""
         return panorama_table(self.longitude, self.latitude, width, height)
 
@@ -85,7 +85,7 @@ class Equirectangular(CameraModel):
         return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
 
     def rays(self, width: int, height: int, window=None):
-        d, _ = self.frame_directions(width, height)
+        d, _ = self.space_directions(width, height)
         if window is not None:
             col0, row0, columns, rows = window
             d = d[row0:row0 + rows, col0:col0 + columns]

@@ -108,8 +108,8 @@ class Fisheye(CameraModel):
                 K[row, 2] = (K[row, 2] + 0.5) * ratio - 0.5
         return K
 
-    def frame_directions(self, width: int, height: int):
-        """Each pixel's unit direction in the camera's frame and whether the lens reaches it
+    def space_directions(self, width: int, height: int):
+        """Each pixel's unit direction in the camera's space and whether the lens reaches it
         (lens.fisheye_table, float64), solved once per lens and image size."""
         K = self.intrinsics(width, height)
         max_theta = math.pi if self.fov is None else math.radians(self.fov) / 2
@@ -117,11 +117,11 @@ class Fisheye(CameraModel):
                                   max_theta, width, height)
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """The kernel's Camera struct: the frame (the rays come from frame_directions' table)."""
+        """The kernel's Camera struct: the frame (the rays come from space_directions' table)."""
         return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
 
     def rays(self, width: int, height: int, window=None):
-        d, _ = self.frame_directions(width, height)
+        d, _ = self.space_directions(width, height)
         if window is not None:
             col0, row0, columns, rows = window
             d = d[row0:row0 + rows, col0:col0 + columns]

@@ -216,7 +216,7 @@ def _pixel_coordinates(intrinsics, width: int, height: int):
 @lru_cache(maxsize=TABLES_KEPT)
 def pinhole_table(intrinsics: tuple, coefficients: tuple, width: int, height: int):
     """The RayTable of a perspective camera with OpenCV's distortion: each pixel's unit direction in
-    the camera's frame (u left, v up, w forward: OpenCV's x and y negated), float64, and whether
+    the camera's space (u left, v up, w forward: OpenCV's x and y negated), float64, and whether
     the lens reaches the pixel (elsewhere the pinhole's ray, a miss)."""
     xd, yd = _pixel_coordinates(intrinsics, width, height)
     x, y, valid = undistort_pinhole(coefficients, xd, yd)

@@ -22,7 +22,7 @@ MIN_UP_SINE = 1e-6
 MIN_PIXEL_TAN = 1e-30
 # A pose's rotation R must be orthonormal within this (every entry of R^T R - I), with det R > 0:
 # poses written with 7 significant digits pass. Within float64 rounding (RIGID_EXACT) R is used as
-# given; otherwise the camera holds its nearest rotation (the polar factor of R), so that its frame
+# given; otherwise the camera holds its nearest rotation (the polar factor of R), so that its space
 # is orthonormal as the kernels assume.
 RIGID_TOLERANCE = 1e-6
 RIGID_EXACT = 1e-12
@@ -55,7 +55,7 @@ CAMERA = Struct(
         ("u", "real4"),  # world_from_camera: columns u (left), v (up), w (forward)
         ("v", "real4"),
         ("w", "real4"),
-        # the eye in the render BVH's frame (world axes around the scene's anchor), rounded to float,
+        # the eye in the render BVH's space (world axes around the scene's anchor), rounded to float,
         # and (w) a margin over that rounding (kernels/bvh_packet.h: box_entries)
         ("box_origin", "float4"),
         # pixel (row j, column i) looks through sx = tan_x (centre_x - 1 - 2 i + centre_x_low) / width,
@@ -72,12 +72,12 @@ CAMERA = Struct(
         # (x, x's rest, y, y's rest; fp64: (value, 0)): the fp32 kernel's exact sx, sy (kernels/camera.h)
         ("pixel_step", "real4"),
     ),
-    "The camera frame (world_from_camera columns) and the image plane (its pixel-centre rays).",
+    "The camera space (world_from_camera columns) and the image plane (its pixel-centre rays).",
 )
 
 
 class ImagePlane(NamedTuple):
-    """Where the pixel centres' rays go, on the image plane at distance 1 in the camera's frame
+    """Where the pixel centres' rays go, on the image plane at distance 1 in the camera's space
     (x left, y up, z forward): pixel (row j, column i) at
     sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height.
     tan_x = width / (2 fx) and tan_y = height / (2 fy) (the tangents of a centred camera's half
@@ -150,8 +150,8 @@ def _rotation(key: str, R: np.ndarray) -> np.ndarray:
 
 
 def packed_frame(rows, plane: ImagePlane, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)):
-    """The kernel's Camera (CAMERA): the frame's rows u, v, w, the image plane (an ImagePlane at
-    this size) and the eye in the BVH's frame (box_origin: the eye minus the scene's anchor,
+    """The kernel's Camera (CAMERA): the space's rows u, v, w, the image plane (an ImagePlane at
+    this size) and the eye in the BVH's space (box_origin: the eye minus the scene's anchor,
     float64). Twice the principal point goes as an integer and the rest, so that the kernel's
     numerator 2 cx - 1 - 2 i is exact but for one rounding of the sum (and exactly
     width - 1 - 2 i, as ever, for a centred camera)."""
@@ -400,7 +400,7 @@ class Camera(CameraModel):
         return t * width / height, t
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """The kernel's Camera struct (packed_frame) of this camera's frame and image plane at this size."""
+        """The kernel's Camera struct (packed_frame) of this camera's space and image plane at this size."""
         return packed_frame(self.basis(), self.image_plane(width, height), width, height, precision, box_origin)
 
     def plane_coordinates(self, width: int, height: int, window=None) -> tuple[np.ndarray, np.ndarray]:
@@ -409,7 +409,7 @@ class Camera(CameraModel):
         sx = tan_x (2 cx - 2 i - 1) / width, sy = tan_y (2 cy - 2 j - 1) / height (ImagePlane; a
         look-at camera: cx = width / 2, so sx = tan_x (width - 2 i - 1) / width). For a camera from
         intrinsics that is (cx - i) / fx (K's cx, OpenCV's convention): the x of K^-1 [i, j, 1], negated
-        (OpenCV's x points right, the frame's u left)."""
+        (OpenCV's x points right, the space's u left)."""
         col0, row0, columns, rows = (0, 0, width, height) if window is None else window
         plane = self.image_plane(width, height)
         sx = plane.tan_x * ((2 * plane.cx - 1.0) - 2.0 * np.arange(col0, col0 + columns)) / width
@@ -421,11 +421,11 @@ class Camera(CameraModel):
         directions: pixel (row j, column i) looks through (sx, sy) (plane_coordinates):
         d = normalize(w + sx u + sy v); for a camera from intrinsics that is
         normalize(R K^-1 [i, j, 1]). With a distortion: each pixel's undistorted direction
-        (frame_directions; a pixel the lens cannot reach gets its pinhole ray, which render and
+        (space_directions; a pixel the lens cannot reach gets its pinhole ray, which render and
         cast report as a miss there). The origins are the eye."""
         u, v, w = self.basis()
         if self.distortion is not None:
-            frame, _ = self.frame_directions(width, height)
+            frame, _ = self.space_directions(width, height)
             if window is not None:
                 col0, row0, columns, rows = window
                 frame = frame[row0:row0 + rows, col0:col0 + columns]
@@ -438,8 +438,8 @@ class Camera(CameraModel):
         origins = np.broadcast_to(np.array(self.eye), d.shape)
         return origins, d
 
-    def frame_directions(self, width: int, height: int):
-        """With a distortion, each pixel's undistorted unit direction in the camera's frame and
+    def space_directions(self, width: int, height: int):
+        """With a distortion, each pixel's undistorted unit direction in the camera's space and
         whether the lens reaches it (lens.pinhole_table: Newton on OpenCV's forward model in
         float64), solved once per lens and image size (kept by value: a moving camera's frames, or a
         handle's views, share it); None for a pinhole."""
@@ -451,7 +451,7 @@ class Camera(CameraModel):
 
     def mitsuba_sensor(self, width: int, height: int) -> MitsubaSensor:
         """Mitsuba's perspective sensor of the same rays. A look-at camera is its look_at with its
-        fov and fov_axis. A camera from intrinsics has to_world the matrix of its frame (columns u
+        fov and fov_axis. A camera from intrinsics has to_world the matrix of its space (columns u
         left, v up, w forward: Mitsuba's camera space, OpenCV's x and y negated) and, since
         Mitsuba's pixels are square, only fx = fy (a SceneError otherwise): fov = 2 atan(width / (2 fx))
         along x, and the principal point through principal_point_offset_x/_y, which Mitsuba adds to

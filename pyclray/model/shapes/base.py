@@ -46,7 +46,7 @@ class SceneShape:
     - ``_from_table(table, name)`` (``(table, name, folder)`` where ``reads_files``): the shape of a
       scene table (or a tuple of shapes, where one table makes several: a mesh file's objects);
     - ``random(rng, shift)``: a random shape for the generic tests (tests/test_shapes.py);
-    - ``lengths(eye)``: the sizes of what its kernel computes from each key in the camera's frame
+    - ``lengths(eye)``: the sizes of what its kernel computes from each key in the camera's space
       (the range check).
 
     Optional, with defaults here: ``required`` (keys that must be given), ``reads_files`` (its table
@@ -111,7 +111,7 @@ class SceneShape:
         return 1
 
     def lengths(self, eye) -> dict[str, float]:
-        """Scene key -> the size of what the kernel computes from it in the camera's frame (e.g. a
+        """Scene key -> the size of what the kernel computes from it in the camera's space (e.g. a
         centre's distance from the eye, a radius), which the kernel may square: the range check
         (scene.check_renderable) refuses a scene whose lengths exceed the precision's range."""
         raise NotImplementedError
@@ -122,21 +122,21 @@ class SceneShape:
         bounds = self.world_bounds([self])
         return np.stack([bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)])
 
-    # -- its own frame (data sets: object poses, models, object coordinates) -----------------
-    def object_frame(self) -> np.ndarray | None:
-        """The 4x4 float64 affine matrix world_from_object of the shape's own frame (a mesh's file
+    # -- its own pose (data sets: object poses, models, object coordinates) -----------------
+    def object_pose(self) -> np.ndarray | None:
+        """The 4x4 float64 affine matrix world_from_object of the shape's own pose (a mesh's file
         coordinates), or None for a type without one (the default)."""
         return None
 
-    def object_frames(self) -> np.ndarray | None:
+    def object_poses(self) -> np.ndarray | None:
         """(P, 4, 4) world_from_object per primitive (a batch: each sphere its own), or (1, 4, 4) for
-        one frame of every primitive; None where the type has no frame (object_frame)."""
-        frame = self.object_frame()
-        return None if frame is None else np.asarray(frame, np.float64)[None]
+        one pose of every primitive; None where the type has no pose (object_pose)."""
+        pose = self.object_pose()
+        return None if pose is None else np.asarray(pose, np.float64)[None]
 
     def object_model(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(vertices (V, 3) float64, faces (F, 3) int64): the shape as triangles in its own frame
-        (object_frame), the model a data set's object poses refer to; None (the default) where the
+        """(vertices (V, 3) float64, faces (F, 3) int64): the shape as triangles in its own space
+        (object_pose), the model a data set's object poses refer to; None (the default) where the
         type has no triangle model."""
         return None
 
@@ -184,8 +184,8 @@ def labels_of(shapes) -> np.ndarray:
     return np.array([-1 if shape.label is None else shape.label for shape in shapes], np.int32).reshape(-1)
 
 
-def frame_columns(normal) -> np.ndarray:
-    """(t1, t2, n): a right-handed orthonormal frame around the unit vector n, float64."""
+def space_columns(normal) -> np.ndarray:
+    """(t1, t2, n): a right-handed orthonormal basis around the unit vector n, float64."""
     n = np.asarray(normal, np.float64)
     helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     t1 = np.cross(helper, n)
@@ -194,7 +194,7 @@ def frame_columns(normal) -> np.ndarray:
 
 
 def object_matrix(columns, origin) -> np.ndarray:
-    """The 4x4 world_from_object of a frame whose axes (world vectors, one per row of ``columns``)
+    """The 4x4 world_from_object of a space whose axes (world vectors, one per row of ``columns``)
     start at ``origin``."""
     out = np.eye(4)
     out[:3, :3] = np.asarray(columns, np.float64).T

@@ -11,7 +11,7 @@ from ..errors import SceneError, vector3
 from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, to_world, distance
-from .device import in_frame, in_frame_low, padded_bounds
+from .device import in_space, in_space_low, padded_bounds
 from .rotations import axis_angle, rotation, rotation_axis_angle
 from .reference import exact_at_most, plain_closest, rational
 
@@ -32,13 +32,13 @@ class Box(Shape):
     struct = Struct(
         "Box",
         (
-            ("axis0", "real4"),  # the box's first axis in the frame; w: its slab's low offset
+            ("axis0", "real4"),  # the box's first axis in the space; w: its slab's low offset
             ("axis1", "real4"),
             ("axis2", "real4"),
             ("high", "real4"),  # the three slabs' high offsets
-            ("center", "real4"),  # the centre in the frame; w unused
+            ("center", "real4"),  # the centre in the space; w unused
             ("half_size", "real4"),  # half the edge lengths
-            ("axis_low0", "real4"),  # the rest of each frame axis, rounded (axis = axisK + axis_lowK: fp32 camera rays)
+            ("axis_low0", "real4"),  # the rest of each space axis, rounded (axis = axisK + axis_lowK: fp32 camera rays)
             ("axis_low1", "real4"),
             ("axis_low2", "real4"),
             ("world_axis0", "real4"),  # the box's axes in world space (the faces' normals)
@@ -48,7 +48,7 @@ class Box(Shape):
             ("primitive", "int"),  # 0
         ),
         "Box: a ray o + s D is inside slab k where lo_k <= s (D . axis_k) <= hi_k, lo_k and hi_k = "
-        "(center - o) . axis_k -+ size_k / 2, exact for the frame origin; center and half for the "
+        "(center - o) . axis_k -+ size_k / 2, exact for the space origin; center and half for the "
         "slab test from the ray's point nearest the centre.",
     )
     world = Struct(
@@ -66,8 +66,8 @@ class Box(Shape):
     flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
-    def object_frame(self) -> np.ndarray:
-        """The box's own frame: its centre at 0, its edges along the axes (its rotation's columns)."""
+    def object_pose(self) -> np.ndarray:
+        """The box's own space: its centre at 0, its edges along the axes (its rotation's columns)."""
         out = np.eye(4)
         out[:3, :3] = rotation(self.axis, self.angle)
         out[:3, 3] = self.center
@@ -119,12 +119,12 @@ class Box(Shape):
     def _rebase(cls, out, world, origin, rotation_rows):
         F = world["center"][:, :3] - origin
         half = world["half_size"][:, :3]
-        out["center"][:, :3] = in_frame(F, rotation_rows)
+        out["center"][:, :3] = in_space(F, rotation_rows)
         out["half_size"][:, :3] = half
         for axis in range(3):
             e = world[f"axis{axis}"][:, :3]
-            out[f"axis{axis}"][:, :3] = in_frame(e, rotation_rows)
-            out[f"axis_low{axis}"][:, :3] = in_frame_low(e, rotation_rows, out[f"axis{axis}"][:, :3])
+            out[f"axis{axis}"][:, :3] = in_space(e, rotation_rows)
+            out[f"axis_low{axis}"][:, :3] = in_space_low(e, rotation_rows, out[f"axis{axis}"][:, :3])
             out[f"world_axis{axis}"][:, :3] = e
             # the slab offsets (centre - origin) . e -+ h, without cancellation for an eye near a face
             ones = np.ones((len(e), 1))

@@ -10,8 +10,8 @@ import numpy as np
 from ..errors import SceneError, number, vector3
 from ..exact import cross_norm2_minus, dot2
 from ..layout import Struct
-from .base import Shape, distance, flag, frame_columns, object_matrix, to_world
-from .device import in_frame, in_frame_low, padded_bounds
+from .base import Shape, distance, flag, space_columns, object_matrix, to_world
+from .device import in_space, in_space_low, padded_bounds
 from .reference import dot_rows, exact_at_most, plain_closest, rational
 
 
@@ -30,17 +30,17 @@ class Cylinder(Shape):
     struct = Struct(
         "Cylinder",
         (
-            ("p0", "real4"),  # centre of one end in the frame; w: radius squared
-            ("p1", "real4"),  # centre of the other end in the frame; w: the length |p1 - p0|
-            ("axis", "real4"),  # unit axis (p1 - p0) / length in the frame; w: c, see below
-            ("axis_low", "real4"),  # the rest of the frame axis, rounded (axis + axis_low: fp32 camera rays' D . A)
+            ("p0", "real4"),  # centre of one end in the space; w: radius squared
+            ("p1", "real4"),  # centre of the other end in the space; w: the length |p1 - p0|
+            ("axis", "real4"),  # unit axis (p1 - p0) / length in the space; w: c, see below
+            ("axis_low", "real4"),  # the rest of the space axis, rounded (axis + axis_low: fp32 camera rays' D . A)
             ("world_axis", "real4"),  # the unit axis in world space (the caps' normals); w: d0
-            ("d1", "real"),  # (p1 - frame origin) . axis
+            ("d1", "real"),  # (p1 - space origin) . axis
             ("caps", "int"),  # 1: closed by its two caps (a solid), 0: an open tube
             ("id", "int"),
             ("primitive", "int"),  # 0
         ),
-        "Cylinder: for rays from the frame origin, c = |(p0 - o) x axis|^2 - r^2 (the eye's squared "
+        "Cylinder: for rays from the space origin, c = |(p0 - o) x axis|^2 - r^2 (the eye's squared "
         "distance from the axis minus r^2) and d0, d1 = (p0 - o).axis, (p1 - o).axis, exact.",
     )
     world = Struct(
@@ -56,10 +56,10 @@ class Cylinder(Shape):
     kernel_files = ("cylinder.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
-    def object_frame(self) -> np.ndarray:
-        """The cylinder's own frame: p0 at 0, z along p1 - p0 (x, y: frame_columns')."""
+    def object_pose(self) -> np.ndarray:
+        """The cylinder's own pose: p0 at 0, z along p1 - p0 (x, y: space_columns')."""
         axis = np.subtract(self.p1, self.p0, dtype=np.float64)
-        return object_matrix(frame_columns(axis / np.linalg.norm(axis)), self.p0)
+        return object_matrix(space_columns(axis / np.linalg.norm(axis)), self.p0)
 
     def __post_init__(self):
         object.__setattr__(self, "p0", vector3("p0", self.p0))
@@ -110,13 +110,13 @@ class Cylinder(Shape):
         p1 = world["p1"][:, :3] - origin
         A = world["axis"][:, :3]
         radius = world["p0"][:, 3]
-        out["p0"][:, :3] = in_frame(p0, rotation)
+        out["p0"][:, :3] = in_space(p0, rotation)
         out["p0"][:, 3] = radius * radius
-        out["p1"][:, :3] = in_frame(p1, rotation)
+        out["p1"][:, :3] = in_space(p1, rotation)
         out["p1"][:, 3] = world["p1"][:, 3]
-        out["axis"][:, :3] = in_frame(A, rotation)
-        out["axis_low"][:, :3] = in_frame_low(A, rotation, out["axis"][:, :3])
-        # what every ray from the frame origin shares, from error-free products and sums
+        out["axis"][:, :3] = in_space(A, rotation)
+        out["axis_low"][:, :3] = in_space_low(A, rotation, out["axis"][:, :3])
+        # what every ray from the space origin shares, from error-free products and sums
         out["axis"][:, 3] = cross_norm2_minus(p0, A, radius)
         out["world_axis"][:, :3] = A
         out["world_axis"][:, 3] = dot2(p0, A)
@@ -302,7 +302,7 @@ class Cylinder(Shape):
     def curvature_radius(self) -> float:
         return self.radius
 
-    # Mitsuba's cylinder solves the textbook quadratic (B^2 - 4 A C in its local frame), in float32
+    # Mitsuba's cylinder solves the textbook quadratic (B^2 - 4 A C in its local coordinates), in float32
     # in the JIT variants: measured up to 1.2 times the sphere's K eps (t + L) / cos on
     # scenes/tp02-cylinder.toml (llvm_ad_rgb); 3 leaves room
     mitsuba_error_scale = 3.0
@@ -312,7 +312,7 @@ class Cylinder(Shape):
 
     @classmethod
     def from_mitsuba(cls, props, folder):
-        """Mitsuba's cylinder is open (no caps): a cylinder with caps = false. Its local frame
+        """Mitsuba's cylinder is open (no caps): a cylinder with caps = false. Its local coordinates
         (to_world, then p0 and the axis p1 - p0, then the radius) must keep its cross-section round."""
         p0 = props.take("p0", "point", np.zeros(3))
         p1 = props.take("p1", "point", np.array([0.0, 0.0, 1.0]))
@@ -321,7 +321,7 @@ class Cylinder(Shape):
         axis = p1 - p0
         if not np.any(axis):
             raise props.element.error("p0 and p1 are the same point")
-        t1, t2, _ = frame_columns(axis / np.linalg.norm(axis))
+        t1, t2, _ = space_columns(axis / np.linalg.norm(axis))
         x, y, z = (to_world.matrix[:3, :3] @ v for v in (t1 * radius, t2 * radius, axis))
         rx, ry = np.linalg.norm(x), np.linalg.norm(y)
         if (abs(np.dot(x, y)) > 1e-9 * rx * ry or abs(rx - ry) > 1e-9 * max(rx, ry)
@@ -337,6 +337,6 @@ class Cylinder(Shape):
             A, _ = self.axis()
             r = self.radius
             for centre, outward in ((self.p0, -A), (self.p1, A)):
-                t1, t2, n = frame_columns(outward)
+                t1, t2, n = space_columns(outward)
                 parts.append({"type": "disk", "to_world": to_world((t1 * r, t2 * r, n * r), centre)})
         return parts

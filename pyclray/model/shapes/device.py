@@ -3,10 +3,10 @@
 scene part's ``bounded`` and primitive counts, and the capabilities of capabilities.py).
 
 The scene lives on the device in world coordinates (``world``: float64 fields, packed once per scene
-by ``pack_world``); for each view the engine rebases it into the frame of the camera (``struct``: what
+by ``pack_world``); for each view the engine rebases it into the space of the camera (``struct``: what
 the kernel's shape test reads) with ``<type>_rebase`` of the shape's kernel file, or on the host with
-``rebase`` (devices without float64, and cast's per-shape frames). Both compute what every ray from
-the frame's origin shares in float64 (error-free sums where a difference cancels), from the world
+``rebase`` (devices without float64, and cast's per-shape spaces). Both compute what every ray from
+the space's origin shares in float64 (error-free sums where a difference cancels), from the world
 fields.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ class DevicePacking:
     A shape type defines (``required_members``):
 
     - ``c_type``: its struct's name in OpenCL C;
-    - ``struct``: the packed layout of one entry in a frame (what ``<type>_hit`` and
+    - ``struct``: the packed layout of one entry in a space (what ``<type>_hit`` and
       ``<type>_normal`` read), declared once; its fields ``id`` and ``primitive`` included;
     - ``world``: the layout of one world entry (float64 fields, camera-independent);
     - ``kernel_files``: its kernel files under engine/kernels/, in order (a batch type reuses its
@@ -34,17 +34,17 @@ class DevicePacking:
       order), ``<type>_hit`` and ``<type>_normal``;
     - ``_pack_world(out, shapes)``: writes the world entries of these shapes into ``out`` (one per
       primitive: the scene part's ``primitive_count``);
-    - ``_rebase(out, world, origin, rotation)``: writes the entries in a frame from the world ones,
-      in float64 on the host; ``origin`` is (3,) (one frame for every entry: render) or (N, 3) (one
-      frame per entry, each at its own anchor: cast);
+    - ``_rebase(out, world, origin, rotation)``: writes the entries in a space from the world ones,
+      in float64 on the host; ``origin`` is (3,) (one space for every entry: render) or (N, 3) (one
+      space per entry, each at its own anchor: cast);
     - for a ``bounded`` type (the scene part's), ``bounds_of(world)``: the conservative box of each
       world entry (culling, the BVH).
 
     Optional, with defaults here: ``spheres_of`` (culling's bounding spheres: around the boxes),
-    ``cast_anchors`` (where cast frames each entry: the centre of its box), ``world_within`` (an
+    ``cast_anchors`` (where cast rebases each entry: the centre of its box), ``world_within`` (an
     unbounded type's range check), ``entries_of`` (the id and primitive index of each entry),
-    ``barycentric`` (its kernel file has ``<type>_barycentric``), ``frames_in_render`` (a large
-    scene frames it where tested), ``leaf_size`` (entries per BVH leaf), ``kernel_structs`` (the
+    ``barycentric`` (its kernel file has ``<type>_barycentric``), ``tested_from_world`` (a large
+    scene rebases it where tested), ``leaf_size`` (entries per BVH leaf), ``kernel_structs`` (the
     structs of other types its kernel file uses), and for the closest-point query ``inside_test`` and
     ``winding_number`` (how its inside is decided).
     """
@@ -59,10 +59,10 @@ class DevicePacking:
     # True for a type whose kernel file has <type>_barycentric(shape, ray, &u, &v) (triangles): the
     # barycentric image's (u, v); the other types give (0, 0)
     barycentric: ClassVar[bool] = False
-    # In a framed scene (engine/scene/prepared.py's FRAMED_FROM) a render frames each entry of a type with
-    # frames_in_render on the eye where it tests it, from its world entry (<type>_rebase): no per-view
+    # In a from-world scene (engine/scene/prepared.py's FROM_WORLD_FROM) a render rebases each entry of a type with
+    # tested_from_world on the eye where it tests it, from its world entry (<type>_rebase): no per-view
     # copy (struct) of them, no pass over them for a new camera. The others keep the per-view pass's copy.
-    frames_in_render: ClassVar[bool] = False
+    tested_from_world: ClassVar[bool] = False
     # the most entries of this type per BVH leaf (None: engine/bvh/tree.py's LEAF_SIZE); a scene's tree
     # takes the largest of its bounded types'
     leaf_size: ClassVar[int | None] = None
@@ -96,11 +96,11 @@ class DevicePacking:
         """(id, primitive) per world entry of these shapes (see entries)."""
         return entries(shapes, ids)
 
-    # -- entries in a frame ----------------------------------------------------------------------
+    # -- entries in a space ----------------------------------------------------------------------
     @classmethod
     def rebase(cls, world, origin, rotation, precision: str, ids=None, primitives=None) -> np.ndarray:
-        """The packed array (``struct``) of these world entries in a frame: origin (world, float64;
-        (3,) for every entry, or (N, 3) one per entry) and rotation (rows: the frame's axes in world
+        """The packed array (``struct``) of these world entries in a space: origin (world, float64;
+        (3,) for every entry, or (N, 3) one per entry) and rotation (rows: the space's axes in world
         coordinates), computed on the host in float64; ids and primitive indices as given (default 0)."""
         out = np.zeros(len(world), dtype=layout(cls.struct, precision).dtype)
         out["id"] = 0 if ids is None else ids
@@ -115,7 +115,7 @@ class DevicePacking:
 
     @classmethod
     def pack(cls, shapes, ids, origin, rotation, precision: str) -> np.ndarray:
-        """The packed array of these shapes in a frame (pack_world, then rebase)."""
+        """The packed array of these shapes in a space (pack_world, then rebase)."""
         entry_ids, primitives = entries(shapes, ids)
         return cls.rebase(cls.pack_world(shapes), origin, rotation, precision, entry_ids, primitives)
 
@@ -173,32 +173,32 @@ def entries(shapes, ids) -> tuple[np.ndarray, np.ndarray]:
             (np.arange(total) - np.repeat(starts, counts)).astype(np.int32))
 
 
-def in_frame(x, rotation) -> np.ndarray:
-    """The coordinates of vectors x (N, 3) along a frame's axes (rotation's rows), each summed as
-    (r0 x0 + r1 x1) + r2 x2: the order kernels/rebase.cl's to_frame sums in, so that the host's and
+def in_space(x, rotation) -> np.ndarray:
+    """The coordinates of vectors x (N, 3) along a space's axes (rotation's rows), each summed as
+    (r0 x0 + r1 x1) + r2 x2: the order kernels/rebase.cl's to_space sums in, so that the host's and
     the device's rebase round alike (numpy's matrix product may sum in another order)."""
     x = np.asarray(x, np.float64).reshape(-1, 3)
     rotation = np.asarray(rotation, np.float64)
     return (x[:, 0:1] * rotation[:, 0] + x[:, 1:2] * rotation[:, 1]) + x[:, 2:3] * rotation[:, 2]
 
 
-def in_frame_low(x, rotation, rounded) -> np.ndarray:
-    """What the rounding of in_frame(x, rotation) to the kernel's precision (``rounded``, the
-    packed coordinates) left out, in float64 (rounded again where it is packed): a frame direction
+def in_space_low(x, rotation, rounded) -> np.ndarray:
+    """What the rounding of in_space(x, rotation) to the kernel's precision (``rounded``, the
+    packed coordinates) left out, in float64 (rounded again where it is packed): a space direction
     as a float pair, for the fp32 camera rays' exact n . d (kernels/lanes.h: pixel_dot; the
-    device's to_frame_low, the same bits); 0 in fp64."""
-    return in_frame(x, rotation) - np.asarray(rounded, np.float64)
+    device's to_space_low, the same bits); 0 in fp64."""
+    return in_space(x, rotation) - np.asarray(rounded, np.float64)
 
 
 def rebase_flat(out, world, origin, rotation) -> None:
     """The fields a flat shape (disk, rectangle) rebases alike: its centre and unit normal in the
-    frame, the frame origin's signed distance to its plane (normal.w, from float64 with an exact
+    space, the space origin's signed distance to its plane (normal.w, from float64 with an exact
     dot), and its world normal, as is."""
     center, normal = world["center"][:, :3], world["normal"][:, :3]
     F = center - origin
-    out["center"][:, :3] = in_frame(F, rotation)
-    out["normal"][:, :3] = in_frame(normal, rotation)
-    out["normal_low"][:, :3] = in_frame_low(normal, rotation, out["normal"][:, :3])
+    out["center"][:, :3] = in_space(F, rotation)
+    out["normal"][:, :3] = in_space(normal, rotation)
+    out["normal_low"][:, :3] = in_space_low(normal, rotation, out["normal"][:, :3])
     out["normal"][:, 3] = -dot2(normal, F)
     out["world_normal"][:, :3] = normal
 

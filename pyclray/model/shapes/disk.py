@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import SceneError, norm3, number, vector3
 from ..layout import Struct
-from .base import Shape, distance, frame_columns, object_matrix, to_world, unit_rows
+from .base import Shape, distance, space_columns, object_matrix, to_world, unit_rows
 from .device import padded_bounds, rebase_flat
 from .reference import dot_rows, flat_hits, exact_at_most, plain_closest, rational
 
@@ -27,9 +27,9 @@ class Disk(Shape):
     struct = Struct(
         "Disk",
         (
-            ("center", "real4"),  # centre in the frame; w: radius squared
-            ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
-            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
+            ("center", "real4"),  # centre in the space; w: radius squared
+            ("normal", "real4"),  # unit normal in the space; w: n . (space origin - centre), exact
+            ("normal_low", "real4"),  # the rest of the space normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
             ("primitive", "int"),  # 0
@@ -47,9 +47,9 @@ class Disk(Shape):
     kernel_files = ("disk.cl",)
     flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
-    def object_frame(self) -> np.ndarray:
-        """The disk's own frame: its centre at 0, z along its normal (x, y: frame_columns')."""
-        return object_matrix(frame_columns(self.unit_normal()), self.center)
+    def object_pose(self) -> np.ndarray:
+        """The disk's own pose: its centre at 0, z along its normal (x, y: space_columns')."""
+        return object_matrix(space_columns(self.unit_normal()), self.center)
 
     def __post_init__(self):
         object.__setattr__(self, "center", vector3("center", self.center))
@@ -144,6 +144,6 @@ class Disk(Shape):
         return partial(cls, tuple(center), tuple(normal), float(0.5 * (ru + rv)))
 
     def mitsuba_shapes(self, scene):
-        t1, t2, n = frame_columns(self.unit_normal())
+        t1, t2, n = space_columns(self.unit_normal())
         r = self.radius
         return [{"type": "disk", "to_world": to_world((t1 * r, t2 * r, n * r), self.center)}]

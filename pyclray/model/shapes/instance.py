@@ -11,11 +11,11 @@ over the shared triangles, and kernels/instance.cl enters it through the inverse
 
 Per view (``_rebase``, kernels/instance.cl's instance_rebase: the same float64 operations), each
 instance gets the eye in object space, e = object_from_world (eye - translate) in float64: the
-object-space triangles are framed on it (their float64 difference rounded once, at each visit), as
-a mesh's world triangles are framed on the eye, so a far instance keeps float32's relative precision;
-and object_from_frame / k rounded to the kernel's precision (the ray's direction in object space,
+object-space triangles are rebased on it (their float64 difference rounded once, at each visit), as
+a mesh's world triangles are rebased on the eye, so a far instance keeps float32's relative precision;
+and object_from_space / k rounded to the kernel's precision (the ray's direction in object space,
 its one extra rounding: a relative error of about 3 eps of the direction, which the error model's
-K eps (t + L) bounds many times over), k a power of two with |object_from_frame / k| <= 1, so that
+K eps (t + L) bounds many times over), k a power of two with |object_from_space / k| <= 1, so that
 the box tests' cone (kernels/bvh.h) is as wide in the object's units as in the world's.
 """
 from __future__ import annotations
@@ -74,12 +74,12 @@ class Instances(SharedArrays, SmoothShading, Shape):
     struct = Struct(
         "Instance",
         (
-            ("eye", "double4"),  # the frame's origin in object space (float64)
+            ("eye", "double4"),  # the space's origin in object space (float64)
             ("normal0", "double4"),  # rows of the normal matrix (as in the world entry)
             ("normal1", "double4"),
             ("normal2", "double4"),
             ("box", "float4"),  # the eye from the BVH's anchor, rounded; w: a margin over that rounding
-            ("m0", "real4"),  # rows of object_from_frame / k, rounded once; m0.w: k
+            ("m0", "real4"),  # rows of object_from_space / k, rounded once; m0.w: k
             ("m1", "real4"),
             ("m2", "real4"),
             # what rounding m0, m1, m2 left out, rounded (row + row_low: the fp32 camera rays' object
@@ -92,7 +92,7 @@ class Instances(SharedArrays, SmoothShading, Shape):
             ("id", "int"),
             ("primitive", "int"),
         ),
-        "A mesh instance in a frame: the eye in object space and the frame's directions there.",
+        "A mesh instance in a space: the eye in object space and the space's directions there.",
     )
 
     @classmethod
@@ -158,7 +158,7 @@ class Instances(SharedArrays, SmoothShading, Shape):
         for r in range(3):
             out[f"normal{r}"][:, :3] = world[f"normal{r}"][:, :3]
         scale = world["anchor"][:, 3]
-        for r in range(3):  # object_from_frame = object_from_world world_from_frame, over k (exact)
+        for r in range(3):  # object_from_space = object_from_world world_from_space, over k (exact)
             row = world[f"inverse{r}"][:, :3]
             exact = np.stack([_dot3(row, np.broadcast_to(axis, row.shape)) for axis in rotation_rows], axis=1) / scale[:, None]
             out[f"m{r}"][:, :3] = exact

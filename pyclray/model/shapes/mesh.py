@@ -20,7 +20,7 @@ from . import mesh_pack
 from .mesh_keys import faces_of, matrix_of, vertices_of
 from .base import Shape, flag
 from .capabilities import CastBlocks, IndexedTriangles, Instancing, SmoothShading
-from .device import in_frame, padded_bounds
+from .device import in_space, padded_bounds
 from .rotations import axis_angle, rotation
 # mesh_io (file readers) and mesh_oracle (the float64 reference) are imported where used: a scene
 # without a mesh file, and every render, needs neither (docs/benchmarks.md, "Why the engine does what it
@@ -62,13 +62,13 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     struct = Struct(
         "Triangle",
         (
-            ("a", "real4"),  # vertex a in the frame (from float64, rounded once); w: the world normal's x
+            ("a", "real4"),  # vertex a in the space (from float64, rounded once); w: the world normal's x
             ("b", "real4"),  # vertex b; w: the world normal's y
             ("c", "real4"),  # vertex c; w: the world normal's z (a zero normal: a zero-area triangle)
             ("id", "int"),
             ("primitive", "int"),  # the triangle's index in its mesh
         ),
-        "Triangle: its vertices in the frame and (in w) its unit world normal from float64.",
+        "Triangle: its vertices in the space and (in w) its unit world normal from float64.",
     )
     world = Struct(
         "TriangleWorld",
@@ -226,12 +226,12 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
         out[:3, 3] = self.translate
         return out
 
-    def object_frame(self) -> np.ndarray:
+    def object_pose(self) -> np.ndarray:
         """world_from_object: the placement (transform) of the file's coordinates."""
         return self.transform()
 
     def object_model(self) -> tuple[np.ndarray, np.ndarray]:
-        """The file's vertices and the faces (the mesh in its own frame)."""
+        """The file's vertices and the faces (the mesh in its own space)."""
         return self.vertices, self.faces
 
     def world_vertices(self) -> np.ndarray:
@@ -319,7 +319,7 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
     def pack_smooth(cls, meshes, precision: str):
         """Per triangle its vertex normals (vertex_normals: unit, world) where its mesh is smooth,
         zeros where it is not (the kernel then lights with the geometric normal); None without a
-        smooth mesh. In the world frame: the kernel turns the interpolated normal into the view's."""
+        smooth mesh. In world coordinates: the kernel turns the interpolated normal into the view's."""
         if not any(mesh.smooth for mesh in meshes):
             return None
         out = np.zeros(sum(len(m.faces) for m in meshes), dtype=layout(cls.smooth_struct, precision).dtype)
@@ -335,10 +335,10 @@ class Mesh(IndexedTriangles, CastBlocks, Instancing, SmoothShading, Shape):
 
     @classmethod
     def _rebase(cls, out, world, origin, rotation_rows):
-        # each vertex minus the frame's origin in float64, along the frame's axes, rounded once: a
+        # each vertex minus the space's origin in float64, along the space's axes, rounded once: a
         # vertex shared by two triangles gets the same bits in both (the watertight test needs it)
         for name in ("a", "b", "c"):
-            out[name][:, :3] = in_frame(world[name][:, :3] - origin, rotation_rows)
+            out[name][:, :3] = in_space(world[name][:, :3] - origin, rotation_rows)
             out[name][:, 3] = world[name][:, 3]
 
     @classmethod

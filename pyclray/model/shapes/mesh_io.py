@@ -340,10 +340,10 @@ def _scene_parts(scene, path: Path):
     parts = []
     for position, node in enumerate(graph.nodes_geometry):
         transform, geometry = graph[node]
-        frame = node
-        while frame not in index and frame in parents:  # a primitive's frame: its node's
-            frame = parents[frame]
-        i = index.get(frame)
+        owner = node
+        while owner not in index and owner in parents:  # a primitive's object: its node's
+            owner = parents[owner]
+        i = index.get(owner)
         if i is None:
             order, name = (len(index), position), node
         else:

@@ -1,4 +1,4 @@
-"""A framed scene's meshes as shared vertices and faces (IndexedTriangles.pack_indexed; pyclray/engine/scene/indexed.py)."""
+"""A from-world scene's meshes as shared vertices and faces (IndexedTriangles.pack_indexed; pyclray/engine/scene/indexed.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -9,8 +9,8 @@ import numpy as np
 from ..errors import SceneError, norm3, number, vector3
 from ..exact import dot2
 from ..layout import Struct
-from .base import Shape, frame_columns, object_matrix, to_world
-from .device import in_frame, in_frame_low
+from .base import Shape, space_columns, object_matrix, to_world
+from .device import in_space, in_space_low
 from .reference import exact_at_most, plain_closest, rational
 
 # Mitsuba has no infinite plane: a disk of this many times the scene's extent stands in for it (a
@@ -32,14 +32,14 @@ class Plane(Shape):
     struct = Struct(
         "Plane",
         (
-            ("normal", "real4"),  # unit normal in the frame; w: signed distance of the frame origin
-            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
+            ("normal", "real4"),  # unit normal in the space; w: signed distance of the space origin
+            ("normal_low", "real4"),  # the rest of the space normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("world_normal", "real4"),  # unit normal in world space (the normal image's value)
             ("id", "int"),
             ("primitive", "int"),  # 0
             ("exact", "ulong4"),  # unit normal and offset in world space, the bits of float64 numbers
         ),
-        "Plane n.p + h = 0: normal.xyz = n in the frame, normal.w = h at the frame's origin.",
+        "Plane n.p + h = 0: normal.xyz = n in the space, normal.w = h at the space's origin.",
     )
     world = Struct(
         "PlaneWorld",
@@ -52,11 +52,11 @@ class Plane(Shape):
     flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
 
-    def object_frame(self) -> np.ndarray:
-        """The plane's own frame: the point nearest the world's origin at 0, z along its normal."""
+    def object_pose(self) -> np.ndarray:
+        """The plane's own space: the point nearest the world's origin at 0, z along its normal."""
         n = np.asarray(self.normal, np.float64)
         length = np.linalg.norm(n)
-        return object_matrix(frame_columns(n / length), -self.offset * n / length**2)
+        return object_matrix(space_columns(n / length), -self.offset * n / length**2)
 
     def __post_init__(self):
         normal = vector3("normal", self.normal)
@@ -122,10 +122,10 @@ class Plane(Shape):
     def _rebase(cls, out, world, origin, rotation):
         n_h = world["normal"]
         n = n_h[:, :3]
-        # signed distance of the frame origin: n . origin + h, compensated (a far origin cancels)
+        # signed distance of the space origin: n . origin + h, compensated (a far origin cancels)
         origin_1 = np.concatenate([np.broadcast_to(origin, n.shape), np.ones((len(n), 1))], axis=1)
-        out["normal"][:, :3] = in_frame(n, rotation)
-        out["normal_low"][:, :3] = in_frame_low(n, rotation, out["normal"][:, :3])
+        out["normal"][:, :3] = in_space(n, rotation)
+        out["normal_low"][:, :3] = in_space_low(n, rotation, out["normal"][:, :3])
         out["normal"][:, 3] = dot2(n_h, origin_1)
         out["world_normal"][:, :3] = n
         out["exact"] = np.ascontiguousarray(n_h).view(np.uint64)
@@ -177,7 +177,7 @@ class Plane(Shape):
         return point - (point @ n + h) * n
 
     def anchor(self, point):
-        """The foot of the point on the plane: the kernel's offset h is measured from the frame's
+        """The foot of the point on the plane: the kernel's offset h is measured from the space's
         origin, Mitsuba's disk is centred at the eye's foot."""
         return self.foot(point)
 
@@ -186,10 +186,10 @@ class Plane(Shape):
 
     # -- Mitsuba 3 -----------------------------------------------------------------------------
     def mitsuba_disk(self, scene):
-        """(centre, frame columns (t1, t2, n), radius) of the disk standing in for the plane:
+        """(centre, space columns (t1, t2, n), radius) of the disk standing in for the plane:
         centred at the eye's foot, DISK_SCALE times the scene's extent."""
         n, _ = self.unit()
-        return self.foot(scene.camera.eye), frame_columns(n), DISK_SCALE * scene.extent()
+        return self.foot(scene.camera.eye), space_columns(n), DISK_SCALE * scene.extent()
 
     def mitsuba_shapes(self, scene):
         centre, (t1, t2, n), radius = self.mitsuba_disk(scene)

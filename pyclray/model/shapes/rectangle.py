@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import SceneError, norm3, vector3
 from ..layout import Struct
 from .base import Shape, distance, object_matrix, to_world, unit_rows
-from .device import in_frame, padded_bounds, rebase_flat
+from .device import in_space, padded_bounds, rebase_flat
 from .reference import flat_hits, exact_at_most, plain_closest, rational
 
 # u and v count as orthogonal when |u.v| <= ORTHOGONAL |u| |v| (scene-format.md)
@@ -30,9 +30,9 @@ class Rectangle(Shape):
     struct = Struct(
         "Rectangle",
         (
-            ("center", "real4"),  # centre in the frame
-            ("normal", "real4"),  # unit normal in the frame; w: n . (frame origin - centre), exact
-            ("normal_low", "real4"),  # the rest of the frame normal, rounded (n = normal + normal_low: fp32 camera rays)
+            ("center", "real4"),  # centre in the space
+            ("normal", "real4"),  # unit normal in the space; w: n . (space origin - centre), exact
+            ("normal_low", "real4"),  # the rest of the space normal, rounded (n = normal + normal_low: fp32 camera rays)
             ("u_dual", "real4"),  # (P - centre) . u_dual = a: the dual basis of (u, v) in the plane
             ("v_dual", "real4"),  # (P - centre) . v_dual = b
             ("world_normal", "real4"),  # normalize(u x v) in world space
@@ -56,8 +56,8 @@ class Rectangle(Shape):
     kernel_files = ("rectangle.cl",)
     flat_camera_depth = True  # its camera rays' n . d is error-free (ReferenceShape.flat_camera_depth)
 
-    def object_frame(self) -> np.ndarray:
-        """The rectangle's own frame: its centre at 0, x along u, y along v, z along u x v (unit
+    def object_pose(self) -> np.ndarray:
+        """The rectangle's own pose: its centre at 0, x along u, y along v, z along u x v (unit
         axes: coordinates in scene units)."""
         u, v = np.asarray(self.u, np.float64), np.asarray(self.v, np.float64)
         x = u / np.linalg.norm(u)
@@ -118,8 +118,8 @@ class Rectangle(Shape):
     @classmethod
     def _rebase(cls, out, world, origin, rotation):
         rebase_flat(out, world, origin, rotation)
-        out["u_dual"][:, :3] = in_frame(world["u_dual"][:, :3], rotation)
-        out["v_dual"][:, :3] = in_frame(world["v_dual"][:, :3], rotation)
+        out["u_dual"][:, :3] = in_space(world["u_dual"][:, :3], rotation)
+        out["v_dual"][:, :3] = in_space(world["v_dual"][:, :3], rotation)
 
     # -- bounds --------------------------------------------------------------------------------
     @classmethod

@@ -10,7 +10,7 @@ from ..errors import number, vector3
 from ..exact import dot2
 from ..layout import Struct
 from .base import Shape, distance, object_matrix
-from .device import in_frame
+from .device import in_space
 from .reference import exact_at_most, plain_closest, rational
 
 
@@ -35,12 +35,12 @@ class Sphere(Shape):
     struct = Struct(
         "Sphere",
         (
-            ("center", "real4"),  # centre in the frame; w: radius squared
-            ("c", "real"),  # |centre - frame origin|^2 - radius^2, from float64 error-free sums
+            ("center", "real4"),  # centre in the space; w: radius squared
+            ("c", "real"),  # |centre - space origin|^2 - radius^2, from float64 error-free sums
             ("id", "int"),
             ("primitive", "int"),  # its index in its batch (pyclray.Spheres), 0 for a Sphere
         ),
-        "Sphere: center.xyz in the frame, center.w = r^2, c = |center|^2 - r^2.",
+        "Sphere: center.xyz in the space, center.w = r^2, c = |center|^2 - r^2.",
     )
     world = Struct(
         "SphereWorld",
@@ -51,10 +51,10 @@ class Sphere(Shape):
     )
     kernel_files = ("sphere.cl",)
     inside_test = True  # its inside: <type>_inside (the closest-point query)
-    frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
+    tested_from_world = True  # rebased on the eye where tested: no per-view copy (Shape.tested_from_world)
 
-    def object_frame(self) -> np.ndarray:
-        """The sphere's own frame: its centre at 0, the world's axes."""
+    def object_pose(self) -> np.ndarray:
+        """The sphere's own space: its centre at 0, the world's axes."""
         return object_matrix(np.eye(3), self.center)
 
     def __post_init__(self):
@@ -77,7 +77,7 @@ class Sphere(Shape):
     def _rebase(cls, out, world, origin, rotation):
         center, radius = world["center"][:, :3], world["center"][:, 3]
         F = center - origin
-        out["center"][:, :3] = in_frame(F, rotation)
+        out["center"][:, :3] = in_space(F, rotation)
         out["center"][:, 3] = radius * radius
         out["c"] = eye_term(F, radius)
 

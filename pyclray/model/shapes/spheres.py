@@ -50,17 +50,17 @@ class Spheres(Shape):
     world = Sphere.world
     kernel_files = ("sphere.cl", "spheres.cl")
     inside_test = True  # its inside: <type>_inside (the closest-point query)
-    frames_in_render = True  # framed on the eye where tested: no per-view copy (Shape.frames_in_render)
+    tested_from_world = True  # rebased on the eye where tested: no per-view copy (Shape.tested_from_world)
     reads_files = True
 
-    def object_frames(self) -> np.ndarray:
-        """Each sphere's own frame: its centre at 0, the world's axes."""
+    def object_poses(self) -> np.ndarray:
+        """Each sphere's own space: its centre at 0, the world's axes."""
         frames = np.broadcast_to(np.eye(4), (len(self.centers), 4, 4)).copy()
         frames[:, :3, 3] = self.centers
         return frames
 
-    def object_frame(self) -> np.ndarray | None:
-        return None  # one frame per sphere: object_frames
+    def object_pose(self) -> np.ndarray | None:
+        return None  # one space per sphere: object_poses
 
     def __post_init__(self):
         centers = _array("centers", self.centers, (3,), "an array of shape (N, 3) of sphere centres")

@@ -1,40 +1,40 @@
-/* The frame of a view (render) or of the per-view pass (kernels/rebase.cl): its origin, the eye, and
- * its axes, the camera's; and the float64 helpers that the shapes' <type>_rebase frame a world entry
+/* The space of a view (render) or of the per-view pass (kernels/rebase.cl): its origin, the eye, and
+ * its axes, the camera's; and the float64 helpers that the shapes' <type>_rebase rebase a world entry
  * with (error-free products and sums, as pyclray.model.exact on the host). The host puts it before
  * the shapes' files with FP_CONTRACT OFF in force: each rounding is the one written, so that a shape
- * framed here has the same bits as on the host (pyclray.model.shapes.base.in_frame, exact.dot2). */
+ * rebased here has the same bits as on the host (pyclray.model.shapes.base.in_space, exact.dot2). */
 
 typedef struct {
     double3 origin;  /* the eye (render) */
-    double3 u, v, w; /* the frame's axes in world coordinates (rows of frame_from_world) */
-} Frame;
+    double3 u, v, w; /* the space's axes in world coordinates (rows of space_from_world) */
+} Space;
 
-/* a vector's coordinates along the frame's axes, rounded to the kernel's precision: per axis
- * (u.x x.x + u.y x.y) + u.z x.z (pyclray.model.shapes.base.in_frame), written by the frame's columns,
- * three vector products and two sums with the same roundings (a framed render frames at each test) */
-inline double3 frame_coordinates(const Frame* frame, const double3 x)
+/* a vector's coordinates along the space's axes, rounded to the kernel's precision: per axis
+ * (u.x x.x + u.y x.y) + u.z x.z (pyclray.model.shapes.base.in_space), written by the space's columns,
+ * three vector products and two sums with the same roundings (a from-world render rebases at each test) */
+inline double3 space_coordinates(const Space* space, const double3 x)
 {
-    const double3 c0 = (double3)(frame->u.x, frame->v.x, frame->w.x);
-    const double3 c1 = (double3)(frame->u.y, frame->v.y, frame->w.y);
-    const double3 c2 = (double3)(frame->u.z, frame->v.z, frame->w.z);
+    const double3 c0 = (double3)(space->u.x, space->v.x, space->w.x);
+    const double3 c1 = (double3)(space->u.y, space->v.y, space->w.y);
+    const double3 c2 = (double3)(space->u.z, space->v.z, space->w.z);
     return (c0 * x.x + c1 * x.y) + c2 * x.z;
 }
 
-inline real3 to_frame(const Frame* frame, const double3 x) { return convert_real3(frame_coordinates(frame, x)); }
+inline real3 to_space(const Space* space, const double3 x) { return convert_real3(space_coordinates(space, x)); }
 
-/* what to_frame's rounding left out (its float64 coordinates minus their rounding, itself rounded):
- * with to_frame, a unit direction of a flat shape as a float pair for the fp32 camera rays' exact
- * n . d (kernels/lanes.h: pixel_dot; pyclray.model.shapes.device.in_frame_low); 0 in fp64 */
-inline real3 to_frame_low(const Frame* frame, const double3 x)
+/* what to_space's rounding left out (its float64 coordinates minus their rounding, itself rounded):
+ * with to_space, a unit direction of a flat shape as a float pair for the fp32 camera rays' exact
+ * n . d (kernels/lanes.h: pixel_dot; pyclray.model.shapes.device.in_space_low); 0 in fp64 */
+inline real3 to_space_low(const Space* space, const double3 x)
 {
-    const double3 f = frame_coordinates(frame, x);
+    const double3 f = space_coordinates(space, x);
     return convert_real3(f - convert_double3(convert_real3(f)));
 }
 
 /* a b = p + e exactly (pyclray.model.exact.two_prod): on PoCL's CPU device with the fused multiply-add
  * (clang's own: PoCL's library fma is a call, which LLVM does not inline there), else Dekker's
  * product with his splitter 2^27 + 1, the host's: the same e either way, exact, for every product
- * whose parts neither overflow nor underflow (a framed render tests shapes with it at each visit,
+ * whose parts neither overflow nor underflow (a from-world render tests shapes with it at each visit,
  * where the fused form costs a fifth of Dekker's) */
 inline double2 two_prod(const double a, const double b)
 {
