@@ -137,6 +137,17 @@ class CameraModel(ABC):
         pinhole (the kernel computes those rays itself: kernels/camera.h)."""
         return None
 
+    def rays_from_table(self, width: int, height: int, window=None) -> tuple[np.ndarray, np.ndarray]:
+        """rays() of a model whose rays come from its table (space_directions): each pixel's
+        direction turned into the world by the basis and normalized, from the eye."""
+        d, _ = self.space_directions(width, height)
+        if window is not None:
+            col0, row0, columns, rows = window
+            d = d[row0:row0 + rows, col0:col0 + columns]
+        d = d @ self.basis()
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.broadcast_to(np.array(self.eye), d.shape), d
+
     def pose(self, convention: str = "opencv") -> np.ndarray:
         """The camera-to-world pose (4x4 float64): its rotation's columns the camera's axes in world
         coordinates, its translation the eye. convention "opencv" (the default; also Open3D's, BOP's

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SceneError, _shown, no_unknown_keys, number, vector3
 from .base import CameraModel, RayTable
 from .lens import TABLES_KEPT
-from .perspective import CAMERA, ImagePlane, look_at_rows, packed_frame
+from .perspective import CAMERA, look_at_rows, packed_space
 
 TABLE_KEYS = ("eye", "target", "up", "longitude", "latitude")
 
@@ -82,16 +82,10 @@ class Equirectangular(CameraModel):
         return panorama_table(self.longitude, self.latitude, width, height)
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
+        return packed_space(self.basis(), width, height, precision, box_origin)
 
     def rays(self, width: int, height: int, window=None):
-        d, _ = self.space_directions(width, height)
-        if window is not None:
-            col0, row0, columns, rows = window
-            d = d[row0:row0 + rows, col0:col0 + columns]
-        d = d @ self.basis()
-        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        return np.broadcast_to(np.array(self.eye), d.shape), d
+        return self.rays_from_table(width, height, window)
 
 
 @lru_cache(maxsize=TABLES_KEPT)

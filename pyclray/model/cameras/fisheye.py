@@ -11,8 +11,8 @@ import numpy as np
 from ..errors import SceneError, _shown, integer, no_unknown_keys, number, text, vector3
 from . import lens
 from .base import MAX_IMAGE_SIDE, CameraModel
-from .perspective import (CAMERA, PIXEL_ORIGINS, ImagePlane, _intrinsics, _matrix, _nested, _rotation, opencv_pose,
-                          packed_frame)
+from .perspective import (CAMERA, PIXEL_ORIGINS, _intrinsics, _matrix, _nested, _rotation, opencv_pose,
+                          packed_space)
 
 TABLE_KEYS = ("intrinsics", "pose", "distortion", "fov", "pixel_origin")
 
@@ -118,16 +118,10 @@ class Fisheye(CameraModel):
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """The kernel's Camera struct: the frame (the rays come from space_directions' table)."""
-        return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
+        return packed_space(self.basis(), width, height, precision, box_origin)
 
     def rays(self, width: int, height: int, window=None):
-        d, _ = self.space_directions(width, height)
-        if window is not None:
-            col0, row0, columns, rows = window
-            d = d[row0:row0 + rows, col0:col0 + columns]
-        d = d @ self.basis()
-        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        return np.broadcast_to(np.array(self.eye), d.shape), d
+        return self.rays_from_table(width, height, window)
 
 
 def fisheye_coefficients(value) -> tuple:

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import SceneError, no_unknown_keys, number, vector3
 from .base import CameraModel, LookAt, MitsubaSensor
-from .perspective import CAMERA, ImagePlane, look_at_rows, packed_frame
+from .perspective import CAMERA, look_at_rows, packed_space
 
 TABLE_KEYS = ("eye", "target", "up", "height")
 
@@ -61,7 +61,7 @@ class Orthographic(CameraModel):
         return cached
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        return packed_frame(self.basis(), ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
+        return packed_space(self.basis(), width, height, precision, box_origin)
 
     def offsets(self, width: int, height: int, window=None) -> tuple[np.ndarray, np.ndarray]:
         """(ox, oy): each column's and row's offset from the eye along u (left) and v (up)."""

@@ -180,6 +180,13 @@ def packed_frame(rows, plane: ImagePlane, width: int, height: int, precision: st
     return camera
 
 
+def packed_space(rows, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)):
+    """The kernel's Camera struct of a model whose rays the kernel does not make from an image plane
+    (a table's: lenses, panoramas; or cast: orthographic): the camera's space (rows) alone, with a
+    unit plane centred on the image."""
+    return packed_frame(rows, ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
+
+
 @dataclass(frozen=True)
 class Camera(CameraModel):
     """A perspective camera at ``eye``, given one of two ways (never a mix):
@@ -423,15 +430,9 @@ class Camera(CameraModel):
         normalize(R K^-1 [i, j, 1]). With a distortion: each pixel's undistorted direction
         (space_directions; a pixel the lens cannot reach gets its pinhole ray, which render and
         cast report as a miss there). The origins are the eye."""
-        u, v, w = self.basis()
         if self.distortion is not None:
-            frame, _ = self.space_directions(width, height)
-            if window is not None:
-                col0, row0, columns, rows = window
-                frame = frame[row0:row0 + rows, col0:col0 + columns]
-            d = frame @ np.stack([u, v, w])
-            d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-            return np.broadcast_to(np.array(self.eye), d.shape), d
+            return self.rays_from_table(width, height, window)
+        u, v, w = self.basis()
         sx, sy = self.plane_coordinates(width, height, window)
         d = w + sx[None, :, None] * u + sy[:, None, None] * v
         d /= np.linalg.norm(d, axis=-1, keepdims=True)
