@@ -1,7 +1,7 @@
 """pyclray.cast, the batch ray API: agreement with the float64 oracle, independence from the batch,
 far origins, tmax and occluded, input checks, edge cases.
 
-Error model of cast (pyclray.accuracy: pyclray_tolerances and cast_frames). Each ray is traced
+Error model of cast (pyclray.accuracy: pyclray_tolerances and cast_spaces). Each ray is traced
 on its own (kernels/cast.cl, kernels/rays.h): a bounded shape of anchor A (its box's centre) and bounding radius
 R is tested from the point O' = O + s0 D of the ray, s0 = max(0, (A - O).D - R), taken in float64
 with the shape's coordinates relative to A; a plane from the ray's world origin in float64. What is

@@ -15,9 +15,9 @@ seen from a centre of curvature of radius r it turns the normal by that error ov
 - camera: Mitsuba's float32 look_at camera turns its rays by up to alpha = 3 eps (1 + S),
   S = max(|eye|, |target|) / |target - eye|, and its origins lie within 2 eps max(|eye|, 1) of the
   eye: alpha t + 2 eps max(|eye|, 1) (images against Mitsuba only);
-- L: pyclray subtracts the eye in float64 on the host (render), so its L is the size of frame
+- L: pyclray subtracts the eye in float64 on the host (render), so its L is the size of the space's
   coordinates: |origin - eye| + |anchor - eye|; a cast traces each ray on its own, from a point of
-  it next to each bounded shape, relative to the shape's box centre (``cast_frames``); Mitsuba works in
+  it next to each bounded shape, relative to the shape's box centre (``cast_spaces``); Mitsuba works in
   float32 world coordinates: L = max(|eye|, |anchor|, |eye - anchor|). The anchor is the point a
   shape's intersection measures from (``Shape.anchor``), r its ``curvature_radius``.
 - the flat law: where a render's camera ray hits a shape of flat faces whose distance the kernel
@@ -133,7 +133,7 @@ def tolerances(t, cos, radius, *, eps, scale, k, oracle_scale=None, camera_reach
     return depth, normal
 
 
-def cast_frames(scene: Scene, origins, directions, ids):
+def cast_spaces(scene: Scene, origins, directions, ids):
     """(L, travelled, anchor) per ray of a cast: cast tests a bounded shape of box centre A and
     bounding radius R from the point O + s0 D of the ray, s0 = max(0, (A - O).D - R) (float64), in
     coordinates relative to A, so what it rounds is of size L = |O + s0 D - A| + R; an unbounded
@@ -154,8 +154,8 @@ def cast_frames(scene: Scene, origins, directions, ids):
     F = A - origins
     margin = 2.0**-50 * np.abs(F).sum(axis=-1)  # the kernel's bound on the rounding of (A - O).D
     s0 = np.where(b, np.maximum(0.0, np.einsum("...k,...k", F, directions) - R - margin), 0.0)
-    frame = np.where(b, np.linalg.norm(F - s0[..., None] * directions, axis=-1) + R, 0.0)
-    return frame, s0, A
+    size = np.where(b, np.linalg.norm(F - s0[..., None] * directions, axis=-1) + R, 0.0)
+    return size, s0, A
 
 
 def flat_camera_depths(scene: Scene) -> np.ndarray:
@@ -170,8 +170,8 @@ def flat_camera_depths(scene: Scene) -> np.ndarray:
 def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None,
                        flat: bool = True):
     """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
-    for rays from ``origins``. A render's kernel works in a frame centred on ``reference_point``
-    (the eye); without one, the rays are a cast's, each traced on its own (``cast_frames``, which
+    for rays from ``origins``. A render's kernel works in a space centred on ``reference_point``
+    (the eye); without one, the rays are a cast's, each traced on its own (``cast_spaces``, which
     needs their unit ``directions``). A render's depth bound on the flat shapes follows the flat
     law (``flat``; False: the sideways law everywhere, the position error that decides edges)."""
     origins = np.asarray(origins, np.float64)
@@ -179,13 +179,13 @@ def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, 
     if reference_point is not None:
         ref = np.asarray(reference_point, np.float64)
         anchor = anchors(scene, ref)[index]
-        frame = np.linalg.norm(origins - ref, axis=-1) + np.linalg.norm(anchor - ref, axis=-1)
+        size = np.linalg.norm(origins - ref, axis=-1) + np.linalg.norm(anchor - ref, axis=-1)
         travelled = None
     else:
-        frame, travelled, anchor = cast_frames(scene, origins, directions, truth["id"])
+        size, travelled, anchor = cast_spaces(scene, origins, directions, truth["id"])
     world = np.linalg.norm(origins, axis=-1) + np.linalg.norm(anchor, axis=-1)
     along = flat_camera_depths(scene)[index] if flat and reference_point is not None else None
-    return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=frame,
+    return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=size,
                       k=K_ORACLE, oracle_scale=world, travelled=travelled, flat=along)
 
 

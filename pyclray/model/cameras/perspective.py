@@ -149,7 +149,7 @@ def _rotation(key: str, R: np.ndarray) -> np.ndarray:
     return U @ Vt
 
 
-def packed_frame(rows, plane: ImagePlane, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)):
+def packed_camera(rows, plane: ImagePlane, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)):
     """The kernel's Camera (CAMERA): the space's rows u, v, w, the image plane (an ImagePlane at
     this size) and the eye in the BVH's space (box_origin: the eye minus the scene's anchor,
     float64). Twice the principal point goes as an integer and the rest, so that the kernel's
@@ -184,7 +184,7 @@ def packed_space(rows, width: int, height: int, precision: str, box_origin=(0.0,
     """The kernel's Camera struct of a model whose rays the kernel does not make from an image plane
     (a table's: lenses, panoramas; or cast: orthographic): the camera's space (rows) alone, with a
     unit plane centred on the image."""
-    return packed_frame(rows, ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
+    return packed_camera(rows, ImagePlane(1.0, 1.0, width / 2, height / 2), width, height, precision, box_origin)
 
 
 @dataclass(frozen=True)
@@ -407,8 +407,8 @@ class Camera(CameraModel):
         return t * width / height, t
 
     def pack(self, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """The kernel's Camera struct (packed_frame) of this camera's space and image plane at this size."""
-        return packed_frame(self.basis(), self.image_plane(width, height), width, height, precision, box_origin)
+        """The kernel's Camera struct (packed_camera) of this camera's space and image plane at this size."""
+        return packed_camera(self.basis(), self.image_plane(width, height), width, height, precision, box_origin)
 
     def plane_coordinates(self, width: int, height: int, window=None) -> tuple[np.ndarray, np.ndarray]:
         """(sx, sy): the pixel centres' coordinates on the image plane at distance 1 (x left, y up),

@@ -142,7 +142,7 @@ class Transform:
         """The images of the unit axes (the linear part's columns), rows of the result."""
         return self.matrix[:3, :3].T.copy()
 
-    def flat_frame(self):
+    def flat_axes(self):
         """(centre, first axis, second axis, unit normal) of Mitsuba's unit shape in z = 0 under
         this transform. Its normal is the normal transform of +z, (M^-T) e_z, which is
         det(M) cross(M e_x, M e_y) / |...|: a mirroring transform turns it around."""

@@ -137,7 +137,7 @@ class Disk(Shape):
     @classmethod
     def from_mitsuba(cls, props, folder):
         """Mitsuba's disk is the unit disk in z = 0: to_world must keep it round."""
-        center, u, v, normal = props.to_world().flat_frame()
+        center, u, v, normal = props.to_world().flat_axes()
         ru, rv = np.linalg.norm(u), np.linalg.norm(v)
         if abs(np.dot(u, v)) > 1e-9 * ru * rv or abs(ru - rv) > 1e-9 * max(ru, rv):
             raise props.element.error("to_world turns the disk into an ellipse: pyclray's disks are round")

@@ -180,7 +180,7 @@ class Rectangle(Shape):
         v, so that cross(u, v) stays along Mitsuba's normal); under any other affine to_world (a
         shear) a parallelogram, Mitsuba's two triangles (mesh_shapes.MITSUBA_RECTANGLE)."""
         to_world = props.to_world()
-        center, u, v, normal = to_world.flat_frame()
+        center, u, v, normal = to_world.flat_axes()
         if abs(np.dot(u, v)) > ORTHOGONAL * np.linalg.norm(u) * np.linalg.norm(v):
             from .mesh import Mesh
             from .mesh_shapes import MITSUBA_RECTANGLE

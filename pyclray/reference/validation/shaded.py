@@ -135,8 +135,8 @@ def cross_check_shaded(scene, variant: str = "scalar_rgb", device=None, truth=No
                                             lifts=(ours_offset, theirs_offset))
     # the error model's bounds on each engine's hit point and normal, made bounds on the colour
     # (a render by casting: each ray traced on its own, cast's bounds)
-    frame_point = scene.camera.eye if scene.camera.rays_from_eye else None
-    our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", frame_point, D)
+    space_origin = scene.camera.eye if scene.camera.rays_from_eye else None
+    our_depth, our_normal = error_model.pyclray_tolerances(scene, ref, ref["cos"], O, "fp32", space_origin, D)
     their_depth, their_normal = error_model.mitsuba_tolerances(scene, ref["depth"], ref["id"], ref["cos"], cameras=True)
     ours_tol, jump = shading.tolerance(scene, D, ref, our_depth, our_normal, EPSILON)
     theirs_tol, jump2 = shading.tolerance(scene, D, ref, their_depth, their_normal, EPSILON)
