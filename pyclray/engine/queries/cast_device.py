@@ -23,6 +23,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.device import launch
+from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -41,14 +42,8 @@ def check_out(out) -> str:
 def _device_rays(ctx, kernels, name: str, value) -> cl_array.Array:
     """value as a contiguous float64 device array of shape (..., 3) on ctx's context: a device array
     converted there (float32 widened exactly), a host array uploaded."""
-    if not is_device_array(value):
-        try:
-            host = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            raise RequestError(f"{name}: expected an array of shape (..., 3) of numbers") from None
-        if host.size == 0 and host.ndim == 1:  # an empty list: no rays
-            host = host.reshape(0, 3)
-        value = cl_array.to_device(ctx.queue, np.ascontiguousarray(host))
+    if not is_device_array(value):  # a host array, checked as cast's (cast.py: _ray_array)
+        value = cl_array.to_device(ctx.queue, np.ascontiguousarray(_ray_array(name, value)))
     elif value.context.int_ptr != ctx.context.int_ptr:
         raise RequestError(f"{name}: a pyopencl array on another context than the handle's (its device's context)")
     if value.dtype not in (np.float32, np.float64):
@@ -162,8 +157,6 @@ def _kernels(tracer) -> DeviceKernels:
 def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, out: str):
     """cast or occluded (engine/queries/cast.py: run_cast) of device rays; out: "device" leaves the
     results pyopencl arrays, "host" reads each back once."""
-    from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, run_cast
-
     ctx, precision = tracer.ctx, tracer.precision
     queue = ctx.queue
     kernels = _kernels(tracer)

@@ -12,7 +12,7 @@ from ..errors import SceneError, _shown, integer, no_unknown_keys, number, text,
 from . import lens
 from .base import MAX_IMAGE_SIDE, CameraModel
 from .perspective import (CAMERA, PIXEL_ORIGINS, _intrinsics, _matrix, _nested, _rotation, opencv_pose,
-                          packed_space)
+                          packed_space, scaled_intrinsics)
 
 TABLE_KEYS = ("intrinsics", "pose", "distortion", "fov", "pixel_origin")
 
@@ -101,12 +101,7 @@ class Fisheye(CameraModel):
 
     def intrinsics(self, width: int, height: int) -> np.ndarray:
         """K (OpenCV's convention) at this image size: as given at its size, scaled at another."""
-        K = np.array(self.K)
-        if self.size is not None and (width, height) != self.size:
-            for row, ratio in ((0, width / self.size[0]), (1, height / self.size[1])):
-                K[row, row] *= ratio
-                K[row, 2] = (K[row, 2] + 0.5) * ratio - 0.5
-        return K
+        return scaled_intrinsics(self.K, self.size, width, height)
 
     def space_directions(self, width: int, height: int):
         """Each pixel's unit direction in the camera's space and whether the lens reaches it

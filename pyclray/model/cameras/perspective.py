@@ -149,6 +149,17 @@ def _rotation(key: str, R: np.ndarray) -> np.ndarray:
     return U @ Vt
 
 
+def scaled_intrinsics(K, size, width: int, height: int) -> np.ndarray:
+    """K (OpenCV's convention) given for an image of ``size`` (or None: any), at width x height: the
+    image's edges scale (pixel centres at integers: the edge at -1/2), so fx and cx + 1/2 do."""
+    K = np.array(K, dtype=np.float64)
+    if size is not None and (width, height) != tuple(size):
+        for row, ratio in ((0, width / size[0]), (1, height / size[1])):
+            K[row, row] *= ratio
+            K[row, 2] = (K[row, 2] + 0.5) * ratio - 0.5
+    return K
+
+
 def packed_camera(rows, plane: ImagePlane, width: int, height: int, precision: str, box_origin=(0.0, 0.0, 0.0)):
     """The kernel's Camera (CAMERA): the space's rows u, v, w, the image plane (an ImagePlane at
     this size) and the eye in the BVH's space (box_origin: the eye minus the scene's anchor,
@@ -378,13 +389,7 @@ class Camera(CameraModel):
             tan_x, tan_y = self.tangents(width, height)
             return np.array([[width / (2 * tan_x), 0.0, width / 2 - 0.5], [0.0, height / (2 * tan_y), height / 2 - 0.5],
                              [0.0, 0.0, 1.0]])
-        K = np.array(self.K)
-        if self.size is not None and (width, height) != self.size:
-            # the image's edges scale (pixel centres at integers: the edge at -1/2), so fx and cx + 1/2
-            for row, ratio in ((0, width / self.size[0]), (1, height / self.size[1])):
-                K[row, row] *= ratio
-                K[row, 2] = (K[row, 2] + 0.5) * ratio - 0.5
-        return K
+        return scaled_intrinsics(self.K, self.size, width, height)
 
     def image_plane(self, width: int, height: int) -> ImagePlane:
         """Where this camera's pixel-centre rays go at this image size (see ImagePlane): the one
