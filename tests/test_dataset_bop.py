@@ -348,3 +348,62 @@ def test_coco_rle_is_pycocotools_encode():
     big = np.zeros((480, 640), bool)
     big[100:300, 200:500] = True  # runs beyond 2^15 and differences of both signs
     assert coco_rle(big)["counts"] == coco_mask.encode(np.asfortranarray(big.astype(np.uint8)))["counts"].decode()
+
+
+def torus(rings=24, sides=12, major=1.0, minor=0.35):
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, rings, endpoint=False), np.linspace(0, 2 * np.pi, sides, endpoint=False),
+                       indexing="ij")
+    vertices = np.stack([(major + minor * np.cos(v)) * np.cos(u), (major + minor * np.cos(v)) * np.sin(u),
+                         minor * np.sin(v)], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(rings), np.arange(sides), indexing="ij")
+    a, b = i * sides + j, ((i + 1) % rings) * sides + j
+    c, d = ((i + 1) % rings) * sides + (j + 1) % sides, i * sides + (j + 1) % sides
+    return vertices, np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+
+
+def test_amodal_masks_are_the_objects_rendered_alone():
+    """A view's amodal masks come from the scene's render (its visible pixels) and renders of each
+    object alone only over the pixels where it may lie hidden, and, where its box reaches beyond the
+    image, over the canvas outside the image (views.py: _start_alone): each mask equals the object
+    rendered alone over the whole image, and its outside count and box the object alone on the whole
+    three-times canvas less the image, bit for bit. Interlocked tori hide each other, a ball (scenery)
+    hides them, the ground cuts one; near cameras see them cut by the image's edges, one from inside
+    an object's box (corners behind the camera)."""
+    from pyclray.io.dataset import DatasetViews, make_format
+
+    vertices, faces = torus()
+    shapes = (pyclray.Plane((0.0, 1.0, 0.0), 0.0, name="ground"),
+              pyclray.Mesh(vertices, faces, scale=0.5, axis=(1.0, 0.0, 0.0), angle=90.0, translate=(0.0, 0.15, 0.0),
+                           name="flat", label=1),
+              pyclray.Mesh(vertices, faces, scale=0.5, translate=(0.5, 0.5, 0.0), name="upright", label=2),
+              pyclray.Sphere((-0.2, 0.35, 0.7), 0.25, name="ball"),
+              pyclray.Mesh(vertices, faces, scale=0.4, axis=(0.0, 1.0, 0.0), angle=40.0, translate=(-0.7, 0.1, -0.5),
+                           name="sunk", label=3))
+    image = pyclray.Image(80, 60)
+    scene = pyclray.Scene(pyclray.Camera((0.0, 2.0, 3.0), (0.0, 0.3, 0.0), fov=50.0), image, shapes,
+                          lights=(pyclray.PointLight((2.0, 4.0, 3.0), (20.0, 20.0, 20.0)),))
+    cameras = view_cameras(scene, Placement("hemisphere", (0.9, 3.5), (5.0, 80.0), 5), 14)
+    cameras.append(pyclray.Camera((0.5, 0.5, 0.1), (0.5, 0.5, 3.0), fov=60.0))  # inside the upright torus's box
+    work = DatasetViews(scene, cameras, make_format("bop"))
+    hidden = reaching_out = 0
+    try:
+        for view in work.views(range(len(cameras))):
+            camera = view.camera
+            K, pose = camera.intrinsics(80, 60), camera.pose()
+            big_K = K.copy()
+            big_K[:2, 2] += [80, 60]
+            canvas_camera = pyclray.Camera.from_intrinsics(big_K, pose, 240, 180)
+            for shape_id, (mask, count, box) in zip((1, 2, 4), view.alone):
+                alone = pyclray.render(pyclray.Scene(camera, image, (shapes[shape_id],)), aovs=("id",))["id"] >= 0
+                assert np.array_equal(mask, alone), (view.index, shape_id)
+                canvas = pyclray.render(pyclray.Scene(canvas_camera, pyclray.Image(240, 180), (shapes[shape_id],)),
+                                        aovs=("id",))["id"] >= 0
+                canvas[60:120, 80:160] = False
+                ys, xs = np.nonzero(canvas)
+                assert count == len(xs)
+                assert box == ((xs.min() - 80, ys.min() - 60, xs.max() - 80, ys.max() - 60) if len(xs) else None)
+                hidden += int((alone & (view.images["id"] != shape_id)).any())
+                reaching_out += int(count > 0)
+    finally:
+        work.close()
+    assert hidden >= 20 and reaching_out >= 10, (hidden, reaching_out)  # the cases the test is for did happen
