@@ -332,6 +332,26 @@ def test_diameter_is_exact():
         assert diameter(points) == pytest.approx(brute, rel=1e-12)
 
 
+def test_diameter_of_many_points_is_every_pairs_largest():
+    """Sets of thousands of points (diameter passes over the pairs of runs of nearby points that
+    cannot hold the largest distance): on a sphere (every point on the hull, near-ties all over),
+    a torus and a circle with exact antipodes, a grid (many equal pairs), a flat square, a line,
+    and a spread cloud: the largest of all pairs' distances, measured one by one."""
+    rng = np.random.default_rng(7)
+    sphere = rng.normal(size=(3000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    angles = np.linspace(0, 2 * np.pi, 1200, endpoint=False)
+    u, v = np.meshgrid(angles[::20], angles[::40], indexing="ij")
+    torus = np.stack([(1 + 0.3 * np.cos(v)) * np.cos(u), (1 + 0.3 * np.cos(v)) * np.sin(u), 0.3 * np.sin(v)], -1)
+    grid = np.stack(np.meshgrid(*[np.arange(12.0)] * 3), -1)
+    sets = (sphere * 7.5 + 100.0, torus.reshape(-1, 3), np.c_[np.cos(angles), np.sin(angles), np.zeros(1200)],
+            grid.reshape(-1, 3), np.c_[rng.uniform(size=(2000, 2)), np.zeros(2000)],
+            np.outer(rng.uniform(size=1500), [1.0, -2.0, 0.5]), rng.standard_cauchy(size=(2500, 3)))
+    for points in sets:
+        brute = max(float(np.sqrt(((points[i] - points) ** 2).sum(axis=1)).max()) for i in range(len(points)))
+        assert diameter(points) == pytest.approx(brute, rel=1e-12)
+
+
 def test_coco_rle_is_pycocotools_encode():
     """Random masks of several sizes and densities, and masks starting with a run of 1s: the counts
     string and size are exactly pycocotools.mask.encode's."""
