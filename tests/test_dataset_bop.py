@@ -368,6 +368,16 @@ def test_coco_rle_is_pycocotools_encode():
     big = np.zeros((480, 640), bool)
     big[100:300, 200:500] = True  # runs beyond 2^15 and differences of both signs
     assert coco_rle(big)["counts"] == coco_mask.encode(np.asfortranarray(big.astype(np.uint8)))["counts"].decode()
+    # given the columns that hold the 1s (the writer passes its visible box's): the same string, for
+    # masks whose 1s start in the first row, end in the last, or fill their columns
+    for _ in range(200):
+        height, width = rng.integers(1, 13, 2)
+        mask = np.zeros((height, width), bool)
+        (x0, x1), (y0, y1) = sorted(rng.integers(0, width, 2)), sorted(rng.integers(0, height, 2))
+        mask[y0:y1 + 1, x0:x1 + 1] = rng.random((y1 - y0 + 1, x1 - x0 + 1)) < rng.choice([0.3, 0.9, 1.0])
+        expected = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))["counts"].decode()
+        for columns in ((x0, x1), (0, width - 1), (x0, width - 1)):
+            assert coco_rle(mask, columns)["counts"] == expected, (mask, columns)
 
 
 def torus(rings=24, sides=12, major=1.0, minor=0.35):
