@@ -113,7 +113,7 @@ class DatasetViews:
         def start_next():
             k = next(todo, None)
             if k is not None:
-                view = with_camera(self.scene, self.cameras[k])
+                view = with_camera(tracer.scene, self.cameras[k])
                 ahead.append((k, tracer.start_render(view, self.format.aovs, motion=self.motion)))
 
         try:
