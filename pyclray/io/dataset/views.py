@@ -54,6 +54,7 @@ class DatasetViews:
         state["_tracers"] = None  # each process prepares its own
         state.pop("_object_boxes", None)
         state.pop("_object_ids", None)
+        state.pop("_object_frames", None)
         return state
 
     # -- the handles ---------------------------------------------------------------------------
@@ -74,6 +75,7 @@ class DatasetViews:
         self._object_boxes = [tracer.scene.shapes[0].box() for tracer in tracers[1:]]  # for their windows
         objects = self.format.objects(scene) if self.format.needs_alone else []
         self._object_ids = [next(i for i, s in enumerate(scene.shapes) if s is shape) for shape in objects]
+        self._object_frames = [_object_frame(tracer.scene.shapes[0]) for tracer in tracers[1:]]
         for k, tracer in enumerate(tracers):
             tracer.render(aovs=self.format.aovs if k == 0 else ("id",), window=(0, 0, 1, 1))
 
@@ -145,7 +147,7 @@ class DatasetViews:
         - In the image, where the frame has id and zdepth and the camera is a pinhole (the rays
           from K and the pose): only over the box of the pixels where the object may lie hidden
           (_hidden_window: another shape seen there, not beyond where the pixel's ray leaves the
-          object's box). Everywhere else the object alone is hit exactly where the scene shows it
+          box of the object's model in its own frame, _object_frame). Everywhere else the object alone is hit exactly where the scene shows it
           (the same ray meets the same triangles: a pixel that sees nothing meets none of them,
           one that sees a shape beyond the object's box cannot meet the object, which would be
           nearer), so its mask there is its visible pixels (_finish_alone). Otherwise over the
@@ -159,12 +161,13 @@ class DatasetViews:
         pinhole = K is not None and camera.rays_from_eye and camera.space_directions(width, height) is None
         hidden = pinhole and frame is not None and "id" in frame and "zdepth" in frame
         canvas_camera = None
-        for tracer, box, shape_id in zip(self._tracers[1:], self._object_boxes, self._object_ids):
+        for tracer, box, shape_id, own in zip(self._tracers[1:], self._object_boxes, self._object_ids,
+                                              self._object_frames):
             window = _projected_window(box, K, pose)  # in image pixels, or None: anywhere
             inside = _clip(window, 0, 0, width, height)
             reaches_out = window is None or inside != window
             if hidden and inside is not None:
-                inside = _hidden_window(frame["id"], frame["zdepth"], shape_id, inside, box, K, pose)
+                inside = _hidden_window(frame["id"], frame["zdepth"], shape_id, inside, own, K, pose)
             seen = replace(tracer.scene, camera=camera)
             in_image = None if inside is None else tracer.start_render(seen, ("id",), window=inside)
             beyond = None
@@ -286,13 +289,28 @@ HIDDEN_BOX_MARGIN = 1e-3  # of the box's largest side
 HIDDEN_DEPTH_MARGIN = 1e-3  # of the depth seen
 
 
-def _hidden_window(ids, zdepth, shape_id: int, window, box, K, pose):
+def _object_frame(shape):
+    """(low, high, object_from_world 4x4) of the box holding the shape in its own frame (its
+    model's box, where it has a model and an invertible pose: tighter than the world box of a
+    turned object), else its world box and the identity."""
+    model, pose = shape.object_model(), shape.object_pose()
+    if model is not None and pose is not None:
+        vertices = np.asarray(model[0], np.float64)
+        pose = np.asarray(pose, np.float64)
+        if len(vertices) and abs(np.linalg.det(pose[:3, :3])) > 0:
+            return vertices.min(axis=0), vertices.max(axis=0), np.linalg.inv(pose)
+    box = shape.box()
+    return box[0], box[1], np.eye(4)
+
+
+def _hidden_window(ids, zdepth, shape_id: int, window, own, K, pose):
     """(x, y, width, height) of the pixels of window (in the image) where the object shape_id may
     lie behind what the scene's render shows there, or None where it can nowhere: where another
     shape is seen (ids, zdepth: the scene's images) and the pixel's ray leaves the object's box
-    (grown by the margins) no nearer than that shape's depth. The ray of pixel (u, v) is
-    R K^-1 [u, v, 1] from the eye (OpenCV's pixel centres, as K), whose parameter is the depth
-    along the optical axis, so it compares with zdepth as it is."""
+    (own: _object_frame's, grown by the margins) no nearer than that shape's depth. The ray of
+    pixel (u, v) is R K^-1 [u, v, 1] from the eye (OpenCV's pixel centres, as K), whose parameter is
+    the depth along the optical axis; taken into the object's frame it keeps its parameter, so it
+    compares with zdepth as it is."""
     x, y, w, h = window
     ids = ids[y:y + h, x:x + w]
     other = (ids >= 0) & (ids != shape_id)
@@ -302,18 +320,20 @@ def _hidden_window(ids, zdepth, shape_id: int, window, box, K, pose):
     y0, y1, x0, x1 = rows[0], rows[-1] + 1, columns[0], columns[-1] + 1
     other = other[y0:y1, x0:x1]
     seen = zdepth[y + y0:y + y1, x + x0:x + x1]
-    eye = pose[:3, 3]
-    rays = pose[:3, :3] @ np.linalg.inv(K)  # row i: the ray's world component i from (u, v, 1)
+    low, high, object_from_world = own
+    eye = object_from_world[:3, :3] @ pose[:3, 3] + object_from_world[:3, 3]
+    rays = object_from_world[:3, :3] @ pose[:3, :3] @ np.linalg.inv(K)  # row i: the ray's component i from (u, v, 1)
     u = np.arange(x + x0, x + x1, dtype=np.float64)
     v = np.arange(y + y0, y + y1, dtype=np.float64)
-    grow = HIDDEN_BOX_MARGIN * float((box[1] - box[0]).max()) + 1e-6 * max(float(np.abs(box).max()), float(np.abs(eye).max()))
+    grow = (HIDDEN_BOX_MARGIN * float((high - low).max())
+            + 1e-6 * max(float(np.abs(low).max()), float(np.abs(high).max()), float(np.abs(eye).max())))
     near = np.full(other.shape, -np.inf, np.float32)
     far = np.full(other.shape, np.inf, np.float32)
     with np.errstate(divide="ignore", invalid="ignore"):
-        for i in range(3):  # the ray's slab of the box along world axis i: a NaN (0 / 0) bounds nothing
+        for i in range(3):  # the ray's slab of the box along axis i: a NaN (0 / 0) bounds nothing
             d = ((rays[i, 1] * v)[:, None] + (rays[i, 0] * u + rays[i, 2])[None, :]).astype(np.float32)
-            a = np.float32(box[0][i] - grow - eye[i]) / d
-            b = np.float32(box[1][i] + grow - eye[i]) / d
+            a = np.float32(low[i] - grow - eye[i]) / d
+            b = np.float32(high[i] + grow - eye[i]) / d
             np.fmax(near, np.minimum(a, b), out=near)
             np.fmin(far, np.maximum(a, b), out=far)
         hidden = other & (far >= near) & (far >= seen * np.float32(1 - HIDDEN_DEPTH_MARGIN))
