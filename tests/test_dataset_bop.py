@@ -456,3 +456,23 @@ def test_object_frame_box_holds_the_object():
     sphere = pyclray.Sphere((1.0, 2.0, 3.0), 0.5)
     low, high, object_from_world = _object_frame(sphere)
     assert np.array_equal(np.stack([low, high]), sphere.box()) and np.array_equal(object_from_world, np.eye(4))
+
+
+def test_a_views_error_comes_after_the_views_before_it(tmp_path):
+    """The scene's renders run two views ahead (views.py: DatasetViews.views): a view whose render
+    cannot start (a camera beyond fp32's range from the shapes) raises its error in its turn, after
+    every view before it was handed over, as Tracer.render_views does."""
+    from pyclray.io.dataset import DatasetViews, make_format
+
+    scene = pyclray.load_scene(write_scene(tmp_path))
+    cameras = view_cameras(scene, Placement("hemisphere", seed=1), 5)
+    cameras[3] = pyclray.Camera((1e30, 0.0, 0.0), (0.0, 0.0, 0.0), fov=50.0)
+    work = DatasetViews(scene, cameras, make_format("bop"))
+    handed = []
+    try:
+        with pytest.raises(pyclray.SceneError, match="from the eye"):
+            for view in work.views(range(5)):
+                handed.append(view.index)
+    finally:
+        work.close()
+    assert handed == [0, 1, 2]

@@ -9,6 +9,7 @@ render_views) gives the arrays of view k, and ``encode(rendered)`` turns them in
 for a few views, a cluster's task."""
 from __future__ import annotations
 
+import functools
 from collections import deque
 from dataclasses import dataclass, field, replace
 
@@ -114,9 +115,13 @@ class DatasetViews:
 
         def start_next():
             k = next(todo, None)
-            if k is not None:
+            if k is None:
+                return
+            try:
                 view = with_camera(tracer.scene, self.cameras[k])
                 ahead.append((k, tracer.start_render(view, self.format.aovs, motion=self.motion)))
+            except Exception as error:  # raised in its turn, after the views before it
+                ahead.append((k, functools.partial(_raise, error)))
 
         try:
             start_next()
@@ -242,6 +247,10 @@ def _projected_window(box, K, pose, margin: int = 2):
     if not (np.isfinite(low).all() and np.isfinite(high).all()) or (np.abs(np.concatenate([low, high])) > 2**30).any():
         return None
     return int(low[0]), int(low[1]), int(high[0] - low[0]) + 1, int(high[1] - low[1]) + 1
+
+
+def _raise(error: Exception):
+    raise error
 
 
 def _wait(renders) -> None:
