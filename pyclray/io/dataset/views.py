@@ -1,10 +1,11 @@
 """Rendering a data set's views on scene handles: the scene prepared once (pyclray.prepare), and for
 formats with amodal masks (BOP) each labelled shape prepared alone, its view rendered beside the
-scene's with the same camera.
+scene's with the same camera, where the object may lie hidden (the rest of its amodal mask is its
+visible mask: DatasetViews._start_alone).
 
 ``DatasetViews`` is the work of one run, picklable: ``prepare()`` once per process (here, or on each
-Dask worker), then ``render(k)`` or ``views(ks)`` (the next view enqueued while one is returned,
-render_views) gives the arrays of view k, and ``encode(rendered)`` turns them into the view's files
+Dask worker), then ``render(k)`` or ``views(ks)`` (the device's next work enqueued while a view is
+read and returned) gives the arrays of view k, and ``encode(rendered)`` turns them into the view's files
 (the format's; PNG encoding is the slow part, done off the render's path). ``__call__(ks)`` is both
 for a few views, a cluster's task."""
 from __future__ import annotations
