@@ -80,7 +80,24 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * state (HitsRay) lives between its steps in the work-item's memory: hits_start sets it up (the ray,
  * its unbounded shapes, its box ray, the root pushed), hits_step is one step, hits_end sorts its rows
  * and writes its count. */
-#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits)
+/* With PYCLRAY_AOV_IN_LEAF (count_hits for occupancy: engine/queries/closest.py), also whether the
+ * ray's origin lies in the box of some leaf (in_leaf_out[r]): the ray enters that leaf's box at 0,
+ * which box_ray's margin (2^-20 of the origin's size) makes so for every box that holds the float64
+ * origin (or within the closest-point query's smaller margin of the same boxes: closest.cl), or the
+ * ray tests every bounded shape without the boxes. Only such a point may lie on a surface: the
+ * others' surface test is skipped. A leaf's box is not tested for this: its entry is the one the
+ * traversal found, read as the leaf is reached. */
+#ifdef PYCLRAY_AOV_IN_LEAF
+#undef PYCLRAY_LEAF_ENTERED
+#define PYCLRAY_LEAF_ENTERED(entry) if ((entry) == 0.0f) S->in_leaf_ = true;
+#define HITS_IN_LEAF_STATE(X) X(bool, in_leaf)
+#define HITS_VISIT_ALL(q) in_leaf = true; PYCLRAY_CAST_VISIT(q)
+#else
+#define HITS_IN_LEAF_STATE(X)
+#define HITS_VISIT_ALL(q) PYCLRAY_CAST_VISIT(q)
+#endif
+#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits) \
+    HITS_IN_LEAF_STATE(X)
 #define HITS_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
     X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
 #define HITS_STATE_FIELD(T, name) T name##_;
@@ -99,6 +116,9 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
 {
     PYCLRAY_CAST_RAY
     int n_hits = 0;
+#ifdef PYCLRAY_AOV_IN_LEAF
+    bool in_leaf = false;
+#endif
 #ifdef PYCLRAY_STORE_HITS
     const long hits_at = (long)r * hit_capacity;
     const int hits_room = hit_capacity;
@@ -109,7 +129,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
         PYCLRAY_CAST_BOX
         float limit = float_above_wide(t_max);
         S->top_ = 0;
-        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
+        PYCLRAY_CAST_BOUNDED(HITS_VISIT_ALL, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
         HITS_TRAVERSAL_STATE(HITS_STATE_SAVE)
     }
 #endif
@@ -175,6 +195,9 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
     }
 #endif
     hit_counts[r] = n_hits;
+#ifdef PYCLRAY_AOV_IN_LEAF
+    in_leaf_out[r] = (uchar)S->in_leaf_;
+#endif
 }
 
 PYCLRAY_KERNELS_BEGIN

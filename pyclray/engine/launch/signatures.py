@@ -256,7 +256,9 @@ CLOSEST = (
 
 # count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
 # (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
-COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
+COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"),
+              # occupancy's rays (the aov "in_leaf"): whether each ray's origin lies in some leaf's box
+              Parameter("in_leaf_out", "__global uchar*", (_asked("in_leaf"),)))
 ALL_HITS = (
     *RAYS,
     Parameter("hit_counts", "__global int*"),

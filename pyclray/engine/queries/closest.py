@@ -25,6 +25,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
 from ..opencl.device import launch
+from .hits import count_from_points
 
 SIGNS = ("parity", "winding")
 
@@ -244,11 +245,36 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
     # solids and whether the point lies on a surface: only a surface point at distance 0 is looked
     # for (within = 0), a traversal of the boxes that hold the point
+    closed = tracer.mesh_handle(closed=True) if sign == "parity" else None
+    if closed is not None and len(closed.shapes) == 1 == len(tracer.shapes) and _shares_boxes(closed):
+        return _one_closed_mesh(closed, flat).astype(np.uint8).reshape(shape)
     inside = _mesh_inside(tracer, flat, sign)
     rest = ~inside
     if rest.any():
         inside[rest] = run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
     return inside.astype(np.uint8).reshape(shape)
+
+
+def _shares_boxes(closed) -> bool:
+    """Whether the closest-point query of the handle traverses the BVH its rays do (the same wide
+    nodes around the same anchor: closest.cl's and rays.h's box tests of the same float boxes)."""
+    inputs = closed.closest_inputs()
+    return inputs.bvh is closed.prepared.bvh and bool(np.all(inputs.anchor == closed.cast_inputs()[1][:3]))
+
+
+def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
+    """Inside a scene of one closed mesh (its handle; points checked): an odd count of the parity
+    ray, or a point on the surface. The count's kernel also says which rays start in some leaf's
+    box (hits.count_from_points); only those points can lie on a triangle (the closest-point
+    query's search for a surface point at distance 0 visits the leaves whose boxes hold the point,
+    within a margin 4 times smaller than the rays' over the same float boxes), so the surface is
+    looked for from those of them with an even count alone: the same answer as from all of them."""
+    counts, in_leaf = count_from_points(closed, points, parity_directions(closed, points))
+    inside = (counts & 1).astype(bool)
+    maybe = np.flatnonzero(in_leaf & ~inside)
+    if len(maybe):
+        inside[maybe] = run_closest(closed, points[maybe], ("inside",), within=0.0)["inside"].astype(bool)
+    return inside
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:

@@ -72,11 +72,12 @@ def _run(ctx, variant, batch: RayBatch, inputs: dict, outputs: dict) -> None:
     ctx.queue.finish()
 
 
-def _counts(tracer, batch: RayBatch) -> np.ndarray:
+def _counts(tracer, batch: RayBatch, in_leaf: np.ndarray | None = None) -> np.ndarray:
     counts = np.zeros(batch.count, np.int32)
     if batch.count:
-        variant = Variant("count_hits", tracer.prepared.types, (), tracer.precision)
-        _run(tracer.ctx, variant, batch, {}, {"hit_counts": counts})
+        outputs = {"hit_counts": counts} if in_leaf is None else {"hit_counts": counts, "in_leaf_out": in_leaf}
+        variant = Variant("count_hits", tracer.prepared.types, () if in_leaf is None else ("in_leaf",), tracer.precision)
+        _run(tracer.ctx, variant, batch, {}, outputs)
     return counts
 
 
@@ -84,6 +85,15 @@ def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax)."""
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
+
+
+def count_from_points(tracer, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(counts int32, in_leaf bool) of rays from checked points (N, 3) along directions (N, 3): each
+    one's number of hits t > 0, and whether its origin lies in the box of some leaf of the handle's
+    BVH (kernels/allhits.cl: PYCLRAY_AOV_IN_LEAF), where alone a point may lie on a surface."""
+    batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
+    in_leaf = np.zeros(batch.count, np.uint8)
+    return _counts(tracer, batch, in_leaf), in_leaf.view(bool)
 
 
 # all_hits' rows per ray in its one pass: a ray with more hits is cast again with room for all of them
