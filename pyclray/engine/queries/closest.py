@@ -113,6 +113,7 @@ class ClosestInputs:
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
         self._winding = None
+        self.parity_grid = None  # occupancy's grid of a closed mesh (engine/queries/parity_grid.py), where asked for
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -264,17 +265,46 @@ def _shares_boxes(closed) -> bool:
 
 def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     """Inside a scene of one closed mesh (its handle; points checked): an odd count of the parity
-    ray, or a point on the surface. The count's kernel also says which rays start in some leaf's
-    box (hits.count_from_points); only those points can lie on a triangle (the closest-point
-    query's search for a surface point at distance 0 visits the leaves whose boxes hold the point,
-    within a margin 4 times smaller than the rays' over the same float boxes), so the surface is
-    looked for from those of them with an even count alone: the same answer as from all of them."""
-    counts, in_leaf = count_from_points(closed, points, parity_directions(closed, points))
-    inside = (counts & 1).astype(bool)
-    maybe = np.flatnonzero(in_leaf & ~inside)
+    ray, or a point on the surface. A large batch's points are first looked up in the mesh's
+    parity grid (engine/queries/parity_grid.py), which decides those of its empty cells and those
+    beyond it; the others (all, without the grid) are decided by their rays. The count's kernel also
+    says which rays start in some leaf's box (hits.count_from_points): only those points can lie
+    on a triangle (the closest-point query's search for a surface point at distance 0 visits the
+    leaves whose boxes hold the point, within a margin 4 times smaller than the rays' over the same
+    float boxes), so the surface is looked for from those of them with an even count alone: the
+    same answers as from every point."""
+    grid = _parity_grid(closed) if len(points) >= COHERENT_FROM else None
+    if grid is None:
+        rays, inside = slice(None), None
+    else:
+        decided, inside = grid.lookup(points)
+        inside = inside.view(bool)
+        rays = np.flatnonzero(~decided.view(bool))
+    origins = points[rays]
+    counts, in_leaf = count_from_points(closed, origins, parity_directions(closed, origins))
+    odd = (counts & 1).astype(bool)
+    maybe = np.flatnonzero(in_leaf & ~odd)
     if len(maybe):
-        inside[maybe] = run_closest(closed, points[maybe], ("inside",), within=0.0)["inside"].astype(bool)
+        odd[maybe] = run_closest(closed, origins[maybe], ("inside",), within=0.0)["inside"].astype(bool)
+    if inside is None:
+        return odd
+    inside[rays] = odd
     return inside
+
+
+def _parity_grid(closed):
+    """The parity grid of the handle's one closed mesh (made at its first call, kept with the
+    handle's closest-point inputs), or None where the mesh has none."""
+    inputs = closed.closest_inputs()
+    with closed.lock:
+        if inputs.parity_grid is None:
+            from .parity_grid import ParityGrid  # numba's code, for large batches only
+
+            (mesh,) = closed.shapes
+            # the exact inside of points on no surface: each one's parity ray
+            inputs.parity_grid = ParityGrid.of(mesh.corners(), lambda p: count_from_points(
+                closed, p, parity_directions(closed, p))[0] & 1) or False
+        return inputs.parity_grid or None
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:

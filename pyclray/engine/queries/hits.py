@@ -87,11 +87,11 @@ def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     return _counts(tracer, batch).reshape(batch.shape)
 
 
-def count_from_points(tracer, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, tmax=None) -> tuple[np.ndarray, np.ndarray]:
     """(counts int32, in_leaf bool) of rays from checked points (N, 3) along directions (N, 3): each
-    one's number of hits t > 0, and whether its origin lies in the box of some leaf of the handle's
-    BVH (kernels/allhits.cl: PYCLRAY_AOV_IN_LEAF), where alone a point may lie on a surface."""
-    batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
+    one's number of hits t in (0, tmax), and whether its origin lies in the box of some leaf of the
+    handle's BVH (kernels/allhits.cl: PYCLRAY_AOV_IN_LEAF), where alone a point may lie on a surface."""
+    batch = RayBatch(tracer, points, directions, None, tmax, ORDER_ALWAYS)
     in_leaf = np.zeros(batch.count, np.uint8)
     return _counts(tracer, batch, in_leaf), in_leaf.view(bool)
 
