@@ -113,7 +113,9 @@ class ClosestInputs:
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
         self._winding = None
-        self.parity_grid = None  # occupancy's grid of a closed mesh (engine/queries/parity_grid.py), where asked for
+        # occupancy's grid of a closed mesh (engine/queries/parity_grid.py) and the count kernel's
+        # arguments of its surface test, where asked for
+        self.parity_grid = self.surface_arguments = None
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -267,12 +269,11 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     """Inside a scene of one closed mesh (its handle; points checked): an odd count of the parity
     ray, or a point on the surface. A large batch's points are first looked up in the mesh's
     parity grid (engine/queries/parity_grid.py), which decides those of its empty cells and those
-    beyond it; the others (all, without the grid) are decided by their rays. The count's kernel also
-    says which rays start in some leaf's box (hits.count_from_points): only those points can lie
-    on a triangle (the closest-point query's search for a surface point at distance 0 visits the
-    leaves whose boxes hold the point, within a margin 4 times smaller than the rays' over the same
-    float boxes), so the surface is looked for from those of them with an even count alone: the
-    same answers as from every point."""
+    beyond it; the others (all, without the grid) by their rays. The count's kernel also decides
+    whether a point with an even count lies on a surface, by the closest-point query's test of the
+    leaves whose boxes hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search
+    visits no other leaf), and where it cannot say (a point in many leaves' boxes), the query
+    itself: the same answers as the query's from every point."""
     grid = _parity_grid(closed) if len(points) >= COHERENT_FROM else None
     if grid is None:
         rays, inside = slice(None), None
@@ -281,15 +282,37 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
         inside = inside.view(bool)
         rays = np.flatnonzero(~decided.view(bool))
     origins = points[rays]
-    counts, in_leaf = count_from_points(closed, origins, parity_directions(closed, origins))
-    odd = (counts & 1).astype(bool)
-    maybe = np.flatnonzero(in_leaf & ~odd)
-    if len(maybe):
-        odd[maybe] = run_closest(closed, origins[maybe], ("inside",), within=0.0)["inside"].astype(bool)
+    counts, on = count_from_points(closed, origins, parity_directions(closed, origins), _surface_arguments(closed))
+    found = (counts & 1).astype(bool) | (on == 1)
+    unknown = np.flatnonzero(on == 2)
+    if len(unknown):
+        found[unknown] = run_closest(closed, origins[unknown], ("inside",), within=0.0)["inside"].astype(bool)
     if inside is None:
-        return odd
-    inside[rays] = odd
+        return found
+    inside[rays] = found
     return inside
+
+
+def _surface_arguments(closed) -> dict:
+    """The count kernel's arguments of its surface test (kernels/allhits.cl: PYCLRAY_AOV_SURFACE):
+    the closest-point query's refs and world entries, and per place of cast's refs where a leaf
+    starts the query's code of that leaf (the two programs' wide nodes are the same but for the
+    leaves' codes, which cast renumbers: engine/queries/cast_blocks.py); made once per handle."""
+    inputs = closed.closest_inputs()
+    with closed.lock:
+        if inputs.surface_arguments is None:
+            ctx = closed.ctx
+            nodes = inputs.bvh.nodes(inputs.anchor)
+            cast_nodes = np.empty_like(nodes)
+            cl.enqueue_copy(ctx.queue, cast_nodes, closed.cast_inputs()[0]["nodes"])
+            ctx.queue.finish()
+            leaf = nodes["child"] < 0
+            places = (~cast_nodes["child"][leaf].astype(np.int64)) >> 3
+            codes = np.zeros(int(places.max()) + 1 if len(places) else 1, np.int32)
+            codes[places] = nodes["child"][leaf]
+            inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
+                                        **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
+        return inputs.surface_arguments
 
 
 def _parity_grid(closed):
@@ -302,8 +325,8 @@ def _parity_grid(closed):
 
             (mesh,) = closed.shapes
             # the exact inside of points on no surface: each one's parity ray
-            inputs.parity_grid = ParityGrid.of(mesh.corners(), lambda p: count_from_points(
-                closed, p, parity_directions(closed, p))[0] & 1) or False
+            inputs.parity_grid = ParityGrid.of(mesh.corners(), lambda p: closed.count_hits(
+                p, parity_directions(closed, p)) & 1) or False
         return inputs.parity_grid or None
 
 
