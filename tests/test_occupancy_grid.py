@@ -89,11 +89,12 @@ def on_surface_points(mesh: pyclray.Mesh, interior: bool) -> np.ndarray:
     return np.vstack([points] * (COHERENT_FROM // len(points) + 1))
 
 
-def general_path(tracer, points) -> np.ndarray:
-    """The answers without the shortcuts: each point's parity ray (the closed meshes' count), then
-    the closest-point query's search for a surface point at distance 0 of every point not inside."""
+def general_path(tracer, points, sign="parity") -> np.ndarray:
+    """The answers without the shortcuts: each point's ray (the closed meshes' count, or signed
+    count), then the closest-point query's search for a surface point at distance 0 of every point
+    not inside."""
     flat, _ = closest.check_points(points)
-    inside = closest._mesh_inside(tracer, flat, "parity")
+    inside = closest._mesh_inside(tracer, flat, sign)
     rest = ~inside
     inside[rest] = closest.run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
     return inside.astype(np.uint8)
@@ -151,27 +152,32 @@ def test_same_bits_as_the_general_path(precision):
             near = near + rng.normal(size=near.shape) * 10.0 ** rng.uniform(-9, -2, (len(near), 1))
             vertices = np.vstack([mesh.world_vertices()] * (COHERENT_FROM // len(mesh.world_vertices()) + 1))
             for points in (uniform, near, vertices):
-                assert np.array_equal(tracer.occupancy(points), general_path(tracer, points))
+                for sign in ("parity", "winding"):
+                    assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
 
 
-def test_nested_shells_regions_against_the_oracle():
-    """One closed mesh of two spheres, the inner one turned inward (a hollow ball): three regions of
-    empty cells (beyond, within the shell, the cavity), each decided by its own ray; uniform points
-    and points beyond the grid against the oracle's exact inside."""
+@pytest.mark.parametrize("turned", [True, False])
+def test_nested_shells_regions_against_the_oracle(turned):
+    """One closed mesh of two spheres, the inner one turned inward (a hollow ball) or not (winding
+    number 2 within it: inside by winding, outside by parity): three regions of empty cells (beyond,
+    within the shell, the cavity), each decided by its own ray; uniform points and points beyond
+    the grid against the oracle's exact inside, by both rules."""
     rng = np.random.default_rng(14)
     v, f = perturbed_sphere(20, 30, 1.0, 0.05, rng)
-    inner = 0.5 * v
-    mesh = pyclray.Mesh(np.vstack([v, inner]), np.vstack([f, f[:, ::-1] + len(v)]))
+    inner = f[:, ::-1] if turned else f
+    mesh = pyclray.Mesh(np.vstack([v, 0.5 * v]), np.vstack([f, inner + len(v)]))
     assert mesh.closed
     scene = scene_of(mesh)
     points = np.vstack([rng.uniform(-1.3, 1.3, (COHERENT_FROM + 500, 3)), rng.uniform(5, 9, (50, 3))])
-    got = pyclray.occupancy(scene, points)
-    assert np.array_equal(got.astype(bool), oracle.inside(scene, points))
     cavity = np.linalg.norm(points, axis=1) < 0.4
-    assert cavity.any() and not got[cavity].any()
-    with pyclray.prepare(scene) as tracer:
-        grid = closest._parity_grid(tracer.mesh_handle(closed=True))
-        assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.state).tolist())
+    assert cavity.any()
+    for sign in ("parity", "winding"):
+        got = pyclray.occupancy(scene, points, sign=sign)
+        assert np.array_equal(got.astype(bool), oracle.inside(scene, points, sign))
+        assert got[cavity].all() == (sign == "winding" and not turned) and got[cavity].any() == got[cavity].all()
+        with pyclray.prepare(scene) as tracer:
+            grid = closest._parity_grid(tracer.mesh_handle(closed=True), sign)
+            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign]).tolist())
 
 
 def test_points_in_many_leaves_boxes(monkeypatch):

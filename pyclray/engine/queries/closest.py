@@ -245,16 +245,26 @@ def signed_distance(tracer, points, sign: str = "parity") -> np.ndarray:
 def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     sign = check_sign(sign)
     flat, shape = check_points(points)
+    inside, rest = np.zeros(len(flat), bool), slice(None)
+    closed = tracer.mesh_handle(closed=True)
+    if closed is not None and len(closed.shapes) == 1 == len(tracer.shapes):  # one closed mesh alone
+        # a large batch's points of the mesh's grid's empty cells and beyond it decided there first
+        grid = _parity_grid(closed, sign) if len(flat) >= COHERENT_FROM else None
+        if grid is not None:
+            decided, inside = grid.lookup(flat, sign)
+            rest = np.flatnonzero(~decided)
+        if sign == "parity" and _shares_boxes(closed):
+            inside[rest] = _one_closed_mesh(closed, flat[rest])
+            return inside.astype(np.uint8).reshape(shape)
     # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
     # solids and whether the point lies on a surface: only a surface point at distance 0 is looked
     # for (within = 0), a traversal of the boxes that hold the point
-    closed = tracer.mesh_handle(closed=True) if sign == "parity" else None
-    if closed is not None and len(closed.shapes) == 1 == len(tracer.shapes) and _shares_boxes(closed):
-        return _one_closed_mesh(closed, flat).astype(np.uint8).reshape(shape)
-    inside = _mesh_inside(tracer, flat, sign)
-    rest = ~inside
-    if rest.any():
-        inside[rest] = run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
+    points = flat[rest]
+    found = _mesh_inside(tracer, points, sign)
+    other = ~found
+    if other.any():
+        found[other] = run_closest(tracer, points[other], ("inside",), within=0.0)["inside"].astype(bool)
+    inside[rest] = found
     return inside.astype(np.uint8).reshape(shape)
 
 
@@ -266,31 +276,18 @@ def _shares_boxes(closed) -> bool:
 
 
 def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
-    """Inside a scene of one closed mesh (its handle; points checked): an odd count of the parity
-    ray, or a point on the surface. A large batch's points are first looked up in the mesh's
-    parity grid (engine/queries/parity_grid.py), which decides those of its empty cells and those
-    beyond it; the others (all, without the grid) by their rays. The count's kernel also decides
-    whether a point with an even count lies on a surface, by the closest-point query's test of the
-    leaves whose boxes hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search
-    visits no other leaf), and where it cannot say (a point in many leaves' boxes), the query
-    itself: the same answers as the query's from every point."""
-    grid = _parity_grid(closed) if len(points) >= COHERENT_FROM else None
-    if grid is None:
-        rays, inside = slice(None), None
-    else:
-        decided, inside = grid.lookup(points)
-        inside = inside.view(bool)
-        rays = np.flatnonzero(~decided.view(bool))
-    origins = points[rays]
-    counts, on = count_from_points(closed, origins, parity_directions(closed, origins), _surface_arguments(closed))
+    """Inside by parity in a scene of one closed mesh (its handle; points checked): an odd count of
+    the parity ray, or a point on the surface. The count's kernel also decides whether a point with
+    an even count lies on a surface, by the closest-point query's test of the leaves whose boxes
+    hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search visits no other leaf),
+    and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
+    the query's from every point."""
+    counts, on = count_from_points(closed, points, parity_directions(closed, points), _surface_arguments(closed))
     found = (counts & 1).astype(bool) | (on == 1)
     unknown = np.flatnonzero(on == 2)
     if len(unknown):
-        found[unknown] = run_closest(closed, origins[unknown], ("inside",), within=0.0)["inside"].astype(bool)
-    if inside is None:
-        return found
-    inside[rays] = found
-    return inside
+        found[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"].astype(bool)
+    return found
 
 
 def _surface_arguments(closed) -> dict:
@@ -315,19 +312,22 @@ def _surface_arguments(closed) -> dict:
         return inputs.surface_arguments
 
 
-def _parity_grid(closed):
-    """The parity grid of the handle's one closed mesh (made at its first call, kept with the
-    handle's closest-point inputs), or None where the mesh has none."""
+def _parity_grid(closed, sign: str):
+    """The grid of the handle's one closed mesh (engine/queries/parity_grid.py; made at its first
+    call, kept with the handle's closest-point inputs) with its cells decided by the sign rule, or
+    None where the mesh has none."""
     inputs = closed.closest_inputs()
     with closed.lock:
         if inputs.parity_grid is None:
             from .parity_grid import ParityGrid  # numba's code, for large batches only
 
             (mesh,) = closed.shapes
-            # the exact inside of points on no surface: each one's parity ray
-            inputs.parity_grid = ParityGrid.of(mesh.corners(), lambda p: closed.count_hits(
-                p, parity_directions(closed, p)) & 1) or False
-        return inputs.parity_grid or None
+            inputs.parity_grid = ParityGrid.of(mesh.corners()) or False
+        grid = inputs.parity_grid or None
+        if grid is not None:  # the exact inside of points on no surface: their rays' count or signed count
+            grid.decide(sign, (lambda p: closed.count_hits(p, parity_directions(closed, p)) & 1) if sign == "parity"
+                        else (lambda p: _signed_crossings(closed, p) >= 0.5))
+        return grid
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:

@@ -11,11 +11,12 @@ cells a box too. So:
 - a point of an empty cell is on no triangle (that triangle's box would meet the cell), and all
   the points of a connected region of empty cells have one inside: a path between two of them
   stays within boxes that no triangle meets, and for a closed mesh (every edge shared by two faces)
-  the parity of a path's crossings depends on its ends alone. One point of each region (near the
-  centre of its first cell) is decided by its exact parity ray (count_hits' tie rule), and every
-  point of an empty cell takes its region's answer without a ray;
+  the parity of a path's crossings depends on its ends alone, as does its signed count (the
+  winding number). One point of each region (near the centre of its first cell) is decided by its
+  exact ray (count_hits' tie rule: its parity, or its signed crossings for sign="winding"), and
+  every point of an empty cell takes its region's answer without a ray;
 - a point beyond the grid is beyond the mesh's box: outside, on no surface;
-- a point of a surface cell is left to its own parity ray (and surface test), as without the grid.
+- a point of a surface cell is left to its own ray (and surface test), as without the grid.
 
 A point of an empty cell lies at least CLEARANCE of a cell from every triangle, far beyond the
 float32 rounding of a triangle tested from it: its own parity ray counts as the grid answers (the
@@ -145,18 +146,21 @@ def _lookup(points, lo, size, dims, state):
 
 
 class ParityGrid:
-    """The grid of one closed mesh (see the module's text): per cell its state (SURFACE, OUTSIDE,
-    INSIDE: int8, x fastest), its first cell's corner lo and cells of side size, dims per axis."""
+    """The grid of one closed mesh (see the module's text): per cell its empty region (int32, x
+    fastest; -1 for a surface cell), each region's decided point (seeds), its first cell's corner
+    lo and cells of side size, dims per axis; per sign rule ("parity", "winding": a closed mesh's
+    winding number is constant on a region too) the cells' states (SURFACE, OUTSIDE, INSIDE), made
+    when first asked for (decide)."""
 
-    def __init__(self, lo: np.ndarray, size: float, dims: np.ndarray, state: np.ndarray):
-        self.lo, self.size, self.dims, self.state = lo, size, dims, state
+    def __init__(self, lo: np.ndarray, size: float, dims: np.ndarray, region: np.ndarray, seeds: np.ndarray):
+        self.lo, self.size, self.dims, self.region, self.seeds = lo, size, dims, region, seeds
+        self.states: dict = {}
 
     @classmethod
-    def of(cls, corners, parity) -> "ParityGrid | None":
+    def of(cls, corners) -> "ParityGrid | None":
         """The grid of a closed mesh's triangles (corners: a, b, c, (F, 3) float64 each, in world
         space), or None where it cannot be made (no triangle, no extent, a mesh too large for the
-        grid's float64 cells); parity(points (N, 3)): the exact inside of points on no surface
-        (their parity rays), asked of one point per empty region."""
+        grid's float64 cells)."""
         a, b, c = corners
         if not len(a):
             return None
@@ -181,11 +185,21 @@ class ParityGrid:
         seeds = lo + (at + REFERENCE_AT) * size
         if not np.array_equal(np.floor((seeds - lo) / size), at):
             return None
-        state = np.full(len(surface), SURFACE, np.int8)
-        empty = region >= 0
-        state[empty] = np.asarray(parity(seeds), bool).astype(np.int8)[region[empty]]
-        return cls(lo, size, dims, state)
+        return cls(lo, size, dims, region, seeds)
 
-    def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(decided, inside) per point (N, 3), uint8 each: see _lookup."""
-        return _lookup(np.ascontiguousarray(points, np.float64), self.lo, self.size, self.dims, self.state)
+    def decide(self, sign: str, rule) -> None:
+        """The cells' states by a sign rule, where not made yet: rule(points (N, 3)) -> bool, the
+        exact inside of points on no surface, asked of the regions' seeds."""
+        if sign not in self.states:
+            region_inside = np.asarray(rule(self.seeds), bool) if len(self.seeds) else np.zeros(0, bool)
+            state = np.full(len(self.region), SURFACE, np.int8)
+            empty = self.region >= 0
+            state[empty] = region_inside[self.region[empty]].astype(np.int8)
+            self.states[sign] = state
+
+    def lookup(self, points: np.ndarray, sign: str) -> tuple[np.ndarray, np.ndarray]:
+        """(decided, inside) per point (N, 3), bool each, by the sign rule's states (decide): see
+        _lookup."""
+        decided, inside = _lookup(np.ascontiguousarray(points, np.float64), self.lo, self.size, self.dims,
+                                  self.states[sign])
+        return decided.view(bool), inside.view(bool)
