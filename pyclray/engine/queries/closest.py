@@ -307,6 +307,7 @@ def _surface_arguments(closed) -> dict:
             places = (~cast_nodes["child"][leaf].astype(np.int64)) >> 3
             codes = np.zeros(int(places.max()) + 1 if len(places) else 1, np.int32)
             codes[places] = nodes["child"][leaf]
+            inputs.nbytes += codes.nbytes
             inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
                                         **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
         return inputs.surface_arguments
