@@ -66,8 +66,8 @@ def check_points(points, name: str = "points") -> tuple[np.ndarray, tuple]:
         raise RequestError(f"{name}: expected an array of shape (..., 3), got shape {array.shape}")
     shape = array.shape[:-1]
     flat = np.ascontiguousarray(array.reshape(-1, 3))
-    finite = np.isfinite(flat).all(axis=1)
-    if not finite.all():
+    if not np.isfinite(flat).all():  # (the rows looked at only then: numpy's reductions over the short axis are slow)
+        finite = np.isfinite(flat).all(axis=1)
         row = int(np.argmin(finite))
         index = np.unravel_index(row, shape)
         where = str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index))
