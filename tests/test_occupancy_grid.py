@@ -1,5 +1,5 @@
-"""Occupancy of a scene of one closed mesh (engine/queries/closest.py: _one_closed_mesh): a large
-batch's points are looked up in the mesh's parity grid (engine/queries/parity_grid.py: its empty
+"""Occupancy of a scene of closed meshes (engine/queries/closest.py: occupancy, _one_closed_mesh): a
+large batch's points are looked up in the meshes' parity grid (engine/queries/parity_grid.py: its empty
 cells' regions decided by one exact ray each), the others counted by their parity rays, whose
 kernel also tests a point with an even count for lying on the surface, over the leaves whose boxes
 hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the closest-point query where more than
@@ -156,6 +156,28 @@ def test_same_bits_as_the_general_path(precision):
                     assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
 
 
+@pytest.mark.parametrize("sign", ["parity", "winding"])
+def test_several_closed_meshes(sign):
+    """Two overlapping closed meshes (a torus through a perturbed sphere: winding 2 where both
+    hold a point) and a third apart: the grid of all their triangles decides the points of its
+    empty cells by the rule's own test of one point per region; the same answers as the general
+    path, and the oracle's off the surfaces."""
+    rng = np.random.default_rng(16)
+    v, f = perturbed_sphere(16, 24, 0.8, 0.1, rng)
+    shapes = (pyclray.Mesh(*torus(16, 24, 1.0, 0.3)), pyclray.Mesh(v + [1.0, 0.0, 0.0], f),
+              pyclray.Mesh(v * 0.5 + [0.0, 0.0, 3.0], f))
+    scene = scene_of(*shapes)
+    points = rng.uniform([-1.5, -1.5, -1.0], [2.0, 1.5, 3.6], (COHERENT_FROM + 500, 3))
+    with pyclray.prepare(scene) as tracer:
+        got = tracer.occupancy(points, sign)
+        assert np.array_equal(got, general_path(tracer, points, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        decided, _ = grid.lookup(points, sign)
+        assert decided.mean() > 0.5  # most points decided by the grid
+    clear = oracle.closest_points(scene, points)["distance"] > 0
+    assert np.array_equal(got.astype(bool)[clear], oracle.inside(scene, points, sign)[clear])
+
+
 @pytest.mark.parametrize("turned", [True, False])
 def test_nested_shells_regions_against_the_oracle(turned):
     """One closed mesh of two spheres, the inner one turned inward (a hollow ball) or not (winding
@@ -176,7 +198,7 @@ def test_nested_shells_regions_against_the_oracle(turned):
         assert np.array_equal(got.astype(bool), oracle.inside(scene, points, sign))
         assert got[cavity].all() == (sign == "winding" and not turned) and got[cavity].any() == got[cavity].all()
         with pyclray.prepare(scene) as tracer:
-            grid = closest._parity_grid(tracer.mesh_handle(closed=True), sign)
+            grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
             assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign]).tolist())
 
 

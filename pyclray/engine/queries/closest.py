@@ -247,13 +247,13 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     flat, shape = check_points(points)
     inside, rest = np.zeros(len(flat), bool), slice(None)
     closed = tracer.mesh_handle(closed=True)
-    if closed is not None and len(closed.shapes) == 1 == len(tracer.shapes):  # one closed mesh alone
-        # a large batch's points of the mesh's grid's empty cells and beyond it decided there first
-        grid = _parity_grid(closed, sign) if len(flat) >= COHERENT_FROM else None
+    if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
+        # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
+        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
         if grid is not None:
             decided, inside = grid.lookup(flat, sign)
             rest = np.flatnonzero(~decided)
-        if sign == "parity" and _shares_boxes(closed):
+        if sign == "parity" and len(closed.shapes) == 1 and _shares_boxes(closed):
             inside[rest] = _one_closed_mesh(closed, flat[rest])
             return inside.astype(np.uint8).reshape(shape)
     # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
@@ -313,21 +313,22 @@ def _surface_arguments(closed) -> dict:
         return inputs.surface_arguments
 
 
-def _parity_grid(closed, sign: str):
-    """The grid of the handle's one closed mesh (engine/queries/parity_grid.py; made at its first
-    call, kept with the handle's closest-point inputs) with its cells decided by the sign rule, or
-    None where the mesh has none."""
+def _parity_grid(tracer, closed, sign: str):
+    """The grid of a scene of closed meshes alone (tracer; closed: the handle of those meshes,
+    which keeps it with its closest-point inputs: engine/queries/parity_grid.py), made at its first
+    call, with its cells decided by the sign rule; None where the meshes have none. Each closed
+    mesh's parity and winding number is constant on a region no triangle meets: so is whether some
+    mesh holds a point, decided by the rule's own test of one point per region (_mesh_inside)."""
     inputs = closed.closest_inputs()
     with closed.lock:
         if inputs.parity_grid is None:
             from .parity_grid import ParityGrid  # numba's code, for large batches only
 
-            (mesh,) = closed.shapes
-            inputs.parity_grid = ParityGrid.of(mesh.corners()) or False
+            corners = [mesh.corners() for mesh in closed.shapes]
+            inputs.parity_grid = ParityGrid.of(tuple(np.concatenate(c) for c in zip(*corners))) or False
         grid = inputs.parity_grid or None
-        if grid is not None:  # the exact inside of points on no surface: their rays' count or signed count
-            grid.decide(sign, (lambda p: closed.count_hits(p, parity_directions(closed, p)) & 1) if sign == "parity"
-                        else (lambda p: _signed_crossings(closed, p) >= 0.5))
+        if grid is not None:  # the exact inside of points on no surface
+            grid.decide(sign, lambda points: _mesh_inside(tracer, points, sign))
         return grid
 
 

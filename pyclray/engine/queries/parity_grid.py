@@ -1,7 +1,7 @@
-"""The parity grid of a closed mesh: occupancy's shortcut for a scene of one closed mesh
-(engine/queries/closest.py), made at its first large batch and kept with the mesh's handle.
+"""The parity grid of closed meshes: occupancy's shortcut for a scene of closed meshes alone
+(engine/queries/closest.py), made at its first large batch and kept with the meshes' handle.
 
-A grid of cells around the mesh's box (GRID_CELLS along its largest side, one more beyond it on
+A grid of cells around the meshes' box (GRID_CELLS along its largest side, one more beyond it on
 each side); a cell is a surface cell where the box of some triangle, widened (SURFACE_MARGIN,
 CLEARANCE), meets it, else empty. A point's cell is floor((x - lo) / size) per axis in float64: a
 function of each coordinate that never decreases as the coordinate grows (each operation rounds
@@ -12,10 +12,10 @@ cells a box too. So:
   the points of a connected region of empty cells have one inside: a path between two of them
   stays within boxes that no triangle meets, and for a closed mesh (every edge shared by two faces)
   the parity of a path's crossings depends on its ends alone, as does its signed count (the
-  winding number). One point of each region (near the centre of its first cell) is decided by its
-  exact ray (count_hits' tie rule: its parity, or its signed crossings for sign="winding"), and
-  every point of an empty cell takes its region's answer without a ray;
-- a point beyond the grid is beyond the mesh's box: outside, on no surface;
+  winding number), mesh by mesh. One point of each region (near the centre of its first cell) is
+  decided by its exact rays (count_hits' tie rule: each mesh's parity, or the signed crossings for
+  sign="winding"), and every point of an empty cell takes its region's answer without a ray;
+- a point beyond the grid is beyond the meshes' box: outside, on no surface;
 - a point of a surface cell is left to its own ray (and surface test), as without the grid.
 
 A point of an empty cell lies at least CLEARANCE of a cell from every triangle, far beyond the
@@ -146,7 +146,7 @@ def _lookup(points, lo, size, dims, state):
 
 
 class ParityGrid:
-    """The grid of one closed mesh (see the module's text): per cell its empty region (int32, x
+    """The grid of closed meshes (see the module's text): per cell its empty region (int32, x
     fastest; -1 for a surface cell), each region's decided point (seeds), its first cell's corner
     lo and cells of side size, dims per axis; per sign rule ("parity", "winding": a closed mesh's
     winding number is constant on a region too) the cells' states (SURFACE, OUTSIDE, INSIDE), made
@@ -158,7 +158,7 @@ class ParityGrid:
 
     @classmethod
     def of(cls, corners) -> "ParityGrid | None":
-        """The grid of a closed mesh's triangles (corners: a, b, c, (F, 3) float64 each, in world
+        """The grid of closed meshes' triangles (corners: a, b, c, (F, 3) float64 each, in world
         space), or None where it cannot be made (no triangle, no extent, a mesh too large for the
         grid's float64 cells)."""
         a, b, c = corners
