@@ -62,6 +62,8 @@ class KeptBuffers:
         self.buffers: dict = {}  # name -> (buffer, its host array (uint8) or None)
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
         self.device_kernels = None  # (engine/queries/cast_device.py: DeviceKernels)
+        self.label_table = None  # (engine/queries/cast_device.py: _label_table)
+        self.constants: dict = {}  # one number's read-only buffer by its bytes (cast_device.py: _constant)
 
     def get(self, ctx, name: str, nbytes: int) -> tuple:
         """(buffer, host): the buffer called name, of at least nbytes (read and written by the
@@ -102,6 +104,7 @@ class KeptBuffers:
     def clear(self) -> None:
         self.buffers.clear()
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
+        self.label_table = None
 
     def nbytes(self) -> int:
         return sum(buffer.size for buffer, _ in self.buffers.values())

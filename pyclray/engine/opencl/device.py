@@ -93,6 +93,25 @@ def context_for(device: cl.Device | str | None = None) -> DeviceContext:
         return _contexts[key]
 
 
+# -- the device's class -------------------------------------------------------------------------
+# A device of the GPU class runs many work-items in lock-step over memory the host reaches through
+# copies: there a cast's host path does nothing per ray (engine/queries/cast_device.py: the rays
+# uploaded once, checked on the device, cast in their order, the results read back once). The one
+# property that decides it: the device's type (not a CPU). $PYCLRAY_GPU_CLASS=1 takes that path on
+# any device (the tests force it on PoCL), =0 the CPU's host path.
+GPU_CLASS_VARIABLE = "PYCLRAY_GPU_CLASS"
+
+
+def gpu_class(device: cl.Device) -> bool:
+    """Whether the device is of the GPU class (see GPU_CLASS_VARIABLE)."""
+    value = os.environ.get(GPU_CLASS_VARIABLE, "").strip()
+    if value:
+        if value not in ("0", "1"):
+            raise DeviceError(f"{GPU_CLASS_VARIABLE}: expected 1 (the GPU's host path) or 0 (the CPU's), got {value!r}")
+        return value == "1"
+    return not device.type & cl.device_type.CPU
+
+
 def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> cl.Event:
     """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument (a number, or a
     struct such as a double4) through its slow generic path; declared once per kernel as scalar types (a

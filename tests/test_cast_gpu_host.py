@@ -1,0 +1,150 @@
+"""The host path of a cast on a device of the GPU class (engine/opencl/device.py: gpu_class), forced
+on PoCL by $PYCLRAY_GPU_CLASS=1: host arrays are uploaded once, checked on the device and cast in
+their order (engine/queries/cast_device.py), with no per-ray work on the host. The same kernel traces
+each ray on its own from the same float64 origin and direction, and the derived AOVs (primitive,
+label, position) are the same operations on the device, so every result is compared bit for bit with
+the CPU's host path (engine/queries/cast.py) on the same handle; bad rays raise the same one line."""
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine.opencl.device import gpu_class
+from pyclray.engine.queries import cast as cast_module
+from pyclray.engine.queries import ray_order
+from pyclray.model.aovs import CAST_AOVS
+
+from test_cast_blocks import rays
+from test_cast_device import labelled_scene, same
+
+
+@pytest.fixture(scope="module", params=["fp32", "fp64"])
+def tracer(request):
+    with pyclray.prepare(labelled_scene(), precision=request.param) as handle:
+        yield handle
+
+
+def both(monkeypatch, call):
+    """call() on the CPU's host path, then on the GPU class's."""
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+    host = call()
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    return host, call()
+
+
+@pytest.mark.parametrize("count", [1, 7, 1000, 5000])  # 5000: the host path's compiled checks (COHERENT_FROM)
+def test_the_gpu_class_gives_the_host_paths_bits(tracer, monkeypatch, count):
+    origins, directions = rays(count, 20 + count)
+    host, gpu = both(monkeypatch, lambda: tracer.cast(origins, directions, aovs=CAST_AOVS))
+    assert set(gpu) == set(host) == set(CAST_AOVS)
+    for name in CAST_AOVS:
+        same(gpu[name], host[name])
+    if count >= 1000:
+        assert (host["id"] >= 0).sum() > count / 2 and (host["id"] < 0).sum() > 10  # hits and misses both
+        assert len(set(host["label"].tolist())) >= 3
+    host, gpu = both(monkeypatch, lambda: tracer.occluded(origins, directions))
+    same(gpu, host)
+
+
+def test_distances_shapes_and_one_origin(tracer, monkeypatch):
+    """Per-ray and one-number tmin and tmax, one origin for every ray, a (2, N) leading shape, float32
+    rays, a list of one ray, and no rays at all."""
+    _, directions = rays(600, 21)
+    directions = directions.reshape(2, 300, 3)
+    origin = np.array([0.3, -0.2, 2.5])
+    tmin = np.linspace(0.0, 1.0, 600).reshape(2, 300)
+    tmax = np.linspace(2.0, 6.0, 600).reshape(2, 300)
+    calls = [
+        lambda: tracer.cast(origin, directions, aovs=CAST_AOVS, tmin=tmin, tmax=tmax),
+        lambda: tracer.cast(origin, directions, aovs=CAST_AOVS, tmin=0.5, tmax=3.0),
+        lambda: tracer.cast(origin.astype(np.float32), directions.astype(np.float32), aovs=CAST_AOVS),
+        lambda: tracer.cast([[0.0, 0.0, 3.0]], [[0.0, 0.0, -1.0]], aovs=CAST_AOVS),
+        lambda: tracer.cast(np.zeros((0, 3)), np.zeros((0, 3)), aovs=CAST_AOVS),
+        lambda: {"occluded": tracer.occluded(origin, directions, tmin=tmin, tmax=tmax)},
+        lambda: {"occluded": tracer.occluded(origin, directions, tmax=2.5)},
+    ]
+    for call in calls:
+        host, gpu = both(monkeypatch, call)
+        assert set(gpu) == set(host)
+        for name in host:
+            same(gpu[name], host[name])
+
+
+@pytest.mark.parametrize("count", [10, 5000])
+@pytest.mark.parametrize("bad, message", [
+    (lambda o, d: (o, np.where(np.arange(len(d))[:, None] == 5, np.nan, d)), "directions: row 5 is not finite"),
+    (lambda o, d: (o, np.where(np.arange(len(d))[:, None] == 2, 0.0, d)), "directions: row 2 has zero length"),
+    (lambda o, d: (np.where(np.arange(len(o))[:, None] == 3, np.inf, o), d), "origins: row 3 is not finite"),
+    (lambda o, d: (np.where(np.arange(len(o))[:, None] == 4, 1e300, o), d), "origins: row 4"),
+    (lambda o, d: (np.array([np.nan, 0.0, 0.0]), d), "origins: row 0 is not finite"),
+    (lambda o, d: (np.array([1e300, 0.0, 0.0]), d), "origins: row 0"),
+])
+def test_bad_rays_raise_the_host_paths_line(tracer, monkeypatch, count, bad, message):
+    origins, directions = bad(*rays(count, 22))
+    for query in (lambda: tracer.cast(origins, directions), lambda: tracer.occluded(origins, directions)):
+        errors = []
+        for switch in ("0", "1"):
+            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+            with pytest.raises(pyclray.RequestError, match=message.replace("(", r"\(")) as error:
+                query()
+            errors.append(str(error.value))
+        assert errors[0] == errors[1] and "\n" not in errors[0]
+    # the handle's kept buffers, which the device's check repaired, serve the next cast as before
+    good_origins, good_directions = rays(count, 23)
+    host, gpu = both(monkeypatch, lambda: tracer.cast(good_origins, good_directions))
+    for name in host:
+        same(gpu[name], host[name])
+
+
+def test_bad_arguments_raise_the_host_paths_line(tracer, monkeypatch):
+    origins, directions = rays(8, 24)
+    cases = [
+        (lambda: tracer.cast(origins, directions, tmax=np.r_[1.0, -1.0, np.ones(6)]), "tmax: expected numbers > 0"),
+        (lambda: tracer.cast(origins, directions, tmin=-1.0), "tmin: expected finite numbers >= 0"),
+        (lambda: tracer.cast(origins[:3], directions), "origins: expected shape"),
+        (lambda: tracer.cast(origins, directions[:, :2]), r"directions: expected an array of shape \(\.\.\., 3\)"),
+        (lambda: tracer.cast(origins, "rays"), "directions: expected an array"),
+    ]
+    for call, message in cases:
+        errors = []
+        for switch in ("0", "1"):
+            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+            with pytest.raises(pyclray.RequestError, match=message) as error:
+                call()
+            errors.append(str(error.value))
+        assert errors[0] == errors[1]
+
+
+def test_no_per_ray_host_work_on_the_gpu_class(tracer, monkeypatch):
+    """On the GPU class the host's per-ray steps (the checks and codes, compiled or numpy's, the
+    origins' box, the ray order, the host path's batch and its positions and primitives) are never
+    called: each is made to raise, and casts of small and large batches still succeed."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("per-ray host work on the GPU class")
+
+    origins, directions = rays(5000, 25)
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+    expected = tracer.cast(origins, directions, aovs=CAST_AOVS)
+    for module, name in [(ray_order, "scan_codes"), (ray_order, "coherent_order"), (ray_order, "_counting_sort"),
+                         (cast_module, "_cast_rays"), (cast_module, "_columns_extent"), (cast_module, "RayBatch"),
+                         (cast_module, "_block_primitives"), (cast_module, "label_of"), (cast_module, "run_cast")]:
+        monkeypatch.setattr(module, name, forbidden)
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    for count in (1, 1000, 5000):
+        frame = tracer.cast(origins[:count], directions[:count], aovs=CAST_AOVS)
+        for name in CAST_AOVS:
+            same(frame[name], expected[name][:count])
+        tracer.occluded(origins[:count], directions[:count])
+
+
+def test_the_switch():
+    from pyclray.engine.opencl.device import context_for
+
+    device = context_for(None).device
+    with pytest.MonkeyPatch.context() as patch:
+        patch.delenv("PYCLRAY_GPU_CLASS", raising=False)
+        assert gpu_class(device) is False  # PoCL's CPU device: its type
+        patch.setenv("PYCLRAY_GPU_CLASS", "1")
+        assert gpu_class(device) is True
+        patch.setenv("PYCLRAY_GPU_CLASS", "yes")
+        with pytest.raises(pyclray.DeviceError, match="PYCLRAY_GPU_CLASS: expected 1"):
+            gpu_class(device)
