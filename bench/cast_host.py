@@ -56,13 +56,14 @@ def empty_launch(ctx):
 
 
 def _launching_modules():
-    """The engine's modules that enqueue kernels through engine/opencl/device.py's launch."""
+    """(module, name): the engine's modules that enqueue kernels through engine/opencl/device.py's
+    launch or launch_kept, and the name they call it by."""
     import sys
 
     from pyclray.engine.opencl import device
 
-    return [module for name, module in list(sys.modules.items())
-            if name.startswith("pyclray.engine") and getattr(module, "launch", None) is device.launch]
+    return [(module, name) for module_name, module in list(sys.modules.items()) if module_name.startswith("pyclray.engine")
+            for name in ("launch", "launch_kept") if getattr(module, name, None) is getattr(device, name)]
 
 
 def profiling_queue(ctx):
@@ -112,8 +113,8 @@ class Split:
         self._wrap(KeptBuffers, "write", "uploads")
         self._wrap(KeptBuffers, "read", "readback")
         events = self.events
-        for module in _launching_modules():
-            original = module.launch
+        for module, name in _launching_modules():
+            original = getattr(module, name)
 
             def launched(*args, _original=original, **kwargs):
                 start = time.perf_counter()
@@ -122,8 +123,8 @@ class Split:
                 self.launched_at = time.perf_counter()
                 events.append(event)
                 return event
-            self.saved.append((module, "launch", original))
-            module.launch = launched
+            self.saved.append((module, name, original))
+            setattr(module, name, launched)
         return self
 
     def __exit__(self, *exc):

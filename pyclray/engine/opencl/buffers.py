@@ -56,6 +56,7 @@ class KeptBuffers:
     read before the next writes."""
 
     SMALLEST = 256  # bytes
+    MOST_CONSTANTS = 16
 
     def __init__(self):
         self.lock = threading.Lock()
@@ -63,7 +64,9 @@ class KeptBuffers:
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
         self.device_kernels = None  # (engine/queries/cast_device.py: DeviceKernels)
         self.label_table = None  # (engine/queries/cast_device.py: _label_table)
-        self.constants: dict = {}  # one number's read-only buffer by its bytes (cast_device.py: _constant)
+        self.lane_primitives = None  # (engine/queries/cast.py: _lane_primitives)
+        self.constants: dict = {}  # small read-only buffers by their bytes (constant)
+        self.launches: dict = {}  # kernel -> the arguments it was last launched with (device.py: launch_kept)
 
     def get(self, ctx, name: str, nbytes: int) -> tuple:
         """(buffer, host): the buffer called name, of at least nbytes (read and written by the
@@ -105,6 +108,21 @@ class KeptBuffers:
         self.buffers.clear()
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
         self.label_table = None
+        self.lane_primitives = None
+        self.constants.clear()
+        self.launches.clear()
+
+    def constant(self, ctx, values: np.ndarray) -> cl.Buffer:
+        """A read-only buffer of a few values (one tmin, one tmax, an unused order), kept by their
+        bytes: a later call with the same values copies nothing (MOST_CONSTANTS kept)."""
+        key = (values.dtype.str, values.tobytes())
+        buffer = self.constants.get(key)
+        if buffer is None:
+            if len(self.constants) >= self.MOST_CONSTANTS:
+                self.constants.clear()
+            buffer = self.constants[key] = cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                                     hostbuf=np.ascontiguousarray(values))
+        return buffer
 
     def nbytes(self) -> int:
         return sum(buffer.size for buffer, _ in self.buffers.values())

@@ -334,17 +334,10 @@ def _finish(ctx, kept, results: dict, out: str, partial, items: int, bound: floa
 
 def _constant(tracer, values: np.ndarray) -> cl.Buffer:
     """A read-only buffer of tmin's or tmax's values: one number's kept on the handle by its value
-    (none is copied again by a later call), an array's a new copy."""
+    (KeptBuffers.constant: no later call copies it again), an array's a new copy."""
     if len(values) > 1:
         return input_buffer(tracer.ctx, np.ascontiguousarray(values))
-    constants = tracer.ray_buffers.constants
-    key = values.tobytes()
-    buffer = constants.get(key)
-    if buffer is None:
-        if len(constants) >= 16:
-            constants.clear()
-        buffer = constants[key] = input_buffer(tracer.ctx, np.ascontiguousarray(values))
-    return buffer
+    return tracer.ray_buffers.constant(tracer.ctx, values)
 
 
 def _label_table(tracer, queue) -> cl_array.Array:
@@ -365,8 +358,7 @@ def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_st
     values = {"n_rays": np.int32(count), "ordered": np.int32(0), "order": _constant(tracer, NO_ORDER),
               "origins": o_buffer, "origin_stride": np.int32(stride), "directions": d_buffer,
               "limits": limits, "limit_stride": np.int32(limit_stride), "starts": starts,
-              "start_stride": np.int32(start_stride),
-              "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args, **outputs}
+              "start_stride": np.int32(start_stride), **args, **outputs}  # (args: the scene's anchor too)
     launch(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values))
 
 
