@@ -148,3 +148,32 @@ def test_the_switch():
         patch.setenv("PYCLRAY_GPU_CLASS", "yes")
         with pytest.raises(pyclray.DeviceError, match="PYCLRAY_GPU_CLASS: expected 1"):
             gpu_class(device)
+
+
+def test_buffers_that_are_not_host_memory(monkeypatch):
+    """As on a GPU: the kept buffers are device memory (copies enqueued in, out behind the kernels,
+    one wait), on a fresh handle told so; the same bits, and a bad ray the same line."""
+    from pyclray.engine.opencl import buffers
+    from pyclray.engine.queries import cast_device
+
+    scene = labelled_scene()
+    origins, directions = rays(3000, 26)
+    with pyclray.prepare(scene) as handle:
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        expected = handle.cast(origins, directions, aovs=CAST_AOVS)
+        occluded = handle.occluded(origins, directions)
+        with pytest.raises(pyclray.RequestError) as host_error:
+            handle.cast(origins, np.where(np.arange(3000)[:, None] == 7, 0.0, directions))
+    monkeypatch.setattr(buffers, "shares_host_memory", lambda ctx: False)
+    monkeypatch.setattr(cast_device, "shares_host_memory", lambda ctx: False)
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    with pyclray.prepare(scene) as handle:
+        for count in (3000, 2, 900):
+            frame = handle.cast(origins[:count], directions[:count], aovs=CAST_AOVS)
+            for name in CAST_AOVS:
+                same(frame[name], expected[name][:count])
+            same(handle.occluded(origins[:count], directions[:count]), occluded[:count])
+        with pytest.raises(pyclray.RequestError) as device_error:
+            handle.cast(origins, np.where(np.arange(3000)[:, None] == 7, 0.0, directions))
+        assert str(device_error.value) == str(host_error.value)
+        assert all(host is None for _, host in handle.ray_buffers.buffers.values())

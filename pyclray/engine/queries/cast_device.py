@@ -1,6 +1,8 @@
 """cast and occluded of rays given as device arrays (pyopencl arrays on the handle's context), their
 results left on the device where asked (out="device"): a loop over a data set's rays then never
-copies them through the host.
+copies them through the host; and of host arrays on a device of the GPU class
+(engine/opencl/device.py: gpu_class), where the host does nothing per ray: each array is uploaded
+once, checked (and a refused ray made harmless) by a kernel, and the results read back behind one wait.
 
 The rays are checked on the device: one reduction per call finds the largest distance of an origin
 from the scene's anchor, +inf where a ray has a coordinate that is not finite or a zero direction;
