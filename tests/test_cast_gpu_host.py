@@ -69,7 +69,7 @@ def test_distances_shapes_and_one_origin(tracer, monkeypatch):
             same(gpu[name], host[name])
 
 
-@pytest.mark.parametrize("count", [10, 5000])
+@pytest.mark.parametrize("count", [10, 100, 5000])  # the host path's checks: Python's floats, numpy's, numba's
 @pytest.mark.parametrize("bad, message", [
     (lambda o, d: (o, np.where(np.arange(len(d))[:, None] == 5, np.nan, d)), "directions: row 5 is not finite"),
     (lambda o, d: (o, np.where(np.arange(len(d))[:, None] == 2, 0.0, d)), "directions: row 2 has zero length"),
@@ -177,3 +177,38 @@ def test_buffers_that_are_not_host_memory(monkeypatch):
             handle.cast(origins, np.where(np.arange(3000)[:, None] == 7, 0.0, directions))
         assert str(device_error.value) == str(host_error.value)
         assert all(host is None for _, host in handle.ray_buffers.buffers.values())
+
+
+@pytest.mark.parametrize("count", [3, 100, 5000])  # the host path's checks: Python's floats, numpy's, numba's
+def test_extreme_fine_rays_pass_every_check(tracer, monkeypatch, count):
+    """Rays the checks must pass (a direction of huge, of subnormal and of mixed magnitudes, whose sum
+    of magnitudes overflows or underflows nothing it must not; an origin far from the scene but within
+    the precision's bound): each row's result is its own, whatever the batch and its checks' path."""
+    origins, directions = rays(count, 27)
+    directions[0] = (1e308, -1e308, 1e308)
+    directions[1] = (5e-324, 0.0, -5e-324)
+    directions[2] = (0.0, 0.0, -1e-300)
+    origins[2] = (0.0, 0.0, 1e15)
+    host, gpu = both(monkeypatch, lambda: tracer.cast(origins, directions, aovs=CAST_AOVS))
+    one = [tracer.cast(origins[i], directions[i:i + 1], aovs=CAST_AOVS) for i in range(3)]
+    for name in CAST_AOVS:
+        same(gpu[name], host[name])
+        for i in range(3):
+            same(host[name][i:i + 1], one[i][name])
+    assert host["id"][2] >= 0  # the far origin's ray hits the scene
+
+
+def test_a_subnormal_direction_gives_its_unit_directions_position(tracer, monkeypatch):
+    """(0, 0, -1e-320) is (0, 0, -1) once scaled by the kernel's power of two (2^1023 for a subnormal
+    largest magnitude): its depth, normal and position are those bits, on either host path (the
+    position's scale once overflowed to inf on the host: NaN positions)."""
+    origins = np.array([[0.0, 0.0, 3.0], [-1.0, 0.1, 2.0]])
+    tiny = np.array([[0.0, 0.0, -1e-320], [5e-324, 0.0, -5e-324]])
+    unit = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, -1.0]])
+    for switch in ("0", "1"):
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+        got = tracer.cast(origins, tiny, aovs=CAST_AOVS)
+        expected = tracer.cast(origins, unit, aovs=CAST_AOVS)
+        for name in CAST_AOVS:
+            same(got[name], expected[name])
+        assert np.isfinite(got["depth"]).all() and np.isfinite(got["position"]).all()

@@ -2,6 +2,8 @@
 (occluded), each ray traced on its own from its float64 origin and direction."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pyopencl as cl
 
@@ -109,6 +111,8 @@ def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None, near=No
     return origins.reshape(-1, 3), directions.reshape(-1, 3), tmin, tmax, shape, extent
 
 
+FEW_RAYS = 16  # _fine_and_near's batches checked as Python's floats
+
 # _cast_rays' extent of a small batch found fine with every origin within the bound of the scene's anchor
 NEAR = "near"
 
@@ -119,7 +123,17 @@ def _fine_and_near(origins: np.ndarray, directions: np.ndarray, anchor: np.ndarr
     separate checks and the origins' box took 14): a direction's largest magnitude is > 0 and finite
     exactly for a fine one (np.maximum keeps a NaN), and the origins' smallest and largest coordinates
     bound their distances from the anchor on every axis (NaN where one is NaN: refused here, then
-    named by the separate checks)."""
+    named by the separate checks). A few rays are checked as Python's floats (numpy's calls cost more
+    than their arithmetic there), each by the same rules."""
+    if directions.size <= 3 * FEW_RAYS:
+        a0, a1, a2 = anchor.tolist()
+        for x, y, z in directions.reshape(-1, 3).tolist():
+            if not 0 < abs(x) + abs(y) + abs(z) < math.inf:  # (a sum of huge magnitudes: inf, refused here)
+                return False
+        for x, y, z in origins.reshape(-1, 3).tolist():
+            if not (abs(x - a0) <= bound and abs(y - a1) <= bound and abs(z - a2) <= bound):
+                return False
+        return True
     flat = np.abs(directions).reshape(-1, 3)
     largest = np.maximum(flat[:, 0], flat[:, 1])
     np.maximum(largest, flat[:, 2], out=largest)
@@ -336,9 +350,12 @@ class RayBatch:
         self.sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
 
     def unit_directions(self) -> np.ndarray:
-        """(N, 3) float64: each direction over its length (as the kernel scales it: kernels/rays.h)."""
+        """(N, 3) float64: each direction over its length, scaled first as the kernel scales it
+        (kernels/rays.h: cast_directions4): by 2^-e for its largest magnitude m in [2^e, 2^(e+1)), from
+        m's exponent bits, at least 2^-1022 and 2^1023 for a subnormal m (whose 2^-e overflows)."""
         d = self.directions
-        scale = np.exp2(-np.floor(np.log2(np.abs(d).max(axis=1))))[:, None]
+        field = 2046 - (np.abs(d).max(axis=1).view(np.int64) >> 52)  # the exponent bits of 2^-e
+        scale = (np.maximum(field, 1) << 52).view(np.float64)[:, None]
         scaled = d * scale
         return scaled / np.sqrt((scaled * scaled).sum(axis=1))[:, None]
 

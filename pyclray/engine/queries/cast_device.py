@@ -118,7 +118,7 @@ __kernel void labels(__global int *label, __global const int *id, long n, __glob
 }
 
 /* origin + t times the unit direction (RayBatch.positions: the direction scaled by a power of two
-   first), (0, 0, 0) on a miss */
+   first, from the exponent bits of its largest magnitude, as kernels/rays.h does), (0, 0, 0) on a miss */
 #define POSITIONS(REAL) \
 __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, long n, __global const double *o, \
                                int s, __global const double *d) { \
@@ -126,7 +126,8 @@ __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, l
         double t = (double)depth[i]; \
         if (!isfinite(t)) { pos[3 * i] = 0; pos[3 * i + 1] = 0; pos[3 * i + 2] = 0; continue; } \
         double x = d[3 * i], y = d[3 * i + 1], z = d[3 * i + 2]; \
-        double scale = exp2(-floor(log2(fmax(fabs(x), fmax(fabs(y), fabs(z)))))); \
+        long field = 2046L - (as_long(fmax(fabs(x), fmax(fabs(y), fabs(z)))) >> 52); \
+        double scale = as_double((field < 1L ? 1L : field) << 52); \
         x = x * scale; y = y * scale; z = z * scale; \
         double length = sqrt((x * x + y * y) + z * z); \
         double ux = x / length, uy = y / length, uz = z / length; \
