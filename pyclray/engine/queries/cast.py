@@ -49,6 +49,10 @@ def _distances(name: str, value, shape: tuple, default: float, good, expected: s
     leading shape; a value that is not good is a RequestError naming its index."""
     if value is None:
         return np.full(1, default)
+    if type(value) is float or type(value) is int:  # one Python number (cast's tmin=0.0): no numpy call to check it
+        if not good(value):
+            raise RequestError(f"{name}: expected {expected}, got {float(value)}")
+        return np.array([value], np.float64)
     if type(value).__module__.startswith("pyopencl"):
         raise RequestError(f"{name}: expected a number or a numpy array (pyopencl arrays are taken for origins and "
                            "directions only)")
