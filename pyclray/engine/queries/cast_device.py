@@ -14,6 +14,8 @@ primitive, label, position) is derived here by small device kernels, to the same
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cl_array
@@ -25,7 +27,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.buffers import shares_host_memory
-from ..opencl.device import launch
+from ..opencl.device import launch, launch_kept
 from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, run_cast
 from .requests import Frame
 
@@ -216,7 +218,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     if origins.shape != directions.shape and origins.shape != (3,):
         raise RequestError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
-    count = int(np.prod(shape))
+    count = math.prod(shape)
     args, anchor, _, _, block_lanes = tracer.cast_inputs()
     tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
     tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
@@ -254,7 +256,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     def result(name: str, shape: tuple, dtype):
         if kept is None:
             return cl_array.empty(queue, shape, dtype)
-        return name, kept.get(ctx, name, max(1, int(np.prod(shape))) * np.dtype(dtype).itemsize)[0], shape, dtype
+        return name, kept.get(ctx, name, max(1, math.prod(shape)) * np.dtype(dtype).itemsize)[0], shape, dtype
 
     def data(value):  # a result's buffer
         return value.data if isinstance(value, cl_array.Array) else value[1]
@@ -263,7 +265,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
         results = {"occluded": result("occluded_out", shape, np.bool_)}
         if count:
             _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision), *rays,
-                    {"occluded_out": data(results["occluded"])}, CAST_GROUP, CAST_WORK_GROUP)
+                    {"occluded_out": data(results["occluded"])}, CAST_GROUP, CAST_WORK_GROUP, kept)
         return _finish(ctx, kept, results, out, partial, items, bound, refused)["occluded"]
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
     kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
@@ -271,7 +273,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     if count:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
         _launch(tracer, variant, *rays, {image_parameter(k): data(v) for k, v in results.items()}, CAST_GROUP,
-                CAST_WORK_GROUP)
+                CAST_WORK_GROUP, kept)
         if "primitive" in results and block_lanes:
             places, first, primitives = _block_lanes_table(tracer, block_lanes, queue)
             kernels.run(queue, "block_primitives", count, data(results["primitive"]), np.int64(count), places.data,
@@ -353,8 +355,10 @@ def _label_table(tracer, queue) -> cl_array.Array:
 
 
 def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride, anchor,
-            args, outputs, group, work_group):
-    """Enqueue the kernel over the device rays (in their order: the order buffer is not read)."""
+            args, outputs, group, work_group, kept=None):
+    """Enqueue the kernel over the device rays (in their order: the order buffer is not read); with
+    kept (the rays and results in the handle's kept buffers), its arguments set only where they
+    changed (device.py: launch_kept)."""
     ctx = tracer.ctx
     groups = -(-count // group)
     sizes = ((-(-groups // work_group) * work_group,), (work_group,))
@@ -362,7 +366,10 @@ def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_st
               "origins": o_buffer, "origin_stride": np.int32(stride), "directions": d_buffer,
               "limits": limits, "limit_stride": np.int32(limit_stride), "starts": starts,
               "start_stride": np.int32(start_stride), **args, **outputs}  # (args: the scene's anchor too)
-    launch(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values))
+    if kept is None:
+        launch(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values))
+    else:
+        launch_kept(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values), kept.launches)
 
 
 NO_ORDER = np.zeros(1, np.int32)  # (the kernel reads no order: ordered is 0)
