@@ -103,6 +103,10 @@ def test_bad_arguments_raise_the_host_paths_line(tracer, monkeypatch):
         (lambda: tracer.cast(origins[:3], directions), "origins: expected shape"),
         (lambda: tracer.cast(origins, directions[:, :2]), r"directions: expected an array of shape \(\.\.\., 3\)"),
         (lambda: tracer.cast(origins, "rays"), "directions: expected an array"),
+        # a bad ray and a bad distance: the ray's line first, as on the host
+        (lambda: tracer.cast(origins, np.where(np.arange(8)[:, None] == 3, np.nan, directions), tmax=-1.0),
+         "directions: row 3 is not finite"),
+        (lambda: tracer.occluded(np.array([np.inf, 0.0, 0.0]), directions, tmin=np.inf), "origins: row 0 is not finite"),
     ]
     for call, message in cases:
         errors = []

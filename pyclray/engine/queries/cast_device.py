@@ -220,8 +220,13 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
     count = math.prod(shape)
     args, anchor, _, _, block_lanes = tracer.cast_inputs()
-    tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
-    tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    try:
+        tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+        tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    except RequestError:
+        if own:  # the host path's first refusal (a bad ray's comes before a bad distance's)
+            refused()
+        raise
     stride = 1 if origins.shape == directions.shape else 0
     real = REAL[precision]
     # the distances the kernel squares must stay below the square root of the largest real (cast.py: RayBatch)
