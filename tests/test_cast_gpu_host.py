@@ -216,3 +216,23 @@ def test_a_subnormal_direction_gives_its_unit_directions_position(tracer, monkey
         for name in CAST_AOVS:
             same(got[name], expected[name])
         assert np.isfinite(got["depth"]).all() and np.isfinite(got["position"]).all()
+
+
+def test_the_hit_queries_take_no_ray_order_on_the_gpu_class(tracer, monkeypatch):
+    """count_hits and all_hits (engine/queries/hits.py) of a large batch, which the CPU casts in the
+    coherent order, take none on the GPU class: the same hits (each ray's are its own)."""
+    origins, directions = rays(5000, 28)
+    host, gpu_counts = both(monkeypatch, lambda: tracer.count_hits(origins, directions))
+    same(gpu_counts, host)
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a ray order on the GPU class")
+
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+    expected = tracer.all_hits(origins, directions)
+    monkeypatch.setattr(ray_order, "coherent_order", forbidden)
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    got = tracer.all_hits(origins, directions)
+    for name in expected:
+        same(got[name], expected[name])
+    assert (host > 1).sum() > 100

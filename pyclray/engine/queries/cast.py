@@ -16,7 +16,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer, run_kernel
 from ..launch.signatures import arguments, image_parameter, shared_arguments
 from ..opencl.buffers import shares_host_memory
-from ..opencl.device import has_fp64, launch, launch_kept
+from ..opencl.device import gpu_class, has_fp64, launch, launch_kept
 from ..scene.prepared import PreparedScene
 from .requests import Frame
 
@@ -158,8 +158,9 @@ COHERENT_FROM = 4096
 # it any ray finds its nodes and shapes in the cache, and the order's cost (the host's sort, the
 # kernel's rows read and results written through it at scattered places) is more than it saves.
 # (docs/benchmarks.md, "Cast's ray order by scene size").
-# A GPU orders every large batch: its work-items run in lock-step groups, where rays that part ways
-# wait for each other.
+# A GPU on the CPU's host path ($PYCLRAY_GPU_CLASS=0) orders every large batch: its work-items run in
+# lock-step groups, where rays that part ways wait for each other. A device of the GPU class orders
+# none: its host does nothing per ray (cast and occluded: cast_device.py; the hit queries' batches too).
 ORDER_CACHE_SHARE = 0.25
 
 
@@ -300,7 +301,7 @@ class RayBatch:
         self.block_lanes = inputs[4]
         # the scan of a large batch makes its codes only where it is ordered (order_always: every large
         # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
-        orders = order_always or _orders(ctx, scene_bytes)
+        orders = (order_always or _orders(ctx, scene_bytes)) and not gpu_class(ctx.device)
         # the distances the kernel squares, from a shape's anchor, must stay below the square root of
         # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
         bound = _BOUNDS[precision]
