@@ -261,6 +261,7 @@ class Tracer:
             prepared = self.prepared
             if self._cast_inputs is None:
                 self._cast_inputs = cast_queries.cast_inputs(prepared)
+                self.ray_buffers.launches.clear()  # (which held the last inputs' buffers: device.py's launch_kept)
             return self._cast_inputs
 
     # -- closest points, distances, inside ------------------------------------------------------
