@@ -59,6 +59,10 @@ def test_distances_shapes_and_one_origin(tracer, monkeypatch):
         lambda: tracer.cast(origin.astype(np.float32), directions.astype(np.float32), aovs=CAST_AOVS),
         lambda: tracer.cast([[0.0, 0.0, 3.0]], [[0.0, 0.0, -1.0]], aovs=CAST_AOVS),
         lambda: tracer.cast(np.zeros((0, 3)), np.zeros((0, 3)), aovs=CAST_AOVS),
+        lambda: tracer.cast(np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.1, -1.0]), aovs=CAST_AOVS),  # shape ()
+        lambda: {k: v.get() for k, v in tracer.cast(np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.1, -1.0]),
+                                                     aovs=CAST_AOVS, out="device").items()},
+        lambda: {"occluded": tracer.occluded(np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.1, -1.0]))},
         lambda: {"occluded": tracer.occluded(origin, directions, tmin=tmin, tmax=tmax)},
         lambda: {"occluded": tracer.occluded(origin, directions, tmax=2.5)},
     ]
@@ -66,7 +70,7 @@ def test_distances_shapes_and_one_origin(tracer, monkeypatch):
         host, gpu = both(monkeypatch, call)
         assert set(gpu) == set(host)
         for name in host:
-            same(gpu[name], host[name])
+            same(np.asarray(gpu[name])[None], np.asarray(host[name])[None])  # (a leading axis: 0-d arrays too)
 
 
 @pytest.mark.parametrize("count", [10, 100, 5000])  # the host path's checks: Python's floats, numpy's, numba's

@@ -300,7 +300,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
                             data(position), data(results["depth"]), np.int64(count), o_buffer, np.int32(stride),
                             d_buffer)
     frame = _finish(ctx, kept, frame, out, partial, items, bound, refused)
-    frame = {k: v.reshape(*(shape + v.shape[1:])) for k, v in frame.items()}
+    frame = {k: v.reshape(shape + v.shape[1:]) for k, v in frame.items()}
     return Frame(frame, precision=precision, device=ctx.device.name.strip())
 
 
