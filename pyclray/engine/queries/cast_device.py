@@ -2,7 +2,8 @@
 results left on the device where asked (out="device"): a loop over a data set's rays then never
 copies them through the host; and of host arrays on a device of the GPU class
 (engine/opencl/device.py: gpu_class), where the host does nothing per ray: each array is uploaded
-once, checked (and a refused ray made harmless) by a kernel, and the results read back behind one wait.
+once, checked (and a refused ray made harmless) by a kernel, and the results, written into regions of
+one kept buffer, read back in one copy.
 
 The rays are checked on the device: one reduction per call finds the largest distance of an origin
 from the scene's anchor, +inf where a ray has a coordinate that is not finite or a zero direction;
@@ -175,8 +176,9 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
     Host rays are uploaded once each into copies of the call's own (a host-results call's into the
     handle's kept buffers, under their lock), which the check's kernel may repair: it writes a
     harmless ray over each refused one, so the cast kernel follows it at once, and the check's
-    partial results are read back beside the cast's; only a refused batch is then cast by the host
-    path, which names its first bad row. Device rays are the caller's: checked before the cast."""
+    partial results are read back with the cast's (a host-results call's all in one copy of one kept
+    buffer's regions); only a refused batch is then cast by the host path, which names its first bad
+    row. Device rays are the caller's: checked before the cast."""
     try:
         if is_device_array(origins) or is_device_array(directions):
             return _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own=False, kept=None)
@@ -233,6 +235,21 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     bound = np.sqrt(np.finfo(real).max) / 4
     partial = None  # the check's largest distance per work-item, where it is read back after the cast
     items = max(1, min(count, ITEMS))
+    needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
+    kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
+    regions = None
+    if kept is not None:  # the results and the check's in regions of one kept buffer, read back in one copy
+        parts = [("check", (items,), np.float64)] if count else []
+        if query == "occluded":
+            parts.append(("occluded_out", shape, np.bool_))
+        else:
+            parts += [(image_parameter(k), TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs]
+            parts += [(k, (count,) + TABLE[k].shape(()), TABLE[k].dtype(precision)) for k in ("label", "position")
+                      if k in aovs]
+        layout = {part: (shape_, np.dtype(dtype)) for part, shape_, dtype in parts}
+        subs, offsets, total = kept.regions(ctx, "results", tuple((part, math.prod(shape_) * dtype.itemsize)
+                                                                  for part, (shape_, dtype) in layout.items()))
+        regions = (layout, subs, offsets, total)
     if own:
         if stride == 0:  # one origin: checked here (the kernel repairs no shared origin), even without rays
             with np.errstate(over="ignore", invalid="ignore"):
@@ -243,7 +260,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
         else:
             o_buffer, d_buffer = (cl_array.to_device(queue, np.ascontiguousarray(a)).data for a in (origins, directions))
         if count:
-            partial = kept.get(ctx, "check", 8 * items)[0] if kept is not None else cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * items)
+            partial = regions[1]["check"] if kept is not None else cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * items)
             kernels.run(queue, "reach", count, partial, o_buffer, np.int32(stride), d_buffer, np.int64(count),
                         *(np.float64(a) for a in anchor[:3]), np.float64(bound), np.int32(1))
     else:
@@ -257,11 +274,11 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     rays = (count, o_buffer, stride, d_buffer, _constant(tracer, tmin), len(tmin) > 1, _constant(tracer, tmax),
             len(tmax) > 1, anchor, args)
 
-    # the results: the handle's kept buffers (host results of host rays), else new device arrays
+    # the results: regions of the handle's kept buffer (host results of host rays), else new device arrays
     def result(name: str, shape: tuple, dtype):
         if kept is None:
             return cl_array.empty(queue, shape, dtype)
-        return name, kept.get(ctx, name, max(1, math.prod(shape)) * np.dtype(dtype).itemsize)[0], shape, dtype
+        return name, regions[1][name]
 
     def data(value):  # a result's buffer
         return value.data if isinstance(value, cl_array.Array) else value[1]
@@ -271,9 +288,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
         if count:
             _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision), *rays,
                     {"occluded_out": data(results["occluded"])}, CAST_GROUP, CAST_WORK_GROUP, kept)
-        return _finish(ctx, kept, results, out, partial, items, bound, refused)["occluded"]
-    needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
-    kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
+        return _finish(ctx, kept, results, out, partial, items, bound, refused, regions)["occluded"]
     results = {k: result(image_parameter(k), TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs}
     if count:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
@@ -299,7 +314,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
                 kernels.run(queue, "positions_float" if real == np.float32 else "positions_double", count,
                             data(position), data(results["depth"]), np.int64(count), o_buffer, np.int32(stride),
                             d_buffer)
-    frame = _finish(ctx, kept, frame, out, partial, items, bound, refused)
+    frame = _finish(ctx, kept, frame, out, partial, items, bound, refused, regions)
     frame = {k: v.reshape(shape + v.shape[1:]) for k, v in frame.items()}
     return Frame(frame, precision=precision, device=ctx.device.name.strip())
 
@@ -309,15 +324,16 @@ def _fine(partial: np.ndarray, bound: float) -> bool:
     return not np.isnan(partial).any() and partial.max() <= bound
 
 
-def _finish(ctx, kept, results: dict, out: str, partial, items: int, bound: float, refused) -> dict:
-    """The results by name: device arrays (out="device"), else host arrays read back once (the copies
-    enqueued behind the kernels, then one wait; out of kept buffers on a device whose buffers are
-    host memory: a copy each after the wait). The check's partial results are read with them, and a
-    refused batch raises (refused)."""
+def _finish(ctx, kept, results: dict, out: str, partial, items: int, bound: float, refused, regions) -> dict:
+    """The results by name: device arrays (out="device"), else host arrays read back behind one wait:
+    the kept buffer's regions (KeptBuffers.regions) in one copy, whose views they are (out of its
+    host memory after the wait on a device whose buffers are host memory), else a copy each of the
+    device arrays. The check's partial results are read with them, and a refused batch raises
+    (refused)."""
     queue = ctx.queue
-    check = np.empty(items, np.float64) if partial is not None else None
     if out == "device":
-        if check is not None:
+        if partial is not None:
+            check = np.empty(items, np.float64)
             cl.enqueue_copy(queue, check, partial)
             if not _fine(check, bound):
                 refused()
@@ -329,17 +345,22 @@ def _finish(ctx, kept, results: dict, out: str, partial, items: int, bound: floa
                 cl.enqueue_copy(queue, arrays[k], v.data, is_blocking=False)
         queue.finish()
         return arrays
-    arrays = {k: np.empty(shape, dtype) for k, (_, _, shape, dtype) in results.items()}
-    outputs = [(results[k][0], a) for k, a in arrays.items() if a.size] + ([("check", check)] if check is not None else [])
+    layout, _, offsets, total = regions
+    block = np.empty(total, np.uint8)
     if shares_host_memory(ctx):
-        queue.finish()  # then the results are in the kept arrays, each copied out
-    for name, array in outputs:
-        kept.read(ctx, name, array)
-    if not shares_host_memory(ctx):
+        queue.finish()  # then the results are in the kept buffer's memory, copied out at once
+        kept.read(ctx, "results", block)
+    else:
+        kept.read(ctx, "results", block)
         queue.finish()
-    if check is not None and not _fine(check, bound):
+
+    def view(part):
+        shape, dtype = layout[part]
+        return block[offsets[part]:offsets[part] + math.prod(shape) * dtype.itemsize].view(dtype).reshape(shape)
+
+    if partial is not None and not _fine(view("check"), bound):
         refused()
-    return arrays
+    return {k: view(part) for k, (part, _) in results.items()}
 
 
 def _constant(tracer, values: np.ndarray) -> cl.Buffer:
