@@ -241,3 +241,21 @@ def test_the_hit_queries_take_no_ray_order_on_the_gpu_class(tracer, monkeypatch)
     for name in expected:
         same(got[name], expected[name])
     assert (host > 1).sum() > 100
+
+
+def test_calls_in_turn_through_the_kept_regions(tracer, monkeypatch):
+    """Calls of other counts and AOVs in turn, each cutting the kept results buffer anew
+    (KeptBuffers.regions) or keeping the last cut: each gives the host path's bits, and the arrays of
+    an earlier Frame are not overwritten by a later call."""
+    calls = [(300, ("depth",)), (300, ("label", "position")), (40, CAST_AOVS), (300, ("depth",)), (2000, ("id", "normal")),
+             (300, ("depth",))]
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    frames = [tracer.cast(*rays(n, n), aovs=aovs) for n, aovs in calls]
+    kept = [{k: v.copy() for k, v in frame.items()} for frame in frames]
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+    for (n, aovs), frame, copy in zip(calls, frames, kept):
+        expected = tracer.cast(*rays(n, n), aovs=aovs)
+        assert set(frame) == set(expected)
+        for name in expected:
+            same(frame[name], expected[name])
+            same(copy[name], expected[name])
