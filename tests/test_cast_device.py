@@ -212,3 +212,17 @@ def test_kernel_arguments_set_once_per_kept_buffers(monkeypatch):
                 same(frame[name], expected[name])
             same(occluded, handles[h].occluded(*rays(n, n), **kw))
         assert not np.array_equal(got[0][0]["depth"], got[1][0]["depth"])  # the handles' shapes differ
+
+
+def test_a_large_cast_between_small_ones_leaves_them_right(monkeypatch):
+    """A large cast (new buffers, every argument set by launch) between two equal small ones (kept
+    buffers, launch_kept): the second small one sets its arguments again, and gives the first's bits."""
+    monkeypatch.setattr(cast_module, "KEPT_BELOW", 512)  # a large cast of few rays
+    small, large = rays(100, 17), rays(600, 18)
+    with pyclray.prepare(mixed_scene()) as handle:
+        first = handle.cast(*small, aovs=CAST_AOVS)
+        big = handle.cast(*large, aovs=CAST_AOVS)
+        again = handle.cast(*small, aovs=CAST_AOVS)
+        for name in CAST_AOVS:
+            same(again[name], first[name])
+        assert not np.array_equal(big["depth"][:100], first["depth"])
