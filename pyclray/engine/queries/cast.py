@@ -124,7 +124,7 @@ NEAR = "near"
 def _fine_and_near(origins: np.ndarray, directions: np.ndarray, anchor: np.ndarray, bound: float) -> bool:
     """Whether every coordinate is finite, no direction is zero and every origin lies within bound of
     anchor on each axis, in a few numpy passes without temporaries of the rays' size but one (the
-    separate checks and the origins' box took 14): a direction's largest magnitude is > 0 and finite
+    separate checks and the origins' box took 14 numpy passes): a direction's largest magnitude is > 0 and finite
     exactly for a fine one (np.maximum keeps a NaN), and the origins' smallest and largest coordinates
     bound their distances from the anchor on every axis (NaN where one is NaN: refused here, then
     named by the separate checks). A few rays are checked as Python's floats (numpy's calls cost more
