@@ -72,19 +72,23 @@ def _device_rays(ctx, kernels, name: str, value) -> cl_array.Array:
 # numpy does, to the host path's bits).
 SOURCE = """
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#define CHECK_GROUP 64
 #pragma OPENCL FP_CONTRACT OFF
 
 __kernel void widen(__global double *out, __global const float *in, long n) {
     for (long i = get_global_id(0); i < n; i += get_global_size(0)) out[i] = (double)in[i];
 }
 
-/* per work-item the largest distance of its rays' origins from the anchor on any axis, +inf where a
-   coordinate is not finite or a direction is zero (the host path's refusals); with repair, each ray
+/* the largest distance of the rays' origins from the anchor on any axis, +inf where a coordinate is
+   not finite or a direction is zero (the host path's refusals), one per work-group (CHECK_GROUP items,
+   reduced in local memory: a few kB however many work-items share the rays); with repair, each ray
    refused (not within bound) becomes a harmless one in the buffers (the call's own copies: a shared
    origin, s 0, is checked on the host), which the cast kernel may then follow before the host reads
    the partial results */
-__kernel void reach(__global double *partial, __global double *o, int s, __global double *d,
-                    long n, double ax, double ay, double az, double bound, int repair) {
+__kernel __attribute__((reqd_work_group_size(CHECK_GROUP, 1, 1)))
+void reach(__global double *partial, __global double *o, int s, __global double *d,
+           long n, double ax, double ay, double az, double bound, int repair) {
+    __local double most_of[CHECK_GROUP];
     double most = 0.0;
     for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
         double x = o[3 * i * s], y = o[3 * i * s + 1], z = o[3 * i * s + 2];
@@ -98,7 +102,17 @@ __kernel void reach(__global double *partial, __global double *o, int s, __globa
             if (s) { o[3 * i] = ax; o[3 * i + 1] = ay; o[3 * i + 2] = az; }
         }
     }
-    partial[get_global_id(0)] = most;
+    const int l = get_local_id(0);
+    most_of[l] = most;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int apart = CHECK_GROUP / 2; apart > 0; apart >>= 1) {
+        if (l < apart) {
+            const double other = most_of[l + apart];
+            most_of[l] = (other > most_of[l] || isnan(other)) ? other : most_of[l];
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (l == 0) partial[get_group_id(0)] = most_of[0];
 }
 
 /* a block's key (-2 - key) -> its triangle's primitive (cast.py: _block_primitives): the block at
@@ -145,6 +159,16 @@ POSITIONS(double)
 
 # the work-items of the helper kernels (each loops over its share of the rays)
 ITEMS = 1024
+# the check's (kernel reach): work-groups of CHECK_GROUP items (SOURCE's), at most CHECK_GROUPS of them
+# (65,536 items, each over 16 or more rays of a million: a GPU's memory is read at its pace), each
+# group's result one double of the partial results read back
+CHECK_GROUP = 64
+CHECK_GROUPS = 1024
+
+
+def check_groups(count: int) -> int:
+    """The work-groups of the check of count rays."""
+    return max(1, min(-(-count // CHECK_GROUP), CHECK_GROUPS))
 
 
 class DeviceKernels:
@@ -156,7 +180,11 @@ class DeviceKernels:
                         for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double")}
 
     def run(self, queue, name: str, n: int, *args):
-        """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share)."""
+        """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share; the
+        check: check_groups(n) work-groups)."""
+        if name == "reach":
+            groups = check_groups(n)
+            return self.kernels[name](queue, (groups * CHECK_GROUP,), (CHECK_GROUP,), *args)
         items = max(1, min(n, ITEMS))
         return self.kernels[name](queue, (items,), None, *args)
 
@@ -234,7 +262,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     # the distances the kernel squares must stay below the square root of the largest real (cast.py: RayBatch)
     bound = np.sqrt(np.finfo(real).max) / 4
     partial = None  # the check's largest distance per work-item, where it is read back after the cast
-    items = max(1, min(count, ITEMS))
+    items = check_groups(count)  # the check's partial results
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
     kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
     regions = None
