@@ -157,11 +157,11 @@ POSITIONS(float)
 POSITIONS(double)
 """
 
-# the work-items of the helper kernels (each loops over its share of the rays)
-ITEMS = 1024
+# the work-items of the helper kernels, each looping over its share of the rays: at most 65,536 (each
+# over 16 or more rays of a million: a GPU's memory is read at its pace; 1,024 were few for it)
+ITEMS = 1 << 16
 # the check's (kernel reach): work-groups of CHECK_GROUP items (SOURCE's), at most CHECK_GROUPS of them
-# (65,536 items, each over 16 or more rays of a million: a GPU's memory is read at its pace), each
-# group's result one double of the partial results read back
+# (ITEMS in all), each group's result one double of the partial results read back
 CHECK_GROUP = 64
 CHECK_GROUPS = 1024
 
