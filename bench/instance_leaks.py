@@ -203,7 +203,8 @@ def contour_sweep(folder, columns=96, rows=4, spacing=0.4, second_scale=0.7, sec
     return out
 
 
-def search(folder, views, builds, size, phase, second_scale, second_at, angle, verbose, threshold=1.0):
+def search(folder, views, builds, size, phase, second_scale, second_at, angle, verbose, threshold=1.0,
+           radius=4.5, heights=(1.0, 1.6, 2.3)):
     shapes = issue_shapes(folder, second_scale, second_at, angle)
     copies = [copy_of(s) if isinstance(s, pyclray.Mesh) and s.name.startswith("bunny") else s for s in shapes]
     found, totals = [], {}
@@ -214,7 +215,7 @@ def search(folder, views, builds, size, phase, second_scale, second_at, angle, v
             os.environ["PYCLRAY_LANES"] = str(lanes)
         counts = totals.setdefault(str(lanes), {"views": 0, "pixels": 0, "instance px": 0, "differ": 0, "leaks": 0,
                                                "copy leaks": 0})
-        for v, (camera, image) in enumerate(circle_views(views, size=size, phase=phase)):
+        for v, (camera, image) in enumerate(circle_views(views, radius=radius, size=size, phase=phase, heights=heights)):
             scene = pyclray.Scene(camera, image, shapes)
             plain = pyclray.Scene(camera, image, copies)
             aovs = ("depth", "id", "primitive")
@@ -270,6 +271,8 @@ def main(argv=None):
     parser.add_argument("--second-scale", type=float, default=0.7)
     parser.add_argument("--second-at", type=float, nargs=2, default=(1.3, -0.9))
     parser.add_argument("--angle", type=float, default=0.0, help="the second bunny's turn about y (degrees)")
+    parser.add_argument("--radius", type=float, default=4.5, help="the circle's radius")
+    parser.add_argument("--heights", type=float, nargs="+", default=(1.0, 1.6, 2.3), help="the eyes' heights, in turn")
     parser.add_argument("--lanes", default="default,1", help="lane widths: default (the device's) and/or numbers")
     parser.add_argument("--json", help="write the leaks found here")
     parser.add_argument("--show", type=float, default=1.0, help="print wrong pixels whose margin is over this (1: leaks only)")
@@ -282,7 +285,8 @@ def main(argv=None):
     builds = [None if x == "default" else int(x) for x in args.lanes.split(",")]
     print(f"pyclray from {Path(pyclray.__file__).parent}", flush=True)
     found, totals = search(args.meshes, args.views, builds, tuple(args.size), args.phase, args.second_scale,
-                           tuple(args.second_at), args.angle, True, args.show)
+                           tuple(args.second_at), args.angle, True, args.show,
+                           args.radius, tuple(args.heights))
     if args.json:
         Path(args.json).write_text(json.dumps({"args": vars(args), "totals": totals, "leaks": found}, indent=1))
     return 0
