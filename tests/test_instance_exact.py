@@ -237,8 +237,9 @@ def test_a_placement_that_scales_across_the_objects_axes_holds_the_oracle(precis
     the circle (three of them): every pixel within the error model. An instance rounds its coordinates in object
     space, each to its own precision; this placement magnifies that rounding up to its condition
     number in world space (object-space coordinates thousands of times the world's, mixed by the
-    turn), and as an instance it let a ray through the pancake's face 1e-3 inside its rim (view 5:
-    the ground at 9.44 where the oracle and a copy meet the pancake at 4.996). Such a placement is
+    turn), and as an instance it let a ray through the pancake's face near its rim, 2.9e-5 from the
+    nearest edge, twice the error model's edge rule (view 5: the ground at 9.44 where the oracle
+    and a copy meet the pancake at 4.996). Such a placement is
     now packed as a copy (model/shapes/mesh_sharing.py: rounding_gains), the others stay instances."""
     if lanes is not None:
         monkeypatch.setenv("PYCLRAY_LANES", str(lanes))

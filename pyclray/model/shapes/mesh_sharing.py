@@ -8,8 +8,8 @@ import numpy as np
 # world space (rounding_gains). An instance rounds its triangles and rays in object space, each
 # coordinate to its own float32 precision; a placement that scales across its object axes (a
 # matrix: a scale after a rotation, a shear) turns that rounding into a world error of up to its
-# condition number times eps t, where a copy's is eps t: a squashed sphere (1:3000) let rays through
-# its rim 1e-3 wide (tests/test_instance_exact.py). Up to this gain the error stays within the
+# condition number times eps t, where a copy's is eps t: a sphere squashed 1:3000 let a ray through
+# its face near the rim (tests/test_instance_exact.py). Up to this gain the error stays within the
 # error model's position error, K eps (t + L) (pyclray/reference/error_model.py); above it the mesh
 # is packed as its own world triangles, as a copy.
 INSTANCE_ROUNDING_GAIN = 4.0
