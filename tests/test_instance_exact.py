@@ -233,14 +233,15 @@ def squashed_placement(squash, mesh):
 @pytest.mark.parametrize("precision, lanes", BUILDS)
 def test_a_placement_that_scales_across_the_objects_axes_holds_the_oracle(precision, lanes, monkeypatch):
     """A sphere-like mesh placed by a matrix that squashes it 1:3000 across its own axes (a turn,
-    then a scale of y), beside two plain placements of the same mesh (instances), from 12 eyes on
-    the circle (three of them): every pixel within the error model. An instance rounds its coordinates in object
-    space, each to its own precision; this placement magnifies that rounding up to its condition
-    number in world space (object-space coordinates thousands of times the world's, mixed by the
-    turn), and as an instance it let a ray through the pancake's face near its rim, 2.9e-5 from the
-    nearest edge, twice the error model's edge rule (view 5: the ground at 9.44 where the oracle
-    and a copy meet the pancake at 4.996). Such a placement is
-    now packed as a copy (model/shapes/mesh_sharing.py: rounding_gains), the others stay instances."""
+    then a scale of y), beside two plain placements of the same mesh (instances), from three of 12
+    eyes on the circle: ids and depth within the error model. An instance rounds its coordinates in
+    object space, each to its own precision; this placement magnifies that rounding up to its
+    condition number in world space (object-space coordinates thousands of times the world's,
+    mixed by the turn), and as an instance it let a ray through the pancake's face near its rim,
+    2.9e-5 from the nearest edge, twice the error model's edge rule (view 5: the ground at 9.44
+    where the oracle and a copy meet the pancake at 4.996; this fails before the change). Such a
+    placement is now packed as a copy (model/shapes/mesh_sharing.py: rounding_gains), the others
+    stay instances. fp32, and one lane."""
     if lanes is not None:
         monkeypatch.setenv("PYCLRAY_LANES", str(lanes))
     blob = pyclray.Mesh(*perturbed_sphere(12, 16, 0.5, 0.15, np.random.default_rng(3)))
