@@ -89,9 +89,9 @@ def circle_views(count, radius=4.5, centre=(0.2, 0.4, 0.2), size=(640, 480), pha
         yield opencv_camera(eye, centre, K, size)
 
 
-def contour_margin(mesh, origin, direction, face, depth, reach):
-    """The distance of the ray from the nearest contour edge of ``mesh`` near its hit point on
-    ``face`` (an edge of one triangle facing the ray and one facing away, or of one triangle),
+def contour_margin(mesh, origin, direction, depth, reach):
+    """The distance of the ray from the nearest contour edge of ``mesh`` near its hit point at
+    ``depth`` (an edge of one triangle facing the ray and one facing away, or of one triangle),
     over ``reach`` (the render's sideways position error there); and the nearest such edge."""
     world = mesh.world_vertices()
     faces = np.asarray(mesh.faces)
@@ -192,7 +192,7 @@ def contour_sweep(folder, columns=96, rows=4, spacing=0.4, second_scale=0.7, sec
             # another shape): how far the oracle's ray passes from the nearest contour edge, in eps t
             with np.errstate(invalid="ignore"):
                 wrong = (ids != truth["id"]) | (np.abs(depth - truth["depth"]) > tolerance)
-            margins = [contour_margin(instance, O[k], D[k], None, truth["depth"][k], eps * truth["depth"][k])[0]
+            margins = [contour_margin(instance, O[k], D[k], truth["depth"][k], eps * truth["depth"][k])[0]
                        for k in np.nonzero(wrong & (truth["id"] == 2))[0]]
             row[name] = {"on_pair": int(on.sum()), "other_way": int(other.sum()),
                          "farthest_other_way_eps_t": float(np.abs(gap[other]).max()) if other.any() else 0.0,
@@ -203,8 +203,17 @@ def contour_sweep(folder, columns=96, rows=4, spacing=0.4, second_scale=0.7, sec
     return out
 
 
+def flat_images(scene):
+    """depth, id and primitive of an fp32 render of ``scene``, one value a pixel."""
+    aovs = ("depth", "id", "primitive")
+    frame = pyclray.render(scene, aovs=aovs, precision="fp32")
+    return {k: np.asarray(frame[k]).reshape(-1) for k in aovs}
+
+
 def search(folder, views, builds, size, phase, second_scale, second_at, angle, verbose, threshold=1.0,
            radius=4.5, heights=(1.0, 1.6, 2.3)):
+    """Renders of the issue's scene and of its copy over ``views`` eyes on the circle per lane width
+    of ``builds`` (None: the device's); (the wrong pixels with margin over ``threshold``, the counts)."""
     shapes = issue_shapes(folder, second_scale, second_at, angle)
     copies = [copy_of(s) if isinstance(s, pyclray.Mesh) and s.name.startswith("bunny") else s for s in shapes]
     found, totals = [], {}
@@ -213,20 +222,20 @@ def search(folder, views, builds, size, phase, second_scale, second_at, angle, v
             os.environ.pop("PYCLRAY_LANES", None)
         else:
             os.environ["PYCLRAY_LANES"] = str(lanes)
-        counts = totals.setdefault(str(lanes), {"views": 0, "pixels": 0, "instance px": 0, "differ": 0, "leaks": 0,
-                                               "copy leaks": 0})
-        for v, (camera, image) in enumerate(circle_views(views, radius=radius, size=size, phase=phase, heights=heights)):
+        counts = totals.setdefault(str(lanes), {"views": 0, "pixels": 0, "instance px": 0, "differ": 0,
+                                                "leaks": 0, "copy leaks": 0})
+        views_on_circle = circle_views(views, radius=radius, size=size, phase=phase, heights=heights)
+        for v, (camera, image) in enumerate(views_on_circle):
             scene = pyclray.Scene(camera, image, shapes)
             plain = pyclray.Scene(camera, image, copies)
-            aovs = ("depth", "id", "primitive")
-            mine = {k: np.asarray(x).reshape(-1) for k, x in pyclray.render(scene, aovs=aovs, precision="fp32").items() if k in aovs}
-            copy = {k: np.asarray(x).reshape(-1) for k, x in pyclray.render(plain, aovs=aovs, precision="fp32").items() if k in aovs}
+            mine, copy = flat_images(scene), flat_images(plain)
             counts["views"] += 1
             counts["pixels"] += mine["id"].size
             counts["instance px"] += int(np.isin(mine["id"], (1, 2)).sum())
             with np.errstate(invalid="ignore"):
+                apart = np.abs(mine["depth"].astype(np.float64) - copy["depth"])
                 differ = (mine["id"] != copy["id"]) | (mine["primitive"] != copy["primitive"]) | \
-                         (np.abs(mine["depth"].astype(np.float64) - copy["depth"]) > 1e-5 * np.fmin(mine["depth"], copy["depth"]))
+                         (apart > 1e-5 * np.fmin(mine["depth"], copy["depth"]))
             differ &= np.isin(mine["id"], (1, 2)) | np.isin(copy["id"], (1, 2))
             counts["differ"] += int(differ.sum())
             if not differ.any():
@@ -245,15 +254,17 @@ def search(folder, views, builds, size, phase, second_scale, second_at, angle, v
                 mesh = shapes[tid]
                 face = int(mesh.oracle_hits(O[j:j + 1], D[j:j + 1])[1][0])
                 reach = tolerance[j] * cos[j]  # the sideways position error (scene units)
-                margin, edge = contour_margin(mesh, O[j], D[j], face, truth["depth"][j], reach)
+                margin, edge = contour_margin(mesh, O[j], D[j], truth["depth"][j], reach)
                 for name, got in (("instance", mine), ("copy", copy)):
                     far = got["id"][pixel] != tid or got["depth"][pixel] > truth["depth"][j] + tolerance[j]
                     if far and margin > threshold:
-                        row = {"build": str(lanes), "view": v, "pixel": [int(pixel % image.width), int(pixel // image.width)],
-                               "who": name, "oracle": [float(truth["depth"][j]), int(tid), face],
+                        row = {"build": str(lanes), "view": v, "who": name,
+                               "pixel": [int(pixel % image.width), int(pixel // image.width)],
+                               "oracle": [float(truth["depth"][j]), int(tid), face],
                                "got": [float(got["depth"][pixel]), int(got["id"][pixel]), int(got["primitive"][pixel])],
                                "cos": float(cos[j]), "margin": float(margin),
-                               "margin_eps_t": float(margin * reach / (2.0**-24 * truth["depth"][j])), "edge": edge, "tolerance": float(tolerance[j])}
+                               "margin_eps_t": float(margin * reach / (2.0**-24 * truth["depth"][j])),
+                               "edge": edge, "tolerance": float(tolerance[j])}
                         found.append(row)
                         counts["leaks" if name == "instance" else "copy leaks"] += int(margin > 1.0)
                         if verbose:
@@ -264,7 +275,8 @@ def search(folder, views, builds, size, phase, second_scale, second_at, angle, v
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--meshes", required=True, help="the folder of CGAL's bunny00.off, elephant.off, armadillo.off, fandisk.off")
+    parser.add_argument("--meshes", required=True,
+                        help="the folder of CGAL's bunny00.off, elephant.off, armadillo.off, fandisk.off")
     parser.add_argument("--views", type=int, default=24)
     parser.add_argument("--size", type=int, nargs=2, default=(640, 480))
     parser.add_argument("--phase", type=float, default=0.0, help="the circle's first angle (radians)")
@@ -275,7 +287,8 @@ def main(argv=None):
     parser.add_argument("--heights", type=float, nargs="+", default=(1.0, 1.6, 2.3), help="the eyes' heights, in turn")
     parser.add_argument("--lanes", default="default,1", help="lane widths: default (the device's) and/or numbers")
     parser.add_argument("--json", help="write the leaks found here")
-    parser.add_argument("--show", type=float, default=1.0, help="print wrong pixels whose margin is over this (1: leaks only)")
+    parser.add_argument("--show", type=float, default=1.0,
+                        help="print the wrong pixels whose margin is over this (1: the leaks only, 0: all)")
     parser.add_argument("--contour", action="store_true", help="sweep rays across the issue's edge instead")
     args = parser.parse_args(argv)
     if args.contour:
