@@ -81,21 +81,29 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_REBASE_
 
 #ifdef PYCLRAY_PIXEL_EXACT
 /* A packet's lanes in float64 (instances are built only where the device has it: their kernel
- * reads float64 vertices anyway); on PoCL's CPU device the compiler's own conversions (as
- * kernels/lanes.h's v_sqrt: the library's would be calls). */
+ * reads float64 vertices anyway), converted lane by lane: a library conversion of 512 bits of
+ * doubles is a call that PoCL's CPU device cannot build (pyclray/engine/launch/programs.py:
+ * MAX_LANE_BITS), a cast per lane compiles to vector conversions everywhere. */
 #if LANES == 1
 typedef double instance_doublev;
-#define INSTANCE_TO_DOUBLE(x) ((double)(x))
-#define INSTANCE_TO_REAL(x) ((real)(x))
+inline instance_doublev instance_to_double(const realv x) { return (double)x; }
+inline realv instance_to_real(const instance_doublev x) { return (real)x; }
 #else
 typedef PYCLRAY_CAT(double, LANES) instance_doublev;
-#ifdef PYCLRAY_INLINE_BUILTINS
-#define INSTANCE_TO_DOUBLE(x) __builtin_convertvector((x), instance_doublev)
-#define INSTANCE_TO_REAL(x) __builtin_convertvector((x), realv)
-#else
-#define INSTANCE_TO_DOUBLE(x) PYCLRAY_CAT(convert_double, LANES)(x)
-#define INSTANCE_TO_REAL(x) PYCLRAY_CAT(convert_float, LANES)(x)
-#endif
+#define INSTANCE_LANE_TO_DOUBLE(l, s) r.s = (double)x.s;
+#define INSTANCE_LANE_TO_REAL(l, s) r.s = (real)x.s;
+inline instance_doublev instance_to_double(const realv x)
+{
+    instance_doublev r;
+    PYCLRAY_EACH_LANE(INSTANCE_LANE_TO_DOUBLE)
+    return r;
+}
+inline realv instance_to_real(const instance_doublev x)
+{
+    realv r;
+    PYCLRAY_EACH_LANE(INSTANCE_LANE_TO_REAL)
+    return r;
+}
 #endif
 
 /* one component of a camera ray's object direction: a row of object_from_space / k, high + low
@@ -107,7 +115,7 @@ inline realv instance_pixel_row(const instance_doublev sx, const instance_double
                                 const realv length)
 {
     const double rx = (double)high.x + (double)low.x, ry = (double)high.y + (double)low.y, rz = (double)high.z + (double)low.z;
-    return INSTANCE_TO_REAL((sx * rx + sy * ry) + rz) / length;
+    return instance_to_real((sx * rx + sy * ry) + rz) / length;
 }
 #endif
 
@@ -135,8 +143,8 @@ inline RayPacket instance_rounded_ray(SHAPE_SPACE const Instance* inst, const Ra
  * move a contour pixel's ray across the edge it passes within a few eps of (issue 42). */
 inline void instance_pixel_direction(SHAPE_SPACE const Instance* inst, const RayPacket* ray, RayPacket* object)
 {
-    const instance_doublev sx = INSTANCE_TO_DOUBLE(ray->x) + INSTANCE_TO_DOUBLE(ray->x_low);
-    const instance_doublev sy = INSTANCE_TO_DOUBLE(ray->y) + INSTANCE_TO_DOUBLE(ray->y_low);
+    const instance_doublev sx = instance_to_double(ray->x) + instance_to_double(ray->x_low);
+    const instance_doublev sy = instance_to_double(ray->y) + instance_to_double(ray->y_low);
     object->dir = v3(instance_pixel_row(sx, sy, inst->m0, inst->m_low0, ray->length),
                      instance_pixel_row(sx, sy, inst->m1, inst->m_low1, ray->length),
                      instance_pixel_row(sx, sy, inst->m2, inst->m_low2, ray->length));
