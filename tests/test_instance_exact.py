@@ -6,7 +6,7 @@ of an edge or a silhouette may go either way, nothing else); and rays swept 1e-7
 shared edges of its front-facing triangles all meet one of the edge's two triangles: watertight in
 object space, no ray let through to the surface behind (the issue's symptom: 2.742310 where the
 oracle and a copy give 2.69438). A vertex from_world differently by its two triangles fails it. fp32,
-and fp32 with one lane (PYCLRAY_LANES=1)."""
+and fp32 with one lane (PYCLRAY_LANES=1); and every lane width gives the same bits."""
 from __future__ import annotations
 
 import math
@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import pyclray
+from pyclray.model.aovs import RENDER_AOVS
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 from pyclray.reference import oracle
 from pyclray.reference import error_model
@@ -142,3 +143,28 @@ def test_rays_swept_across_an_instances_shared_edges_all_hit_it(precision, lanes
             assert (np.abs(frame["depth"].reshape(-1).astype(np.float64) - truth["depth"]) <= tolerance).all()
             swept += 1
     assert swept >= 4
+
+
+def test_every_lane_width_gives_the_same_bits(monkeypatch):
+    """The exact pixel rays' parts are each lane's own: an instance's object direction, taken at its
+    packet's first leaf of the instance, and a box's exact face distance, taken where its face met
+    is grazing, give the same bits at widths 1, 2, 4 and 8, for every image (shaded with a point
+    light's shadow rays, which take the rounded direction) of the issue's scene from two views and
+    of the box and instances seen at a grazing angle (tests/test_grazing.py's camera)."""
+    from test_grazing import grazing_scenes, pitched_camera
+    from test_packets import at_width, widths
+    from test_speedups import same
+
+    light = pyclray.PointLight(position=(2.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0))
+    scenes = [pyclray.Scene(camera, image, issue_shapes(), lights=(light,)) for camera, image in circle_views(2, (61, 47))]
+    camera, image = pitched_camera(2.0, scale=0.125)
+    scenes += [pyclray.Scene(camera, image, grazing_scenes()[case]) for case in ("box", "instances")]
+
+    def run():
+        return [pyclray.render(scene, aovs=RENDER_AOVS) for scene in scenes]
+
+    runs = {w: at_width(monkeypatch, w, run) for w in widths("fp32")}
+    scalar = runs.pop(1)
+    for frames in runs.values():
+        for a, b in zip(scalar, frames):
+            same(a, b)
