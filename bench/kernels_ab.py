@@ -2,10 +2,15 @@
 alternating (issue 42: the exact pixel rays' cost on flat shapes and mesh instances).
 
     .venv/bin/python bench/kernels_ab.py --against /path/to/other/checkout [--rounds 6] [--block 7]
+    .venv/bin/python bench/kernels_ab.py --without-pixel-exact [--rounds 6] [--block 7]
 
 The host side (scenes, structs, the per-view pass) is this checkout's; only the kernels/ folder is
 swapped (pyclray.engine.launch.programs.kernel_dir), so the other checkout's kernels must read the
-structs this one packs (fields this one added are ignored there). Each round builds both kernel
+structs this one packs (fields this one added are ignored there): a checkout from before a change
+of the structs or of the kernels' files cannot be the other side. --without-pixel-exact makes the
+other side this checkout's own kernels with the exact pixel rays compiled out (a copy in a
+temporary folder whose kernels/lanes.h never defines PYCLRAY_PIXEL_EXACT: the camera rays, flat
+shapes and instances as before issue 42's item 1, everything else the same). Each round builds both kernel
 sets afresh (in alternating order) and times each workload in a block of renders (median wall and
 process CPU time); the report is the median over the rounds and the ratio this / other. bench/engine_ab.py
 is the whole-engine comparison (other processes, other host code); this one isolates the kernels
@@ -20,7 +25,9 @@ depth, normal and id:
 from __future__ import annotations
 
 import argparse
+import shutil
 import statistics
+import tempfile
 import time
 from pathlib import Path
 
@@ -54,15 +61,39 @@ def workloads(size: int = 512) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--against", required=True, help="the other checkout's root (its pyclray/engine/kernels/ is read)")
+    other = parser.add_mutually_exclusive_group(required=True)
+    other.add_argument("--against", help="the other checkout's root (its pyclray/engine/kernels/ is read)")
+    other.add_argument("--without-pixel-exact", action="store_true",
+                       help="the other side: this checkout's kernels with PYCLRAY_PIXEL_EXACT compiled out")
     parser.add_argument("--rounds", type=int, default=6)
     parser.add_argument("--block", type=int, default=7)
     args = parser.parse_args(argv)
-    folders = {"this": programs.kernel_dir(), "other": Path(args.against) / "pyclray" / "engine" / "kernels"}
+    with tempfile.TemporaryDirectory() as temporary:
+        if args.without_pixel_exact:
+            other_kernels = without_pixel_exact(programs.kernel_dir(), Path(temporary) / "kernels")
+        else:
+            other_kernels = Path(args.against) / "pyclray" / "engine" / "kernels"
+        compare({"this": programs.kernel_dir(), "other": other_kernels}, args.rounds, args.block)
+
+
+def without_pixel_exact(kernels: Path, copy: Path) -> Path:
+    """A copy of the kernels folder whose lanes.h never defines PYCLRAY_PIXEL_EXACT."""
+    shutil.copytree(kernels, copy)
+    lanes = copy / "lanes.h"
+    text = lanes.read_text(encoding="utf-8")
+    define = "#define PYCLRAY_PIXEL_EXACT 1\n"
+    if text.count(define) != 1:
+        raise SystemExit(f"{kernels / 'lanes.h'}: expected one line {define.strip()!r}")
+    lanes.write_text(text.replace(define, ""), encoding="utf-8")
+    return copy
+
+
+def compare(folders: dict, rounds: int, block: int) -> None:
+    """Each workload rendered with each side's kernels, alternating; the table of the medians."""
     scenes = workloads()
     aovs = ("depth", "normal", "id")
     times = {(w, side): [] for w in scenes for side in folders}
-    for r in range(args.rounds):
+    for r in range(rounds):
         for side in (("this", "other") if r % 2 == 0 else ("other", "this")):
             programs.kernel_dir = lambda folder=folders[side]: folder
             programs.clear()
@@ -70,7 +101,7 @@ def main(argv=None) -> None:
             for name, scene in scenes.items():
                 pyclray.render(scene, aovs=aovs)  # built and prepared: not timed
                 wall, cpu = [], []
-                for _ in range(args.block):
+                for _ in range(block):
                     c0, w0 = time.process_time(), time.perf_counter()
                     pyclray.render(scene, aovs=aovs)
                     cpu.append(time.process_time() - c0)
