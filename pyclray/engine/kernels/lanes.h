@@ -21,7 +21,8 @@
 #define LANES PYCLRAY_LANES
 
 /* A render's fp32 pinhole camera rays carry their image-plane point as float pairs, for the flat
- * shapes' n . d (pixel_dot below); cast traces the caller's rays, a camera table's rays (a lens, a
+ * shapes' n . d (pixel_dot below) and mesh instances' object directions (kernels/instance.cl);
+ * bench/kernels_ab.py --without-pixel-exact compiles this line out to measure their cost; cast traces the caller's rays, a camera table's rays (a lens, a
  * panorama: kernels/camera.h) come rounded from the host, the closest-point query has no rays, and
  * fp64 has the digits without it. */
 #if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE) && !defined(PYCLRAY_CLOSEST)
@@ -341,10 +342,6 @@ inline realv pixel_along(const RayPacket* ray, const real4 high, const real4 low
     return ANY(grazing) ? (grazing ? pixel_dot(ray, high, low) : plain) : plain;
 }
 #define PIXEL_DOT(ray, high, low, plain) pixel_along((ray), (high), (low), (plain))
-/* pixel_dot for every packet of camera rays (a direction's every component, not a cosine: an
- * instance's object-space direction, kernels/instance.cl) */
-#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
 #else
 #define PIXEL_DOT(ray, high, low, plain) (plain)
-#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (plain)
 #endif
