@@ -10,12 +10,13 @@ structs this one packs (fields this one added are ignored there): a checkout fro
 of the structs or of the kernels' files cannot be the other side. --without-pixel-exact makes the
 other side this checkout's own kernels with the exact pixel rays compiled out (a copy in a
 temporary folder whose kernels/lanes.h never defines PYCLRAY_PIXEL_EXACT: the camera rays, flat
-shapes and instances as before issue 42's item 1, everything else the same). Each round builds both kernel
-sets afresh (in alternating order) and times each workload in a block of renders (median wall and
-process CPU time); the report is the median over the rounds and the ratio this / other. bench/engine_ab.py
-is the whole-engine comparison (other processes, other host code); this one isolates the kernels
-on the workloads engine_ab has none of: flat shapes in numbers and mesh instances. 512x512, fp32,
-depth, normal and id:
+shapes and instances as before issue 42's item 1, everything else the same). Each round builds
+both kernel sets afresh (in alternating order) and times each workload in a block of renders
+(median wall and process CPU time; --block renders, more where those would take less than
+--block-ms); the report is the median over the rounds and the ratio this / other.
+bench/engine_ab.py is the whole-engine comparison (other processes, other host code); this one
+isolates the kernels on the workloads engine_ab has none of: flat shapes in numbers and mesh
+instances. 512x512, fp32, depth, normal and id:
 
 - tp02: scenes/tp02.toml (a ground plane and three balls);
 - 100k spheres: bench/engine_ab.py's field (a ground plane and a batch of 100,000 spheres);
@@ -67,13 +68,15 @@ def main(argv=None) -> None:
                        help="the other side: this checkout's kernels with PYCLRAY_PIXEL_EXACT compiled out")
     parser.add_argument("--rounds", type=int, default=6)
     parser.add_argument("--block", type=int, default=7)
+    parser.add_argument("--block-ms", type=float, default=100.0,
+                        help="a block has at least --block renders and lasts about this long at least (tp02's 1 ms renders)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as temporary:
         if args.without_pixel_exact:
             other_kernels = without_pixel_exact(programs.kernel_dir(), Path(temporary) / "kernels")
         else:
             other_kernels = Path(args.against) / "pyclray" / "engine" / "kernels"
-        compare({"this": programs.kernel_dir(), "other": other_kernels}, args.rounds, args.block)
+        compare({"this": programs.kernel_dir(), "other": other_kernels}, args.rounds, args.block, args.block_ms / 1e3)
 
 
 def without_pixel_exact(kernels: Path, copy: Path) -> Path:
@@ -88,7 +91,7 @@ def without_pixel_exact(kernels: Path, copy: Path) -> Path:
     return copy
 
 
-def compare(folders: dict, rounds: int, block: int) -> None:
+def compare(folders: dict, rounds: int, block: int, block_s: float) -> None:
     """Each workload rendered with each side's kernels, alternating; the table of the medians."""
     scenes = workloads()
     aovs = ("depth", "normal", "id")
@@ -100,8 +103,11 @@ def compare(folders: dict, rounds: int, block: int) -> None:
             pyclray.clear_cache()
             for name, scene in scenes.items():
                 pyclray.render(scene, aovs=aovs)  # built and prepared: not timed
+                w0 = time.perf_counter()
+                pyclray.render(scene, aovs=aovs)  # nor this one: it sizes the block
+                renders = max(block, int(block_s / max(time.perf_counter() - w0, 1e-6)))
                 wall, cpu = [], []
-                for _ in range(block):
+                for _ in range(renders):
                     c0, w0 = time.process_time(), time.perf_counter()
                     pyclray.render(scene, aovs=aovs)
                     cpu.append(time.process_time() - c0)
