@@ -115,12 +115,12 @@ inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
 }
 
 #ifdef PYCLRAY_PIXEL_EXACT
-/* A camera ray's distance s to the face it meets (k: its slab, high_side: which of its two), again
- * with D . e_k exact (kernels/lanes.h: pixel_dot) in the lanes where the face is seen at a grazing
- * angle, as a plane's: the face seen within a few roundings of its distance. Only the face met pays
- * for it (one product, not the three slabs'): which face that is, and whether the ray meets the box,
- * stay decided by the plain products, which differ from the exact ones only for a ray within
- * rounding of an edge, where either face is right. */
+/* A camera ray's distance s to the face it meets (entering: the entry slab's face, else the exit
+ * slab's), again with that slab's D . e_k exact (kernels/lanes.h: pixel_dot) in the lanes where it
+ * is below PIXEL_EXACT_COS, as a plane's: a face seen at a grazing angle within a few roundings of
+ * its distance. Only the face met pays for it (one product, not the three slabs'): which face that
+ * is, and whether the ray meets the box, stay decided by the plain products, which choose otherwise
+ * than the exact ones only for a ray within rounding of an edge, where either face is right. */
 inline realv box_pixel_distance(SHAPE_SPACE const Box* box, const RayPacket* ray, const BoxSlabs* slabs,
                                 const intv entering, const realv s)
 {
@@ -136,7 +136,7 @@ inline realv box_pixel_distance(SHAPE_SPACE const Box* box, const RayPacket* ray
     const intv high_side = entering ? along < 0 : along > 0;
     const realv offset_low = k0 ? SPLAT(box->axis0.w) : (k1 ? SPLAT(box->axis1.w) : SPLAT(box->axis2.w));
     const realv offset_high = k0 ? SPLAT(box->high.x) : (k1 ? SPLAT(box->high.y) : SPLAT(box->high.z));
-    /* a lane whose exact product has not the plain one's sign (a ray along the face) keeps its s */
+    /* a lane whose exact product has not the plain one's sign (a ray along the face) keeps the plain s */
     const intv taken = grazing && ((exact > 0) == (along > 0)) && exact != 0;
     return taken ? box_plane(offset_low, offset_high, exact, high_side) : s;
 }

@@ -22,9 +22,9 @@
 
 /* A render's fp32 pinhole camera rays carry their image-plane point as float pairs, for the flat
  * shapes' n . d (pixel_dot below) and mesh instances' object directions (kernels/instance.cl);
- * bench/kernels_ab.py --without-pixel-exact compiles this line out to measure their cost; cast traces the caller's rays, a camera table's rays (a lens, a
- * panorama: kernels/camera.h) come rounded from the host, the closest-point query has no rays, and
- * fp64 has the digits without it. */
+ * cast traces the caller's rays, a camera table's rays (a lens, a panorama: kernels/camera.h) come
+ * rounded from the host, the closest-point query has no rays, and fp64 has the digits without it.
+ * (bench/kernels_ab.py --without-pixel-exact compiles the define out to measure what it costs.) */
 #if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE) && !defined(PYCLRAY_CLOSEST)
 #define PYCLRAY_PIXEL_EXACT 1
 #endif
@@ -312,8 +312,8 @@ inline realv pixel_sum_error(const realv a, const realv b, const realv s)
 /* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's space as a float
  * pair from float64: kernels/space.h's to_space and to_space_low), lane by lane: n . (sx, sy, 1)
  * with its two products (fused multiply-adds) and two sums error-free, their errors and the low
- * parts' terms added (those terms are below 2^-11 of the products: their own roundings, fused too,
- * are far below the result's), over the point's length. Within a few roundings of the exact n . d
+ * parts' terms added (small numbers: the pairs' rests, kernels/camera.h; their own roundings,
+ * fused too, are far below what the result needs), over the point's length. Within a few roundings of the exact n . d
  * relative to itself, also where the terms cancel (a grazing ray: n . d near 0); that relative
  * error, times the distance, is a flat shape's depth error, where the plain dot product's
  * eps / |n . d| is one of a sideways move. */
