@@ -144,10 +144,11 @@ class Tracer:
             return self._scene
         return render_query.with_camera(self._scene, camera)
 
-    def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto", motion=None):
+    def start_render(self, view: Scene, aovs, window=None, acceleration: str = "auto", motion=None, warn_pose=True):
         """Enqueue a render of ``view`` (a Scene with this handle's shapes) and return a callable that
-        waits for it and returns its Frame (engine/queries/render.py: start; motion: for flow)."""
-        return render_query.start(self, view, aovs, window, acceleration, motion)
+        waits for it and returns its Frame (engine/queries/render.py: start; motion: for flow;
+        warn_pose: the all-miss pose warning, off for a part of a scene)."""
+        return render_query.start(self, view, aovs, window, acceleration, motion, warn_pose)
 
     def views_of(self, scene: Scene, cameras, aovs=AOVS, acceleration: str = "auto", motion=None):
         """render_views of ``scene`` (this handle's shapes, its own lights and shading) from each camera."""

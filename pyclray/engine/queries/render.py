@@ -35,12 +35,14 @@ def _window(scene: Scene, window) -> tuple[int, int, int, int]:
     return col0, row0, cols, rows
 
 
-def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion | None = None):
+def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion | None = None, warn_pose: bool = True):
     """A render's work up to the kernel's launch on a scene handle (engine/tracer.py), for a view of
     its shapes (view: a Scene with the handle's shapes and the camera, image, lights and shading to
     render; the checks, the per-view pass, the kernel, enqueued on the device's in-order queue): a
     callable that waits for this view's kernel and returns its Frame. motion: the next frame, for
-    flow (engine/queries/motion.py; its camera None: the view's)."""
+    flow (engine/queries/motion.py; its camera None: the view's). warn_pose: warn (LOOKS_AWAY) when
+    nothing is hit and every shape lies behind the camera; off for renders of a part of a scene
+    whose emptiness says nothing of the pose (a data set's objects alone)."""
     ctx, precision = tracer.ctx, tracer.precision
     asked = check_request(aovs, precision, ctx, RENDER_AOVS)
     if "zdepth" in asked and not view.camera.has_zdepth:
@@ -92,7 +94,7 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
 
     def frame() -> Frame:
         images = pending.result()
-        if _all_missed(images) and _behind_the_camera(view.camera, prepared):
+        if warn_pose and _all_missed(images) and _behind_the_camera(view.camera, prepared):
             warnings.warn(LOOKS_AWAY, PyclrayWarning, stacklevel=2)
         if any(name in MOTION_AOVS for name in asked):  # derived on the host, then only what was asked
             images = with_motion(view, images, motion, asked)

@@ -175,7 +175,7 @@ class DatasetViews:
             if hidden and inside is not None:
                 inside = _hidden_window(frame["id"], frame["zdepth"], shape_id, inside, own, K, pose)
             seen = replace(tracer.scene, camera=camera)
-            in_image = None if inside is None else tracer.start_render(seen, ("id",), window=inside)
+            in_image = None if inside is None else tracer.start_render(seen, ("id",), window=inside, warn_pose=False)
             beyond = None
             if reaches_out:
                 if canvas_camera is None:
@@ -186,7 +186,7 @@ class DatasetViews:
                 view = replace(tracer.scene, camera=canvas_camera, image=Image(3 * width, 3 * height))
                 on_canvas = None if window is None else (window[0] + width, window[1] + height, window[2], window[3])
                 area = _clip(on_canvas, 0, 0, 3 * width, 3 * height)
-                beyond = [(part, tracer.start_render(view, ("id",), window=part))
+                beyond = [(part, tracer.start_render(view, ("id",), window=part, warn_pose=False))
                           for part in _around(area, width, height, width, height)]
             started.append((inside, in_image, beyond))
 
