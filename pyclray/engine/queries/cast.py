@@ -10,7 +10,7 @@ from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for
 from ..launch.run import REAL, input_buffer, run_kernel
 from ..launch.signatures import arguments, image_parameter, shared_arguments
 from ..opencl.buffers import shares_host_memory
@@ -145,13 +145,14 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own space (its anchor), the BVH around the scene's anchor
-def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict]:
-    """(arguments by name, anchor, size, bytes, block lanes): the BVH around the scene's anchor (its root box's
+def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict, "PairNodes | None"]:
+    """(arguments by name, anchor, size, bytes, block lanes, pair nodes): the BVH around the scene's anchor (its root box's
     centre), its refs and the entries' anchors, and per packed kind its buffer (each bounded entry
     relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
     They depend on the shapes only, never on the rays: a scene handle makes them at its first cast
     and keeps them until its shapes change. block lanes: per cast_blocks type, which entry each
-    block's lane is (engine/queries/cast_blocks.py: regroup), for the hit queries."""
+    block's lane is (engine/queries/cast_blocks.py: regroup), for the hit queries. pair nodes: the
+    tree for one ray per work-item (ray_arguments), made from the wide nodes when first asked."""
     ctx, precision, shape_types = prepared.ctx, prepared.precision, prepared.types
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
@@ -165,6 +166,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
     blocks, block_lanes = {}, {}
+    pairs = None
     if tree.types:
         nodes = tree.nodes(anchor[:3])
         if any(capability(prepared.kinds[name].cls, "cast_blocks") for name in tree.types):  # a leaf's triangles of a mesh at once
@@ -183,6 +185,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
         anchors = np.ascontiguousarray(anchors)
         args.update(nodes=input_buffer(ctx, nodes), refs=input_buffer(ctx, refs), anchors=input_buffer(ctx, anchors),
                     box_anchors=input_buffer(ctx, _box_anchors(anchors, anchor)), root_box=_root_box(nodes))
+        pairs = PairNodes(prepared, nodes, anchor[:3])
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
@@ -208,7 +211,36 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
                      **shared_arguments(name, kind.shared), f"n_{name}s": np.int32(kind.count)})
     held = sum(a.size for a in args.values() if isinstance(a, cl.MemoryObjectHolder))
-    return args, anchor, size, held, block_lanes
+    return args, anchor, size, held, block_lanes, pairs
+
+
+class PairNodes:
+    """cast's pair nodes (one ray per work-item: engine/bvh/pairs.py), around cast's anchor, with the
+    wide nodes' leaf codes (regroup's, where it rewrote them): made on the device when first asked
+    (a CPU's casts traverse the wide nodes and never ask)."""
+
+    def __init__(self, prepared: PreparedScene, wide: np.ndarray, origin: np.ndarray):
+        self.prepared, self.wide, self.origin = prepared, wide, origin
+        self._buffer = None
+
+    def buffer(self):
+        if self._buffer is None:
+            with self.prepared.lock:
+                if self._buffer is None:
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        pairs = self.prepared.bvh.pair_nodes(self.origin, wide_child=self.wide["child"])
+                    self._buffer = input_buffer(self.prepared.ctx, pairs)
+        return self._buffer
+
+
+def ray_arguments(tracer, inputs) -> tuple[dict, bool]:
+    """(the cast inputs' arguments, pairs): pairs where this device's lane width traverses the pair
+    nodes (programs.pairs_for: a GPU's), which then take the wide nodes' place (Variant.pairs)."""
+    pairs = pairs_for(lanes_for(tracer.ctx.device, tracer.precision))
+    args = inputs[0]
+    if pairs and inputs[5] is not None:
+        args = {**args, "nodes": inputs[5].buffer()}
+    return args, pairs
 
 
 def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
@@ -251,8 +283,9 @@ class RayBatch:
         ctx, precision = tracer.ctx, tracer.precision
         real = REAL[precision]
         inputs = tracer.cast_inputs()
-        args, anchor, scene_size, scene_bytes = inputs[:4]
+        _, anchor, scene_size, scene_bytes = inputs[:4]
         self.block_lanes = inputs[4]
+        args, self.pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
         # the scan of a large batch makes its codes only where it is ordered (order_always: every large
         # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
         orders = order_always or _orders(ctx, scene_bytes)
@@ -349,7 +382,7 @@ def _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept):
     if query == "occluded":
         if count == 0:
             return np.zeros(shape, bool)
-        variant = Variant("occluded", tracer.prepared.types, (), precision)
+        variant = Variant("occluded", tracer.prepared.types, (), precision, pairs=batch.pairs)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         if kept is None:
             _run_into(ctx, variant, batch.sizes, batch.args, out)
@@ -362,7 +395,7 @@ def _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept):
     if count == 0:
         results = {k: TABLE[k].empty((0,), precision) for k in kernel_aovs}
     else:
-        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
+        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=batch.pairs)
         if kept is None:
             results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
                                  tracer.outputs, local_size=batch.sizes[1])

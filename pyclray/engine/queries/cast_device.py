@@ -23,7 +23,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.device import launch
-from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, run_cast
+from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -167,7 +167,9 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
         raise RequestError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
     count = int(np.prod(shape))
-    args, anchor, _, _, block_lanes = tracer.cast_inputs()
+    inputs = tracer.cast_inputs()
+    anchor, block_lanes = inputs[1], inputs[4]
+    args, pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
     given = (tmin, tmax)  # for the host's checks, should the device refuse a ray
     tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
     tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
@@ -192,14 +194,14 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
     if query == "occluded":
         result = cl_array.empty(queue, shape, np.bool_)
         if count:
-            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision), count, origins, stride,
+            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision, pairs=pairs), count, origins, stride,
                     directions, tmin, tmax, anchor, args, {"occluded_out": result.data}, CAST_GROUP, CAST_WORK_GROUP)
         return finish({"occluded": result})["occluded"]
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
     kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
     results = {k: cl_array.empty(queue, TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs}
     if count:
-        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
+        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=pairs)
         _launch(tracer, variant, count, origins, stride, directions, tmin, tmax, anchor, args,
                 {image_parameter(k): v.data for k, v in results.items()}, CAST_GROUP, CAST_WORK_GROUP)
         if "primitive" in results and block_lanes:
