@@ -207,6 +207,8 @@ def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes
     are the pair nodes' (their source has bvh_pairs.h's marker and the kernel takes PairNode nodes);
     at 8 (and with PYCLRAY_TRAVERSAL=wide) none is: the tests above compare two traversals."""
     scene = scene_of([bunny(scenes_dir)])
+    lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0)),)
+    shaded = scene_of([bunny(scenes_dir)], lights=lights, shading=Shading(shadows=True))
     origins, directions = rays_at(scene, 100)
     built = []
     original = programs._build
@@ -221,12 +223,15 @@ def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes
         programs.clear()
         built.clear()
         queries(scene, "fp32", origins, directions)
-        return {v.query: source for v, source in built if v.query != "rebase"}
+        pyclray.render(shaded, ("shaded",), acceleration="bvh")
+        return {(v.query, v.shadows): source for v, source in built if v.query != "rebase"}
 
     one = at_width(monkeypatch, 1, run)
-    assert set(one) == {"render", "cast", "occluded", "count_hits", "all_hits"}
+    assert {query for query, _ in one} == {"render", "cast", "occluded", "count_hits", "all_hits"}
+    assert ("render", True) in one
     for query, source in one.items():
         assert "#define PYCLRAY_PAIR_TRAVERSAL 1" in source and "PairNode*" in source, query
+        assert "WideNode* nodes" not in source and "BvhNode* nodes" not in source, query  # shadow rays too
     eight = at_width(monkeypatch, 8, run)
     for query, source in eight.items():
         assert "PYCLRAY_PAIR_TRAVERSAL" not in source, query

@@ -93,11 +93,22 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
 #else
 /* A render's camera ray (a packet of one: LANES 1) through the pair nodes: every leaf whose box it
  * enters before its best (a real variable VISIT lowers), nearest first; each child's box tested by
- * box_entries_of (kernels/bvh_packet.h), the test the wide traversal gives a child it pops. */
+ * box_entries_of (kernels/bvh_packet.h), the test the wide traversal gives a child it pops. Its
+ * shadow rays likewise, with their own box tests (kernels/shading.h). */
 #if LANES != 1
 #error "the pair nodes' traversal is one ray per work-item (LANES 1)"
 #endif
-#define PYCLRAY_TRAVERSE_PAIRS(nodes, box, best, VISIT)                                 \
+/* a child's box (lo, hi: a pair node's corners) against the packet's ray: box_entries_of */
+inline realv pair_box_entries(const float4 lo, const float4 hi, const BoxPacket* b, const realv limit)
+{
+    return box_entries_of(lo.xyz, hi.xyz, b, limit);
+}
+#define PYCLRAY_TRAVERSE_PAIRS(nodes, box, best, VISIT) \
+    PYCLRAY_TRAVERSE_PAIRS_WITH(nodes, pair_box_entries, &(box), best, VISIT)
+/* the same with another box test ENTRIES_OF(lo, hi, boxes, limit): shadow rays (kernels/shading.h:
+ * shadow_box_entries_of, or pair_box_entries from a point light), whose best is their reach
+ * (-inf once the ray is blocked: no box is entered then, and the traversal ends) */
+#define PYCLRAY_TRAVERSE_PAIRS_WITH(nodes, ENTRIES_OF, boxes, best, VISIT)              \
     {                                                                                   \
         int stack_child[BVH_BINARY_STACK];                                              \
         real stack_entry[BVH_BINARY_STACK];                                             \
@@ -107,8 +118,8 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
             while (code >= 0) {  /* down: a node per level */                           \
                 const PairNode node = nodes[code];                                      \
                 const int left = PAIR_CODE(node.left_lo), right = PAIR_CODE(node.right_lo); \
-                const real left_entry = box_entries_of(node.left_lo.xyz, node.left_hi.xyz, &(box), best); \
-                const real right_entry = right != 0 ? box_entries_of(node.right_lo.xyz, node.right_hi.xyz, &(box), best) \
+                const real left_entry = ENTRIES_OF(node.left_lo, node.left_hi, boxes, best); \
+                const real right_entry = right != 0 ? ENTRIES_OF(node.right_lo, node.right_hi, boxes, best) \
                                                     : (real)INFINITY;               \
                 const bool in_left = left_entry < INFINITY, in_right = right_entry < INFINITY; \
                 if (in_left && in_right) {                                              \

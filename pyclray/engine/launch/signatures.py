@@ -145,10 +145,11 @@ RENDER = (
     Parameter("space_v", "const double4", (_from_world,)),
     Parameter("space_w", "const double4", (_from_world,)),
     # the wide BVH (camera packets: kernels/bvh_wide_packet.h), the binary one of the same boxes for
-    # shadow rays (kernels/shading.h), the leaves' refs
+    # shadow rays (kernels/shading.h), or for one ray per work-item the pair nodes for both
+    # (kernels/bvh_pairs.h), the leaves' refs
     Parameter("wide_nodes", "__global const WideNode*", (_through_bvh, _bounded, _wide)),
     Parameter("pair_nodes", "__global const PairNode*", (_through_bvh, _bounded, _pairs)),
-    Parameter("nodes", "__global const BvhNode*", (_through_bvh, _bounded, _shadows)),
+    Parameter("nodes", "__global const BvhNode*", (_through_bvh, _bounded, _shadows, _wide)),
     Parameter("refs", "__global const int*", (_through_bvh, _bounded)),
     EachType((
         # its entries, where the render reads them (kernels/entries.h)

@@ -234,12 +234,12 @@ class ViewInputs:
                 args[name] = np.append(v, 0.0).view(cl.cltypes.double4)[0]
         if acceleration == "bvh" and prepared.bvh.types:
             args["refs"] = prepared.refs
-            if pairs:  # one ray per work-item (GPUs): the pair nodes (kernels/bvh_pairs.h)
+            if pairs:  # one ray per work-item (GPUs): the pair nodes, shadow rays too (kernels/bvh_pairs.h)
                 args["pair_nodes"] = prepared.pair_nodes
             else:
                 args["wide_nodes"] = prepared.wide_nodes
-            if shadows:
-                args["nodes"] = prepared.nodes
+                if shadows:
+                    args["nodes"] = prepared.nodes
         for t, kind in prepared.kinds.items():
             # its entries: the faces and vertices (indexed), the world entries, ids and primitive
             # indices (rebased), or the view buffer; then the arrays its entries share
