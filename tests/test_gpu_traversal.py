@@ -202,6 +202,33 @@ def test_rays_from_far_away_give_the_same_bits(monkeypatch, scenes_dir, precisio
     same_bits(at_width(monkeypatch, 1, run), at_width(monkeypatch, 8 if precision == "fp32" else 4, run), "far render")
 
 
+def test_a_refitted_frame_gives_the_same_bits(monkeypatch):
+    """An animation's frame refitted in place (some spheres moved): the handle's pair nodes are made
+    anew from the refitted boxes, and its render and cast at one lane are a fresh handle's at 8."""
+    rng = np.random.default_rng(9)
+    shapes = [pyclray.Sphere(tuple(rng.uniform(-1, 1, 3)), float(rng.uniform(0.05, 0.2))) for _ in range(60)]
+    scene = scene_of(shapes)
+    moved = list(shapes)
+    for i in (3, 17, 40):
+        moved[i] = pyclray.Sphere(tuple(np.array(shapes[i].center) + [0.6, -0.3, 0.2]), shapes[i].radius)
+    later = pyclray.Scene(scene.camera, scene.image, tuple(moved))
+    origins, directions = rays_at(later, 500, seed=6)
+
+    def one_lane():
+        tracer = pyclray.prepare(scene)
+        tracer.render(aovs=EVERY, acceleration="bvh")  # the pair nodes made for the first frame
+        tracer.cast(origins, directions, aovs=EVERY)
+        assert tracer.refit(later.shapes, [3, 17, 40])  # in place
+        return {"render": tracer.render(aovs=EVERY, acceleration="bvh"),
+                "cast": tracer.cast(origins, directions, aovs=EVERY)}
+
+    one = at_width(monkeypatch, 1, one_lane)
+    eight = at_width(monkeypatch, 8, lambda: {"render": pyclray.render(later, EVERY, acceleration="bvh"),
+                                              "cast": pyclray.cast(later, origins, directions, aovs=EVERY)})
+    for name in one:
+        same_bits(one[name], eight[name], name)
+
+
 def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes_dir):
     """At a lane width of 1 the programs built for a render through the BVH and for every ray query
     are the pair nodes' (their source has bvh_pairs.h's marker and the kernel takes PairNode nodes);
