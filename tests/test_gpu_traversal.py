@@ -231,7 +231,8 @@ def test_a_refitted_frame_gives_the_same_bits(monkeypatch):
 
 def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes_dir):
     """At a lane width of 1 the programs built for a render through the BVH and for every ray query
-    are the pair nodes' (their source has bvh_pairs.h's marker and the kernel takes PairNode nodes);
+    are the pair nodes' (their source has bvh_pairs.h's marker and the kernel takes PairNode nodes;
+    a ray query's work-item traces one ray);
     at 8 (and with PYCLRAY_TRAVERSAL=wide) none is: the tests above compare two traversals."""
     scene = scene_of([bunny(scenes_dir)])
     lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0)),)
@@ -259,9 +260,11 @@ def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes
     for query, source in one.items():
         assert "#define PYCLRAY_PAIR_TRAVERSAL 1" in source and "PairNode*" in source, query
         assert "WideNode* nodes" not in source and "BvhNode* nodes" not in source, query  # shadow rays too
+        if query[0] != "render":  # one ray per work-item (kernels/rays.h: CAST_GROUP)
+            assert "#define CAST_GROUP 1\n" in source, query
     eight = at_width(monkeypatch, 8, run)
     for query, source in eight.items():
-        assert "PYCLRAY_PAIR_TRAVERSAL" not in source, query
+        assert "PYCLRAY_PAIR_TRAVERSAL" not in source and "#define CAST_GROUP 1\n" not in source, query
     with monkeypatch.context() as patch:
         patch.setenv("PYCLRAY_TRAVERSAL", "wide")
         for query, source in at_width(monkeypatch, 1, run).items():

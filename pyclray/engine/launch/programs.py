@@ -102,6 +102,19 @@ def pairs_for(lanes: int) -> bool:
     return lanes == 1 and value != "wide"
 
 
+# The rays of the ray queries a work-item traces, one after the other (kernels/rays.h: CAST_GROUP, their
+# directions set up four at once in vector registers), and the rays of a work-group: where the pair
+# nodes are traversed (a GPU's lane width) one ray per work-item, the work-group's items a few warps
+# of rays; else 8, in work-groups of 16 (engine/queries/cast.py).
+RAY_GROUP = {False: 8, True: 1}
+WORK_GROUP_RAYS = 128
+
+
+def ray_group(pairs: bool) -> tuple[int, int]:
+    """(rays per work-item, work-items per work-group) of a ray query's program (Variant.pairs)."""
+    return RAY_GROUP[pairs], WORK_GROUP_RAYS // RAY_GROUP[pairs]
+
+
 def packet_shape(lanes: int) -> tuple[int, int]:
     """(columns, rows) of pixels a render work-item's packet covers: two rows where the lanes
     allow (4x2 for 8 lanes, 2x2 for 4), else one. A square packet's rays stay closer together than a
@@ -182,6 +195,7 @@ class Variant:
                 lines.append("#define PYCLRAY_STORE_HITS 1")
         if self.query in RAY_QUERIES:
             lines.append("#define PYCLRAY_CAST 1")
+            lines.append(f"#define CAST_GROUP {ray_group(self.pairs)[0]}")  # rays per work-item (kernels/rays.h)
             # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]

@@ -10,7 +10,7 @@ from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
-from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for
+from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for, ray_group
 from ..launch.run import REAL, input_buffer, run_kernel
 from ..launch.signatures import arguments, image_parameter, shared_arguments
 from ..opencl.buffers import shares_host_memory
@@ -131,11 +131,12 @@ def _orders(ctx, scene_bytes: int) -> bool:
 
 
 # The rays one work-item traces, one after the other, their setups done together (kernels/rays.h's
-# CAST_GROUP, which this must equal), and the work-items of a work-group: 128 rays, so that the
-# device's threads share a batch evenly (left to PoCL, 12,500 work-items made 5 work-groups for 2
-# threads); the global size is rounded up to whole work-groups, whose items past the rays do nothing
-CAST_GROUP = 8
-CAST_WORK_GROUP = 16
+# CAST_GROUP, which the program's source takes from programs.ray_group), and the work-items of a
+# work-group: 128 rays, so that the device's threads share a batch evenly (left to PoCL, 12,500
+# work-items made 5 work-groups for 2 threads); the global size is rounded up to whole work-groups,
+# whose items past the rays do nothing. Where the pair nodes are traversed (a GPU) one ray per
+# work-item, 128 work-items a work-group (ray_group(True)).
+CAST_GROUP, CAST_WORK_GROUP = ray_group(False)
 
 
 def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -333,8 +334,9 @@ class RayBatch:
                      "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
                      "start_stride": np.int32(1 if len(tmin) > 1 else 0), **buffers,
                      "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
-        groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
-        self.sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
+        group, work_group = ray_group(self.pairs)  # a work-item per group of rays (kernels/rays.h: CAST_GROUP)
+        groups = -(-count // group)
+        self.sizes = ((-(-groups // work_group) * work_group,), (work_group,))
 
     def unit_directions(self) -> np.ndarray:
         """(N, 3) float64: each direction over its length (as the kernel scales it: kernels/rays.h)."""

@@ -19,11 +19,11 @@ import pyopencl.array as cl_array
 from ...model.aovs import TABLE
 from ...model.errors import RequestError
 from ...model.shapes.base import labels_of
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, ray_group
 from ..launch.run import REAL
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.device import launch
-from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
+from .cast import _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -195,7 +195,7 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
         result = cl_array.empty(queue, shape, np.bool_)
         if count:
             _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision, pairs=pairs), count, origins, stride,
-                    directions, tmin, tmax, anchor, args, {"occluded_out": result.data}, CAST_GROUP, CAST_WORK_GROUP)
+                    directions, tmin, tmax, anchor, args, {"occluded_out": result.data}, *ray_group(pairs))
         return finish({"occluded": result})["occluded"]
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
     kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
@@ -203,7 +203,7 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
     if count:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=pairs)
         _launch(tracer, variant, count, origins, stride, directions, tmin, tmax, anchor, args,
-                {image_parameter(k): v.data for k, v in results.items()}, CAST_GROUP, CAST_WORK_GROUP)
+                {image_parameter(k): v.data for k, v in results.items()}, *ray_group(pairs))
         if "primitive" in results and block_lanes:
             places, first, primitives = _block_lanes_table(tracer, block_lanes, queue)
             kernels.run(queue, "block_primitives", count, results["primitive"].data, np.int64(count), places.data,
