@@ -64,7 +64,7 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
                       from_world=prepared.from_world, indexed=prepared.indexed, camera_table=inputs.table_format,
-                      pairs=pairs_for(lanes))
+                      pairs=pairs_for(lanes) and acceleration == "bvh")
     tile = tiles.TILE
     # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),

@@ -235,8 +235,8 @@ class PreparedScene(Refit):
             with self.lock:
                 if self._pairs is None:
                     with np.errstate(over="ignore", invalid="ignore"):
-                        binary = self._nodes_host if self._nodes_host is not None else None
-                        self._pairs_host = aligned(self.bvh.pair_nodes(self.anchor, binary))
+                        # (from the binary nodes where made: the same boxes, packed once)
+                        self._pairs_host = aligned(self.bvh.pair_nodes(self.anchor, self._nodes_host))
                     self._pairs = _buffer(self.ctx, self._pairs_host)
         return self._pairs
 
