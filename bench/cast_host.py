@@ -14,7 +14,9 @@ phases and the kernel's own time, beside Open3D's RaycastingScene.cast_rays and 
   the copies into a handle's kept ones), launch (the enqueue), wait (from the enqueue's end until the
   kernel is done), readback (the results' copies out of kept buffers; a large cast's are its arrays)
   and other (the rest: argument checks, output arrays, the Frame); kernel: the kernel's time from
-  its OpenCL profiling event (start to end), which lies within launch and wait. Medians per phase.
+  its OpenCL profiling event (start to end), which lies within launch and wait. Medians per phase;
+- host CPU: the call's process CPU time with its kernels' enqueues stubbed (host_cpu): the host's own
+  part, the steadiest figure on a loaded machine.
 The machine is shared: compare each size's figures with each other (ratios), and note `uptime`.
 """
 from __future__ import annotations
@@ -56,13 +58,41 @@ def empty_launch(ctx):
 
 
 def _launching_modules():
-    """The engine's modules that enqueue kernels through engine/opencl/device.py's launch."""
+    """(module, name): the engine's modules that enqueue kernels through engine/opencl/device.py's
+    launch or launch_kept, and the name they call it by."""
     import sys
 
     from pyclray.engine.opencl import device
 
-    return [module for name, module in list(sys.modules.items())
-            if name.startswith("pyclray.engine") and getattr(module, "launch", None) is device.launch]
+    return [(module, name) for module_name, module in list(sys.modules.items()) if module_name.startswith("pyclray.engine")
+            for name in ("launch", "launch_kept")
+            if getattr(device, name, None) is not None and getattr(module, name, None) is getattr(device, name)]
+
+
+class _Enqueued:
+    def wait(self):
+        pass
+
+
+def host_cpu(tracer, origins, directions, calls: int) -> float:
+    """The call's process CPU time with its kernels' enqueues left out (the engine's launch functions
+    stubbed; the results are not looked at): the host's own part, which a shared machine's load
+    moves far less than the wall phases. ms per call, the median of 5 blocks of calls."""
+    tracer.cast(origins, directions)  # warm: programs built, kept buffers grown
+    saved = [(module, name, getattr(module, name)) for module, name in _launching_modules()]
+    for module, name, _ in saved:
+        setattr(module, name, lambda *args, **kwargs: _Enqueued())
+    try:
+        blocks = []
+        for _ in range(5):
+            start = time.process_time()
+            for _ in range(calls):
+                tracer.cast(origins, directions)
+            blocks.append((time.process_time() - start) / calls)
+    finally:
+        for module, name, original in saved:
+            setattr(module, name, original)
+    return float(np.median(blocks)) * 1e3
 
 
 def profiling_queue(ctx):
@@ -112,8 +142,8 @@ class Split:
         self._wrap(KeptBuffers, "write", "uploads")
         self._wrap(KeptBuffers, "read", "readback")
         events = self.events
-        for module in _launching_modules():
-            original = module.launch
+        for module, name in _launching_modules():
+            original = getattr(module, name)
 
             def launched(*args, _original=original, **kwargs):
                 start = time.perf_counter()
@@ -122,8 +152,8 @@ class Split:
                 self.launched_at = time.perf_counter()
                 events.append(event)
                 return event
-            self.saved.append((module, "launch", original))
-            module.launch = launched
+            self.saved.append((module, name, original))
+            setattr(module, name, launched)
         return self
 
     def __exit__(self, *exc):
@@ -172,7 +202,8 @@ def main(argv=None):
     floor = empty_launch(ctx)
     o3d_scene = None if args.no_open3d else open3d_scene(mesh)
     print(f"device: {ctx.device.name.strip()}; load {os.getloadavg()[0]:.1f}; mesh {len(mesh.faces):,} triangles")
-    header = f"{'rays':>9} | {'pyclray':>9} | {'Open3D':>9} | {'launch floor':>12} | " + " | ".join(f"{p:>7}" for p in PHASES)
+    header = (f"{'rays':>9} | {'pyclray':>9} | {'Open3D':>9} | {'launch floor':>12} | "
+              + " | ".join(f"{p:>7}" for p in PHASES) + f" | {'host CPU':>8}")
     print(header)
     for size in (int(s) for s in args.sizes.split(",")):
         origins, directions = incoherent_rays(mesh, size)
@@ -185,9 +216,10 @@ def main(argv=None):
         block = max(3, min(args.block, int(2e5 // size) or 3))
         timed = blocks(systems, args.rounds, block)
         phases = split(tracer, origins, directions, block)
+        host = host_cpu(tracer, origins, directions, max(block, int(2e4 // size)))
         theirs = f"{timed['open3d']['median']:9.3f}" if "open3d" in timed else f"{'-':>9}"
         print(f"{size:>9,} | {timed['pyclray']['median']:9.3f} | {theirs} | {timed['floor']['median']:12.3f} | "
-              + " | ".join(f"{phases[p]:7.3f}" for p in PHASES), flush=True)
+              + " | ".join(f"{phases[p]:7.3f}" for p in PHASES) + f" | {host:8.3f}", flush=True)
     print(f"load {os.getloadavg()[0]:.1f} (ms per call, medians; the phases: means on a profiling queue)")
 
 

@@ -183,3 +183,46 @@ def test_distances_stay_host_values(tracer):
     queue = tracer.ctx.queue
     with pytest.raises(pyclray.RequestError, match="tmax: expected a number or a numpy array"):
         tracer.cast(origins, cl_array.to_device(queue, directions), tmax=cl_array.to_device(queue, np.ones(4)))
+
+
+def test_kernel_arguments_set_once_per_kept_buffers(monkeypatch):
+    """A small cast's kernel keeps its arguments from call to call (engine/opencl/device.py:
+    launch_kept): two handles of one variant's kernel (the same shape types, other shapes), casts of
+    other counts and distances in turn, each gives the bits of the same cast through new buffers
+    (every argument set); a repeated call sets none (the bare enqueue)."""
+    from pyclray.engine.opencl import device
+
+    scene = mixed_scene()
+    moved = pyclray.Scene(scene.camera, scene.image,
+                          tuple(replace(s, translate=(0.3, 0.1, 0.0)) if isinstance(s, pyclray.Mesh) else s
+                                for s in scene.shapes))
+    calls = [(0, 300, {}), (1, 300, {}), (0, 300, {"tmax": 2.0}), (1, 40, {"tmin": 0.5}), (0, 300, {}), (0, 300, {})]
+    with pyclray.prepare(scene) as first, pyclray.prepare(moved) as second:
+        handles = (first, second)
+        bare = []
+        enqueue = cl.enqueue_nd_range_kernel
+        monkeypatch.setattr(device.cl, "enqueue_nd_range_kernel", lambda *a, **k: bare.append(1) or enqueue(*a, **k))
+        got = [(handles[h].cast(*rays(n, n), aovs=CAST_AOVS, **kw), handles[h].occluded(*rays(n, n), **kw))
+               for h, n, kw in calls]
+        assert len(bare) >= 2  # the last call's cast and occluded: nothing changed since the one before
+        monkeypatch.setattr(cast_module, "KEPT_BELOW", 0)
+        for (h, n, kw), (frame, occluded) in zip(calls, got):
+            expected = handles[h].cast(*rays(n, n), aovs=CAST_AOVS, **kw)
+            for name in CAST_AOVS:
+                same(frame[name], expected[name])
+            same(occluded, handles[h].occluded(*rays(n, n), **kw))
+        assert not np.array_equal(got[0][0]["depth"], got[1][0]["depth"])  # the handles' shapes differ
+
+
+def test_a_large_cast_between_small_ones_leaves_them_right(monkeypatch):
+    """A large cast (new buffers, every argument set by launch) between two equal small ones (kept
+    buffers, launch_kept): the second small one sets its arguments again, and gives the first's bits."""
+    monkeypatch.setattr(cast_module, "KEPT_BELOW", 512)  # a large cast of few rays
+    small, large = rays(100, 17), rays(600, 18)
+    with pyclray.prepare(mixed_scene()) as handle:
+        first = handle.cast(*small, aovs=CAST_AOVS)
+        big = handle.cast(*large, aovs=CAST_AOVS)
+        again = handle.cast(*small, aovs=CAST_AOVS)
+        for name in CAST_AOVS:
+            same(again[name], first[name])
+        assert not np.array_equal(big["depth"][:100], first["depth"])

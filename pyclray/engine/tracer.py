@@ -25,7 +25,7 @@ from ..model.loader import as_scene
 from ..model.scene import Scene, check_shape_count
 from .launch.run import OutputBuffers
 from .opencl.buffers import KeptBuffers
-from .opencl.device import context_for
+from .opencl.device import context_for, gpu_class
 from .queries import cast as cast_queries
 from .queries import cast_device as device_casts
 from .queries import closest as closest_queries
@@ -209,10 +209,11 @@ class Tracer:
         return self._run_cast("occluded", origins, directions, tmax, (), tmin, out)
 
     def _run_cast(self, query, origins, directions, tmax, aovs, tmin, out):
-        """Rays given as pyopencl arrays, or results asked for on the device (out="device"), go
-        through engine/queries/cast_device.py; host arrays to host results through cast.py."""
+        """Rays given as pyopencl arrays, results asked for on the device (out="device"), or any rays
+        on a device of the GPU class (engine/opencl/device.py: gpu_class) go through
+        engine/queries/cast_device.py; host arrays to host results on a CPU through cast.py."""
         if device_casts.check_out(out) == "device" or device_casts.is_device_array(origins) \
-                or device_casts.is_device_array(directions):
+                or device_casts.is_device_array(directions) or gpu_class(self.ctx.device):
             return device_casts.run_cast_device(self, query, origins, directions, tmax, aovs, tmin, out)
         return cast_queries.run_cast(self, query, origins, directions, tmax, aovs, tmin)
 
@@ -260,6 +261,7 @@ class Tracer:
             prepared = self.prepared
             if self._cast_inputs is None:
                 self._cast_inputs = cast_queries.cast_inputs(prepared)
+                self.ray_buffers.launches.clear()  # (which held the last inputs' buffers: device.py's launch_kept)
             return self._cast_inputs
 
     # -- closest points, distances, inside ------------------------------------------------------

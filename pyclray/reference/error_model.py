@@ -168,12 +168,16 @@ def flat_camera_depths(scene: Scene) -> np.ndarray:
 
 
 def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, reference_point=None, directions=None,
-                       flat: bool = True):
+                       flat: bool = True, flat_shapes=None):
     """Bounds of pyclray (render or cast, ``precision``) against the float64 oracle's ``truth``
     for rays from ``origins``. A render's kernel works in a space centred on ``reference_point``
     (the eye); without one, the rays are a cast's, each traced on its own (``cast_spaces``, which
     needs their unit ``directions``). A render's depth bound on the flat shapes follows the flat
-    law (``flat``; False: the sideways law everywhere, the position error that decides edges)."""
+    law (``flat``; False: the sideways law everywhere, the position error that decides edges).
+    flat_shapes: per shape id, whether the flat law holds for a render's camera rays, where a
+    caller has arranged its conditions for another shape (a mesh instance whose triangles all lie
+    in one coordinate plane of its object space: tests/test_instance_exact.py); by default
+    ``flat_camera_depths``."""
     origins = np.asarray(origins, np.float64)
     index = np.maximum(truth["id"], 0)
     if reference_point is not None:
@@ -184,7 +188,8 @@ def pyclray_tolerances(scene: Scene, truth: dict, cos, origins, precision: str, 
     else:
         size, travelled, anchor = cast_spaces(scene, origins, directions, truth["id"])
     world = np.linalg.norm(origins, axis=-1) + np.linalg.norm(anchor, axis=-1)
-    along = flat_camera_depths(scene)[index] if flat and reference_point is not None else None
+    flat_ids = flat_camera_depths(scene) if flat_shapes is None else np.asarray(flat_shapes, bool)
+    along = flat_ids[index] if flat and reference_point is not None else None
     return tolerances(truth["depth"], cos, curvature_radii(scene)[index], eps=EPSILON[precision], scale=size,
                       k=K_ORACLE, oracle_scale=world, travelled=travelled, flat=along)
 

@@ -56,12 +56,18 @@ class KeptBuffers:
     read before the next writes."""
 
     SMALLEST = 256  # bytes
+    MOST_CONSTANTS = 16
 
     def __init__(self):
         self.lock = threading.Lock()
         self.buffers: dict = {}  # name -> (buffer, its host array (uint8) or None)
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
         self.device_kernels = None  # (engine/queries/cast_device.py: DeviceKernels)
+        self.label_table = None  # (engine/queries/cast_device.py: _label_table)
+        self.lane_primitives = None  # (engine/queries/cast.py: _lane_primitives)
+        self.constants: dict = {}  # small read-only buffers by their bytes (constant)
+        self.launches: dict = {}  # kernel -> the arguments it was last launched with (device.py: launch_kept)
+        self.cut = None  # (buffer, sizes, sub-buffers): regions' last cut
 
     def get(self, ctx, name: str, nbytes: int) -> tuple:
         """(buffer, host): the buffer called name, of at least nbytes (read and written by the
@@ -102,6 +108,41 @@ class KeptBuffers:
     def clear(self) -> None:
         self.buffers.clear()
         self.block_tables = None  # (engine/queries/cast.py: _block_lanes_table)
+        self.label_table = None
+        self.lane_primitives = None
+        self.constants.clear()
+        self.launches.clear()
+        self.cut = None
+
+    def regions(self, ctx, name: str, sizes: tuple) -> tuple:
+        """(sub-buffers, offsets, total): the buffer called name cut into consecutive regions, one per
+        (part, nbytes) of sizes, each starting at a multiple of the device's base address alignment
+        (at least ALIGNMENT bytes), so that a call's results, written by several kernels, come back
+        in one copy of its first total bytes (read). The last cut is kept (the same sizes: the same
+        sub-buffers, whose kernel arguments then stay set)."""
+        align = max(ctx.device.mem_base_addr_align // 8, ALIGNMENT)
+        offsets, total = {}, 0
+        for part, nbytes in sizes:
+            offsets[part] = total
+            total += -(-max(nbytes, 1) // align) * align
+        buffer, _ = self.get(ctx, name, total)
+        cut = self.cut
+        if cut is None or cut[0] is not buffer or cut[1] != sizes:
+            subs = {part: buffer.get_sub_region(offsets[part], max(nbytes, 1)) for part, nbytes in sizes}
+            cut = self.cut = (buffer, sizes, subs)
+        return cut[2], offsets, total
+
+    def constant(self, ctx, values: np.ndarray) -> cl.Buffer:
+        """A read-only buffer of a few values (one tmin, one tmax, an unused order), kept by their
+        bytes: a later call with the same values copies nothing (MOST_CONSTANTS kept)."""
+        key = (values.dtype.str, values.tobytes())
+        buffer = self.constants.get(key)
+        if buffer is None:
+            if len(self.constants) >= self.MOST_CONSTANTS:
+                self.constants.clear()
+            buffer = self.constants[key] = cl.Buffer(ctx.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                                     hostbuf=np.ascontiguousarray(values))
+        return buffer
 
     def nbytes(self) -> int:
         return sum(buffer.size for buffer, _ in self.buffers.values())

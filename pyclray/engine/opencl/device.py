@@ -1,6 +1,7 @@
 """OpenCL devices, their contexts and queues, and launching a kernel."""
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 from dataclasses import dataclass
@@ -93,6 +94,25 @@ def context_for(device: cl.Device | str | None = None) -> DeviceContext:
         return _contexts[key]
 
 
+# -- the device's class -------------------------------------------------------------------------
+# A device of the GPU class runs many work-items in lock-step over memory the host reaches through
+# copies: there a cast's host path does nothing per ray (engine/queries/cast_device.py: the rays
+# uploaded once, checked on the device, cast in their order, the results read back once). The one
+# property that decides it: the device's type (not a CPU). $PYCLRAY_GPU_CLASS=1 takes that path on
+# any device (the tests force it on PoCL), =0 the CPU's host path.
+GPU_CLASS_VARIABLE = "PYCLRAY_GPU_CLASS"
+
+
+def gpu_class(device: cl.Device) -> bool:
+    """Whether the device is of the GPU class (see GPU_CLASS_VARIABLE)."""
+    value = os.environ.get(GPU_CLASS_VARIABLE, "").strip()
+    if value:
+        if value not in ("0", "1"):
+            raise DeviceError(f"{GPU_CLASS_VARIABLE}: expected 1 (the GPU's host path) or 0 (the CPU's), got {value!r}")
+        return value == "1"
+    return not device.type & cl.device_type.CPU
+
+
 def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args) -> cl.Event:
     """Enqueue the kernel over these arguments. pyopencl sets a numpy scalar argument (a number, or a
     struct such as a double4) through its slow generic path; declared once per kernel as scalar types (a
@@ -101,11 +121,38 @@ def launch(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args)
     argument setting is not thread-safe: setting the arguments and enqueueing happen under one lock (the
     kernel then runs on its own; the lock is held for the enqueue only)."""
     with _launch_lock:
-        if not getattr(kernel, "_pyclray_scalar_types_set", False):
-            kernel.set_scalar_arg_dtypes(
-                [a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iufV" else None for a in args])
-            kernel._pyclray_scalar_types_set = True
+        _declare_scalars(kernel, args)
+        kernel._pyclray_setter = None  # its arguments' record (launch_kept): none
         return kernel(ctx.queue, global_size, local_size, *args)  # its event (bench/cast_host.py profiles it)
+
+
+def _declare_scalars(kernel: cl.Kernel, args) -> None:
+    if not getattr(kernel, "_pyclray_scalar_types_set", False):
+        kernel.set_scalar_arg_dtypes([a.dtype if isinstance(a, np.generic) and a.dtype.kind in "iufV" else None for a in args])
+        kernel._pyclray_scalar_types_set = True
+
+
+_setters = itertools.count(1)
+
+
+def launch_kept(ctx: DeviceContext, kernel: cl.Kernel, global_size, local_size, args, record: dict) -> cl.Event:
+    """launch, but where the kernel's arguments are those it was last launched with, by a call with
+    this record (a scene handle's kept buffers': kernel -> (setter, arguments)) and by no launch since,
+    they are not set again: a small cast's kernel reads the same kept buffers, scene inputs and
+    counts from call to call, and setting its 23 arguments cost more than a third of PoCL's launch
+    (docs/benchmarks.md, "The host path of a cast"). Arguments compare equal where each is the same
+    buffer or an equal number; the record holds them (none is freed and its handle reused meanwhile)."""
+    args = tuple(args)
+    with _launch_lock:
+        last = record.get(kernel)
+        setter = getattr(kernel, "_pyclray_setter", None)
+        if last is not None and setter is not None and last[0] == setter and last[1] == args:
+            return cl.enqueue_nd_range_kernel(ctx.queue, kernel, global_size, local_size)
+        _declare_scalars(kernel, args)
+        event = kernel(ctx.queue, global_size, local_size, *args)
+        kernel._pyclray_setter = next(_setters)
+        record[kernel] = (kernel._pyclray_setter, args)
+        return event
 
 
 def list_devices() -> list[dict]:

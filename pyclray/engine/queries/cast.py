@@ -2,6 +2,8 @@
 (occluded), each ray traced on its own from its float64 origin and direction."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pyopencl as cl
 
@@ -14,7 +16,7 @@ from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for, ray_gro
 from ..launch.run import REAL, input_buffer, run_kernel
 from ..launch.signatures import arguments, image_parameter, shared_arguments
 from ..opencl.buffers import shares_host_memory
-from ..opencl.device import has_fp64, launch
+from ..opencl.device import gpu_class, has_fp64, launch, launch_kept
 from ..scene.prepared import PreparedScene
 from .requests import Frame
 
@@ -47,6 +49,10 @@ def _distances(name: str, value, shape: tuple, default: float, good, expected: s
     leading shape; a value that is not good is a RequestError naming its index."""
     if value is None:
         return np.full(1, default)
+    if type(value) is float or type(value) is int:  # one Python number (cast's tmin=0.0): no numpy call to check it
+        if not good(value):
+            raise RequestError(f"{name}: expected {expected}, got {float(value)}")
+        return np.array([value], np.float64)
     if type(value).__module__.startswith("pyopencl"):
         raise RequestError(f"{name}: expected a number or a numpy array (pyopencl arrays are taken for origins and "
                            "directions only)")
@@ -70,7 +76,7 @@ def _distances(name: str, value, shape: tuple, default: float, good, expected: s
     return np.ascontiguousarray(array).reshape(-1)
 
 
-def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None):
+def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None, near=None):
     """(origins (M, 3), directions (N, 3), tmin, tmax, leading shape, extent): float64 arrays of the rays as
     given, flattened, checked; M is N, or 1 for one origin shared by every ray; tmin and tmax (1,) for
     one number, else (N,); extent: the origins'
@@ -78,7 +84,8 @@ def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None):
     large batch's compiled scan found them (cast_order.scan_codes), else None. The kernel normalizes the
     directions (scaled by a power of two near their largest component first, so that neither a tiny
     nor a huge finite direction under- or overflows in the length). Each check is one pass over the arrays; the row
-    of a failure is looked for only then."""
+    of a failure is looked for only then. near: (anchor, bound): a small batch is first checked in one
+    fused pass (_fine_and_near), its extent then NEAR where it passes; else it is checked as above."""
     directions = _ray_array("directions", directions)
     shape = directions.shape[:-1]
     origins = _ray_array("origins", origins)
@@ -92,6 +99,8 @@ def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None):
 
         fine, lo, hi, direction_codes = scan_codes(origins.reshape(-1, 3), directions.reshape(-1, 3), codes)
         extent = (lo, hi, direction_codes) if fine else None
+    elif near is not None and directions.size and _fine_and_near(origins, directions, *near):
+        extent = NEAR
     if extent is None:  # numpy's checks (and where one fails, its row)
         for name, array in (("directions", directions), ("origins", origins)):
             if not np.isfinite(array).all():
@@ -106,6 +115,38 @@ def _cast_rays(origins, directions, tmax, codes: bool = True, tmin=None):
     return origins.reshape(-1, 3), directions.reshape(-1, 3), tmin, tmax, shape, extent
 
 
+FEW_RAYS = 16  # _fine_and_near's batches checked as Python's floats
+
+# _cast_rays' extent of a small batch found fine with every origin within the bound of the scene's anchor
+NEAR = "near"
+
+
+def _fine_and_near(origins: np.ndarray, directions: np.ndarray, anchor: np.ndarray, bound: float) -> bool:
+    """Whether every coordinate is finite, no direction is zero and every origin lies within bound of
+    anchor on each axis, in a few numpy passes without temporaries of the rays' size but one (the
+    separate checks and the origins' box took 14 numpy passes): a direction's largest magnitude is > 0 and finite
+    exactly for a fine one (np.maximum keeps a NaN), and the origins' smallest and largest coordinates
+    bound their distances from the anchor on every axis (NaN where one is NaN: refused here, then
+    named by the separate checks). A few rays are checked as Python's floats (numpy's calls cost more
+    than their arithmetic there), each by the same rules."""
+    if directions.size <= 3 * FEW_RAYS:
+        a0, a1, a2 = anchor.tolist()
+        for x, y, z in directions.reshape(-1, 3).tolist():
+            if not 0 < abs(x) + abs(y) + abs(z) < math.inf:  # (a sum of huge magnitudes: inf, refused here)
+                return False
+        for x, y, z in origins.reshape(-1, 3).tolist():
+            if not (abs(x - a0) <= bound and abs(y - a1) <= bound and abs(z - a2) <= bound):
+                return False
+        return True
+    flat = np.abs(directions).reshape(-1, 3)
+    largest = np.maximum(flat[:, 0], flat[:, 1])
+    np.maximum(largest, flat[:, 2], out=largest)
+    if not (largest.min() > 0 and largest.max() < np.inf):
+        return False
+    lo, hi = float(origins.min()), float(origins.max())  # Python's floats: an overflow is inf, never a warning
+    return hi - float(anchor.min()) <= bound and float(anchor.max()) - lo <= bound
+
+
 # Rays are cast in the order of a 15-bit Morton code of their origins and directions when there are
 # at least this many (pyclray.engine.queries.ray_order): neighbouring work-items then walk the same
 # nodes and shapes, which stay in cache (docs/benchmarks.md, "Why the engine does what it does":
@@ -117,8 +158,9 @@ COHERENT_FROM = 4096
 # it any ray finds its nodes and shapes in the cache, and the order's cost (the host's sort, the
 # kernel's rows read and results written through it at scattered places) is more than it saves.
 # (docs/benchmarks.md, "Cast's ray order by scene size").
-# A GPU orders every large batch: its work-items run in lock-step groups, where rays that part ways
-# wait for each other.
+# A GPU on the CPU's host path ($PYCLRAY_GPU_CLASS=0) orders every large batch: its work-items run in
+# lock-step groups, where rays that part ways wait for each other. A device of the GPU class orders
+# none: its host does nothing per ray (cast and occluded: cast_device.py; the hit queries' batches too).
 ORDER_CACHE_SHARE = 0.25
 
 
@@ -129,6 +171,11 @@ def _orders(ctx, scene_bytes: int) -> bool:
         return True
     return scene_bytes > ORDER_CACHE_SHARE * ctx.device.global_mem_cache_size
 
+
+NO_ORDER = np.zeros(1, np.int32)  # (a batch cast in its own order: the kernel reads none)
+
+# cast's bound on the distances of origins from the scene's anchor, per precision: RayBatch
+_BOUNDS = {precision: float(np.sqrt(np.finfo(real).max) / 4) for precision, real in REAL.items()}
 
 # The rays one work-item traces, one after the other, their setups done together (kernels/rays.h's
 # CAST_GROUP, which the program's source takes from programs.ray_group), and the work-items of a
@@ -163,7 +210,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
     # (kernels/rays.h: its rays then test every bounded shape)
     large = bool(tree.types) and not np.all(np.abs(np.stack([tree.tree.lo[0], tree.tree.hi[0]]) - anchor) < 2.0**100)
     anchor = np.append(anchor, 1.0 if large else 0.0)
-    args = {}
+    args = {"scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0]}
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
     blocks, block_lanes = {}, {}
@@ -282,27 +329,30 @@ class RayBatch:
 
     def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False, kept=None):
         ctx, precision = tracer.ctx, tracer.precision
-        real = REAL[precision]
         inputs = tracer.cast_inputs()
         _, anchor, scene_size, scene_bytes = inputs[:4]
         self.block_lanes = inputs[4]
         args, self.pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
         # the scan of a large batch makes its codes only where it is ordered (order_always: every large
         # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
-        orders = order_always or _orders(ctx, scene_bytes)
-        origins, directions, tmin, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders, tmin=tmin)
-        count = len(directions)
-        ordered = orders and count >= COHERENT_FROM
+        orders = (order_always or _orders(ctx, scene_bytes)) and not gpu_class(ctx.device)
         # the distances the kernel squares, from a shape's anchor, must stay below the square root of
         # the largest real (rays too far for the BVH's float32 box tests test every bounded shape)
-        bound = np.sqrt(np.finfo(real).max) / 4
+        bound = _BOUNDS[precision]
+        origins, directions, tmin, tmax, shape, extent = _cast_rays(origins, directions, tmax, codes=orders, tmin=tmin,
+                                                                    near=(anchor[:3], bound))
+        count = len(directions)
+        ordered = orders and count >= COHERENT_FROM
         direction_codes = None
-        if extent is not None:
-            lo, hi, direction_codes = extent
+        if extent is NEAR:  # checked: every origin within bound
+            reach = 0.0
         else:
-            lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
-        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
-            reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
+            if extent is not None:
+                lo, hi, direction_codes = extent
+            else:
+                lo, hi = _columns_extent(origins) if len(origins) else (anchor[:3], anchor[:3])
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here, not a warning
+                reach = np.maximum(np.abs(hi - anchor[:3]), np.abs(lo - anchor[:3])).max()
         if not reach <= bound:  # the row, looked for only now
             with np.errstate(over="ignore", invalid="ignore"):
                 reach = np.abs(origins - anchor[:3]).max(axis=-1)
@@ -320,28 +370,32 @@ class RayBatch:
 
             order = coherent_order(origins, directions, lo, hi, scene_size, direction_codes)
         else:
-            order = np.zeros(1, np.int32)
+            order = NO_ORDER
         # the rays' buffers: new ones (on a CPU device the arrays' own memory), or the handle's kept
-        # ones (kept: a small cast, run_cast's KEPT_BELOW), the rays copied into them (KeptBuffers.write)
+        # ones (kept: a small cast, run_cast's KEPT_BELOW), the rays copied into them (KeptBuffers.write),
+        # one number (a tmin, a tmax, no order) a kept constant (KeptBuffers.constant)
         rays = {"order": order, "origins": origins, "directions": directions, "limits": tmax, "starts": tmin}
         if kept is None:
             buffers = {name: _ray_buffer(ctx, array) for name, array in rays.items()}
         else:
-            buffers = {name: kept.write(ctx, name, array) for name, array in rays.items()}
+            buffers = {name: kept.constant(ctx, array) if len(array) == 1 and name != "origins" else
+                       kept.write(ctx, name, array) for name, array in rays.items()}
         # the kernel's arguments by name (engine/launch/signatures.py: the rays), but for the results
         self.args = {"n_rays": np.int32(count), "ordered": np.int32(1 if ordered else 0),
                      "origin_stride": np.int32(1 if len(origins) > 1 else 0),
                      "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
-                     "start_stride": np.int32(1 if len(tmin) > 1 else 0), **buffers,
-                     "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args}
+                     "start_stride": np.int32(1 if len(tmin) > 1 else 0), **buffers, **args}
         group, work_group = ray_group(self.pairs)  # a work-item per group of rays (kernels/rays.h: CAST_GROUP)
         groups = -(-count // group)
         self.sizes = ((-(-groups // work_group) * work_group,), (work_group,))
 
     def unit_directions(self) -> np.ndarray:
-        """(N, 3) float64: each direction over its length (as the kernel scales it: kernels/rays.h)."""
+        """(N, 3) float64: each direction over its length, scaled first as the kernel scales it
+        (kernels/rays.h: cast_directions4): by 2^-e for its largest magnitude m in [2^e, 2^(e+1)), from
+        m's exponent bits, at least 2^-1022 and 2^1023 for a subnormal m (whose 2^-e overflows)."""
         d = self.directions
-        scale = np.exp2(-np.floor(np.log2(np.abs(d).max(axis=1))))[:, None]
+        field = 2046 - (np.abs(d).max(axis=1).view(np.int64) >> 52)  # the exponent bits of 2^-e
+        scale = (np.maximum(field, 1) << 52).view(np.float64)[:, None]
         scaled = d * scale
         return scaled / np.sqrt((scaled * scaled).sum(axis=1))[:, None]
 
@@ -429,12 +483,24 @@ def _block_primitives(tracer, batch, primitive: np.ndarray) -> np.ndarray:
     keyed = primitive <= -2
     if not keyed.any():
         return primitive
-    (name, (places, first, kept)), = batch.block_lanes.items()  # one type is cast in blocks: meshes
+    places, first, lane_primitives = _lane_primitives(tracer, batch.block_lanes)
     key = -2 - primitive[keyed].astype(np.int64)
-    entry = kept[first[np.searchsorted(places, key >> 3)] + (key & 7)]
     primitive = primitive.copy()
-    primitive[keyed] = np.asarray(tracer.prepared.kinds[name].primitives)[entry]
+    primitive[keyed] = lane_primitives[first[np.searchsorted(places, key >> 3)] + (key & 7)]
     return primitive
+
+
+def _lane_primitives(tracer, block_lanes: dict) -> tuple:
+    """(places, first, primitives): the block lanes' tables (RayBatch.block_lanes) with each lane's
+    entry as its triangle's primitive, made once per cast inputs (an indexed mesh makes its
+    primitives anew at each read: 0.1 ms on 80,000 triangles), kept on the handle's kept buffers."""
+    kept = tracer.ray_buffers
+    cached = kept.lane_primitives
+    if cached is None or cached[0] is not block_lanes:
+        (name, (places, first, entries)), = block_lanes.items()  # one type is cast in blocks: meshes
+        primitives = np.asarray(tracer.prepared.kinds[name].primitives)[entries]
+        cached = kept.lane_primitives = (block_lanes, (places, first, primitives))
+    return cached[1]
 
 
 def _block_lanes_table(tracer, block_lanes: dict, queue) -> tuple:
@@ -446,10 +512,9 @@ def _block_lanes_table(tracer, block_lanes: dict, queue) -> tuple:
     kept = tracer.ray_buffers
     cached = getattr(kept, "block_tables", None)
     if cached is None or cached[0] is not block_lanes:
-        (name, (places, first, entries)), = block_lanes.items()  # one type is cast in blocks: meshes
-        primitives = np.asarray(tracer.prepared.kinds[name].primitives)[entries].astype(np.int32)
+        places, first, primitives = _lane_primitives(tracer, block_lanes)
         tables = tuple(cl_array.to_device(queue, np.ascontiguousarray(a))
-                       for a in (np.asarray(places, np.int64), np.asarray(first, np.int64), primitives))
+                       for a in (np.asarray(places, np.int64), np.asarray(first, np.int64), primitives.astype(np.int32)))
         cached = kept.block_tables = (block_lanes, tables)
     return cached[1]
 
@@ -473,7 +538,8 @@ def _run_kept(ctx, variant, batch: RayBatch, kept, outputs: dict) -> None:
     """Run the kernel over the batch (its rays in the kept buffers) with kept buffers for its results
     (outputs: parameter name -> the array each is read back into, once, at the end), and wait."""
     buffers = {name: kept.get(ctx, name, out.nbytes)[0] for name, out in outputs.items()}
-    done = launch(ctx, kernel_for(ctx, variant), *batch.sizes, arguments(variant, {**batch.args, **buffers}))
+    done = launch_kept(ctx, kernel_for(ctx, variant), *batch.sizes, arguments(variant, {**batch.args, **buffers}),
+                       kept.launches)
     if shares_host_memory(ctx):
         done.wait()  # then the results are in the kept arrays, each copied out
         for name, out in outputs.items():

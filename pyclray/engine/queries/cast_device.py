@@ -1,6 +1,9 @@
 """cast and occluded of rays given as device arrays (pyopencl arrays on the handle's context), their
 results left on the device where asked (out="device"): a loop over a data set's rays then never
-copies them through the host.
+copies them through the host; and of host arrays on a device of the GPU class
+(engine/opencl/device.py: gpu_class), where the host does nothing per ray: each array is uploaded
+once, checked (and a refused ray made harmless) by a kernel, and the results, written into regions of
+one kept buffer, read back in one copy.
 
 The rays are checked on the device: one reduction per call finds the largest distance of an origin
 from the scene's anchor, +inf where a ray has a coordinate that is not finite or a zero direction;
@@ -12,6 +15,8 @@ primitive, label, position) is derived here by small device kernels, to the same
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cl_array
@@ -20,9 +25,10 @@ from ...model.aovs import TABLE
 from ...model.errors import RequestError
 from ...model.shapes.base import labels_of
 from ..launch.programs import Variant, kernel_for, ray_group
-from ..launch.run import REAL
+from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
-from ..opencl.device import launch
+from ..opencl.buffers import shares_host_memory
+from ..opencl.device import launch, launch_kept
 from .cast import _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
@@ -66,16 +72,23 @@ def _device_rays(ctx, kernels, name: str, value) -> cl_array.Array:
 # numpy does, to the host path's bits).
 SOURCE = """
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#define CHECK_GROUP 64
 #pragma OPENCL FP_CONTRACT OFF
 
 __kernel void widen(__global double *out, __global const float *in, long n) {
     for (long i = get_global_id(0); i < n; i += get_global_size(0)) out[i] = (double)in[i];
 }
 
-/* per work-item the largest distance of its rays' origins from the anchor on any axis, +inf where a
-   coordinate is not finite or a direction is zero (the host path's refusals) */
-__kernel void reach(__global double *partial, __global const double *o, int s, __global const double *d,
-                    long n, double ax, double ay, double az) {
+/* the largest distance of the rays' origins from the anchor on any axis, +inf where a coordinate is
+   not finite or a direction is zero (the host path's refusals), one per work-group (CHECK_GROUP items,
+   reduced in local memory: a few kB however many work-items share the rays); with repair, each ray
+   refused (not within bound) becomes a harmless one in the buffers (the call's own copies: a shared
+   origin, s 0, is checked on the host), which the cast kernel may then follow before the host reads
+   the partial results */
+__kernel __attribute__((reqd_work_group_size(CHECK_GROUP, 1, 1)))
+void reach(__global double *partial, __global double *o, int s, __global double *d,
+           long n, double ax, double ay, double az, double bound, int repair) {
+    __local double most_of[CHECK_GROUP];
     double most = 0.0;
     for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
         double x = o[3 * i * s], y = o[3 * i * s + 1], z = o[3 * i * s + 2];
@@ -84,8 +97,22 @@ __kernel void reach(__global double *partial, __global const double *o, int s, _
                    && (u != 0 || v != 0 || w != 0);
         double r = fine ? fmax(fabs(x - ax), fmax(fabs(y - ay), fabs(z - az))) : INFINITY;
         most = (r > most || isnan(r)) ? r : most;
+        if (repair && !(r <= bound)) {
+            d[3 * i] = 1.0; d[3 * i + 1] = 0.0; d[3 * i + 2] = 0.0;
+            if (s) { o[3 * i] = ax; o[3 * i + 1] = ay; o[3 * i + 2] = az; }
+        }
     }
-    partial[get_global_id(0)] = most;
+    const int l = get_local_id(0);
+    most_of[l] = most;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int apart = CHECK_GROUP / 2; apart > 0; apart >>= 1) {
+        if (l < apart) {
+            const double other = most_of[l + apart];
+            most_of[l] = (other > most_of[l] || isnan(other)) ? other : most_of[l];
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (l == 0) partial[get_group_id(0)] = most_of[0];
 }
 
 /* a block's key (-2 - key) -> its triangle's primitive (cast.py: _block_primitives): the block at
@@ -108,7 +135,7 @@ __kernel void labels(__global int *label, __global const int *id, long n, __glob
 }
 
 /* origin + t times the unit direction (RayBatch.positions: the direction scaled by a power of two
-   first), (0, 0, 0) on a miss */
+   first, from the exponent bits of its largest magnitude, as kernels/rays.h does), (0, 0, 0) on a miss */
 #define POSITIONS(REAL) \
 __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, long n, __global const double *o, \
                                int s, __global const double *d) { \
@@ -116,7 +143,8 @@ __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, l
         double t = (double)depth[i]; \
         if (!isfinite(t)) { pos[3 * i] = 0; pos[3 * i + 1] = 0; pos[3 * i + 2] = 0; continue; } \
         double x = d[3 * i], y = d[3 * i + 1], z = d[3 * i + 2]; \
-        double scale = exp2(-floor(log2(fmax(fabs(x), fmax(fabs(y), fabs(z)))))); \
+        long field = 2046L - (as_long(fmax(fabs(x), fmax(fabs(y), fabs(z)))) >> 52); \
+        double scale = as_double((field < 1L ? 1L : field) << 52); \
         x = x * scale; y = y * scale; z = z * scale; \
         double length = sqrt((x * x + y * y) + z * z); \
         double ux = x / length, uy = y / length, uz = z / length; \
@@ -129,8 +157,18 @@ POSITIONS(float)
 POSITIONS(double)
 """
 
-# the work-items of the helper kernels (each loops over its share of the rays)
-ITEMS = 1024
+# the work-items of the helper kernels, each looping over its share of the rays: at most 65,536 (each
+# over 16 or more rays of a million: a GPU's memory is read at its pace; 1,024 were few for it)
+ITEMS = 1 << 16
+# the check's (kernel reach): work-groups of CHECK_GROUP items (SOURCE's), at most CHECK_GROUPS of them
+# (ITEMS in all), each group's result one double of the partial results read back
+CHECK_GROUP = 64
+CHECK_GROUPS = 1024
+
+
+def check_groups(count: int) -> int:
+    """The work-groups of the check of count rays."""
+    return max(1, min(-(-count // CHECK_GROUP), CHECK_GROUPS))
 
 
 class DeviceKernels:
@@ -142,7 +180,11 @@ class DeviceKernels:
                         for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double")}
 
     def run(self, queue, name: str, n: int, *args):
-        """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share)."""
+        """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share; the
+        check: check_groups(n) work-groups)."""
+        if name == "reach":
+            groups = check_groups(n)
+            return self.kernels[name](queue, (groups * CHECK_GROUP,), (CHECK_GROUP,), *args)
         items = max(1, min(n, ITEMS))
         return self.kernels[name](queue, (items,), None, *args)
 
@@ -155,90 +197,235 @@ def _kernels(tracer) -> DeviceKernels:
 
 
 def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, out: str):
-    """cast or occluded (engine/queries/cast.py: run_cast) of device rays; out: "device" leaves the
-    results pyopencl arrays, "host" reads each back once."""
+    """cast or occluded (engine/queries/cast.py: run_cast) of device rays, or of host rays on a device of
+    the GPU class (engine/opencl/device.py: gpu_class); out: "device" leaves the results pyopencl
+    arrays, "host" reads each back once.
+
+    Host rays are uploaded once each into copies of the call's own (a host-results call's into the
+    handle's kept buffers, under their lock), which the check's kernel may repair: it writes a
+    harmless ray over each refused one, so the cast kernel follows it at once, and the check's
+    partial results are read back with the cast's (a host-results call's all in one copy of one kept
+    buffer's regions); only a refused batch is then cast by the host path, which names its first bad
+    row. Device rays are the caller's: checked before the cast."""
+    try:
+        if is_device_array(origins) or is_device_array(directions):
+            return _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own=False, kept=None)
+        if out == "device":  # its results are new arrays, its rays new copies (no later call waits for them)
+            return _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own=True, kept=None)
+        kept = tracer.ray_buffers
+        with kept.lock:  # from the rays' writes to the results' reads
+            return _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own=True, kept=kept)
+    except _Refused as refused:  # the host path's checks name the first bad row (of the rays as given)
+        result = run_cast(tracer, query, *refused.rays, tmax, aovs, tmin)
+        raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
+
+
+class _Refused(Exception):
+    """The device's check refused a ray: the host path is to name it (outside the kept buffers' lock,
+    which the host path takes)."""
+
+    def __init__(self, rays: tuple):
+        super().__init__()
+        self.rays = rays
+
+
+def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, kept):
     ctx, precision = tracer.ctx, tracer.precision
     queue = ctx.queue
     kernels = _kernels(tracer)
-    directions = _device_rays(ctx, kernels, "directions", directions)
-    origins = _device_rays(ctx, kernels, "origins", origins)
+    given = (origins, directions)
+
+    def refused():
+        raise _Refused(given if own else (origins.get(), directions.get()))
+
+    if own:  # host arrays, their shapes checked as cast's (cast.py: _ray_array)
+        directions = _ray_array("directions", directions)
+        origins = _ray_array("origins", origins)
+    else:
+        directions = _device_rays(ctx, kernels, "directions", directions)
+        origins = _device_rays(ctx, kernels, "origins", origins)
     shape = directions.shape[:-1]
     if origins.shape != directions.shape and origins.shape != (3,):
         raise RequestError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
-    count = int(np.prod(shape))
+    count = math.prod(shape)
     inputs = tracer.cast_inputs()
     anchor, block_lanes = inputs[1], inputs[4]
     args, pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
-    given = (tmin, tmax)  # for the host's checks, should the device refuse a ray
-    tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
-    tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    try:
+        tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+        tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    except RequestError:
+        if own:  # the host path's first refusal (a bad ray's comes before a bad distance's)
+            refused()
+        raise
     stride = 1 if origins.shape == directions.shape else 0
-    if count:
-        partial = cl_array.empty(queue, (max(1, min(count, ITEMS)),), np.float64)
-        kernels.run(queue, "reach", count, partial.data, origins.data, np.int32(stride), directions.data,
-                    np.int64(count), *(np.float64(a) for a in anchor[:3]))
-        partial = partial.get()  # one read of a few kB: the largest, or where a ray is refused, NaN or inf
-        reach = partial.max() if not np.isnan(partial).any() else np.nan
-        bound = np.sqrt(np.finfo(REAL[precision]).max) / 4
-        if not reach <= bound:  # the host path's checks name the first bad row
-            result = run_cast(tracer, query, origins.get(), directions.get(), given[1], aovs, given[0])
-            raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})")
     real = REAL[precision]
-
-    def finish(arrays: dict):
-        if out == "host":
-            arrays = {k: v.get() for k, v in arrays.items()}
-        return arrays
-
-    if query == "occluded":
-        result = cl_array.empty(queue, shape, np.bool_)
-        if count:
-            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision, pairs=pairs), count, origins, stride,
-                    directions, tmin, tmax, anchor, args, {"occluded_out": result.data}, *ray_group(pairs))
-        return finish({"occluded": result})["occluded"]
+    # the distances the kernel squares must stay below the square root of the largest real (cast.py: RayBatch)
+    bound = np.sqrt(np.finfo(real).max) / 4
+    partial = None  # the check's largest distance per work-item, where it is read back after the cast
+    items = check_groups(count)  # the check's partial results
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
     kernel_aovs = tuple(a for a in ("depth", "normal", "id", "primitive", "barycentric") if a in needed)
-    results = {k: cl_array.empty(queue, TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs}
+    regions = None
+    if kept is not None:  # the results and the check's in regions of one kept buffer, read back in one copy
+        parts = [("check", (items,), np.float64)] if count else []
+        if query == "occluded":
+            parts.append(("occluded_out", shape, np.bool_))
+        else:
+            parts += [(image_parameter(k), TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs]
+            parts += [(k, (count,) + TABLE[k].shape(()), TABLE[k].dtype(precision)) for k in ("label", "position")
+                      if k in aovs]
+        layout = {part: (shape_, np.dtype(dtype)) for part, shape_, dtype in parts}
+        subs, offsets, total = kept.regions(ctx, "results", tuple((part, math.prod(shape_) * dtype.itemsize)
+                                                                  for part, (shape_, dtype) in layout.items()))
+        regions = (layout, subs, offsets, total)
+    if own:
+        if stride == 0:  # one origin: checked here (the kernel repairs no shared origin), even without rays
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not np.abs(origins - anchor[:3]).max() <= bound:
+                    refused()
+        if kept is not None:
+            o_buffer, d_buffer = kept.write(ctx, "origins", origins), kept.write(ctx, "directions", directions)
+        else:
+            o_buffer, d_buffer = (cl_array.to_device(queue, np.ascontiguousarray(a)).data for a in (origins, directions))
+        if count:
+            partial = regions[1]["check"] if kept is not None else cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * items)
+            kernels.run(queue, "reach", count, partial, o_buffer, np.int32(stride), d_buffer, np.int64(count),
+                        *(np.float64(a) for a in anchor[:3]), np.float64(bound), np.int32(1))
+    else:
+        o_buffer, d_buffer = origins.data, directions.data
+        if count:
+            check = cl_array.empty(queue, (items,), np.float64)
+            kernels.run(queue, "reach", count, check.data, o_buffer, np.int32(stride), d_buffer, np.int64(count),
+                        *(np.float64(a) for a in anchor[:3]), np.float64(bound), np.int32(0))
+            if not _fine(check.get(), bound):  # one read of a few kB before the cast: the caller's rays
+                refused()
+    rays = (count, o_buffer, stride, d_buffer, _constant(tracer, tmin), len(tmin) > 1, _constant(tracer, tmax),
+            len(tmax) > 1, anchor, args)
+
+    # the results: regions of the handle's kept buffer (host results of host rays), else new device arrays
+    def result(name: str, shape: tuple, dtype):
+        if kept is None:
+            return cl_array.empty(queue, shape, dtype)
+        return name, regions[1][name]
+
+    def data(value):  # a result's buffer
+        return value.data if isinstance(value, cl_array.Array) else value[1]
+
+    if query == "occluded":
+        results = {"occluded": result("occluded_out", shape, np.bool_)}
+        if count:
+            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision, pairs=pairs), *rays,
+                    {"occluded_out": data(results["occluded"])}, *ray_group(pairs), kept)
+        return _finish(ctx, kept, results, out, partial, items, bound, refused, regions)["occluded"]
+    results = {k: result(image_parameter(k), TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs}
     if count:
         variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=pairs)
-        _launch(tracer, variant, count, origins, stride, directions, tmin, tmax, anchor, args,
-                {image_parameter(k): v.data for k, v in results.items()}, *ray_group(pairs))
+        _launch(tracer, variant, *rays, {image_parameter(k): data(v) for k, v in results.items()}, *ray_group(pairs),
+                kept)
         if "primitive" in results and block_lanes:
             places, first, primitives = _block_lanes_table(tracer, block_lanes, queue)
-            kernels.run(queue, "block_primitives", count, results["primitive"].data, np.int64(count), places.data,
+            kernels.run(queue, "block_primitives", count, data(results["primitive"]), np.int64(count), places.data,
                         np.int32(places.size), first.data, primitives.data)
     frame = {}
     for name in aovs:
         if name in results:
             frame[name] = results[name]
         elif name == "label":
-            labels = cl_array.to_device(queue, np.append(labels_of(tracer.shapes), np.int32(-1)))
-            label = cl_array.empty(queue, (count,), np.int32)
+            labels = _label_table(tracer, queue)
+            label = frame[name] = result("label", (count,), np.int32)
             if count:
-                kernels.run(queue, "labels", count, label.data, results["id"].data, np.int64(count), labels.data,
+                kernels.run(queue, "labels", count, data(label), data(results["id"]), np.int64(count), labels.data,
                             np.int32(labels.size - 1))
-            frame[name] = label
         elif name == "position":
-            position = cl_array.empty(queue, (count, 3), real)
+            position = frame[name] = result("position", (count, 3), real)
             if count:
                 kernels.run(queue, "positions_float" if real == np.float32 else "positions_double", count,
-                            position.data, results["depth"].data, np.int64(count), origins.data, np.int32(stride),
-                            directions.data)
-            frame[name] = position
-    frame = finish({k: v.reshape(*(shape + v.shape[1:])) for k, v in frame.items()})
+                            data(position), data(results["depth"]), np.int64(count), o_buffer, np.int32(stride),
+                            d_buffer)
+    frame = _finish(ctx, kept, frame, out, partial, items, bound, refused, regions)
+    frame = {k: v.reshape(shape + v.shape[1:]) for k, v in frame.items()}
     return Frame(frame, precision=precision, device=ctx.device.name.strip())
 
 
-def _launch(tracer, variant, count, origins, stride, directions, tmin, tmax, anchor, args, outputs, group, work_group):
-    """Enqueue the kernel over the device rays (in their order: no order buffer is read)."""
+def _fine(partial: np.ndarray, bound: float) -> bool:
+    """Whether the check's partial results (kernel reach) pass: no ray refused, every origin within bound."""
+    return not np.isnan(partial).any() and partial.max() <= bound
+
+
+def _finish(ctx, kept, results: dict, out: str, partial, items: int, bound: float, refused, regions) -> dict:
+    """The results by name: device arrays (out="device"), else host arrays read back behind one wait:
+    the kept buffer's regions (KeptBuffers.regions) in one copy, whose views they are (out of its
+    host memory after the wait on a device whose buffers are host memory), else a copy each of the
+    device arrays. The check's partial results are read with them, and a refused batch raises
+    (refused)."""
+    queue = ctx.queue
+    if out == "device":
+        if partial is not None:
+            check = np.empty(items, np.float64)
+            cl.enqueue_copy(queue, check, partial)
+            if not _fine(check, bound):
+                refused()
+        return results
+    if kept is None:
+        arrays = {k: np.empty(v.shape, v.dtype) for k, v in results.items()}
+        for k, v in results.items():
+            if v.size:
+                cl.enqueue_copy(queue, arrays[k], v.data, is_blocking=False)
+        queue.finish()
+        return arrays
+    layout, _, offsets, total = regions
+    block = np.empty(total, np.uint8)
+    if shares_host_memory(ctx):
+        queue.finish()  # then the results are in the kept buffer's memory, copied out at once
+        kept.read(ctx, "results", block)
+    else:
+        kept.read(ctx, "results", block)
+        queue.finish()
+
+    def view(part):
+        shape, dtype = layout[part]
+        return block[offsets[part]:offsets[part] + math.prod(shape) * dtype.itemsize].view(dtype).reshape(shape)
+
+    if partial is not None and not _fine(view("check"), bound):
+        refused()
+    return {k: view(part) for k, (part, _) in results.items()}
+
+
+def _constant(tracer, values: np.ndarray) -> cl.Buffer:
+    """A read-only buffer of tmin's or tmax's values: one number's kept on the handle by its value
+    (KeptBuffers.constant: no later call copies it again), an array's a new copy."""
+    if len(values) > 1:
+        return input_buffer(tracer.ctx, np.ascontiguousarray(values))
+    return tracer.ray_buffers.constant(tracer.ctx, values)
+
+
+def _label_table(tracer, queue) -> cl_array.Array:
+    """The shapes' labels and -1 (label_of's table) on the device, uploaded once per shapes."""
+    kept = tracer.ray_buffers
+    shapes = tracer.shapes
+    if kept.label_table is None or kept.label_table[0] is not shapes:
+        kept.label_table = (shapes, cl_array.to_device(queue, np.append(labels_of(shapes), np.int32(-1))))
+    return kept.label_table[1]
+
+
+def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride, anchor,
+            args, outputs, group, work_group, kept=None):
+    """Enqueue the kernel over the device rays (in their order: the order buffer is not read); with
+    kept (the rays and results in the handle's kept buffers), its arguments set only where they
+    changed (device.py: launch_kept)."""
     ctx = tracer.ctx
-    to_device = lambda array: cl_array.to_device(ctx.queue, np.ascontiguousarray(array)).data  # noqa: E731
     groups = -(-count // group)
     sizes = ((-(-groups // work_group) * work_group,), (work_group,))
-    values = {"n_rays": np.int32(count), "ordered": np.int32(0), "order": to_device(np.zeros(1, np.int32)),
-              "origins": origins.data, "origin_stride": np.int32(stride), "directions": directions.data,
-              "limits": to_device(tmax), "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
-              "starts": to_device(tmin), "start_stride": np.int32(1 if len(tmin) > 1 else 0),
-              "scene_anchor": anchor.astype(np.float64).view(cl.cltypes.double4)[0], **args, **outputs}
-    launch(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values))
+    values = {"n_rays": np.int32(count), "ordered": np.int32(0), "order": _constant(tracer, NO_ORDER),
+              "origins": o_buffer, "origin_stride": np.int32(stride), "directions": d_buffer,
+              "limits": limits, "limit_stride": np.int32(limit_stride), "starts": starts,
+              "start_stride": np.int32(start_stride), **args, **outputs}  # (args: the scene's anchor too)
+    if kept is None:
+        launch(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values))
+    else:
+        launch_kept(ctx, kernel_for(ctx, variant), *sizes, arguments(variant, values), kept.launches)
+
+
+NO_ORDER = np.zeros(1, np.int32)  # (the kernel reads no order: ordered is 0)

@@ -23,7 +23,8 @@ from .requests import Frame
 # The hit queries trace every large batch in cast's coherent order (engine/queries/ray_order.py), also
 # where cast would not for a scene that fits the cache: each ray traverses the tree to its end, and
 # neighbouring rays then share more of it (docs/benchmarks.md, "Hit counts": 117 against 138 ms on
-# the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order.
+# the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order. A device of the GPU
+# class takes none (engine/queries/cast.py: RayBatch; its host does no per-ray ordering).
 ORDER_ALWAYS = True
 
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
