@@ -202,6 +202,21 @@ def test_rays_from_far_away_give_the_same_bits(monkeypatch, scenes_dir, precisio
     same_bits(at_width(monkeypatch, 1, run), at_width(monkeypatch, 8 if precision == "fp32" else 4, run), "far render")
 
 
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_the_gpu_class_host_path_gives_the_same_bits(monkeypatch, scenes_dir, precision):
+    """A GPU's whole path on PoCL: one lane and the GPU class's host path ($PYCLRAY_GPU_CLASS=1: the rays
+    uploaded and cast in their order, engine/queries/cast_device.py) against the CPU's 8 lanes and host path."""
+    need(precision)
+    scene = scene_of(mixed(scenes_dir) + instances()[:2])
+    origins, directions = rays_at(scene, 5000, seed=8)  # (5000: a batch the CPU's host path orders)
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_GPU_CLASS", "1")
+        one = at_width(monkeypatch, 1, lambda: queries(scene, precision, origins, directions))
+    eight = at_width(monkeypatch, 8 if precision == "fp32" else 4, lambda: queries(scene, precision, origins, directions))
+    for name in one:
+        same_bits(one[name], eight[name], name)
+
+
 def test_a_refitted_frame_gives_the_same_bits(monkeypatch):
     """An animation's frame refitted in place (some spheres moved): the handle's pair nodes are made
     anew from the refitted boxes, and its render and cast at one lane are a fresh handle's at 8."""
