@@ -2,15 +2,24 @@
 alternating (issue 42: the exact pixel rays' cost on flat shapes and mesh instances).
 
     .venv/bin/python bench/kernels_ab.py --against /path/to/other/checkout [--rounds 6] [--block 7]
+    .venv/bin/python bench/kernels_ab.py --without-pixel-exact [--rounds 6] [--block 7]
 
 The host side (scenes, structs, the per-view pass) is this checkout's; only the kernels/ folder is
 swapped (pyclray.engine.launch.programs.kernel_dir), so the other checkout's kernels must read the
-structs this one packs (fields this one added are ignored there). Each round builds both kernel
-sets afresh (in alternating order) and times each workload in a block of renders (median wall and
-process CPU time); the report is the median over the rounds and the ratio this / other. bench/engine_ab.py
-is the whole-engine comparison (other processes, other host code); this one isolates the kernels
-on the workloads engine_ab has none of: flat shapes in numbers and mesh instances. 512x512, fp32,
-depth, normal and id:
+structs this one packs (fields this one added are ignored there): a checkout from before a change
+of the structs or of the kernels' files cannot be the other side. --without-pixel-exact makes the
+other side this checkout's own kernels with the exact pixel rays compiled out (a copy in a
+temporary folder whose kernels/lanes.h never defines PYCLRAY_PIXEL_EXACT: the camera rays, flat
+shapes and instances as before issue 42's item 1, everything else the same). Both sides'
+kernels are built once and kept (programs' in-memory kernels swapped with the folder: a switch
+rebuilds nothing); each workload is then timed in blocks of renders (median wall
+and process CPU time; --block renders, more where those would take less than --block-ms), one
+block per side in each round, the sides' order alternating from round to round. The report is the
+median over the rounds of each side's time and of the ratio this / other of each round's two
+blocks, which run side by side in time (a loaded machine's slow drift cancels in it).
+bench/engine_ab.py is the whole-engine comparison (other processes, other host code); this one
+isolates the kernels on the workloads engine_ab has none of: flat shapes in numbers and mesh
+instances. 512x512, fp32, depth, normal and id:
 
 - tp02: scenes/tp02.toml (a ground plane and three balls);
 - 100k spheres: bench/engine_ab.py's field (a ground plane and a batch of 100,000 spheres);
@@ -20,7 +29,9 @@ depth, normal and id:
 from __future__ import annotations
 
 import argparse
+import shutil
 import statistics
+import tempfile
 import time
 from pathlib import Path
 
@@ -54,36 +65,77 @@ def workloads(size: int = 512) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--against", required=True, help="the other checkout's root (its pyclray/engine/kernels/ is read)")
+    other = parser.add_mutually_exclusive_group(required=True)
+    other.add_argument("--against", help="the other checkout's root (its pyclray/engine/kernels/ is read)")
+    other.add_argument("--without-pixel-exact", action="store_true",
+                       help="the other side: this checkout's kernels with PYCLRAY_PIXEL_EXACT compiled out")
     parser.add_argument("--rounds", type=int, default=6)
     parser.add_argument("--block", type=int, default=7)
+    parser.add_argument("--block-ms", type=float, default=100.0,
+                        help="a block has at least --block renders and lasts about this long at least (tp02's 1 ms renders)")
     args = parser.parse_args(argv)
-    folders = {"this": programs.kernel_dir(), "other": Path(args.against) / "pyclray" / "engine" / "kernels"}
+    with tempfile.TemporaryDirectory() as temporary:
+        if args.without_pixel_exact:
+            other_kernels = without_pixel_exact(programs.kernel_dir(), Path(temporary) / "kernels")
+        else:
+            other_kernels = Path(args.against) / "pyclray" / "engine" / "kernels"
+        compare({"this": programs.kernel_dir(), "other": other_kernels}, args.rounds, args.block, args.block_ms / 1e3)
+
+
+def without_pixel_exact(kernels: Path, copy: Path) -> Path:
+    """A copy of the kernels folder whose lanes.h never defines PYCLRAY_PIXEL_EXACT."""
+    shutil.copytree(kernels, copy)
+    lanes = copy / "lanes.h"
+    text = lanes.read_text(encoding="utf-8")
+    define = "#define PYCLRAY_PIXEL_EXACT 1\n"
+    if text.count(define) != 1:
+        raise SystemExit(f"{kernels / 'lanes.h'}: expected one line {define.strip()!r}")
+    lanes.write_text(text.replace(define, ""), encoding="utf-8")
+    return copy
+
+
+def compare(folders: dict, rounds: int, block: int, block_s: float) -> None:
+    """Each workload rendered with each side's kernels in alternating blocks; the table of the
+    medians and of the median ratio of adjacent blocks."""
     scenes = workloads()
     aovs = ("depth", "normal", "id")
+    built = {}
+    for side, folder in folders.items():  # each side's kernels built once and kept: a switch costs nothing
+        programs.kernel_dir = lambda folder=folder: folder
+        programs._programs = {}
+        for scene in scenes.values():
+            pyclray.render(scene, aovs=aovs)
+        built[side] = programs._programs
+
+    def use(side):
+        programs.kernel_dir = lambda folder=folders[side]: folder
+        programs._programs = built[side]
+
     times = {(w, side): [] for w in scenes for side in folders}
-    for r in range(args.rounds):
-        for side in (("this", "other") if r % 2 == 0 else ("other", "this")):
-            programs.kernel_dir = lambda folder=folders[side]: folder
-            programs.clear()
-            pyclray.clear_cache()
-            for name, scene in scenes.items():
-                pyclray.render(scene, aovs=aovs)  # built and prepared: not timed
+    for name, scene in scenes.items():
+        w0 = time.perf_counter()
+        pyclray.render(scene, aovs=aovs)  # not timed: it sizes the block
+        renders = max(block, int(block_s / max(time.perf_counter() - w0, 1e-6)))
+        for r in range(rounds):
+            for side in (("this", "other") if r % 2 == 0 else ("other", "this")):
+                use(side)
+                pyclray.render(scene, aovs=aovs)  # not timed: the switch
                 wall, cpu = [], []
-                for _ in range(args.block):
+                for _ in range(renders):
                     c0, w0 = time.process_time(), time.perf_counter()
                     pyclray.render(scene, aovs=aovs)
                     cpu.append(time.process_time() - c0)
                     wall.append(time.perf_counter() - w0)
                 times[(name, side)].append((statistics.median(wall) * 1e3, statistics.median(cpu) * 1e3))
-                time.sleep(0.2)
+                time.sleep(0.1)
     print("| workload | this: wall ms (CPU) | other: wall ms (CPU) | this / other: wall | CPU |")
     print("|---|---|---|---|---|")
     for name in scenes:
-        this = np.median(np.array(times[(name, "this")]), axis=0)
-        other = np.median(np.array(times[(name, "other")]), axis=0)
+        this, other = np.array(times[(name, "this")]), np.array(times[(name, "other")])
+        ratio = np.median(this / other, axis=0)  # each round's blocks side by side in time
+        this, other = np.median(this, axis=0), np.median(other, axis=0)
         print(f"| {name} | {this[0]:.2f} ({this[1]:.2f}) | {other[0]:.2f} ({other[1]:.2f}) | "
-              f"{this[0] / other[0]:.3f} | {this[1] / other[1]:.3f} |")
+              f"{ratio[0]:.3f} | {ratio[1]:.3f} |")
 
 
 if __name__ == "__main__":

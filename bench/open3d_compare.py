@@ -48,21 +48,25 @@ BEGIN, END = "<!-- scale:begin -->", "<!-- scale:end -->"
 
 
 def blocks(systems: dict, rounds: int, block: int, pause: float = 0.05) -> dict:
-    """Median and quartiles (ms) of each system's calls, timed in rotating blocks."""
+    """Median and quartiles (ms) of each system's calls, timed in rotating blocks; "cpu": the median
+    process CPU time of its calls (ms, every thread's: what the machine's other load leaves alone)."""
     times = {name: [] for name in systems}
+    cpus = {name: [] for name in systems}
     names = list(systems)
     for r in range(rounds):
         for name in names[r % len(names):] + names[: r % len(names)]:
             time.sleep(pause)
             systems[name]()
             for _ in range(block):
-                start = time.perf_counter()
+                start, start_cpu = time.perf_counter(), time.process_time()
                 systems[name]()
                 times[name].append(time.perf_counter() - start)
+                cpus[name].append(time.process_time() - start_cpu)
     out = {}
     for name, values in times.items():
         ms = np.array(values) * 1e3
-        out[name] = {"median": float(np.median(ms)), "q1": float(np.percentile(ms, 25)), "q3": float(np.percentile(ms, 75)), "n": len(ms)}
+        out[name] = {"median": float(np.median(ms)), "q1": float(np.percentile(ms, 25)), "q3": float(np.percentile(ms, 75)),
+                     "n": len(ms), "cpu": float(np.median(cpus[name])) * 1e3}
     return out
 
 

@@ -9,7 +9,8 @@ triangle perturbed UV sphere), both closed. Points (seeded): 100,000 uniform in 
 points, moved by a uniform offset in [-1%, 1%] of the size along a random direction).
 
 Cases, each timed in rotating blocks with a pause at each switch (bench.open3d_compare.blocks), the
-medians and their ratios printed:
+medians and their ratios printed, of the wall clock and of the process CPU time (every thread's:
+on a shared machine what other work leaves alone):
 - distance: pyclray.Tracer.distance against compute_distance (float32 points for Open3D, its only type);
 - occupancy and signed distance, parity: Tracer.occupancy / signed_distance(sign="parity") against
   compute_occupancy / compute_signed_distance(nsamples=1) (one ray each, as pyclray's parity);
@@ -72,7 +73,12 @@ def open_winding_rows(name, mesh, tracer, uniform, rounds, block):
         times = blocks({"winding, open": lambda: holed_tracer.occupancy(uniform, sign="winding"),
                         "parity, closed": lambda: tracer.occupancy(uniform, sign="parity")}, rounds, block)
     return [(name, "uniform", "occupancy winding, 1% of faces removed: hierarchical (vs parity, closed)",
-             times["winding, open"]["median"], times["parity, closed"]["median"])]
+             _both(times["winding, open"]), _both(times["parity, closed"]))]
+
+
+def _both(timed: dict) -> tuple[float, float]:
+    """(wall, CPU) medians in ms of a system's calls (bench.open3d_compare.blocks)."""
+    return timed["median"], timed["cpu"]
 
 
 def run_mesh(name, mesh, rounds, block, rng):
@@ -101,7 +107,7 @@ def run_mesh(name, mesh, rounds, block, rng):
             "pyclray signed_distance winding": lambda: tracer.signed_distance(points, sign="winding"),
         }
         times = blocks(systems, rounds, block)
-        ms = {k: v["median"] for k, v in times.items()}
+        ms = {k: _both(v) for k, v in times.items()}
         rows.append((name, label, "distance", ms["pyclray distance"], ms["Open3D compute_distance"]))
         rows.append((name, label, "occupancy parity", ms["pyclray occupancy parity"], ms["Open3D compute_occupancy"]))
         rows.append((name, label, "signed_distance parity", ms["pyclray signed_distance parity"],
@@ -149,13 +155,15 @@ def main(argv=None) -> None:
             with pyclray.prepare(scene) as tracer:
                 rows = open_winding_rows(name, mesh, tracer, rng.uniform(lo, hi, (COUNT, 3)), args.rounds, args.block)
             for _, label, query, mine, other in rows:
-                print(f"| {name} | {label} | {query} | {mine:.1f} | {other:.1f} | {other / mine:.2f} |")
+                print(f"| {name} | {label} | {query} | {mine[0]:.1f} | {other[0]:.1f} | {other[0] / mine[0]:.2f} "
+                      f"| {other[1] / mine[1]:.2f} |")
             continue
         rows, errors = run_mesh(f"{name} ({len(mesh.faces):,} triangles)", mesh, args.rounds, args.block, rng)
-        print(f"\n{name}: {len(mesh.faces):,} triangles, {COUNT:,} points; medians in ms; ratio = other / pyclray")
-        print(f"| points | query | pyclray | other | ratio |\n|---|---|---:|---:|---:|")
+        print(f"\n{name}: {len(mesh.faces):,} triangles, {COUNT:,} points; medians in ms; ratio = other / pyclray "
+              "(wall; and of the process CPU time, all threads)")
+        print(f"| points | query | pyclray | other | ratio | CPU ratio |\n|---|---|---:|---:|---:|---:|")
         for _, label, query, mine, other in rows:
-            print(f"| {label} | {query} | {mine:.1f} | {other:.1f} | {other / mine:.2f} |")
+            print(f"| {label} | {query} | {mine[0]:.1f} | {other[0]:.1f} | {other[0] / mine[0]:.2f} | {other[1] / mine[1]:.2f} |")
         print(f"sign errors of {SIGN_POINTS:,} points at {SIGN_OFFSET:g} of the size from the surface:")
         for key, value in errors.items():
             print(f"  {key}: {value}")

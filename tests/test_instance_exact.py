@@ -8,7 +8,7 @@ object space, no ray let through to the surface behind (the issue's symptom: 2.7
 oracle and a copy give 2.69438). A vertex from_world differently by its two triangles fails it. And
 the object-space direction itself: a grazing flat instance's depth holds the flat law (the pixel's
 float64 ray rounded once in object space; the float32 product before it fails). fp32, and fp32
-with one lane (PYCLRAY_LANES=1)."""
+with one lane (PYCLRAY_LANES=1); and every lane width gives the same bits."""
 from __future__ import annotations
 
 import math
@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import pyclray
+from pyclray.model.aovs import RENDER_AOVS
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
 from pyclray.reference import oracle
 from pyclray.reference import error_model
@@ -270,3 +271,28 @@ def test_a_placement_that_scales_across_the_objects_axes_holds_the_oracle(precis
     assert seen > 300  # the pancake is in view
     # packed so: the pancake as a copy, the plain placements still as instances
     assert pyclray.Mesh.packed_as(shapes[1:], [1, 2, 3]) == {"mesh": ([shapes[1]], [1]), "instance": (shapes[2:], [2, 3])}
+
+
+def test_every_lane_width_gives_the_same_bits(monkeypatch):
+    """The exact pixel rays' parts are each lane's own: an instance's object direction, taken at its
+    packet's first leaf of the instance, and a box's exact face distance, taken where its face met
+    is grazing, give the same bits at widths 1, 2, 4 and 8, for every image (shaded with a point
+    light's shadow rays, which take the rounded direction) of the issue's scene from two views and
+    of the box and instances seen at a grazing angle (tests/test_grazing.py's camera)."""
+    from test_grazing import grazing_scenes, pitched_camera
+    from test_packets import at_width, widths
+    from test_speedups import same
+
+    light = pyclray.PointLight(position=(2.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0))
+    scenes = [pyclray.Scene(camera, image, issue_shapes(), lights=(light,)) for camera, image in circle_views(2, (61, 47))]
+    camera, image = pitched_camera(2.0, scale=0.125)
+    scenes += [pyclray.Scene(camera, image, grazing_scenes()[case]) for case in ("box", "instances")]
+
+    def run():
+        return [pyclray.render(scene, aovs=RENDER_AOVS) for scene in scenes]
+
+    runs = {w: at_width(monkeypatch, w, run) for w in widths("fp32")}
+    scalar = runs.pop(1)
+    for frames in runs.values():
+        for a, b in zip(scalar, frames):
+            same(a, b)

@@ -80,13 +80,46 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * state (HitsRay) lives between its steps in the work-item's memory: hits_start sets it up (the ray,
  * its unbounded shapes, its box ray, the root pushed), hits_step is one step, hits_end sorts its rows
  * and writes its count. */
-#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits)
+/* With PYCLRAY_AOV_SURFACE (count_hits for occupancy: engine/queries/closest.py), also whether the
+ * ray's origin, a point, lies on a surface (surface_out[r]: 1 on, 0 not or an odd count, 2 not
+ * known here). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
+ * box_ray's margin (2^-20 of the origin's size) makes it for every box that holds the float64
+ * origin, or within the closest-point query's 4 times smaller margin of the same float boxes
+ * (kernels/closest.cl). The traversal notes the first SURFACE_LEAVES such leaves as it reaches them
+ * (their entry is the one it found: no box is tested for this), and where the count is even
+ * (a point on a surface is inside, whatever its count) tests their shapes as the closest-point
+ * query's search for a surface point at distance 0 does: the same <type>_closest of the same
+ * float64 world entries (the closest-point query's leaf, surface_leaf_codes: per place of this
+ * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0. A
+ * ray with more such leaves, or one that tests every bounded shape without the boxes, is not known
+ * here (2: the host asks the closest-point query). */
+#ifdef PYCLRAY_AOV_SURFACE
+#define SURFACE_LEAVES 8
+#undef PYCLRAY_LEAF_ENTERED
+#define PYCLRAY_LEAF_ENTERED(entry)                                                 \
+    if ((entry) == 0.0f) {                                                          \
+        if (S->n_surface_ < SURFACE_LEAVES) S->surface_leaf_[S->n_surface_] = first; \
+        S->n_surface_ += S->n_surface_ <= SURFACE_LEAVES;                           \
+    }
+#define HITS_SURFACE_STATE(X) X(int, n_surface)
+#define HITS_VISIT_ALL(q) n_surface = SURFACE_LEAVES + 1; PYCLRAY_CAST_VISIT(q)
+#define HITS_ON_SURFACE_KIND(Type, type)                                            \
+    if (kind == KIND_##type && type##_closest(&type##_surface_worlds[k], p).d2 == 0.0) surface = 1;
+#else
+#define HITS_SURFACE_STATE(X)
+#define HITS_VISIT_ALL(q) PYCLRAY_CAST_VISIT(q)
+#endif
+#define HITS_RAY_STATE(X) X(RayPacket, ray) X(double, t_max) X(double, t_min) X(int, r) X(real, ray_length) X(int, n_hits) \
+    HITS_SURFACE_STATE(X)
 #define HITS_TRAVERSAL_STATE(X) X(RayPacket, moved) X(double4, moved_anchor) X(double, s0) X(bool, near) \
     X(float3, o) X(float3, box_direction) X(BoxRay, box) X(float, limit)
 #define HITS_STATE_FIELD(T, name) T name##_;
 #define HITS_STATE_SAVE(T, name) S->name##_ = name;
 typedef struct {
     HITS_RAY_STATE(HITS_STATE_FIELD)
+#ifdef PYCLRAY_AOV_SURFACE
+    int surface_leaf_[SURFACE_LEAVES];
+#endif
 #ifdef PYCLRAY_HAS_BOUNDED
     HITS_TRAVERSAL_STATE(HITS_STATE_FIELD)
     int top_;
@@ -99,6 +132,9 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
 {
     PYCLRAY_CAST_RAY
     int n_hits = 0;
+#ifdef PYCLRAY_AOV_SURFACE
+    int n_surface = 0;
+#endif
 #ifdef PYCLRAY_STORE_HITS
     const long hits_at = (long)r * hit_capacity;
     const int hits_room = hit_capacity;
@@ -109,7 +145,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
         PYCLRAY_CAST_BOX
         float limit = float_above_wide(t_max);
         S->top_ = 0;
-        PYCLRAY_CAST_BOUNDED(PYCLRAY_CAST_VISIT, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
+        PYCLRAY_CAST_BOUNDED(HITS_VISIT_ALL, S->stack_child_[0] = 0; S->stack_entry_[0] = 0.0f; S->top_ = 1;)
         HITS_TRAVERSAL_STATE(HITS_STATE_SAVE)
     }
 #endif
@@ -175,6 +211,23 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
     }
 #endif
     hit_counts[r] = n_hits;
+#ifdef PYCLRAY_AOV_SURFACE
+    uchar surface = 0;
+    if (!(n_hits & 1) && S->n_surface_ > SURFACE_LEAVES) {
+        surface = 2;
+    } else if (!(n_hits & 1)) {
+        const double3 p = S->ray_.world;
+        for (int j = 0; j < S->n_surface_ && !surface; ++j) {
+            const int code = surface_leaf_codes[S->surface_leaf_[j]];
+            const int first = (~code) >> 3, count = (~code) & 7;
+            for (int q = first; q < first + count && !surface; ++q) {
+                const int ref = surface_refs[q], kind = ref & 15, k = ref >> 4;
+                PYCLRAY_BOUNDED(HITS_ON_SURFACE_KIND)
+            }
+        }
+    }
+    surface_out[r] = surface;
+#endif
 }
 
 PYCLRAY_KERNELS_BEGIN

@@ -79,10 +79,9 @@ inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
     const vec3v D = ray->dir;
     const vec3v e0 = v3_splat(box->axis0), e1 = v3_splat(box->axis1), e2 = v3_splat(box->axis2);
     BoxSlabs slabs;
-    /* D . e_k: exact for camera rays (a face seen at a grazing angle keeps its distance's digits) */
-    slabs.along = v3(PIXEL_DOT(ray, box->axis0, box->axis_low0, v3_dot(D, e0)),
-                     PIXEL_DOT(ray, box->axis1, box->axis_low1, v3_dot(D, e1)),
-                     PIXEL_DOT(ray, box->axis2, box->axis_low2, v3_dot(D, e2)));
+    /* D . e_k (a camera ray's face seen at a grazing angle has its distance again from the exact
+     * product: box_pixel_distance) */
+    slabs.along = v3(v3_dot(D, e0), v3_dot(D, e1), v3_dot(D, e2));
     /* camera rays (from the space's origin): the offsets as packed; cast and shadow rays: their origin's */
     const vec3v zero = v3(SPLAT(0), SPLAT(0), SPLAT(0));
     const vec3v F = FROM_EYE(ray) ? v3_splat(box->center) : v3_sub(v3_splat(box->center), ray->origin);
@@ -115,12 +114,44 @@ inline BoxSlabs box_slabs(SHAPE_SPACE const Box* box, const RayPacket* ray)
     return slabs;
 }
 
+#ifdef PYCLRAY_PIXEL_EXACT
+/* A camera ray's distance s to the face it meets (entering: the entry slab's face, else the exit
+ * slab's), again with that slab's D . e_k exact (kernels/lanes.h: pixel_dot) in the lanes where it
+ * is below PIXEL_EXACT_COS, as a plane's: a face seen at a grazing angle within a few roundings of
+ * its distance. Only the face met pays for it (one product, not the three slabs'): which face that
+ * is, and whether the ray meets the box, stay decided by the plain products, which choose otherwise
+ * than the exact ones only for a ray within rounding of an edge, where either face is right. */
+inline realv box_pixel_distance(SHAPE_SPACE const Box* box, const RayPacket* ray, const BoxSlabs* slabs,
+                                const intv entering, const realv s)
+{
+    const intv k = entering ? slabs->entry_axis : slabs->exit_axis;
+    const intv k0 = k == SPLAT_INT(0), k1 = k == SPLAT_INT(1);
+    const realv along = k0 ? slabs->along.x : (k1 ? slabs->along.y : slabs->along.z);
+    const intv grazing = slabs->overlap && v_abs(along) < SPLAT(PIXEL_EXACT_COS);
+    if (!ANY(grazing)) return s;
+    const vec3v high = v3_select(v3_select(v3_splat(box->axis2), v3_splat(box->axis1), k1), v3_splat(box->axis0), k0);
+    const vec3v low = v3_select(v3_select(v3_splat(box->axis_low2), v3_splat(box->axis_low1), k1), v3_splat(box->axis_low0), k0);
+    const realv exact = pixel_dot_lanes(ray, high, low);
+    /* the face's offset, as box_slabs takes it: moving along +e_k the ray enters by the low face */
+    const intv high_side = entering ? along < 0 : along > 0;
+    const realv offset_low = k0 ? SPLAT(box->axis0.w) : (k1 ? SPLAT(box->axis1.w) : SPLAT(box->axis2.w));
+    const realv offset_high = k0 ? SPLAT(box->high.x) : (k1 ? SPLAT(box->high.y) : SPLAT(box->high.z));
+    /* a lane whose exact product has not the plain one's sign (a ray along the face) keeps the plain s */
+    const intv taken = grazing && ((exact > 0) == (along > 0)) && exact != 0;
+    return taken ? box_plane(offset_low, offset_high, exact, high_side) : s;
+}
+#endif
+
 /* The entry if it lies ahead, else the exit (from inside: the far side); MISS if the slabs do not
  * overlap or lie behind. */
 inline realv box_hit(SHAPE_SPACE const Box* box, const RayPacket* ray)
 {
     const BoxSlabs slabs = box_slabs(box, ray);
-    const realv s = slabs.entry > 0 ? slabs.entry : slabs.exit;
+    const intv entering = slabs.entry > 0;
+    realv s = entering ? slabs.entry : slabs.exit;
+#ifdef PYCLRAY_PIXEL_EXACT
+    if (FROM_EYE(ray)) s = box_pixel_distance(box, ray, &slabs, entering, s);
+#endif
     return (slabs.overlap && s > 0 && s < MISS) ? s : SPLAT(MISS);
 }
 /* The outward normal of the face hit: against the ray along the entry slab's axis, with it along

@@ -125,6 +125,11 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
             PYCLRAY_TRAVERSE_STEP(nodes, box, limit, stack_child, stack_entry, top, NEAREST_FIRST, LEAF_MASK, VISIT) \
     }
 
+/* What a query does as a leaf is reached, given the distance at which its ray enters the leaf's box
+ * (0: the box holds the ray's origin, within the box ray's margin): nothing, unless the query's file
+ * says otherwise (kernels/allhits.cl: whether a point may lie on a surface) */
+#define PYCLRAY_LEAF_ENTERED(entry)
+
 /* One step of PYCLRAY_TRAVERSE (top > 0): the nearest waiting child popped, and where the ray still
  * enters it before limit, a leaf's shapes visited or a node's entered children pushed. Its own
  * macro so that a caller can interleave several rays' traversals, a step of each in turn
@@ -136,6 +141,7 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
             const int code = stack_child[top];                                          \
             if (code < 0) {                                                             \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
+                PYCLRAY_LEAF_ENTERED(stack_entry[top])                                  \
                 for (int leaf_mask = LEAF_MASK(first, count); leaf_mask != 0 && !(limit < 0.0f); \
                      leaf_mask &= leaf_mask - 1) {                                      \
                     const int q = first + BVH_LOWEST_BIT(leaf_mask);                    \

@@ -49,10 +49,8 @@ inline RayPacket camera_rays(__global const Camera* camera, const int i0, const 
     const realv whole_y = TO_REALV(SPLAT_INT(camera->centre_y - 1) - 2 * j);
     ray.x = SPLAT(step.x) * whole_x;
     ray.x_low = SPLAT(step.y) * whole_x + SPLAT((step.x + step.y) * camera->centre_x_low);
-    ray.x_high = pixel_split_high_v(ray.x);
     ray.y = SPLAT(step.z) * whole_y;
     ray.y_low = SPLAT(step.w) * whole_y + SPLAT((step.z + step.w) * camera->centre_y_low);
-    ray.y_high = pixel_split_high_v(ray.y);
     const realv sx = ray.x + ray.x_low, sy = ray.y + ray.y_low;
 #else
     const realv sx = SPLAT(camera->tan_x) * ((TO_REALV(SPLAT_INT(camera->centre_x - 1) - 2 * i) + SPLAT(camera->centre_x_low))

@@ -79,23 +79,85 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_REBASE_
     (real4)(convert_real3(vertices[(f).y].xyz - (eye)), (f).w >= 0 ? 1 : 0),                          \
     (real4)(convert_real3(vertices[(f).z].xyz - (eye)), (f).w >= 0 ? 1 : 0)
 
-/* the packet in object space: from the eye (where its triangles are rebased), along object_from_space d / k */
-inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
+#ifdef PYCLRAY_PIXEL_EXACT
+/* A packet's lanes in float64 (instances are built only where the device has it: their kernel
+ * reads float64 vertices anyway), converted lane by lane: a library conversion of 512 bits of
+ * doubles is a call that PoCL's CPU device cannot build (pyclray/engine/launch/programs.py:
+ * MAX_LANE_BITS), a cast per lane compiles to vector conversions everywhere. */
+#if LANES == 1
+typedef double instance_doublev;
+inline instance_doublev instance_to_double(const realv x) { return (double)x; }
+inline realv instance_to_real(const instance_doublev x) { return (real)x; }
+#else
+typedef PYCLRAY_CAT(double, LANES) instance_doublev;
+#define INSTANCE_LANE_TO_DOUBLE(l, s) r.s = (double)x.s;
+#define INSTANCE_LANE_TO_REAL(l, s) r.s = (real)x.s;
+inline instance_doublev instance_to_double(const realv x)
+{
+    instance_doublev r;
+    PYCLRAY_EACH_LANE(INSTANCE_LANE_TO_DOUBLE)
+    return r;
+}
+inline realv instance_to_real(const instance_doublev x)
+{
+    realv r;
+    PYCLRAY_EACH_LANE(INSTANCE_LANE_TO_REAL)
+    return r;
+}
+#endif
+
+/* one component of a camera ray's object direction: a row of object_from_space / k, high + low
+ * (a float pair: exact in float64), times the pixel point (sx, sy, 1) (sx = x + x_low, sy alike:
+ * exact in float64) in float64, whose roundings are far below float's even where the terms cancel,
+ * rounded to float, over the point's length: the float64 pixel ray's component within a rounding
+ * or two, relative to itself (kernels/lanes.h's pixel_dot in float64, where the device has it) */
+inline realv instance_pixel_row(const instance_doublev sx, const instance_doublev sy, const real4 high, const real4 low,
+                                const realv length)
+{
+    const double rx = (double)high.x + (double)low.x, ry = (double)high.y + (double)low.y, rz = (double)high.z + (double)low.z;
+    return instance_to_real((sx * rx + sy * ry) + rz) / length;
+}
+#endif
+
+/* the packet in object space: from the eye (where its triangles are rebased), along object_from_space d / k
+ * as the float product of the rounded rows and the rounded direction */
+inline RayPacket instance_rounded_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
 {
     const vec3v d = ray->dir;
     const real4 m0 = inst->m0, m1 = inst->m1, m2 = inst->m2;
     RayPacket r;
     r.origin = v3(SPLAT(0), SPLAT(0), SPLAT(0));
-    /* a camera ray's object direction is the float64 pixel ray's, rounded once (object_from_space's
-     * rows as float pairs times the exact pixel point: pixel_dot), as a copy's camera-space direction
-     * is: a float32 product of the rounded rows and the rounded direction turns it by a few eps,
-     * enough to move a contour pixel's ray across the edge it passes within a few eps of */
-    r.dir = v3(PIXEL_DOT_ALWAYS(ray, m0, inst->m_low0, (SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z),
-               PIXEL_DOT_ALWAYS(ray, m1, inst->m_low1, (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z),
-               PIXEL_DOT_ALWAYS(ray, m2, inst->m_low2, (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z));
+    r.dir = v3((SPLAT(m0.x) * d.x + SPLAT(m0.y) * d.y) + SPLAT(m0.z) * d.z,
+               (SPLAT(m1.x) * d.x + SPLAT(m1.y) * d.y) + SPLAT(m1.z) * d.z,
+               (SPLAT(m2.x) * d.x + SPLAT(m2.y) * d.y) + SPLAT(m2.z) * d.z);
     r.a = v3_dot(r.dir, r.dir);
 #ifdef PYCLRAY_SHADOWS
     r.from_eye = 1;
+#endif
+    return r;
+}
+
+#ifdef PYCLRAY_PIXEL_EXACT
+/* A camera ray's object direction is the float64 pixel ray's, rounded (instance_pixel_row), as a
+ * copy's camera-space direction is: the rounded product above turns it by a few eps, enough to
+ * move a contour pixel's ray across the edge it passes within a few eps of (issue 42). */
+inline void instance_pixel_direction(SHAPE_SPACE const Instance* inst, const RayPacket* ray, RayPacket* object)
+{
+    const instance_doublev sx = instance_to_double(ray->x) + instance_to_double(ray->x_low);
+    const instance_doublev sy = instance_to_double(ray->y) + instance_to_double(ray->y_low);
+    object->dir = v3(instance_pixel_row(sx, sy, inst->m0, inst->m_low0, ray->length),
+                     instance_pixel_row(sx, sy, inst->m1, inst->m_low1, ray->length),
+                     instance_pixel_row(sx, sy, inst->m2, inst->m_low2, ray->length));
+    object->a = v3_dot(object->dir, object->dir);
+}
+#endif
+
+/* the packet in object space, a camera ray's direction exact */
+inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket* ray)
+{
+    RayPacket r = instance_rounded_ray(inst, ray);
+#ifdef PYCLRAY_PIXEL_EXACT
+    if (FROM_EYE(ray)) instance_pixel_direction(inst, ray, &r);
 #endif
     return r;
 }
@@ -108,8 +170,22 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
                              intv* which)
 {
     const real scale = inst->m0.w;
-    const RayPacket object = instance_ray(inst, ray);
+    /* the tree's boxes are tested along the rounded direction, within a few eps of a camera ray's
+     * exact one: far inside the boxes' cone (kernels/bvh.h: BVH_WIDEN, 2^-12 of the distance), so
+     * that no box the exact ray's hits lie in is dropped; the exact direction is taken at the first
+     * leaf the packet reaches (a packet that meets no leaf of this instance never pays for it) */
+    RayPacket object = instance_rounded_ray(inst, ray);
     const BoxPacket box = box_packet(object.dir, inst->box);
+#ifdef PYCLRAY_PIXEL_EXACT
+    bool exact = !FROM_EYE(ray);
+#define INSTANCE_EXACT_DIRECTION                           \
+    if (!exact) {                                          \
+        instance_pixel_direction(inst, ray, &object);      \
+        exact = true;                                      \
+    }
+#else
+#define INSTANCE_EXACT_DIRECTION
+#endif
     const double3 eye = inst->eye.xyz;
     __global const BvhNode* tree = nodes + inst->root;
     __global const int4* own = faces + inst->first;
@@ -117,6 +193,7 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
     intv found = SPLAT_INT(0), leaf = SPLAT_INT(-1);
 #define INSTANCE_VISIT(q)                                                                             \
     {                                                                                                 \
+        INSTANCE_EXACT_DIRECTION                                                                      \
         const int4 f = own[q];                                                                        \
         const realv s = mesh_hit_of(INSTANCE_CORNERS(vertices, f, eye), &object);                     \
         const intv take = s < nearest || (s == nearest && s < MISS && (!found || SPLAT_INT(q) < leaf)); \
@@ -128,6 +205,7 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
     }
     PYCLRAY_TRAVERSE_PACKET(tree, box, nearest, INSTANCE_VISIT)
 #undef INSTANCE_VISIT
+#undef INSTANCE_EXACT_DIRECTION
     *which = leaf;
     return found ? nearest / SPLAT(scale) : SPLAT(MISS);
 }

@@ -21,9 +21,10 @@
 #define LANES PYCLRAY_LANES
 
 /* A render's fp32 pinhole camera rays carry their image-plane point as float pairs, for the flat
- * shapes' n . d (pixel_dot below); cast traces the caller's rays, a camera table's rays (a lens, a
- * panorama: kernels/camera.h) come rounded from the host, the closest-point query has no rays, and
- * fp64 has the digits without it. */
+ * shapes' n . d (pixel_dot below) and mesh instances' object directions (kernels/instance.cl);
+ * cast traces the caller's rays, a camera table's rays (a lens, a panorama: kernels/camera.h) come
+ * rounded from the host, the closest-point query has no rays, and fp64 has the digits without it.
+ * (bench/kernels_ab.py --without-pixel-exact compiles the define out to measure what it costs.) */
 #if !defined(PYCLRAY_FP64) && !defined(PYCLRAY_CAST) && !defined(PYCLRAY_CAMERA_TABLE) && !defined(PYCLRAY_CLOSEST)
 #define PYCLRAY_PIXEL_EXACT 1
 #endif
@@ -161,6 +162,28 @@ inline realv v_sqrt(const realv x) { return PYCLRAY_LANEWISE(PYCLRAY_SQRT_LANE, 
 #else
 inline realv v_sqrt(const realv x) { return sqrt(x); }
 #endif
+/* a b + c rounded once (a fused multiply-add, exact IEEE on every device: in hardware or emulated), lane
+ * by lane; on PoCL's CPU device the compiler's own, as v_sqrt's (one vector instruction with FMA) */
+#ifdef PYCLRAY_INLINE_BUILTINS
+#ifdef PYCLRAY_FP64
+#define PYCLRAY_FMA_LANE(a, b, c) __builtin_fma(a, b, c)
+#else
+#define PYCLRAY_FMA_LANE(a, b, c) __builtin_fmaf(a, b, c)
+#endif
+#if LANES == 1
+inline realv v_fma(const realv a, const realv b, const realv c) { return PYCLRAY_FMA_LANE(a, b, c); }
+#else
+#define PYCLRAY_FMA_OF_LANE(l, s) r.s = PYCLRAY_FMA_LANE(a.s, b.s, c.s);
+inline realv v_fma(const realv a, const realv b, const realv c)
+{
+    realv r;
+    PYCLRAY_EACH_LANE(PYCLRAY_FMA_OF_LANE)
+    return r;
+}
+#endif
+#else
+inline realv v_fma(const realv a, const realv b, const realv c) { return fma(a, b, c); }
+#endif
 
 /* -- packets of 3-vectors ------------------------------------------------------------------------ */
 typedef struct {
@@ -242,10 +265,9 @@ typedef struct {
 #endif
 #ifdef PYCLRAY_PIXEL_EXACT
     /* a camera ray's point (sx, sy, 1) on the image plane as float pairs, sx = x + x_low (x an exact
-     * product, x_low its rest: kernels/camera.h), x_high the upper half of x's bits (Veltkamp's
-     * split, for pixel_dot's error-free products), the same in y; and the point's length |(sx, sy, 1)|
+     * product, x_low its rest: kernels/camera.h), the same in y; and the point's length |(sx, sy, 1)|
      * (dir is the point over it) */
-    realv x, x_high, x_low, y, y_high, y_low, length;
+    realv x, x_low, y, y_low, length;
 #endif
 } RayPacket;
 
@@ -272,29 +294,9 @@ typedef struct {
 #endif
 
 #ifdef PYCLRAY_PIXEL_EXACT
-/* Error-free float arithmetic (Dekker 1971, Knuth): a b = p + e and a + b = s + e exactly, in float
- * operations only (contraction is off: each rounding is the one written). Veltkamp's split of a
- * float into halves of 12 bits (with 2^12 + 1) makes the halves' products exact. */
-inline float pixel_split_high(const float a)
-{
-    const float t = 4097.0f * a;
-    return t - (t - a);
-}
-
-inline realv pixel_split_high_v(const realv a)
-{
-    const realv t = SPLAT(4097.0f) * a;
-    return t - (t - a);
-}
-
-/* a b - p for p = a b rounded, a a shape's constant and b split by the camera (b_high) */
-inline realv pixel_product_error(const float a, const realv b, const realv b_high, const realv p)
-{
-    const float a_high = pixel_split_high(a), a_low = a - a_high;
-    const realv b_low = b - b_high;
-    return ((SPLAT(a_high) * b_high - p) + SPLAT(a_high) * b_low + SPLAT(a_low) * b_high) + SPLAT(a_low) * b_low;
-}
-
+/* Error-free float arithmetic: a + b = s + e exactly, e from Knuth's two-sum (contraction is off,
+ * so each rounding is the one written); a b = p + e exactly, e the fused multiply-add a b - p (the
+ * rounding error of a product is a float, outside underflow and overflow). */
 inline realv pixel_sum_error(const realv a, const realv b, const realv s)
 {
     const realv z = s - a;
@@ -308,21 +310,27 @@ inline realv pixel_sum_error(const realv a, const realv b, const realv s)
 #define PIXEL_EXACT_COS 0.125f
 
 /* n . dir of a camera ray, n = high + low (a shape's unit direction in the camera's space as a float
- * pair from float64: kernels/space.h's to_space and to_space_low): n . (sx, sy, 1) with its two
- * products and two sums error-free, their errors and the low parts' terms added, over the point's
- * length. Within a few roundings of the exact n . d relative to itself, also where the terms cancel
- * (a grazing ray: n . d near 0); that relative error, times the distance, is a flat shape's depth
- * error, where the plain dot product's eps / |n . d| is one of a sideways move. */
+ * pair from float64: kernels/space.h's to_space and to_space_low), lane by lane: n . (sx, sy, 1)
+ * with its two products (fused multiply-adds) and two sums error-free, their errors and the low
+ * parts' terms added (small numbers: the pairs' rests, kernels/camera.h; their own roundings,
+ * fused too, are far below what the result needs), over the point's length. Within a few roundings of the exact n . d
+ * relative to itself, also where the terms cancel (a grazing ray: n . d near 0); that relative
+ * error, times the distance, is a flat shape's depth error, where the plain dot product's
+ * eps / |n . d| is one of a sideways move. */
+inline realv pixel_dot_lanes(const RayPacket* ray, const vec3v high, const vec3v low)
+{
+    const realv px = high.x * ray->x, py = high.y * ray->y;
+    const realv ex = v_fma(high.x, ray->x, -px), ey = v_fma(high.y, ray->y, -py);
+    const realv s1 = px + py, s2 = s1 + high.z;
+    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, high.z, s2);
+    const realv rest = v_fma(high.x, ray->x_low, v_fma(high.y, ray->y_low, v_fma(low.x, ray->x, v_fma(low.y, ray->y, low.z))));
+    return (s2 + (((ex + ey) + (e1 + e2)) + rest)) / ray->length;
+}
+
+/* the same for one direction n = high + low (xyz) in every lane */
 inline realv pixel_dot(const RayPacket* ray, const real4 high, const real4 low)
 {
-    const realv px = SPLAT(high.x) * ray->x, py = SPLAT(high.y) * ray->y, nz = SPLAT(high.z);
-    const realv ex = pixel_product_error(high.x, ray->x, ray->x_high, px);
-    const realv ey = pixel_product_error(high.y, ray->y, ray->y_high, py);
-    const realv s1 = px + py, s2 = s1 + nz;
-    const realv e1 = pixel_sum_error(px, py, s1), e2 = pixel_sum_error(s1, nz, s2);
-    const realv rest = (SPLAT(high.x) * ray->x_low + SPLAT(high.y) * ray->y_low)
-                       + ((SPLAT(low.x) * ray->x + SPLAT(low.y) * ray->y) + SPLAT(low.z));
-    return (s2 + (((ex + ey) + (e1 + e2)) + rest)) / ray->length;
+    return pixel_dot_lanes(ray, v3_splat(high), v3_splat(low));
 }
 
 /* n . dir: the plain dot product, or pixel_dot in the lanes of camera rays below PIXEL_EXACT_COS
@@ -334,10 +342,6 @@ inline realv pixel_along(const RayPacket* ray, const real4 high, const real4 low
     return ANY(grazing) ? (grazing ? pixel_dot(ray, high, low) : plain) : plain;
 }
 #define PIXEL_DOT(ray, high, low, plain) pixel_along((ray), (high), (low), (plain))
-/* pixel_dot for every packet of camera rays (a direction's every component, not a cosine: an
- * instance's object-space direction, kernels/instance.cl) */
-#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (FROM_EYE(ray) ? pixel_dot((ray), (high), (low)) : (plain))
 #else
 #define PIXEL_DOT(ray, high, low, plain) (plain)
-#define PIXEL_DOT_ALWAYS(ray, high, low, plain) (plain)
 #endif

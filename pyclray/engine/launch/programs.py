@@ -300,6 +300,8 @@ class Variant:
             parts += [FROM_WORLD_BEGIN, _read("space.h"), "#define PYCLRAY_REBASE 1"]
             parts += [_read(name) for name in _kernel_files([s for s in shapes if s.tested_from_world])] + [FROM_WORLD_END]
         parts += [_read(name) for name in _kernel_files(shapes)]
+        if self.query == "count_hits" and "surface" in self.aovs:  # the shapes' closest points too (allhits.cl)
+            parts += [SURFACE_BEGIN, _read("closest.h")] + [_read(name) for name in _kernel_files(shapes)] + [SURFACE_END]
         if cast:
             parts.append(_read("rays.h"))
         else:
@@ -368,6 +370,10 @@ FROM_WORLD_BEGIN = """#pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 #define PYCLRAY_REBASE_OUT"""
 FROM_WORLD_END = "#undef PYCLRAY_REBASE"
+# occupancy's count (kernels/allhits.cl: PYCLRAY_AOV_SURFACE) compiles each shape file twice too: its
+# ray tests, then its closest-point part (<type>_closest, as in the closest-point query's program)
+SURFACE_BEGIN = "#undef PYCLRAY_CAST\n#define PYCLRAY_CLOSEST 1"
+SURFACE_END = "#undef PYCLRAY_CLOSEST\n#define PYCLRAY_CAST 1"
 
 
 def _unique(items) -> list:

@@ -269,7 +269,17 @@ CLOSEST = (
 
 # count_hits: each ray's number of hits; all_hits: that, and its first hit_capacity hits in its rows
 # (r * hit_capacity on): distance (float64), kind, entry and triangle (kernels/allhits.cl)
-COUNT_HITS = (*RAYS, Parameter("hit_counts", "__global int*"))
+COUNT_HITS = (
+    *RAYS,
+    Parameter("hit_counts", "__global int*"),
+    # occupancy's rays from points (the aov "surface", kernels/allhits.cl): whether each point lies on
+    # a surface, by the closest-point query's leaves (per leaf's first place in refs), refs and the
+    # types' float64 world entries
+    Parameter("surface_leaf_codes", "__global const int*", (_asked("surface"),)),
+    Parameter("surface_refs", "__global const int*", (_asked("surface"),)),
+    EachType((Parameter("{type}_surface_worlds", "__global const {World}*", (_asked("surface"),)),)),
+    Parameter("surface_out", "__global uchar*", (_asked("surface"),)),
+)
 ALL_HITS = (
     *RAYS,
     Parameter("hit_counts", "__global int*"),

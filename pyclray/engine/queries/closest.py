@@ -25,6 +25,7 @@ from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
 from ..opencl.device import launch
+from .hits import count_from_points
 
 SIGNS = ("parity", "winding")
 
@@ -65,8 +66,8 @@ def check_points(points, name: str = "points") -> tuple[np.ndarray, tuple]:
         raise RequestError(f"{name}: expected an array of shape (..., 3), got shape {array.shape}")
     shape = array.shape[:-1]
     flat = np.ascontiguousarray(array.reshape(-1, 3))
-    finite = np.isfinite(flat).all(axis=1)
-    if not finite.all():
+    if not np.isfinite(flat).all():  # (the rows looked at only then: numpy's reductions over the short axis are slow)
+        finite = np.isfinite(flat).all(axis=1)
         row = int(np.argmin(finite))
         index = np.unravel_index(row, shape)
         where = str(index[0]) if len(index) == 1 else str(tuple(int(i) for i in index))
@@ -112,6 +113,9 @@ class ClosestInputs:
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
         self._winding = None
+        # occupancy's grid of a closed mesh (engine/queries/parity_grid.py) and the count kernel's
+        # arguments of its surface test, where asked for
+        self.parity_grid = self.surface_arguments = None
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -241,14 +245,91 @@ def signed_distance(tracer, points, sign: str = "parity") -> np.ndarray:
 def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     sign = check_sign(sign)
     flat, shape = check_points(points)
+    inside, rest = np.zeros(len(flat), bool), slice(None)
+    closed = tracer.mesh_handle(closed=True)
+    if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
+        # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
+        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
+        if grid is not None:
+            decided, inside = grid.lookup(flat, sign)
+            rest = np.flatnonzero(~decided)
+        if sign == "parity" and len(closed.shapes) == 1 and _shares_boxes(closed):
+            inside[rest] = _one_closed_mesh(closed, flat[rest])
+            return inside.astype(np.uint8).reshape(shape)
     # the meshes' inside first (the costlier part); then, for the points no mesh holds, the analytic
     # solids and whether the point lies on a surface: only a surface point at distance 0 is looked
     # for (within = 0), a traversal of the boxes that hold the point
-    inside = _mesh_inside(tracer, flat, sign)
-    rest = ~inside
-    if rest.any():
-        inside[rest] = run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
+    points = flat[rest]
+    found = _mesh_inside(tracer, points, sign)
+    other = ~found
+    if other.any():
+        found[other] = run_closest(tracer, points[other], ("inside",), within=0.0)["inside"].astype(bool)
+    inside[rest] = found
     return inside.astype(np.uint8).reshape(shape)
+
+
+def _shares_boxes(closed) -> bool:
+    """Whether the closest-point query of the handle traverses the BVH its rays do (the same wide
+    nodes around the same anchor: closest.cl's and rays.h's box tests of the same float boxes)."""
+    inputs = closed.closest_inputs()
+    return inputs.bvh is closed.prepared.bvh and bool(np.all(inputs.anchor == closed.cast_inputs()[1][:3]))
+
+
+def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
+    """Inside by parity in a scene of one closed mesh (its handle; points checked): an odd count of
+    the parity ray, or a point on the surface. The count's kernel also decides whether a point with
+    an even count lies on a surface, by the closest-point query's test of the leaves whose boxes
+    hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search visits no other leaf),
+    and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
+    the query's from every point."""
+    counts, on = count_from_points(closed, points, parity_directions(closed, points), _surface_arguments(closed))
+    found = (counts & 1).astype(bool) | (on == 1)
+    unknown = np.flatnonzero(on == 2)
+    if len(unknown):
+        found[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"].astype(bool)
+    return found
+
+
+def _surface_arguments(closed) -> dict:
+    """The count kernel's arguments of its surface test (kernels/allhits.cl: PYCLRAY_AOV_SURFACE):
+    the closest-point query's refs and world entries, and per place of cast's refs where a leaf
+    starts the query's code of that leaf (the two programs' wide nodes are the same but for the
+    leaves' codes, which cast renumbers: engine/queries/cast_blocks.py); made once per handle."""
+    inputs = closed.closest_inputs()
+    with closed.lock:
+        if inputs.surface_arguments is None:
+            ctx = closed.ctx
+            nodes = inputs.bvh.nodes(inputs.anchor)
+            cast_nodes = np.empty_like(nodes)
+            cl.enqueue_copy(ctx.queue, cast_nodes, closed.cast_inputs()[0]["nodes"])
+            ctx.queue.finish()
+            leaf = nodes["child"] < 0
+            places = (~cast_nodes["child"][leaf].astype(np.int64)) >> 3
+            codes = np.zeros(int(places.max()) + 1 if len(places) else 1, np.int32)
+            codes[places] = nodes["child"][leaf]
+            inputs.nbytes += codes.nbytes
+            inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
+                                        **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
+        return inputs.surface_arguments
+
+
+def _parity_grid(tracer, closed, sign: str):
+    """The grid of a scene of closed meshes alone (tracer; closed: the handle of those meshes,
+    which keeps it with its closest-point inputs: engine/queries/parity_grid.py), made at its first
+    call, with its cells decided by the sign rule; None where the meshes have none. Each closed
+    mesh's parity and winding number is constant on a region no triangle meets: so is whether some
+    mesh holds a point, decided by the rule's own test of one point per region (_mesh_inside)."""
+    inputs = closed.closest_inputs()
+    with closed.lock:
+        if inputs.parity_grid is None:
+            from .parity_grid import ParityGrid  # numba's code, for large batches only
+
+            corners = [mesh.corners() for mesh in closed.shapes]
+            inputs.parity_grid = ParityGrid.of(tuple(np.concatenate(c) for c in zip(*corners))) or False
+        grid = inputs.parity_grid or None
+        if grid is not None:  # the exact inside of points on no surface
+            grid.decide(sign, lambda points: _mesh_inside(tracer, points, sign))
+        return grid
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:

@@ -87,6 +87,20 @@ def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
     return _counts(tracer, batch).reshape(batch.shape)
 
 
+def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(counts int32, on uint8) of rays from checked points (N, 3) along directions (N, 3): each
+    one's number of hits t > 0, and where that is even whether the point lies on a surface (1; 0
+    not, or an odd count; 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE); surface: that
+    test's arguments (the closest-point query's leaves, refs and world entries: closest.py)."""
+    batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
+    counts = np.zeros(batch.count, np.int32)
+    on = np.zeros(batch.count, np.uint8)
+    if batch.count:
+        variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision)
+        _run(tracer.ctx, variant, batch, surface, {"hit_counts": counts, "surface_out": on})
+    return counts, on
+
+
 # all_hits' rows per ray in its one pass: a ray with more hits is cast again with room for all of them
 CAPACITY = 8
 

@@ -83,7 +83,7 @@ class Instances(SharedArrays, SmoothShading, Shape):
             ("m1", "real4"),
             ("m2", "real4"),
             # what rounding m0, m1, m2 left out, rounded (row + row_low: the fp32 camera rays' object
-            # directions from an error-free product, kernels/lanes.h's pixel_dot)
+            # directions in float64 from the exact pixel point, kernels/instance.cl's instance_pixel_row)
             ("m_low0", "real4"),
             ("m_low1", "real4"),
             ("m_low2", "real4"),

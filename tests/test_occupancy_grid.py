@@ -1,0 +1,234 @@
+"""Occupancy of a scene of closed meshes (engine/queries/closest.py: occupancy, _one_closed_mesh): a
+large batch's points are looked up in the meshes' parity grid (engine/queries/parity_grid.py: its empty
+cells' regions decided by one exact ray each), the others counted by their parity rays, whose
+kernel also tests a point with an even count for lying on the surface, over the leaves whose boxes
+hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the closest-point query where more than
+SURFACE_LEAVES do). Held to truths known by construction (points exactly on the triangles, written
+in float64; points just off a convex mesh's faces), to the float64 oracle, and to the general path
+(the parity count of every point, then the closest-point query's surface search) bit for bit."""
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine.queries import closest
+from pyclray.engine.queries.closest import COHERENT_FROM
+from pyclray.engine.queries.parity_grid import INSIDE, OUTSIDE, SURFACE
+from pyclray.model.shapes.mesh_shapes import perturbed_sphere, torus
+from pyclray.reference import oracle
+
+CAMERA = pyclray.Camera((0, 0, 10), (0, 0, 0))
+
+
+def scene_of(*shapes) -> pyclray.Scene:
+    return pyclray.Scene(CAMERA, pyclray.Image(8, 8), tuple(shapes))
+
+
+def octahedron(n: int, shift: float = 0.0) -> pyclray.Mesh:
+    """|x| + |y| + |z| = 1 (+ shift), each face cut into n^2 triangles: every vertex's coordinates
+    are multiples of 1/n, exact in float64 (n a power of two), the faces tilted to every axis."""
+    index, vertices, faces = {}, [], []
+
+    def vertex(key):
+        if key not in index:
+            index[key] = len(vertices)
+            vertices.append(key)
+        return index[key]
+
+    for sx in (1, -1):
+        for sy in (1, -1):
+            for sz in (1, -1):
+                def at(i, j):  # the face's point (i, j, n - i - j) / n, signed
+                    return vertex((sx * i, sy * j, sz * (n - i - j)))
+                for i in range(n):
+                    for j in range(n - i):
+                        tri = [(at(i, j), at(i + 1, j), at(i, j + 1))]
+                        if i + j < n - 1:
+                            tri.append((at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)))
+                        for a, b, c in tri:  # outward: the face's normal (sx, sy, sz)
+                            faces.append((a, b, c) if sx * sy * sz > 0 else (a, c, b))
+    mesh = pyclray.Mesh(np.array(vertices, np.float64) / n + shift, np.array(faces))
+    assert mesh.closed
+    return mesh
+
+
+def cube(n: int, shift: float = 0.0) -> pyclray.Mesh:
+    """The cube [0, 1]^3 (+ shift), each face cut into n x n squares of two triangles each (the
+    vertices' coordinates multiples of 1/n, exact in float64 for n a power of two), outward."""
+    index, vertices, faces = {}, [], []
+
+    def vertex(key):
+        if key not in index:
+            index[key] = len(vertices)
+            vertices.append(key)
+        return index[key]
+
+    for axis in range(3):
+        u, w = (axis + 1) % 3, (axis + 2) % 3
+        for side in (0, n):
+            def at(i, j):
+                key = [0, 0, 0]
+                key[axis], key[u], key[w] = side, i, j
+                return vertex(tuple(key))
+            for i in range(n):
+                for j in range(n):
+                    quad = [(at(i, j), at(i + 1, j), at(i + 1, j + 1)), (at(i, j), at(i + 1, j + 1), at(i, j + 1))]
+                    for a, b, c in quad:  # (u, w, axis) is right-handed: outward on the far side
+                        faces.append((a, b, c) if side else (a, c, b))
+    mesh = pyclray.Mesh(np.array(vertices, np.float64) / n + shift, np.array(faces))
+    assert mesh.closed
+    return mesh
+
+
+def on_surface_points(mesh: pyclray.Mesh, interior: bool) -> np.ndarray:
+    """Every triangle's vertices and edge midpoints, and with interior its points a/4 + b/4 + c/2:
+    exact in float64 for a mesh of coordinates that are multiples of 1/8 near 0 or 1e6; repeated up
+    to a large batch."""
+    a, b, c = mesh.corners()
+    points = [a, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)] + ([0.25 * a + 0.25 * b + 0.5 * c] if interior else [])
+    points = np.vstack(points)
+    return np.vstack([points] * (COHERENT_FROM // len(points) + 1))
+
+
+def general_path(tracer, points, sign="parity") -> np.ndarray:
+    """The answers without the shortcuts: each point's ray (the closed meshes' count, or signed
+    count), then the closest-point query's search for a surface point at distance 0 of every point
+    not inside."""
+    flat, _ = closest.check_points(points)
+    inside = closest._mesh_inside(tracer, flat, sign)
+    rest = ~inside
+    inside[rest] = closest.run_closest(tracer, flat[rest], ("inside",), within=0.0)["inside"].astype(bool)
+    return inside.astype(np.uint8)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+@pytest.mark.parametrize("make, interior", [(octahedron, False), (cube, True)])
+def test_points_on_the_triangles_are_inside(make, interior, precision, shift):
+    """Points exactly on the triangles (the grid's surface cells, the count kernel's surface test)
+    are inside, near the origin and 1e6 from it: the vertices and edge midpoints of the tilted
+    octahedron's triangles, and on the cube's faces their interior points too. (The closest-point
+    query finds a point inside a tilted face at the distance its rounded unit normal gives, a
+    float64 rounding above 0: its inside is then its ray's, as before this grid.)"""
+    mesh = make(8, shift)
+    points = on_surface_points(mesh, interior)
+    assert np.array_equal(points - shift, on_surface_points(make(8), interior))  # exact: no rounding
+    assert len(points) >= COHERENT_FROM
+    got = pyclray.occupancy(scene_of(mesh), points, precision=precision)
+    assert got.all()
+    assert pyclray.occupancy(scene_of(mesh), points[:200], precision=precision).all()  # a small batch
+
+
+@pytest.mark.parametrize("precision, offset", [("fp64", 1e-9), ("fp32", 1e-6)])
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_points_just_off_the_faces(precision, offset, shift):
+    """Points off a face of the (convex) octahedron by offset of its size along its normal: 0
+    outside, 1 inside (float32 rounds a triangle tested from a point by about 6e-8 of their
+    distance: 1e-6 there, 1e-9 in float64)."""
+    mesh = octahedron(8, shift)
+    rng = np.random.default_rng(9)
+    a, b, c = mesh.corners()
+    tri = rng.integers(0, len(a), COHERENT_FROM + 300)
+    u = rng.uniform(0.1, 0.8, len(tri))
+    v = rng.uniform(0.05, 0.9 - u)
+    on = a[tri] + u[:, None] * (b[tri] - a[tri]) + v[:, None] * (c[tri] - a[tri])
+    normal = mesh.face_normals()[tri]
+    scene = scene_of(mesh)
+    assert not pyclray.occupancy(scene, on + 2 * offset * normal, precision=precision).any()
+    assert pyclray.occupancy(scene, on - 2 * offset * normal, precision=precision).all()
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_same_bits_as_the_general_path(precision):
+    """A perturbed sphere and a torus: uniform points in and around the box, points near the
+    surface, the vertices: the grid's and the count kernel's answers are the general path's."""
+    rng = np.random.default_rng(12)
+    v, f = perturbed_sphere(24, 36, 1.0, 0.1, rng)
+    for mesh in (pyclray.Mesh(v + 3.0, f), pyclray.Mesh(*torus(16, 24, 1.0, 0.3))):
+        lo, hi = (np.asarray(x) for x in mesh.box())
+        uniform = rng.uniform(lo - 0.2, hi + 0.2, (COHERENT_FROM + 1000, 3))
+        with pyclray.prepare(scene_of(mesh), precision=precision) as tracer:
+            seeds = rng.uniform(lo, hi, (COHERENT_FROM, 3))
+            near = tracer.closest_points(seeds)["position"].astype(np.float64)
+            near = near + rng.normal(size=near.shape) * 10.0 ** rng.uniform(-9, -2, (len(near), 1))
+            vertices = np.vstack([mesh.world_vertices()] * (COHERENT_FROM // len(mesh.world_vertices()) + 1))
+            for points in (uniform, near, vertices):
+                for sign in ("parity", "winding"):
+                    assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
+
+
+@pytest.mark.parametrize("sign", ["parity", "winding"])
+def test_several_closed_meshes(sign):
+    """Two overlapping closed meshes (a torus through a perturbed sphere: winding 2 where both
+    hold a point) and a third apart: the grid of all their triangles decides the points of its
+    empty cells by the rule's own test of one point per region; the same answers as the general
+    path, and the oracle's off the surfaces."""
+    rng = np.random.default_rng(16)
+    v, f = perturbed_sphere(16, 24, 0.8, 0.1, rng)
+    shapes = (pyclray.Mesh(*torus(16, 24, 1.0, 0.3)), pyclray.Mesh(v + [1.0, 0.0, 0.0], f),
+              pyclray.Mesh(v * 0.5 + [0.0, 0.0, 3.0], f))
+    scene = scene_of(*shapes)
+    points = rng.uniform([-1.5, -1.5, -1.0], [2.0, 1.5, 3.6], (COHERENT_FROM + 500, 3))
+    with pyclray.prepare(scene) as tracer:
+        got = tracer.occupancy(points, sign)
+        assert np.array_equal(got, general_path(tracer, points, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        decided, _ = grid.lookup(points, sign)
+        assert decided.mean() > 0.5  # most points decided by the grid
+    clear = oracle.closest_points(scene, points)["distance"] > 0
+    assert np.array_equal(got.astype(bool)[clear], oracle.inside(scene, points, sign)[clear])
+
+
+@pytest.mark.parametrize("turned", [True, False])
+def test_nested_shells_regions_against_the_oracle(turned):
+    """One closed mesh of two spheres, the inner one turned inward (a hollow ball) or not (winding
+    number 2 within it: inside by winding, outside by parity): three regions of empty cells (beyond,
+    within the shell, the cavity), each decided by its own ray; uniform points and points beyond
+    the grid against the oracle's exact inside, by both rules."""
+    rng = np.random.default_rng(14)
+    v, f = perturbed_sphere(20, 30, 1.0, 0.05, rng)
+    inner = f[:, ::-1] if turned else f
+    mesh = pyclray.Mesh(np.vstack([v, 0.5 * v]), np.vstack([f, inner + len(v)]))
+    assert mesh.closed
+    scene = scene_of(mesh)
+    points = np.vstack([rng.uniform(-1.3, 1.3, (COHERENT_FROM + 500, 3)), rng.uniform(5, 9, (50, 3))])
+    cavity = np.linalg.norm(points, axis=1) < 0.4
+    assert cavity.any()
+    for sign in ("parity", "winding"):
+        got = pyclray.occupancy(scene, points, sign=sign)
+        assert np.array_equal(got.astype(bool), oracle.inside(scene, points, sign))
+        assert got[cavity].all() == (sign == "winding" and not turned) and got[cavity].any() == got[cavity].all()
+        with pyclray.prepare(scene) as tracer:
+            grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign]).tolist())
+
+
+def test_points_in_many_leaves_boxes(monkeypatch):
+    """A cone whose apex and base centre are each a corner of 64 triangles (more leaves than the
+    count kernel notes: those points go to the closest-point query): the apex, the base centre and
+    points around them, against the oracle (on the surface: inside)."""
+    count = 64
+    angle = 2 * np.pi * np.arange(count) / count
+    rim = np.stack([np.cos(angle), np.sin(angle), np.zeros(count)], axis=1)
+    vertices = np.vstack([rim, [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]])
+    i = np.arange(count)
+    faces = np.vstack([np.stack([i, (i + 1) % count, np.full(count, count)], axis=1),
+                       np.stack([(i + 1) % count, i, np.full(count, count + 1)], axis=1)])
+    mesh = pyclray.Mesh(vertices, faces)
+    assert mesh.closed
+    scene = scene_of(mesh)
+    rng = np.random.default_rng(15)
+    corners = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    points = np.vstack([np.repeat(corners, 100, axis=0),
+                        np.repeat(corners, COHERENT_FROM // 2, axis=0) + rng.normal(size=(COHERENT_FROM, 3)) * 1e-3])
+    asked = []
+    original = closest.run_closest
+
+    def recording(tracer, points, outputs, within=np.inf):
+        asked.append(len(points))
+        return original(tracer, points, outputs, within)
+
+    monkeypatch.setattr(closest, "run_closest", recording)
+    got = pyclray.occupancy(scene, points)
+    assert asked and asked[0] >= 200  # the corners at least: more than SURFACE_LEAVES leaves
+    assert got[:200].all()
+    assert np.array_equal(got.astype(bool), oracle.inside(scene, points))
