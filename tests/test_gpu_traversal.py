@@ -217,6 +217,21 @@ def test_the_gpu_class_host_path_gives_the_same_bits(monkeypatch, scenes_dir, pr
         same_bits(one[name], eight[name], name)
 
 
+def test_occupancy_gives_the_same_answers(monkeypatch):
+    """occupancy's parity rays (count_hits with the surface test: the leaves entered at 0 noted as the
+    traversal reaches them, kernels/allhits.cl) through the pair nodes: the 8-lane path's answers, on
+    points inside, outside and on the surface of a closed mesh."""
+    rng = np.random.default_rng(11)
+    v, f = perturbed_sphere(16, 24, 1.0, 0.1, rng)
+    scene = scene_of([pyclray.Mesh(v, f)])  # one closed mesh: the count kernel's surface test decides
+    on = v[: len(v) // 2]  # its vertices: on the surface, whatever their parity rays' counts
+    points = np.concatenate([rng.uniform(-1.5, 1.5, (3000, 3)), on])
+    one = at_width(monkeypatch, 1, lambda: pyclray.occupancy(scene, points))
+    eight = at_width(monkeypatch, 8, lambda: pyclray.occupancy(scene, points))
+    same_bits(one, eight, "occupancy")
+    assert 0.05 < one.mean() < 0.95 and one[-len(on):].all()
+
+
 def test_a_refitted_frame_gives_the_same_bits(monkeypatch):
     """An animation's frame refitted in place (some spheres moved): the handle's pair nodes are made
     anew from the refitted boxes, and its render and cast at one lane are a fresh handle's at 8."""

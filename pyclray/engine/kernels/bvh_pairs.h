@@ -51,6 +51,7 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
         --top;                                                                          \
         if (stack_entry[top] <= limit) {                                                \
             int code = stack_child[top];                                                \
+            float entry = stack_entry[top];  /* where the ray enters code's box */      \
             while (code >= 0) {  /* down: a node per level */                           \
                 const PairNode node = nodes[code];                                      \
                 const int left = PAIR_CODE(node.left_lo), right = PAIR_CODE(node.right_lo); \
@@ -62,14 +63,17 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
                     stack_child[top] = right_first ? left : right;                      \
                     stack_entry[top++] = right_first ? left_entry : right_entry;        \
                     code = right_first ? right : left;                                  \
+                    entry = right_first ? right_entry : left_entry;                     \
                 } else if (in_left || in_right) {                                       \
                     code = in_left ? left : right;                                      \
+                    entry = in_left ? left_entry : right_entry;                         \
                 } else {                                                                \
                     break;  /* neither entered: code stays a node's, no leaf */         \
                 }                                                                       \
             }                                                                           \
             if (code < 0) {  /* a leaf: its shapes */                                   \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
+                PYCLRAY_LEAF_ENTERED(entry)                                             \
                 for (int leaf_mask = LEAF_MASK(first, count); leaf_mask != 0 && !(limit < 0.0f); \
                      leaf_mask &= leaf_mask - 1) {                                      \
                     const int q = first + BVH_LOWEST_BIT(leaf_mask);                    \

@@ -96,7 +96,7 @@ def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surfac
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
     if batch.count:
-        variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision)
+        variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision, pairs=batch.pairs)
         _run(tracer.ctx, variant, batch, surface, {"hit_counts": counts, "surface_out": on})
     return counts, on
 
