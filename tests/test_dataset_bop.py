@@ -332,6 +332,26 @@ def test_diameter_is_exact():
         assert diameter(points) == pytest.approx(brute, rel=1e-12)
 
 
+def test_diameter_of_many_points_is_every_pairs_largest():
+    """Sets of thousands of points (diameter passes over the pairs of runs of nearby points that
+    cannot hold the largest distance): on a sphere (every point on the hull, near-ties all over),
+    a torus and a circle with exact antipodes, a grid (many equal pairs), a flat square, a line,
+    and a spread cloud: the largest of all pairs' distances, measured one by one."""
+    rng = np.random.default_rng(7)
+    sphere = rng.normal(size=(3000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    angles = np.linspace(0, 2 * np.pi, 1200, endpoint=False)
+    u, v = np.meshgrid(angles[::20], angles[::40], indexing="ij")
+    torus = np.stack([(1 + 0.3 * np.cos(v)) * np.cos(u), (1 + 0.3 * np.cos(v)) * np.sin(u), 0.3 * np.sin(v)], -1)
+    grid = np.stack(np.meshgrid(*[np.arange(12.0)] * 3), -1)
+    sets = (sphere * 7.5 + 100.0, torus.reshape(-1, 3), np.c_[np.cos(angles), np.sin(angles), np.zeros(1200)],
+            grid.reshape(-1, 3), np.c_[rng.uniform(size=(2000, 2)), np.zeros(2000)],
+            np.outer(rng.uniform(size=1500), [1.0, -2.0, 0.5]), rng.standard_cauchy(size=(2500, 3)))
+    for points in sets:
+        brute = max(float(np.sqrt(((points[i] - points) ** 2).sum(axis=1)).max()) for i in range(len(points)))
+        assert diameter(points) == pytest.approx(brute, rel=1e-12)
+
+
 def test_coco_rle_is_pycocotools_encode():
     """Random masks of several sizes and densities, and masks starting with a run of 1s: the counts
     string and size are exactly pycocotools.mask.encode's."""
@@ -348,3 +368,111 @@ def test_coco_rle_is_pycocotools_encode():
     big = np.zeros((480, 640), bool)
     big[100:300, 200:500] = True  # runs beyond 2^15 and differences of both signs
     assert coco_rle(big)["counts"] == coco_mask.encode(np.asfortranarray(big.astype(np.uint8)))["counts"].decode()
+    # given the columns that hold the 1s (the writer passes its visible box's): the same string, for
+    # masks whose 1s start in the first row, end in the last, or fill their columns
+    for _ in range(200):
+        height, width = rng.integers(1, 13, 2)
+        mask = np.zeros((height, width), bool)
+        (x0, x1), (y0, y1) = sorted(rng.integers(0, width, 2)), sorted(rng.integers(0, height, 2))
+        mask[y0:y1 + 1, x0:x1 + 1] = rng.random((y1 - y0 + 1, x1 - x0 + 1)) < rng.choice([0.3, 0.9, 1.0])
+        expected = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))["counts"].decode()
+        for columns in ((x0, x1), (0, width - 1), (x0, width - 1)):
+            assert coco_rle(mask, columns)["counts"] == expected, (mask, columns)
+
+
+def torus(rings=24, sides=12, major=1.0, minor=0.35):
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, rings, endpoint=False), np.linspace(0, 2 * np.pi, sides, endpoint=False),
+                       indexing="ij")
+    vertices = np.stack([(major + minor * np.cos(v)) * np.cos(u), (major + minor * np.cos(v)) * np.sin(u),
+                         minor * np.sin(v)], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(rings), np.arange(sides), indexing="ij")
+    a, b = i * sides + j, ((i + 1) % rings) * sides + j
+    c, d = ((i + 1) % rings) * sides + (j + 1) % sides, i * sides + (j + 1) % sides
+    return vertices, np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+
+
+def test_amodal_masks_are_the_objects_rendered_alone():
+    """A view's amodal masks come from the scene's render (its visible pixels) and renders of each
+    object alone only over the pixels where it may lie hidden, and, where its box reaches beyond the
+    image, over the canvas outside the image (views.py: _start_alone): each mask equals the object
+    rendered alone over the whole image, and its outside count and box the object alone on the whole
+    three-times canvas less the image, bit for bit. Interlocked tori hide each other, a ball (scenery)
+    hides them, the ground cuts one; near cameras see them cut by the image's edges, one from inside
+    an object's box (corners behind the camera)."""
+    from pyclray.io.dataset import DatasetViews, make_format
+
+    vertices, faces = torus()
+    shapes = (pyclray.Plane((0.0, 1.0, 0.0), 0.0, name="ground"),
+              pyclray.Mesh(vertices, faces, scale=0.5, axis=(1.0, 0.0, 0.0), angle=90.0, translate=(0.0, 0.15, 0.0),
+                           name="flat", label=1),
+              pyclray.Mesh(vertices, faces, scale=0.5, translate=(0.5, 0.5, 0.0), name="upright", label=2),
+              pyclray.Sphere((-0.2, 0.35, 0.7), 0.25, name="ball"),
+              pyclray.Mesh(vertices, faces, scale=0.4, axis=(0.0, 1.0, 0.0), angle=40.0, translate=(-0.7, 0.1, -0.5),
+                           name="sunk", label=3))
+    image = pyclray.Image(80, 60)
+    scene = pyclray.Scene(pyclray.Camera((0.0, 2.0, 3.0), (0.0, 0.3, 0.0), fov=50.0), image, shapes,
+                          lights=(pyclray.PointLight((2.0, 4.0, 3.0), (20.0, 20.0, 20.0)),))
+    cameras = view_cameras(scene, Placement("hemisphere", (0.9, 3.5), (5.0, 80.0), 5), 14)
+    cameras.append(pyclray.Camera((0.5, 0.5, 0.1), (0.5, 0.5, 3.0), fov=60.0))  # inside the upright torus's box
+    work = DatasetViews(scene, cameras, make_format("bop"))
+    hidden = reaching_out = 0
+    try:
+        for view in work.views(range(len(cameras))):
+            camera = view.camera
+            K, pose = camera.intrinsics(80, 60), camera.pose()
+            big_K = K.copy()
+            big_K[:2, 2] += [80, 60]
+            canvas_camera = pyclray.Camera.from_intrinsics(big_K, pose, 240, 180)
+            for shape_id, (mask, count, box) in zip((1, 2, 4), view.alone):
+                alone = pyclray.render(pyclray.Scene(camera, image, (shapes[shape_id],)), aovs=("id",))["id"] >= 0
+                assert np.array_equal(mask, alone), (view.index, shape_id)
+                canvas = pyclray.render(pyclray.Scene(canvas_camera, pyclray.Image(240, 180), (shapes[shape_id],)),
+                                        aovs=("id",))["id"] >= 0
+                canvas[60:120, 80:160] = False
+                ys, xs = np.nonzero(canvas)
+                assert count == len(xs)
+                assert box == ((xs.min() - 80, ys.min() - 60, xs.max() - 80, ys.max() - 60) if len(xs) else None)
+                hidden += int((alone & (view.images["id"] != shape_id)).any())
+                reaching_out += int(count > 0)
+    finally:
+        work.close()
+    assert hidden >= 20 and reaching_out >= 10, (hidden, reaching_out)  # the cases the test is for did happen
+
+
+def test_object_frame_box_holds_the_object():
+    """The box the hidden pixels are bounded by (views.py: _object_frame): a turned mesh's model box
+    in its own frame holds its world vertices taken there, and is tighter than its world box; a shape
+    without a model (a sphere) has its world box and the identity."""
+    from pyclray.io.dataset.views import _object_frame
+
+    vertices, faces = torus()
+    mesh = pyclray.Mesh(vertices, faces, scale=(0.5, 0.3, 0.2), axis=(1.0, 1.0, 0.0), angle=35.0, translate=(1.0, 2.0, 3.0))
+    low, high, object_from_world = _object_frame(mesh)
+    world = mesh.world_vertices()
+    local = world @ object_from_world[:3, :3].T + object_from_world[:3, 3]
+    assert np.allclose(local.min(axis=0), low) and np.allclose(local.max(axis=0), high)
+    box = mesh.box()
+    assert np.prod(high - low) * abs(np.linalg.det(mesh.object_pose()[:3, :3])) < 0.7 * np.prod(box[1] - box[0])
+    sphere = pyclray.Sphere((1.0, 2.0, 3.0), 0.5)
+    low, high, object_from_world = _object_frame(sphere)
+    assert np.array_equal(np.stack([low, high]), sphere.box()) and np.array_equal(object_from_world, np.eye(4))
+
+
+def test_a_views_error_comes_after_the_views_before_it(tmp_path):
+    """The scene's renders run two views ahead (views.py: DatasetViews.views): a view whose render
+    cannot start (a camera beyond fp32's range from the shapes) raises its error in its turn, after
+    every view before it was handed over, as Tracer.render_views does."""
+    from pyclray.io.dataset import DatasetViews, make_format
+
+    scene = pyclray.load_scene(write_scene(tmp_path))
+    cameras = view_cameras(scene, Placement("hemisphere", seed=1), 5)
+    cameras[3] = pyclray.Camera((1e30, 0.0, 0.0), (0.0, 0.0, 0.0), fov=50.0)
+    work = DatasetViews(scene, cameras, make_format("bop"))
+    handed = []
+    try:
+        with pytest.raises(pyclray.SceneError, match="from the eye"):
+            for view in work.views(range(5)):
+                handed.append(view.index)
+    finally:
+        work.close()
+    assert handed == [0, 1, 2]

@@ -53,6 +53,19 @@ def test_the_right_pose_and_a_look_beside_the_shapes_are_not_warned_about():
     assert warned(lambda: pyclray.render(scene_with(OPENGL, plane_only))) == []
 
 
+def test_one_primitive_in_front_among_thousands_behind_is_not_warned_about():
+    """A mesh of 3,000 triangles behind the camera but one (not among every 997th, the sample
+    looked at first) in front of it, beside the view: all miss, and not every shape lies behind."""
+    behind = np.array([[0.0, 0.0, 8.0], [0.1, 0.0, 8.0], [0.0, 0.1, 8.0]])  # z = 8: behind the eye at z = 6
+    vertices = np.concatenate([behind + [0.0, 0.0, 0.01 * i] for i in range(3000)])
+    vertices[3:6] += [40.0, 0.0, -8.0]  # triangle 1 at z = 0, 40 to the left: in front, beside the view
+    mesh = pyclray.Mesh(vertices, np.arange(len(vertices)).reshape(-1, 3))
+    assert (pyclray.render(scene_with(OPENCV, (mesh,)), aovs=("id",))["id"] == -1).all()
+    assert warned(lambda: pyclray.render(scene_with(OPENCV, (mesh,)), aovs=("id",))) == []
+    far = pyclray.Mesh(vertices[6:], np.arange(len(vertices) - 6).reshape(-1, 3))  # without the two first
+    assert len(warned(lambda: pyclray.render(scene_with(OPENCV, (far,)), aovs=("id",)))) == 1
+
+
 def test_render_views_warns_for_the_view_that_looks_away():
     scene = scene_with(OPENCV)
     cameras = [scene.camera, pyclray.Camera.from_intrinsics(K, OPENGL, 64, 48)]

@@ -157,8 +157,14 @@ def _srgb_float32(linear: np.ndarray) -> np.ndarray:
     threshold (thr: +inf in the buckets the levels do not step in)."""
     base, step, thr = _srgb_tables()
     x = np.ascontiguousarray(linear)
-    bucket = x.view(np.uint32) >> 16
-    return base[bucket] + step[bucket] * (x >= thr[bucket])
+    # the buckets as intp once for three takes (a uint32 index is converted at each fancy index),
+    # the threshold's float32 lookup compared and dropped before the step's (the large temporaries
+    # in this order are quicker: docs/benchmarks.md, "Data sets (issue 40)")
+    bucket = (x.view(np.uint32) >> 16).astype(np.intp)
+    levels = base.take(bucket)
+    stepped = x >= thr.take(bucket)
+    levels += step.take(bucket) * stepped
+    return levels
 
 
 @functools.cache

@@ -53,21 +53,34 @@ def mask_box(mask: np.ndarray):
     return int(columns[0]), int(rows[0]), int(columns[-1]), int(rows[-1])
 
 
-def run_lengths(mask: np.ndarray) -> list[int]:
+def run_lengths(mask: np.ndarray, columns=None) -> list[int]:
     """The runs of 0s and 1s of a mask in column-major order, starting with a run of 0s (COCO's RLE
-    counts; the toolkit's pycoco_utils.binary_mask_to_rle)."""
-    flat = np.asarray(mask, bool).ravel(order="F")
+    counts; the toolkit's pycoco_utils.binary_mask_to_rle). columns: (first, last) holding every 1
+    of the mask, if known: only those columns are read, the others' 0s added to the end runs."""
+    mask = np.asarray(mask, bool)
+    first, last = (0, mask.shape[1] - 1) if columns is None or not mask.size else columns
+    flat = mask[:, first:last + 1].ravel(order="F")
     changes = np.flatnonzero(flat[1:] != flat[:-1]) + 1
     counts = np.diff(np.concatenate([[0], changes, [flat.size]])).tolist()
-    return [0] + counts if flat.size and flat[0] else counts
+    counts = [0] + counts if flat.size and flat[0] else counts
+    before, after = first * mask.shape[0], (mask.shape[1] - 1 - last) * mask.shape[0]
+    if before:
+        counts[0] += before
+    if after:  # onto the last run of 0s, or a new one after a last run of 1s
+        if len(counts) % 2:
+            counts[-1] += after
+        else:
+            counts.append(after)
+    return counts
 
 
-def coco_rle(mask: np.ndarray) -> dict:
+def coco_rle(mask: np.ndarray, columns=None) -> dict:
     """COCO's compressed run-length encoding of a mask, as pycocotools.mask.encode makes it: size
     [height, width] and counts, the run lengths as a string (maskApi.c's rleToString: from the
     third run on, each run less the one two before it, in 5-bit groups, low first, with a
-    continuation bit, as characters 48 + value). pycocotools.mask.decode reads it as it is."""
-    counts = run_lengths(mask)
+    continuation bit, as characters 48 + value). pycocotools.mask.decode reads it as it is.
+    columns: as run_lengths."""
+    counts = run_lengths(mask, columns)
     text = []
     for i, count in enumerate(counts):
         x = count - counts[i - 2] if i > 2 else count
@@ -182,30 +195,36 @@ class BopFormat:
             R_m2c = R_w2c @ world_from_model[:3, :3]
             t_m2c = (R_w2c @ world_from_model[:3, 3] + t_w2c) * mm
             gts.append({"cam_R_m2c": R_m2c.ravel().tolist(), "cam_t_m2c": t_m2c.tolist(), "obj_id": shape.label})
-            count_visible = int(visible.sum())
-            count_all = int(mask.sum()) + outside_count
+            # the counts and boxes over the box of the amodal mask, which holds the visible mask
+            whole = mask_box(mask)
+            x0, y0, x1, y1 = whole or (0, 0, -1, -1)
+            inside, seen_inside = mask[y0:y1 + 1, x0:x1 + 1], visible[y0:y1 + 1, x0:x1 + 1]
+            count_visible = int(np.count_nonzero(seen_inside))
+            count_all = int(np.count_nonzero(inside)) + outside_count
+            seen = mask_box(seen_inside)
+            if seen is not None:
+                seen = (seen[0] + x0, seen[1] + y0, seen[2] + x0, seen[3] + y0)
             box_all = box_visible = [-1, -1, -1, -1]
             if count_visible > 0:  # as calc_gt_info: no boxes for an object not seen
-                corners = [c for c in (mask_box(mask), outside_box) if c is not None]
+                corners = [c for c in (whole, outside_box) if c is not None]
                 box_all = bbox([c[0] for c in corners] + [c[2] for c in corners],
                                [c[1] for c in corners] + [c[3] for c in corners])
-                seen = mask_box(visible)
                 box_visible = bbox([seen[0], seen[2]], [seen[1], seen[3]])
             infos.append({
                 "bbox_obj": box_all, "bbox_visib": box_visible, "px_count_all": count_all,
-                "px_count_valid": int((depth[mask] > 0).sum()), "px_count_visib": count_visible,
+                "px_count_valid": int(np.count_nonzero(depth[y0:y1 + 1, x0:x1 + 1][inside])),
+                "px_count_visib": count_visible,
                 "visib_fract": count_visible / count_all if count_all > 0 else 0.0,
             })
             stem = f"{name}_{gt_id:06d}"
             files[f"{SCENE_FOLDER}/mask/{stem}.png"] = (lambda m=mask: png_bytes(mask_image(m)))
             files[f"{SCENE_FOLDER}/mask_visib/{stem}.png"] = (lambda m=visible: png_bytes(mask_image(m)))
             if count_visible > 0:  # calc_gt_coco: an annotation per instance seen, ids counting every instance
-                seen = mask_box(visible)
                 annotations.append({
                     "id": k * len(object_ids) + gt_id + 1, "image_id": k, "category_id": shape.label, "iscrowd": 0,
                     "area": count_visible,
                     "bbox": [seen[0], seen[1], seen[2] - seen[0] + 1, seen[3] - seen[1] + 1],
-                    "segmentation": coco_rle(visible), "width": width, "height": height,
+                    "segmentation": coco_rle(visible, (seen[0], seen[2])), "width": width, "height": height,
                 })
         record = {
             "im_id": k,

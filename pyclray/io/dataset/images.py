@@ -7,22 +7,23 @@ and id + 1 for shape id (``id_image``); a BOP or PNG mask is 255 where the objec
 from __future__ import annotations
 
 import struct
-import zlib
 
 import numpy as np
+from isal import isal_zlib
 
-# zlib's level for the data set's PNGs: masks and depth compress well already at level 1, and
-# encoding is most of a view's host work
-PNG_LEVEL = 1
+# The data set's PNGs are deflated by ISA-L (isal_zlib: the zlib format, read by every PNG
+# reader), at its level 2: the size of zlib's level 1 in a quarter of its time or less, and encoding
+# is most of a view's host work (docs/benchmarks.md, "Data sets (issue 40)")
+PNG_LEVEL = 2
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", isal_zlib.crc32(kind + data))
 
 
 def png_bytes(image: np.ndarray, level: int = PNG_LEVEL) -> bytes:
     """The PNG of an (H, W) uint8 or uint16 grey image or an (H, W, 3) uint8 RGB image (16-bit
-    samples big-endian, as PNG stores them), every row with filter 0 (none)."""
+    samples big-endian, as PNG stores them), every row with filter 0 (none); level: ISA-L's, 0 to 3."""
     image = np.asarray(image)
     if image.ndim == 2 and image.dtype in (np.uint8, np.uint16):
         colour, samples = 0, image.astype(">u2" if image.dtype == np.uint16 else np.uint8, copy=False)
@@ -37,7 +38,7 @@ def png_bytes(image: np.ndarray, level: int = PNG_LEVEL) -> bytes:
     lines = np.zeros((height, rows.shape[1] + 1), np.uint8)
     lines[:, 1:] = rows
     header = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", zlib.compress(lines.tobytes(), level))
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", isal_zlib.compress(lines, level))
             + _chunk(b"IEND", b""))
 
 

@@ -97,38 +97,62 @@ def ply_bytes(model: ObjectModel) -> bytes:
     return (header + vertex_lines + face_lines).encode()
 
 
+# diameter's runs of nearby points: DIAMETER_RUN consecutive points in the order of a Z curve through
+# a grid of 2^DIAMETER_BITS cells per axis
+DIAMETER_BITS = 10
+DIAMETER_RUN = 64
+
+
+def _z_order(points: np.ndarray) -> np.ndarray:
+    """The order of the points along a Z (Morton) curve through a grid over their box: runs of
+    consecutive points lie close together."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    cells = ((points - low) / np.where(high > low, high - low, 1.0) * ((1 << DIAMETER_BITS) - 1)).astype(np.int64)
+    code = np.zeros(len(points), np.int64)
+    for bit in range(DIAMETER_BITS):
+        for axis in range(3):
+            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
 def diameter(points: np.ndarray) -> float:
-    """The largest distance between two of the points, exactly (no sampling): only the points on
-    their convex hull can be the pair (scipy's hull, where installed), and of those the ones that
-    can reach the best pair found from the extremes; the squared distances of all pairs of the rest
-    come from matrix products in blocks (|a|^2 + |b|^2 - 2 a.b), and the pairs within their
-    rounding of the largest are measured again directly."""
+    """The largest distance between two of the points, exactly (no sampling): the best pair found
+    from the extremes bounds it from below; only the points far enough from the box's centre to
+    reach beyond it can be the pair; in runs of nearby points (_z_order), the pairs of runs whose
+    boxes are farther apart than the best so far have the squared distances of all their pairs
+    computed from matrix products (|a|^2 + |b|^2 - 2 a.b), and the pairs within their rounding of
+    the largest are measured again directly."""
     points = np.asarray(points, np.float64)
     if len(points) < 2:
         return 0.0
-    try:  # the pair lies on the convex hull
-        from scipy.spatial import ConvexHull
-
-        points = points[ConvexHull(points).vertices]
-    except Exception:  # no scipy, or a flat or degenerate set of points: all of them
-        pass
     centre = (points.min(axis=0) + points.max(axis=0)) / 2
     points = points - centre
     reach = np.linalg.norm(points, axis=1)
     extremes = np.unique(np.concatenate([points.argmin(axis=0), points.argmax(axis=0), [reach.argmax()]]))
     best = float(np.max(np.linalg.norm(points[extremes][:, None] - points[None], axis=2)))
     points = points[reach + reach.max() >= best]
+    points = points[_z_order(points)]
     squares = (points**2).sum(axis=1)
     slack = 16 * np.finfo(np.float64).eps * 4 * float(squares.max())  # the products' rounding, generously
+    starts = np.arange(0, len(points), DIAMETER_RUN)
+    run_low, run_high = np.minimum.reduceat(points, starts), np.maximum.reduceat(points, starts)
     largest, pairs = best**2, []
-    for start in range(0, len(points), 2048):
-        block = points[start:start + 2048]
-        d2 = squares[start:start + 2048, None] + squares[None, :] - 2.0 * (block @ points.T)
+    for i, start in enumerate(starts):
+        # the largest squared distance between this run's box and each later one's (per axis the
+        # farther of the two face pairs), a little over its rounding
+        span = np.maximum(run_high[i] - run_low[i:], run_high[i:] - run_low[i])
+        others = np.flatnonzero((span**2).sum(axis=1) * (1 + 1e-9) >= largest - slack) + i
+        if not len(others):
+            continue
+        columns = (starts[others][:, None] + np.arange(DIAMETER_RUN)).ravel()
+        columns = columns[columns < len(points)]
+        block = points[start:start + DIAMETER_RUN]
+        d2 = squares[start:start + DIAMETER_RUN, None] + squares[None, columns] - 2.0 * (block @ points[columns].T)
         top = float(d2.max())
         if top >= largest - slack:
             largest = max(largest, top)
-            rows, columns = np.nonzero(d2 >= largest - slack)
-            pairs.append((rows + start, columns))
+            rows, at = np.nonzero(d2 >= largest - slack)
+            pairs.append((rows + start, columns[at]))
     for rows, columns in pairs:
         exact = np.sqrt(((points[rows] - points[columns]) ** 2).sum(axis=1))
         best = max(best, float(exact.max()) if len(exact) else best)
