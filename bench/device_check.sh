@@ -10,8 +10,10 @@
 # - stage: only keep the .warp/ parts this call carried in /tmp/warp-parts (Warp's wheel is larger than
 #   what one call may carry: the calls before the last each carry one part and run `stage`; the last
 #   carries .whl/ and the last part and runs `all`, which stages it too and unpacks Warp);
-# - all: the device tests (TESTS, default the cast, render and device-array files; TEST_S seconds, 150
-#   by default) and bench.gpu_warp (BENCH_S seconds, 100 by default): under 5 minutes with the install;
+# - all: the device tests (TESTS, default the pair nodes' (one ray per work-item: a GPU's lane width,
+#   held to the 8-lane path's bits on the device itself), the cast, render and device-array files;
+#   TEST_S seconds, 150 by default) and bench.gpu_warp (BENCH_S seconds, 100 by default; its rows
+#   "wide tree" the same kernels through the wide tree at one lane): under 5 minutes with the install;
 # - dry: the same steps on this machine (PoCL on the CPU, Warp on the CPU, the checkout's .venv), at
 #   small sizes, with no install and no NVIDIA library: the script checked end to end.
 #
@@ -22,14 +24,14 @@ out=${OUT:-/tmp/pyclray-device}
 mkdir -p "$out"
 exec > >(tee -a "$out/all.log") 2>&1
 set -x
-TESTS=${TESTS:-"tests/test_cast.py tests/test_cast_device.py tests/test_cast_blocks.py tests/test_all_hits.py tests/test_render.py"}
+TESTS=${TESTS:-"tests/test_gpu_traversal.py tests/test_cast.py tests/test_cast_device.py tests/test_cast_blocks.py tests/test_all_hits.py tests/test_render.py"}
 if [ "$what" = dry ]; then
     python=${PYTHON:-.venv/bin/python}
     [ -x "$python" ] || python=/work/main/.venv/bin/python
     export PYTHONPATH=$PWD PYTHONUNBUFFERED=1
     "$python" -m pyclray devices || exit 1
-    timeout "${TEST_S:-600}" "$python" -m pytest -q -x -p no:cacheprovider ${DRY_TESTS:-tests/test_cast_device.py} 2>&1 | tail -5
-    timeout "${BENCH_S:-900}" "$python" -m bench.gpu_warp --rounds 1 --block 3 --size 128 --rays 100000 || exit 1
+    PYCLRAY_LANES=1 timeout "${TEST_S:-600}" "$python" -m pytest -q -x -p no:cacheprovider ${DRY_TESTS:-tests/test_cast_device.py} 2>&1 | tail -5
+    PYCLRAY_LANES=1 timeout "${BENCH_S:-900}" "$python" -m bench.gpu_warp --rounds 1 --block 3 --size 128 --rays 100000 || exit 1
     exit 0
 fi
 mkdir -p /tmp/warp-parts

@@ -13,6 +13,9 @@ Rows (bench.meshes' bunny, 80,000 triangles, and its 1,000,000-triangle perturbe
   float64 numpy arrays, the Frame's numpy arrays back; Warp: wp.array of the float32 rays uploaded,
   the launch, .numpy() of t, normal and face) and from device buffers (pyclray: pyopencl arrays in,
   out="device"; Warp: wp.arrays already on the device, launch and synchronize), each call's wall time.
+Where pyclray's lane width is 1 (a GPU: its pair nodes, kernels/bvh_pairs.h), the primary rays'
+kernel and the device buffers' cast also run through the wide tree at one lane (PYCLRAY_TRAVERSAL=wide),
+rows marked "wide tree": the pair nodes' figures against the layout they replace, on the same device.
 Warp builds its BVH once per mesh (wp.Mesh), pyclray prepares its handle once: neither is timed.
 Here (no GPU) both run on the CPU, Warp through its LLVM backend and pyclray through PoCL: a dry run of
 the script, its figures for scale only (docs/benchmarks.md, "The host path of a cast").
@@ -22,11 +25,13 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import pyopencl.array as cl_array
 
 import pyclray
+from pyclray.engine.launch.programs import lanes_for, pairs_for
 from pyclray.engine.opencl.device import context_for
 
 from .cast_host import kernel_ms, profiling_queue
@@ -117,12 +122,33 @@ class WarpCaster:
         return float(np.median(times))
 
 
+@contextmanager
+def wide_tree():
+    """pyclray's kernels through the wide tree at a lane width of 1 (programs.pairs_for)."""
+    saved = os.environ.get("PYCLRAY_TRAVERSAL")
+    os.environ["PYCLRAY_TRAVERSAL"] = "wide"
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop("PYCLRAY_TRAVERSAL")
+        else:
+            os.environ["PYCLRAY_TRAVERSAL"] = saved
+
+
+def traversal(ctx) -> str:
+    """The tree pyclray's kernels traverse on this device."""
+    lanes = lanes_for(ctx.device, "fp32")
+    return "pair nodes, one ray per work-item" if pairs_for(lanes) else f"wide tree, {lanes} lanes"
+
+
 def run(rounds: int, block: int, size: int, rays: int, warp_device: str) -> list[tuple]:
     """(case, pyclray ms, Warp ms) rows."""
     from pyclray.reference import oracle
 
     rows = []
     ctx = context_for(None)
+    pairs = pairs_for(lanes_for(ctx.device, "fp32"))  # a wide-tree row beside each pair-node one
     for label, mesh in meshes(None).items():
         scene = camera_for(mesh, size)
         tracer = pyclray.prepare(scene)
@@ -137,11 +163,17 @@ def run(rounds: int, block: int, size: int, rays: int, warp_device: str) -> list
         plain = profiling_queue(ctx)
         try:
             ours = kernel_ms(lambda: tracer.render(aovs=AOVS), block)
+            if pairs:
+                with wide_tree():
+                    tracer.render(aovs=AOVS)  # (its program built)
+                    wide = kernel_ms(lambda: tracer.render(aovs=AOVS), block)
         finally:
             ctx.queue.finish()
             ctx.queue = plain
         theirs = caster.kernel_ms(w_origins, w_directions, block)
         rows.append((f"{label}: primary rays {size}x{size}, kernel", ours, theirs))
+        if pairs:
+            rows.append((f"{label}: primary rays {size}x{size}, kernel, wide tree", wide, theirs))
         rows.append((f"{label}: primary rays {size}x{size}, call (wall)", timed["pyclray"]["median"],
                      timed["warp"]["median"]))
         # incoherent rays, from host arrays and from device buffers
@@ -157,6 +189,14 @@ def run(rounds: int, block: int, size: int, rays: int, warp_device: str) -> list
                      timed["warp host"]["median"]))
         rows.append((f"{label}: {rays:,} incoherent rays from device buffers", timed["pyclray device"]["median"],
                      timed["warp device"]["median"]))
+        if pairs:
+            def wide_device():
+                with wide_tree():
+                    return tracer.cast(d_origins, d_directions, aovs=AOVS, out="device")
+
+            wide = blocks({"pyclray device": wide_device}, rounds, inner)
+            rows.append((f"{label}: {rays:,} incoherent rays from device buffers, wide tree",
+                         wide["pyclray device"]["median"], timed["warp device"]["median"]))
         tracer.close()
     return rows
 
@@ -176,8 +216,8 @@ def main(argv=None):
     device = args.warp_device or ("cuda:0" if wp.is_cuda_available() else "cpu")
     ctx = context_for(None)
     rows = run(args.rounds, args.block, args.size, args.rays, device)
-    print(f"pyclray on {ctx.device.name.strip()}, Warp {wp.config.version} on {wp.get_device(device).name}; "
-          f"load {os.getloadavg()[0]:.1f}; ms, medians")
+    print(f"pyclray on {ctx.device.name.strip()} ({traversal(ctx)}), Warp {wp.config.version} on "
+          f"{wp.get_device(device).name}; load {os.getloadavg()[0]:.1f}; ms, medians")
     print("| case | pyclray ms | Warp ms | Warp / pyclray |\n|---|---|---|---|")
     for case, ours, theirs in rows:
         print(f"| {case} | {ours:.3f} | {theirs:.3f} | {theirs / ours:.2f}x |")

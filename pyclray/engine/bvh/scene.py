@@ -8,6 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from ...model.shapes import KINDS
+from .pairs import leaf_codes, pack_pairs
 from .tree import BINARY_STACK, BVH, LEAF_SIZE, SAH_FROM, SCENE_LEAF_SIZE, SCENE_TRAVERSAL, WIDEN, build, pack_nodes, widened
 from .wide import STACK, WIDTH, WideBVH, collapse, pack_wide
 
@@ -46,6 +47,13 @@ class SceneBVH:
     def binary_nodes(self, origin) -> np.ndarray:
         """The binary nodes with their boxes relative to origin (see pack_nodes)."""
         return pack_nodes(self.tree, origin)
+
+    def pair_nodes(self, origin, binary=None, wide_child=None) -> np.ndarray:
+        """The pair nodes (one ray per work-item: bvh/pairs.py) with their boxes relative to origin;
+        binary: the binary nodes already packed around origin, if made; wide_child: the wide
+        nodes' packed codes where cast's regroup rewrote their leaves."""
+        binary = self.binary_nodes(origin) if binary is None else binary
+        return pack_pairs(self.tree, binary, leaf_codes(self.tree, self.wide if wide_child is not None else None, wide_child))
 
     def refs(self, shape_types) -> np.ndarray:
         """refs[q] = index * 16 + kind (kernels/shapes.h: KIND_<Type> = 1 + its place among the

@@ -101,7 +101,11 @@
  * caller put them, scattered in the coherent order, and PoCL runs a work-group's items one after
  * the other, which would otherwise wait for each ray's first read (a seventh of cast's time on a
  * mesh). Each ray's own computations are unchanged: no bit of any result depends on the grouping. */
-#define CAST_GROUP 8
+/* CAST_GROUP (the host's, programs.ray_group): 8, or 1 where the program traverses the pair nodes (a
+ * GPU's one ray per work-item: kernels/bvh_pairs.h; a warp's rays are its work-items) */
+#ifndef CAST_GROUP
+#error "the host defines CAST_GROUP"
+#endif
 #define CAST_PREFETCH_ROW(p) { CAST_PREFETCH(p, 1) CAST_PREFETCH((__global const char*)(p) + 23, 1) }
 #define PYCLRAY_CAST_PREFETCH_GROUP(start)                                          \
     for (int ahead_i = (start); ahead_i < (start) + CAST_GROUP && ahead_i < n_rays; ++ahead_i) { \
@@ -233,22 +237,37 @@ inline void cast_directions4(const double4 x, const double4 y, const double4 z, 
                          (double4)(d0.z, d1.z, d2.z, d3.z), &directions_of[(l0)]);  \
     }
 
+/* the group's directions: in vectors of four rays; a group of one, its ray in all four lanes (each
+ * lane's operations are its own: lane 0 is that ray's, as in a group of 8) */
+#if CAST_GROUP == 8
+#define CAST_DIRECTIONS 8
+#define CAST_LOAD_GROUP_DIRECTIONS CAST_LOAD_DIRECTIONS4(0) CAST_LOAD_DIRECTIONS4(4)
+#elif CAST_GROUP == 1
+#define CAST_DIRECTIONS 4
+#define CAST_LOAD_GROUP_DIRECTIONS                                                  \
+    {                                                                               \
+        const double3 d0 = load_double3(directions, rays[0]);                       \
+        cast_directions4((double4)(d0.x), (double4)(d0.y), (double4)(d0.z), directions_of); \
+    }
+#else
+#error "CAST_GROUP must be 8 or 1"
+#endif
+
 /* The places i0 .. i0 + CAST_GROUP - 1 of the order (those below n_rays): each one's ray rays[l] and
  * its direction, set up together (see CAST_GROUP) */
 #define PYCLRAY_CAST_GROUP_SETUP                                                    \
     const int i0 = group * CAST_GROUP;                                              \
     const int in_group = n_rays - i0 < CAST_GROUP ? n_rays - i0 : CAST_GROUP;       \
     int rays[CAST_GROUP];                                                           \
-    CastDirection directions_of[CAST_GROUP];                                        \
+    CastDirection directions_of[CAST_DIRECTIONS];                                   \
     PYCLRAY_CAST_PREFETCH_GROUP(i0)                                                 \
     PYCLRAY_CAST_PREFETCH_GROUP(i0 + CAST_GROUP)                                    \
-    /* all CAST_GROUP (8) set up, four at once, the places past the batch's end as its last ray */ \
+    /* all CAST_GROUP set up, four at once, the places past the batch's end as its last ray */ \
     for (int l = 0; l < CAST_GROUP; ++l) {                                          \
         const int i = l < in_group ? i0 + l : n_rays - 1;                           \
         rays[l] = ordered ? order[i] : i;                                           \
     }                                                                               \
-    CAST_LOAD_DIRECTIONS4(0)                                                        \
-    CAST_LOAD_DIRECTIONS4(4)
+    CAST_LOAD_GROUP_DIRECTIONS
 
 /* A group's rays through one traversal (State: its per-ray state; start, step, end: its functions),
  * after PYCLRAY_CAST_GROUP_SETUP: interleaved, a step of each ray still traversing until none is,

@@ -66,7 +66,11 @@ PYCLRAY_WORK_ITEM_FUNCTION void render_packet(const int packet, const int r, PYC
 #if defined(PYCLRAY_BVH) && defined(PYCLRAY_HAS_BOUNDED)
     /* the bounded shapes through the BVH, whose boxes are in world axes around the scene's anchor */
     const BoxPacket box = box_packet(world_from_space(camera, ray.dir), camera->box_origin);
+#ifdef PYCLRAY_PAIRS  /* one ray per work-item (GPUs): the pair nodes (kernels/bvh_pairs.h) */
+    PYCLRAY_TRAVERSE_PAIRS(pair_nodes, box, best, PYCLRAY_VISIT)
+#else
     PYCLRAY_TRAVERSE_PACKET_WIDE(wide_nodes, box, best, PYCLRAY_VISIT)
+#endif
 #endif
 #ifdef PYCLRAY_CAMERA_TABLE
     PYCLRAY_OUT_OF_FIELD(in_field)

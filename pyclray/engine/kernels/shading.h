@@ -146,10 +146,9 @@ inline void shadow_box_origins(ShadowBoxes* s, const vec3v origin, const realv m
 /* per lane, where the ray from its own origin enters the node's box before limit, else +inf
  * (kernels/bvh_packet.h's box_entries, with the faces taken relative to the origin and the margin; the
  * origin's rounding by the margin, the faces' differences by the ray's cone, as there) */
-inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
+inline realv shadow_box_entries_of(const float4 lo, const float4 hi, const ShadowBoxes* s, const realv limit)
 {
     const BoxPacket* b = &s->box;
-    const float4 lo = node->lo, hi = node->hi;
     const realv near_x = (b->negative_x ? SPLAT(hi.x) : SPLAT(lo.x)) - s->near_origin.x;
     const realv near_y = (b->negative_y ? SPLAT(hi.y) : SPLAT(lo.y)) - s->near_origin.y;
     const realv near_z = (b->negative_z ? SPLAT(hi.z) : SPLAT(lo.z)) - s->near_origin.z;
@@ -161,6 +160,11 @@ inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes*
     const realv leave = v_min(v_min(far_x * b->far_inverse.x + b->far_add.x, far_y * b->far_inverse.y + b->far_add.y),
                               v_min(far_z * b->far_inverse.z + b->far_add.z, limit)) * SPLAT(BVH_GAMMA3_2);
     return enter <= leave ? enter : SPLAT(INFINITY);
+}
+
+inline realv shadow_box_entries(__global const BvhNode* node, const ShadowBoxes* s, const realv limit)
+{
+    return shadow_box_entries_of(node->lo, node->hi, s, limit);
 }
 
 #define PYCLRAY_SHADOW_VISIT_KIND(Type, type)                                         \
@@ -214,13 +218,22 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
                       (float4)(from, (real)m < margin ? m * (1.0f + 0x1p-23f) : m));
 }
 
+/* the bounded shapes' any-hit traversal, given a box test of a node (the binary tree's packets) and
+ * of a box (lo, hi: the pair nodes' children, one ray per work-item: kernels/bvh_pairs.h) */
+#ifdef PYCLRAY_PAIRS
+#define PYCLRAY_SHADOW_TRAVERSE(ENTRIES, ENTRIES_OF, boxes) \
+    PYCLRAY_TRAVERSE_PAIRS_WITH(pair_nodes, ENTRIES_OF, boxes, reach, PYCLRAY_SHADOW_VISIT)
+#else
+#define PYCLRAY_SHADOW_TRAVERSE(ENTRIES, ENTRIES_OF, boxes) \
+    PYCLRAY_TRAVERSE_PACKET_WITH(nodes, ENTRIES, boxes, reach, PYCLRAY_SHADOW_VISIT)
+#endif
 #define PYCLRAY_SHADOW_SHAPES                                                         \
     PYCLRAY_UNBOUNDED(PYCLRAY_SHADOW_TEST)                                            \
     if (point && ANY(open)) {                                                         \
         const BoxPacket from_light = shadow_light_packet(camera, light.position, shadow.dir, \
                                                          world_from_space(camera, shadow.origin), open); \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
-        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, box_entries, &from_light, reach, PYCLRAY_SHADOW_VISIT) \
+        PYCLRAY_SHADOW_TRAVERSE(box_entries, pair_box_entries, &from_light)          \
     } else if (ANY(open)) {                                                           \
         ShadowBoxes boxes;                                                            \
         boxes.box = box_packet(world_from_space(camera, shadow.dir), camera->box_origin); \
@@ -231,7 +244,7 @@ inline BoxPacket shadow_light_packet(__global const Camera* camera, const real4 
                            + SPLAT(0x1p-20) * ((v_abs(from_eye.x) + v_abs(from_eye.y)) + v_abs(from_eye.z)) \
                            + SPLAT(camera->box_origin.w));                            \
         realv reach = open ? limit : SPLAT(-INFINITY);                                \
-        PYCLRAY_TRAVERSE_PACKET_WITH(nodes, shadow_box_entries, &boxes, reach, PYCLRAY_SHADOW_VISIT) \
+        PYCLRAY_SHADOW_TRAVERSE(shadow_box_entries, shadow_box_entries_of, &boxes)   \
     }
 #else
 #define PYCLRAY_SHADOW_SHAPES PYCLRAY_SHAPES(PYCLRAY_SHADOW_TEST)

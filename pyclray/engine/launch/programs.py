@@ -21,6 +21,7 @@ from ...model.cameras.perspective import CAMERA
 from ...model.layout import c_header
 from ...model.lights import STRUCTS as SHADING_STRUCTS
 from ...model.shapes import KINDS as REGISTRY  # the packed kinds: the scene's types and mesh instances
+from ..bvh.pairs import PAIR_NODE
 from ..bvh.tree import NODE
 from ..bvh.wide import WIDE_NODE
 from ..bvh.winding import WINDING_BETA, WINDING_SLOT
@@ -91,6 +92,29 @@ def lanes_for(device: cl.Device, precision: str) -> int:
     return max(w for w in widths if w <= max(int(preferred), 1))
 
 
+def pairs_for(lanes: int) -> bool:
+    """Whether the kernels of this lane width traverse the BVH's pair nodes, one ray per work-item
+    (kernels/bvh_pairs.h: a GPU's lane width, 1), rather than the wide tree (a CPU's packets).
+    $PYCLRAY_TRAVERSAL=wide keeps the wide tree at a lane width of 1 (for benchmarks: the same bits)."""
+    value = os.environ.get("PYCLRAY_TRAVERSAL", "").strip()
+    if value not in ("", "pairs", "wide"):
+        raise DeviceError(f"PYCLRAY_TRAVERSAL: expected pairs or wide, got {value!r}")
+    return lanes == 1 and value != "wide"
+
+
+# The rays of the ray queries a work-item traces, one after the other (kernels/rays.h: CAST_GROUP, their
+# directions set up four at once in vector registers), and the rays of a work-group: where the pair
+# nodes are traversed (a GPU's lane width) one ray per work-item, the work-group's items a few warps
+# of rays; else 8, in work-groups of 16 (engine/queries/cast.py).
+RAY_GROUP = {False: 8, True: 1}
+WORK_GROUP_RAYS = 128
+
+
+def ray_group(pairs: bool) -> tuple[int, int]:
+    """(rays per work-item, work-items per work-group) of a ray query's program (Variant.pairs)."""
+    return RAY_GROUP[pairs], WORK_GROUP_RAYS // RAY_GROUP[pairs]
+
+
 def packet_shape(lanes: int) -> tuple[int, int]:
     """(columns, rows) of pixels a render work-item's packet covers: two rows where the lanes
     allow (4x2 for 8 lanes, 2x2 for 4), else one. A square packet's rays stay closer together than a
@@ -124,9 +148,18 @@ class Variant:
     # camera_table_rays) instead of the pinhole's image plane: "plane" (each ray's image-plane
     # coordinates: every ray ahead of the eye's plane) or "sphere" (unit directions); None: a pinhole
     camera_table: str | None = None
+    # the BVH's pair nodes, one ray per work-item (pairs_for: a lane width of 1), instead of the wide
+    # tree: a render through the BVH, and the ray queries (kernels/bvh_pairs.h)
+    pairs: bool = False
 
     def bounded_types(self) -> tuple[str, ...]:
         return tuple(t for t in self.shape_types if REGISTRY[t].bounded)
+
+    def through_pairs(self) -> bool:
+        """Whether the program traverses the pair nodes (kernels/bvh_pairs.h): asked for, and a BVH
+        to traverse (a render through it, or a ray query, over some bounded type)."""
+        tree = (self.query == "render" and self.bvh) or self.query in RAY_QUERIES
+        return self.pairs and tree and bool(self.bounded_types())
 
     def defines(self) -> list[str]:
         """The #defines that select this variant in its query's kernel file (QUERY_FILES) and the
@@ -149,6 +182,8 @@ class Variant:
         lines += self._shape_calls()
         if self.bvh and self.query == "render":
             lines.append("#define PYCLRAY_BVH 1")
+        if self.through_pairs():
+            lines.append("#define PYCLRAY_PAIRS 1")
         lines += [f"#define PYCLRAY_AOV_{aov.upper()} 1" for aov in self.aovs]
         if any(aov in WINNER_AOVS for aov in self.aovs):  # the winner matters, not only its distance
             lines.append("#define PYCLRAY_TRACK_ID 1")
@@ -160,6 +195,7 @@ class Variant:
                 lines.append("#define PYCLRAY_STORE_HITS 1")
         if self.query in RAY_QUERIES:
             lines.append("#define PYCLRAY_CAST 1")
+            lines.append(f"#define CAST_GROUP {ray_group(self.pairs)[0]}")  # rays per work-item (kernels/rays.h)
             # how cast tests each type's entries: one by one, or a leaf's in blocks (Shape.cast_blocks)
             lines += [f"#define PYCLRAY_CAST_MODE_{t} {'BLOCKS' if REGISTRY[t].cast_blocks else 'ENTRY'}"
                       for t in self.shape_types]
@@ -243,7 +279,8 @@ class Variant:
         shading = "shaded" in self.aovs
         cast = self.query in RAY_QUERIES  # rebases each shape on its ray's origin: the world entries too
         from_world = self.from_world and self.query == "render"
-        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or from_world else [])
+        pairs = self.through_pairs()
+        structs = _unique(([] if cast else [CAMERA]) + [NODE, WIDE_NODE] + ([PAIR_NODE] if pairs else []) + [s.struct for s in shapes] + ([s.world for s in shapes] if cast or from_world else [])
                           + [x for s in shapes for x in s.kernel_structs]
                           + (list(SHADING_STRUCTS) if shading else [])
                           + ([REGISTRY[t].smooth_struct for t in self.smooth] if shading else []))
@@ -251,9 +288,13 @@ class Variant:
         parts += [_read("shapes.h")]
         if cast:  # one ray at a time through the wide tree; mesh instances' own trees as packets of one
             parts += [_read(name) for name in ("bvh.h", "bvh_ray.h", "bvh_packet.h", "cast.h")]
+            if pairs:  # its traversal over the pair nodes in place of the wide tree's
+                parts.append(_read("bvh_pairs.h"))
         else:  # camera packets through the wide tree (with the BVH), shadow rays through the binary one
             parts += [_read(name) for name in ("camera.h", "bvh.h", "bvh_packet.h")]
-            if self.bvh and self.bounded_types():
+            if pairs:  # one camera ray per work-item through the pair nodes
+                parts.append(_read("bvh_pairs.h"))
+            elif self.bvh and self.bounded_types():
                 parts.append(_read("bvh_wide_packet.h"))
         if from_world:  # each rebased type's <type>_rebase (the per-view pass's, to the same bits), then its tests
             parts += [FROM_WORLD_BEGIN, _read("space.h"), "#define PYCLRAY_REBASE 1"]

@@ -45,6 +45,16 @@ def _shadows(variant, _type=None) -> bool:
     return variant.shadows and "shaded" in variant.aovs
 
 
+def _wide(variant, _type=None) -> bool:
+    """The BVH's wide nodes (a CPU's packets, cast's rays on a CPU), not its pair nodes."""
+    return not variant.through_pairs()
+
+
+def _pairs(variant, _type=None) -> bool:
+    """The BVH's pair nodes: one ray per work-item (kernels/bvh_pairs.h: GPUs)."""
+    return variant.through_pairs()
+
+
 def _from_world(variant, _type=None) -> bool:
     """A render that rebases its shapes on the eye where it tests them (kernels/entries.h)."""
     return variant.from_world
@@ -135,9 +145,11 @@ RENDER = (
     Parameter("space_v", "const double4", (_from_world,)),
     Parameter("space_w", "const double4", (_from_world,)),
     # the wide BVH (camera packets: kernels/bvh_wide_packet.h), the binary one of the same boxes for
-    # shadow rays (kernels/shading.h), the leaves' refs
-    Parameter("wide_nodes", "__global const WideNode*", (_through_bvh, _bounded)),
-    Parameter("nodes", "__global const BvhNode*", (_through_bvh, _bounded, _shadows)),
+    # shadow rays (kernels/shading.h), or for one ray per work-item the pair nodes for both
+    # (kernels/bvh_pairs.h), the leaves' refs
+    Parameter("wide_nodes", "__global const WideNode*", (_through_bvh, _bounded, _wide)),
+    Parameter("pair_nodes", "__global const PairNode*", (_through_bvh, _bounded, _pairs)),
+    Parameter("nodes", "__global const BvhNode*", (_through_bvh, _bounded, _shadows, _wide)),
     Parameter("refs", "__global const int*", (_through_bvh, _bounded)),
     EachType((
         # its entries, where the render reads them (kernels/entries.h)
@@ -197,7 +209,8 @@ RAYS = (
     Parameter("starts", "__global const double*"),  # tmin: hits beyond it (one for every ray where start_stride is 0)
     Parameter("start_stride", "const int"),
     Parameter("scene_anchor", "const double4"),
-    Parameter("nodes", "__global const WideNode*", (_bounded,)),
+    Parameter("nodes", "__global const WideNode*", (_bounded, _wide)),
+    Parameter("nodes", "__global const PairNode*", (_bounded, _pairs)),  # one ray per work-item (GPUs)
     Parameter("refs", "__global const int*", (_bounded,)),
     Parameter("anchors", "__global const double4*", (_bounded,)),
     Parameter("box_anchors", "__global const float4*", (_bounded,)),

@@ -12,7 +12,7 @@ from ...model.errors import DeviceError, RequestError
 from ...model.layout import layout
 from ...model.shapes.base import labels_of
 from ...model.shapes.capabilities import capability
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for, ray_group
 from ..launch.run import REAL, input_buffer, run_kernel
 from ..launch.signatures import arguments, image_parameter, shared_arguments
 from ..opencl.buffers import shares_host_memory
@@ -178,11 +178,12 @@ NO_ORDER = np.zeros(1, np.int32)  # (a batch cast in its own order: the kernel r
 _BOUNDS = {precision: float(np.sqrt(np.finfo(real).max) / 4) for precision, real in REAL.items()}
 
 # The rays one work-item traces, one after the other, their setups done together (kernels/rays.h's
-# CAST_GROUP, which this must equal), and the work-items of a work-group: 128 rays, so that the
-# device's threads share a batch evenly (left to PoCL, 12,500 work-items made 5 work-groups for 2
-# threads); the global size is rounded up to whole work-groups, whose items past the rays do nothing
-CAST_GROUP = 8
-CAST_WORK_GROUP = 16
+# CAST_GROUP, which the program's source takes from programs.ray_group), and the work-items of a
+# work-group: 128 rays, so that the device's threads share a batch evenly (left to PoCL, 12,500
+# work-items made 5 work-groups for 2 threads); the global size is rounded up to whole work-groups,
+# whose items past the rays do nothing. Where the pair nodes are traversed (a GPU) one ray per
+# work-item, 128 work-items a work-group (ray_group(True)).
+CAST_GROUP, CAST_WORK_GROUP = ray_group(False)
 
 
 def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,13 +193,14 @@ def _columns_extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- the inputs of casts: each bounded entry in its own space (its anchor), the BVH around the scene's anchor
-def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict]:
-    """(arguments by name, anchor, size, bytes, block lanes): the BVH around the scene's anchor (its root box's
+def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, dict, "PairNodes | None"]:
+    """(arguments by name, anchor, size, bytes, block lanes, pair nodes): the BVH around the scene's anchor (its root box's
     centre), its refs and the entries' anchors, and per packed kind its buffer (each bounded entry
     relative to its own anchor, in leaf order) and count; bytes: those buffers' sizes together.
     They depend on the shapes only, never on the rays: a scene handle makes them at its first cast
     and keeps them until its shapes change. block lanes: per cast_blocks type, which entry each
-    block's lane is (engine/queries/cast_blocks.py: regroup), for the hit queries."""
+    block's lane is (engine/queries/cast_blocks.py: regroup), for the hit queries. pair nodes: the
+    tree for one ray per work-item (ray_arguments), made from the wide nodes when first asked."""
     ctx, precision, shape_types = prepared.ctx, prepared.precision, prepared.types
     tree = prepared.bvh
     anchor = 0.5 * (tree.tree.lo[0] + tree.tree.hi[0]) if tree.types else np.zeros(3)
@@ -212,6 +214,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
     # each type's world entries, read once (an indexed type's are packed anew at each read: Kind.world)
     worlds = {name: prepared.kinds[name].world for name in shape_types}
     blocks, block_lanes = {}, {}
+    pairs = None
     if tree.types:
         nodes = tree.nodes(anchor[:3])
         if any(capability(prepared.kinds[name].cls, "cast_blocks") for name in tree.types):  # a leaf's triangles of a mesh at once
@@ -230,6 +233,7 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
         anchors = np.ascontiguousarray(anchors)
         args.update(nodes=input_buffer(ctx, nodes), refs=input_buffer(ctx, refs), anchors=input_buffer(ctx, anchors),
                     box_anchors=input_buffer(ctx, _box_anchors(anchors, anchor)), root_box=_root_box(nodes))
+        pairs = PairNodes(prepared, nodes, anchor[:3])
     identity = np.eye(3)
     for name in shape_types:
         kind = prepared.kinds[name]
@@ -255,7 +259,36 @@ def cast_inputs(prepared: PreparedScene) -> tuple[dict, np.ndarray, float, int, 
                      f"{name}_worlds": input_buffer(ctx, np.ascontiguousarray(worlds[name])),
                      **shared_arguments(name, kind.shared), f"n_{name}s": np.int32(kind.count)})
     held = sum(a.size for a in args.values() if isinstance(a, cl.MemoryObjectHolder))
-    return args, anchor, size, held, block_lanes
+    return args, anchor, size, held, block_lanes, pairs
+
+
+class PairNodes:
+    """cast's pair nodes (one ray per work-item: engine/bvh/pairs.py), around cast's anchor, with the
+    wide nodes' leaf codes (regroup's, where it rewrote them): made on the device when first asked
+    (a CPU's casts traverse the wide nodes and never ask)."""
+
+    def __init__(self, prepared: PreparedScene, wide: np.ndarray, origin: np.ndarray):
+        self.prepared, self.wide, self.origin = prepared, wide, origin
+        self._buffer = None
+
+    def buffer(self):
+        if self._buffer is None:
+            with self.prepared.lock:
+                if self._buffer is None:
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        pairs = self.prepared.bvh.pair_nodes(self.origin, wide_child=self.wide["child"])
+                    self._buffer = input_buffer(self.prepared.ctx, pairs)
+        return self._buffer
+
+
+def ray_arguments(tracer, inputs) -> tuple[dict, bool]:
+    """(the cast inputs' arguments, pairs): pairs where this device's lane width traverses the pair
+    nodes (programs.pairs_for: a GPU's), which then take the wide nodes' place (Variant.pairs)."""
+    pairs = pairs_for(lanes_for(tracer.ctx.device, tracer.precision))
+    args = inputs[0]
+    if pairs and inputs[5] is not None:
+        args = {**args, "nodes": inputs[5].buffer()}
+    return args, pairs
 
 
 def _box_anchors(anchors: np.ndarray, scene_anchor: np.ndarray) -> np.ndarray:
@@ -297,8 +330,9 @@ class RayBatch:
     def __init__(self, tracer, origins, directions, tmin, tmax, order_always: bool = False, kept=None):
         ctx, precision = tracer.ctx, tracer.precision
         inputs = tracer.cast_inputs()
-        args, anchor, scene_size, scene_bytes = inputs[:4]
+        _, anchor, scene_size, scene_bytes = inputs[:4]
         self.block_lanes = inputs[4]
+        args, self.pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
         # the scan of a large batch makes its codes only where it is ordered (order_always: every large
         # batch, as the hit queries', whose rays traverse to their ends, want: engine/queries/hits.py)
         orders = (order_always or _orders(ctx, scene_bytes)) and not gpu_class(ctx.device)
@@ -351,8 +385,9 @@ class RayBatch:
                      "origin_stride": np.int32(1 if len(origins) > 1 else 0),
                      "limit_stride": np.int32(1 if len(tmax) > 1 else 0),
                      "start_stride": np.int32(1 if len(tmin) > 1 else 0), **buffers, **args}
-        groups = -(-count // CAST_GROUP)  # a work-item per group of CAST_GROUP rays (kernels/rays.h)
-        self.sizes = ((-(-groups // CAST_WORK_GROUP) * CAST_WORK_GROUP,), (CAST_WORK_GROUP,))
+        group, work_group = ray_group(self.pairs)  # a work-item per group of rays (kernels/rays.h: CAST_GROUP)
+        groups = -(-count // group)
+        self.sizes = ((-(-groups // work_group) * work_group,), (work_group,))
 
     def unit_directions(self) -> np.ndarray:
         """(N, 3) float64: each direction over its length, scaled first as the kernel scales it
@@ -403,7 +438,7 @@ def _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept):
     if query == "occluded":
         if count == 0:
             return np.zeros(shape, bool)
-        variant = Variant("occluded", tracer.prepared.types, (), precision)
+        variant = Variant("occluded", tracer.prepared.types, (), precision, pairs=batch.pairs)
         out = np.empty(count, np.bool_)  # the kernel's chars 0 and 1: numpy's bools
         if kept is None:
             _run_into(ctx, variant, batch.sizes, batch.args, out)
@@ -416,7 +451,7 @@ def _run_cast(tracer, query, origins, directions, tmax, aovs, tmin, kept):
     if count == 0:
         results = {k: TABLE[k].empty((0,), precision) for k in kernel_aovs}
     else:
-        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
+        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=batch.pairs)
         if kept is None:
             results = run_kernel(ctx, variant, batch.args, batch.sizes[0], count, kernel_aovs, precision, (count,),
                                  tracer.outputs, local_size=batch.sizes[1])

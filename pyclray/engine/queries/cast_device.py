@@ -24,12 +24,12 @@ import pyopencl.array as cl_array
 from ...model.aovs import TABLE
 from ...model.errors import RequestError
 from ...model.shapes.base import labels_of
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, ray_group
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.buffers import shares_host_memory
 from ..opencl.device import launch, launch_kept
-from .cast import CAST_GROUP, CAST_WORK_GROUP, _block_lanes_table, _distances, _ray_array, run_cast
+from .cast import _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -249,7 +249,9 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
         raise RequestError(
             f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
     count = math.prod(shape)
-    args, anchor, _, _, block_lanes = tracer.cast_inputs()
+    inputs = tracer.cast_inputs()
+    anchor, block_lanes = inputs[1], inputs[4]
+    args, pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
     try:
         tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
         tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
@@ -314,14 +316,14 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     if query == "occluded":
         results = {"occluded": result("occluded_out", shape, np.bool_)}
         if count:
-            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision), *rays,
-                    {"occluded_out": data(results["occluded"])}, CAST_GROUP, CAST_WORK_GROUP, kept)
+            _launch(tracer, Variant("occluded", tracer.prepared.types, (), precision, pairs=pairs), *rays,
+                    {"occluded_out": data(results["occluded"])}, *ray_group(pairs), kept)
         return _finish(ctx, kept, results, out, partial, items, bound, refused, regions)["occluded"]
     results = {k: result(image_parameter(k), TABLE[k].shape((count,)), TABLE[k].dtype(precision)) for k in kernel_aovs}
     if count:
-        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision)
-        _launch(tracer, variant, *rays, {image_parameter(k): data(v) for k, v in results.items()}, CAST_GROUP,
-                CAST_WORK_GROUP, kept)
+        variant = Variant("cast", tracer.prepared.types, kernel_aovs, precision, pairs=pairs)
+        _launch(tracer, variant, *rays, {image_parameter(k): data(v) for k, v in results.items()}, *ray_group(pairs),
+                kept)
         if "primitive" in results and block_lanes:
             places, first, primitives = _block_lanes_table(tracer, block_lanes, queue)
             kernels.run(queue, "block_primitives", count, data(results["primitive"]), np.int64(count), places.data,

@@ -76,7 +76,7 @@ def _run(ctx, variant, batch: RayBatch, inputs: dict, outputs: dict) -> None:
 def _counts(tracer, batch: RayBatch) -> np.ndarray:
     counts = np.zeros(batch.count, np.int32)
     if batch.count:
-        variant = Variant("count_hits", tracer.prepared.types, (), tracer.precision)
+        variant = Variant("count_hits", tracer.prepared.types, (), tracer.precision, pairs=batch.pairs)
         _run(tracer.ctx, variant, batch, {}, {"hit_counts": counts})
     return counts
 
@@ -96,7 +96,7 @@ def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surfac
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
     if batch.count:
-        variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision)
+        variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision, pairs=batch.pairs)
         _run(tracer.ctx, variant, batch, surface, {"hit_counts": counts, "surface_out": on})
     return counts, on
 
@@ -113,7 +113,7 @@ def _stored(tracer, batch: RayBatch, capacity: int):
     t = np.empty(n * capacity, np.float64)
     kinds, entries, subs = (np.empty(n * capacity, np.int32) for _ in range(3))
     if n:
-        variant = Variant("all_hits", tracer.prepared.types, (), tracer.precision)
+        variant = Variant("all_hits", tracer.prepared.types, (), tracer.precision, pairs=batch.pairs)
         _run(tracer.ctx, variant, batch, {"hit_capacity": np.int32(capacity)},
              {"hit_counts": counts, "hit_t": t, "hit_kind": kinds, "hit_k": entries, "hit_sub": subs})
     return counts, t, kinds, entries, subs

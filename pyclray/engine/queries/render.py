@@ -11,7 +11,7 @@ from ...model.cameras import CAMERAS, CameraModel
 from ...model.errors import PyclrayWarning, RequestError
 from ...model.scene import Scene
 from ..bvh import tiles
-from ..launch.programs import Variant, lanes_for, packet_shape
+from ..launch.programs import Variant, lanes_for, packet_shape, pairs_for
 from ..launch.run import enqueue_kernel
 from .labels import with_labels
 from .motion import MOTION_AOVS, Motion, with_motion
@@ -65,12 +65,13 @@ def start(tracer, view: Scene, aovs, window, acceleration: str, motion: Motion |
     shadows = "shaded" in aovs and view.shading.shadows
     smooth = prepared.smooth if "shaded" in aovs else ()  # compiled in only with a smooth shape, shaded
     variant = Variant("render", prepared.types, aovs, precision, lanes, shadows, bvh=acceleration == "bvh", smooth=smooth,
-                      from_world=prepared.from_world, indexed=prepared.indexed, camera_table=inputs.table_format)
+                      from_world=prepared.from_world, indexed=prepared.indexed, camera_table=inputs.table_format,
+                      pairs=pairs_for(lanes) and acceleration == "bvh")
     tile = tiles.TILE
     # the kernel's arguments by name (engine/launch/signatures.py: the render kernel's), but for the images' buffers
     args = {"camera": inputs.camera, "col0": np.int32(col0), "row0": np.int32(row0), "cols": np.int32(cols),
             "rows": np.int32(rows), "tile_shift": np.int32(tile.bit_length() - 1),
-            "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows)}
+            "tiles_x": np.int32(-(-view.image.width // tile)), **inputs.shape_args(prepared, acceleration, shadows, variant.through_pairs())}
     if inputs.table is not None:  # in this program's packets
         args["camera_directions"] = inputs.directions_for(lanes)
     if "position" in aovs:

@@ -187,6 +187,7 @@ class PreparedScene(Refit):
         self.bounded = sum(k.count for k in self.kinds.values() if k.cls.bounded)
         self.wide_nodes = self.refs = None
         self._nodes = self._nodes_host = None  # the binary nodes: made when first asked (see nodes)
+        self._pairs = self._pairs_host = None  # the pair nodes: made when first asked (see pair_nodes)
         # The BVH's boxes around a fixed anchor, the root box's centre, rounded outward to float once:
         # a view passes the eye relative to the anchor (and a margin over its rounding) instead of
         # re-expressing every box around the eye (kernels/bvh_packet.h: box_entries).
@@ -224,6 +225,20 @@ class PreparedScene(Refit):
                         self._nodes_host = aligned(self.bvh.binary_nodes(self.anchor))
                     self._nodes = _buffer(self.ctx, self._nodes_host, writable=True)
         return self._nodes
+
+    @property
+    def pair_nodes(self) -> cl.Buffer | None:
+        """The pair nodes on the device (one ray per work-item: bvh/pairs.py; the binary tree's
+        boxes around the anchor), made when first asked: only a render at a lane width of 1 (GPUs)
+        traverses them."""
+        if self._pairs is None and self.bvh.types:
+            with self.lock:
+                if self._pairs is None:
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        # (from the binary nodes where made: the same boxes, packed once)
+                        self._pairs_host = aligned(self.bvh.pair_nodes(self.anchor, self._nodes_host))
+                    self._pairs = _buffer(self.ctx, self._pairs_host)
+        return self._pairs
 
     # A refit keeps the tree's topology: shapes that wander far apart make its boxes overlap and
     # rays visit more of them. A frame rebuilds the scene where the refitted tree's SAH cost exceeds
@@ -270,6 +285,7 @@ class PreparedScene(Refit):
         if self.bvh.types:
             total += self._wide_host.nbytes + self._refs_host.nbytes
             total += 0 if self._nodes_host is None else self._nodes_host.nbytes
+            total += 0 if self._pairs_host is None else self._pairs_host.nbytes
         return total
 
     # -- the range check, once per view in O(1) ---------------------------------------------------

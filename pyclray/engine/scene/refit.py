@@ -113,6 +113,8 @@ class Refit:
                                                                    tree.hi[refitted] - self.anchor)
                 self._nodes_host[refitted] = nodes
                 written.append((self.nodes, self._nodes_host, refitted, nodes))
+            # the pair nodes (a render at a lane width of 1), made anew from the boxes when next asked
+            self._pairs = self._pairs_host = None
             if not shared:
                 for buffer, host, index, rows_written in written:
                     if self.on_device:

@@ -223,18 +223,23 @@ class ViewInputs:
                               "background": np.array((*shades.background, 0), real)}
         return self._lighting
 
-    def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False) -> dict:
+    def shape_args(self, prepared: PreparedScene, acceleration: str, shadows: bool = False, pairs: bool = False) -> dict:
         """The render kernel's shape arguments by name (engine/launch/signatures.py): a from-world scene's eye
         space; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
-        entries and count, or per type its entries and tile lists (and with shadows its count)."""
+        entries and count, or per type its entries and tile lists (and with shadows its count);
+        pairs: the pair nodes in place of the wide ones (Variant.through_pairs)."""
         args = {}
         if prepared.from_world:  # the eye's space (the eye, the camera's axes), float64: each shape is rebased on it
             for name, v in zip(("space_origin", "space_u", "space_v", "space_w"), (self.eye, *self.rows)):
                 args[name] = np.append(v, 0.0).view(cl.cltypes.double4)[0]
         if acceleration == "bvh" and prepared.bvh.types:
-            args["wide_nodes"], args["refs"] = prepared.wide_nodes, prepared.refs
-            if shadows:
-                args["nodes"] = prepared.nodes
+            args["refs"] = prepared.refs
+            if pairs:  # one ray per work-item (GPUs): the pair nodes, shadow rays too (kernels/bvh_pairs.h)
+                args["pair_nodes"] = prepared.pair_nodes
+            else:
+                args["wide_nodes"] = prepared.wide_nodes
+                if shadows:
+                    args["nodes"] = prepared.nodes
         for t, kind in prepared.kinds.items():
             # its entries: the faces and vertices (indexed), the world entries, ids and primitive
             # indices (rebased), or the view buffer; then the arrays its entries share

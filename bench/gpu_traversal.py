@@ -1,0 +1,156 @@
+"""The pair nodes (one ray per work-item: engine/bvh/pairs.py, kernels/bvh_pairs.h) beside the wide
+tree they replace at a lane width of 1 (issue 41, item 1), on bench.meshes' bunny (80,000 triangles)
+and 1,000,000-triangle mesh:
+
+    python -m bench.gpu_traversal [--rounds 3] [--block 5] [--size 512] [--rays 100000] [--sample 2000]
+
+- the trees: nodes and bytes of the wide tree (224 bytes a node), the binary one (32) and the pair
+  nodes (64), and the conversion's time at prepare time (the binary nodes packed around the anchor,
+  then the pair nodes: pack_nodes + pack_pairs, the median of 5);
+- nodes read per ray (`--sample` of the incoherent rays, and the camera rays of every 64th pixel):
+  each node whose box the ray enters before its nearest hit (pyclray's cast depth), in float64 on
+  the binary tree's boxes: a pair node is read per internal binary node entered, a wide node per
+  wide node entered; the leaves are the same in both. This is the part of a traversal no visiting
+  order saves (the nearest hit found first): a lower bound of both, their ratio the reads' ratio;
+- PoCL at a lane width of 1 (PYCLRAY_LANES=1, the programs a GPU builds): the pair nodes against
+  the wide tree at one lane (PYCLRAY_TRAVERSAL=wide), render of size x size (depth, normal, id,
+  primitive) and cast of `--rays` incoherent rays, each call's wall time in alternating blocks
+  (bench.open3d_compare.blocks); the 8-lane default beside them for scale.
+Prints one table; the machine is shared: compare ratios, note the load printed.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from contextlib import contextmanager
+
+import numpy as np
+
+import pyclray
+from pyclray.engine.api import tracer_for
+from pyclray.engine.bvh.pairs import PAIR_NODE, leaf_codes, pack_pairs
+from pyclray.engine.bvh.tree import NODE, pack_nodes
+from pyclray.engine.bvh.wide import WIDE_NODE
+from pyclray.engine.opencl.device import context_for
+from pyclray.model.layout import layout
+
+from .meshes import camera_for, incoherent_rays, meshes
+from .open3d_compare import blocks
+
+AOVS = ("depth", "normal", "id", "primitive")
+
+
+@contextmanager
+def environment(**values):
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update({k: str(v) for k, v in values.items()})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def entered(lo, hi, origins, directions, limits):
+    """(rays, boxes) bool: the ray enters the box before its limit (float64 slab test)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = 1.0 / directions
+        t0 = (lo[None] - origins[:, None]) * inverse[:, None]
+        t1 = (hi[None] - origins[:, None]) * inverse[:, None]
+    near = np.nan_to_num(np.minimum(t0, t1), nan=-np.inf).max(axis=2)
+    far = np.nan_to_num(np.maximum(t0, t1), nan=np.inf).min(axis=2)
+    return (np.maximum(near, 0.0) <= far) & (near <= limits[:, None])
+
+
+def reads_per_ray(bvh, origins, directions, depth):
+    """(pair nodes, wide nodes, leaves) entered per ray before its nearest hit (see the docstring)."""
+    tree, wide = bvh.tree, bvh.wide
+    inner = np.flatnonzero(tree.count == 0)
+    leaves = np.flatnonzero(tree.count > 0)
+    internal_slots = (wide.binary >= 0) & (tree.count[np.maximum(wide.binary, 0)] == 0)
+    wide_sources = wide.binary[internal_slots]  # the binary node each wide node below the root opens
+    limits = np.where(np.isfinite(depth), depth, np.inf)
+    chunk = max(1, 2_000_000 // tree.nodes)  # rays at once: (chunk, nodes, 3) arrays of a few tens of MB
+    pair, wide_reads, leaf = [], [], []
+    for start in range(0, len(origins), chunk):
+        o, d, t = origins[start:start + chunk], directions[start:start + chunk], limits[start:start + chunk]
+        pair.append(entered(tree.lo[inner], tree.hi[inner], o, d, t).sum(axis=1))
+        wide_reads.append(1 + entered(tree.lo[wide_sources], tree.hi[wide_sources], o, d, t).sum(axis=1))
+        leaf.append(entered(tree.lo[leaves], tree.hi[leaves], o, d, t).sum(axis=1))
+    return tuple(float(np.mean(np.concatenate(x))) for x in (pair, wide_reads, leaf))
+
+
+def tree_rows(label, tracer):
+    bvh = tracer.prepared.bvh
+    anchor = tracer.prepared.anchor
+    times = []
+    for _ in range(5):
+        start = time.perf_counter()
+        pairs = pack_pairs(bvh.tree, pack_nodes(bvh.tree, anchor), leaf_codes(bvh.tree))
+        times.append((time.perf_counter() - start) * 1e3)
+    wide_bytes = layout(WIDE_NODE, "fp32").itemsize
+    return [(f"{label}: wide nodes (x {wide_bytes} B)", len(bvh.wide.child), len(bvh.wide.child) * wide_bytes / 2**20, ""),
+            (f"{label}: binary nodes (x {layout(NODE, 'fp32').itemsize} B)", bvh.tree.nodes,
+             bvh.tree.nodes * layout(NODE, "fp32").itemsize / 2**20, ""),
+            (f"{label}: pair nodes (x {layout(PAIR_NODE, 'fp32').itemsize} B)", len(pairs), pairs.nbytes / 2**20,
+             f"conversion {np.median(times):.1f} ms")]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--block", type=int, default=5)
+    parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--rays", type=int, default=100_000)
+    parser.add_argument("--sample", type=int, default=2000)
+    args = parser.parse_args(argv)
+    ctx = context_for(None)
+    trees, reads, timing = [], [], []
+    for label, mesh in meshes(None).items():
+        scene = camera_for(mesh, args.size)
+        tracer = tracer_for(scene, ctx, "fp32")
+        trees += tree_rows(label, tracer)
+        origins, directions = incoherent_rays(mesh, args.rays)
+        sample = slice(0, args.sample)
+        depth = pyclray.cast(scene, origins[sample], directions[sample], aovs=("depth",))["depth"].astype(np.float64)
+        reads.append((f"{label}: {args.sample} incoherent rays",
+                      *reads_per_ray(tracer.prepared.bvh, origins[sample], directions[sample], depth)))
+        from pyclray.reference import oracle
+
+        cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
+        cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
+        reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
+
+        def at(lanes, traversal, fn):
+            def call():
+                with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
+                    return fn()
+            return call
+
+        render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
+        cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
+        for name, fn in (("render", render), ("cast", cast)):
+            systems = {"pairs, 1 lane": at(1, "pairs", fn), "wide, 1 lane": at(1, "wide", fn),
+                       "wide, 8 lanes": at(8, "wide", fn)}
+            timed = blocks(systems, args.rounds, args.block)
+            what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{args.rays:,} incoherent rays cast"
+            timing.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
+    print(f"PoCL on {ctx.device.name.strip()}; load {os.getloadavg()[0]:.1f}")
+    print("| tree | nodes | MiB | |\n|---|---|---|---|")
+    for row in trees:
+        print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
+    print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
+    for case, pair, wide, leaves in reads:
+        ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
+        print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
+    print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
+    for case, pairs, wide, eight in timing:
+        print(f"| {case} | {pairs:.2f} | {wide:.2f} | {pairs / wide:.2f} | {eight:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

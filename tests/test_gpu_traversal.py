@@ -1,0 +1,334 @@
+"""One ray per work-item through the pair nodes (engine/bvh/pairs.py, kernels/bvh_pairs.h): the
+traversal a lane width of 1 (a GPU's) compiles in, for a render through the BVH and the ray queries
+(cast, occluded, count_hits, all_hits). PoCL at PYCLRAY_LANES=1 builds the same programs as a GPU.
+
+Why every result is the same bits as the 8-lane path's (the wide tree's packets, the CPU's): the
+pair nodes hold the binary tree's boxes rounded as the wide nodes hold them, tested by the same
+operations, with the same leaves; every shape test is the same function, and every tie rule
+(render's id and key, cast's id) picks one winner whatever order the leaves are visited in. So
+the tests compare bits (np.array_equal of the raw bytes), no tolerance: a traversal that dropped
+a leaf a ray's hit lies in, or tested a box otherwise, would show in some pixel or ray."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pyclray
+from pyclray.engine.api import tracer_for
+from pyclray.engine.bvh.pairs import PAIR_NODE, leaf_codes, pack_pairs
+from pyclray.engine.bvh.tree import build
+from pyclray.engine.launch import programs
+from pyclray.engine.opencl.device import context_for, has_fp64
+from pyclray.model.layout import layout
+from pyclray.model.lights import PointLight, Shading
+from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
+
+EVERY = ("depth", "normal", "id", "primitive", "barycentric")
+
+
+def need(precision):
+    if precision == "fp64" and not has_fp64(context_for(None).device):
+        pytest.skip("device lacks cl_khr_fp64")
+
+
+def at_width(monkeypatch, lanes: int, fn):
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_LANES", str(lanes))
+        return fn()
+
+
+def same_bits(a, b, what=""):
+    """Two results (a Frame or mapping of arrays, or an array) with the same bits."""
+    if not isinstance(a, np.ndarray):
+        assert set(a.keys()) == set(b.keys()), what
+        for key in a.keys():
+            same_bits(np.asarray(a[key]), np.asarray(b[key]), f"{what} {key}")
+        return
+    assert a.dtype == b.dtype and a.shape == b.shape, what
+    assert np.array_equal(np.ascontiguousarray(a).view(np.uint8), np.ascontiguousarray(b).view(np.uint8)), what
+
+
+def bunny(scenes_dir):
+    base = pyclray.Mesh.load(scenes_dir / "meshes" / "bunny.ply")
+    return pyclray.Mesh(base.vertices, base.faces, name="bunny")
+
+
+def instances():
+    """A perturbed sphere placed 9 times (rotated, scaled, mirrored: mesh instances) on a grid floor."""
+    rng = np.random.default_rng(7)
+    v, f = perturbed_sphere(10, 14, 0.8, 0.25, rng)
+    base = pyclray.Mesh(v, f)
+    shapes = [base.placed(scale=[(1.0, 1.0, 1.0), (1.3, 0.6, 0.9), (-1.0, 1.0, 1.0)][(i + j) % 3],
+                          axis=tuple(rng.normal(size=3)), angle=float(rng.uniform(0, 360)),
+                          translate=(2.2 * (i - 1), 0.8, 2.2 * (j - 1)))
+              for i in range(3) for j in range(3)]
+    v, f = grid(6, 6, 12.0)
+    return shapes + [pyclray.Mesh(v, f)]
+
+
+def mixed(scenes_dir):
+    """Analytic shapes among meshes, a sphere batch and a plane (unbounded: outside the tree)."""
+    mesh = bunny(scenes_dir)
+    lo, hi = mesh.box()
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(lo, hi, (200, 3))
+    return [mesh, pyclray.Spheres(centres, np.full(200, 0.004)),
+            pyclray.Sphere(tuple(0.5 * (lo + hi) + [0.1, 0, 0]), 0.03),
+            pyclray.Box(tuple(0.5 * (lo + hi) - [0.08, 0, 0]), (0.03, 0.04, 0.05), axis=(1, 1, 0), angle=30.0),
+            pyclray.Cylinder(tuple(lo), tuple(hi), 0.01),
+            pyclray.Disk(tuple(0.5 * (lo + hi) + [0, 0.05, 0.05]), (0, 0, 1), 0.03),
+            pyclray.Rectangle(tuple(0.5 * (lo + hi) + [0, -0.05, 0.05]), (0.03, 0, 0), (0, 0.02, 0.01)),
+            pyclray.Plane((0, 1, 0), -float(lo[1]))]
+
+
+def scene_of(shapes, size=(97, 61), **keys) -> pyclray.Scene:
+    """A view of the shapes' box from a corner (the plane, unbounded, left out of the box)."""
+    boxes = [s.box() for s in shapes if s.bounded]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    centre, size_ = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    eye = centre + size_ * np.array([0.6, 0.5, 1.1])
+    return pyclray.Scene(pyclray.Camera(tuple(eye), tuple(centre), (0, 1, 0), 40.0), pyclray.Image(*size), tuple(shapes),
+                         **keys)
+
+
+def rays_at(scene, count=2000, seed=0, far=None):
+    """Rays from around the scene's box into it (and some away), or from `far` away toward it."""
+    rng = np.random.default_rng(seed)
+    boxes = [s.box() for s in scene.shapes if s.bounded]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    targets = rng.uniform(lo, hi, (count, 3))
+    if far is None:
+        origins = rng.uniform(lo - (hi - lo), hi + (hi - lo), (count, 3))
+    else:
+        away = rng.normal(size=(count, 3))
+        origins = 0.5 * (lo + hi) + far * away / np.linalg.norm(away, axis=1)[:, None]
+    directions = targets - origins
+    directions[::7] *= -1  # some leave the scene
+    return origins, directions
+
+
+def queries(scene, precision, origins, directions, hits=True):
+    """Every query through the tree: the render through the BVH (every image), cast, occluded
+    (within a limit), count_hits and all_hits."""
+    out = {"render": pyclray.render(scene, EVERY, precision, acceleration="bvh"),
+           "cast": pyclray.cast(scene, origins, directions, aovs=EVERY, precision=precision),
+           "occluded": pyclray.occluded(scene, origins, directions, tmax=np.linalg.norm(directions, axis=1) * 0.5,
+                                        precision=precision)}
+    if hits:
+        out["count_hits"] = pyclray.count_hits(scene, origins, directions, precision=precision)
+        out["all_hits"] = pyclray.all_hits(scene, origins, directions, aovs=("depth", "id", "primitive"),
+                                           precision=precision)
+    return out
+
+
+def assert_same_at_widths(monkeypatch, scene, precision, origins, directions, hits=True):
+    one = at_width(monkeypatch, 1, lambda: queries(scene, precision, origins, directions, hits))
+    eight = at_width(monkeypatch, programs.MAX_LANE_BITS // (32 if precision == "fp32" else 64),
+                     lambda: queries(scene, precision, origins, directions, hits))
+    for name in one:
+        same_bits(one[name], eight[name], name)
+    return one
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_a_mesh_gives_the_same_bits(monkeypatch, scenes_dir, precision):
+    """The bunny (its triangles cast in blocks): every image of a render, cast, occluded and the hit counts."""
+    need(precision)
+    scene = scene_of([bunny(scenes_dir)])
+    origins, directions = rays_at(scene)
+    one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions)
+    assert (one["render"]["id"] >= 0).mean() > 0.2 and np.isfinite(one["cast"]["depth"]).mean() > 0.3
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_mesh_instances_give_the_same_bits(monkeypatch, precision):
+    """Mesh instances (Mesh.placed: the scene's tree over instances, each instance's own tree inside)."""
+    need(precision)
+    scene = scene_of(instances())
+    assert "instance" in tracer_for(scene, context_for(), precision).prepared.types
+    origins, directions = rays_at(scene, seed=1)
+    one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions)
+    assert len(np.unique(one["render"]["id"])) > 8
+
+
+def test_a_sphere_batch_gives_the_same_bits(monkeypatch):
+    """20,000 spheres of one batch (the SAH tree: leaves of up to 7)."""
+    rng = np.random.default_rng(5)
+    shapes = [pyclray.Spheres(rng.uniform(-1, 1, (20_000, 3)), rng.uniform(0.002, 0.02, 20_000))]
+    scene = scene_of(shapes, size=(128, 96))
+    origins, directions = rays_at(scene, 5000, seed=2)
+    one = assert_same_at_widths(monkeypatch, scene, "fp32", origins, directions)
+    assert (one["render"]["id"] >= 0).mean() > 0.3
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_analytic_shapes_among_meshes_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    need(precision)
+    scene = scene_of(mixed(scenes_dir))
+    origins, directions = rays_at(scene, seed=3)
+    one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions)
+    assert len(np.unique(one["cast"]["id"])) >= 6
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_a_shaded_render_with_shadows_gives_the_same_bits(monkeypatch, scenes_dir, precision):
+    """Camera rays through the pair nodes, shadow rays from their hits (the binary tree's packets of one)."""
+    need(precision)
+    lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0)),)
+    for shapes in (mixed(scenes_dir), instances()):
+        scene = scene_of(shapes, lights=lights, shading=Shading(shadows=True))
+        run = lambda: pyclray.render(scene, ("shaded", "depth", "id"), precision, acceleration="bvh")  # noqa: E731
+        one, eight = at_width(monkeypatch, 1, run), at_width(monkeypatch, 8 if precision == "fp32" else 4, run)
+        same_bits(one, eight, "shaded")
+        assert np.ptp(one["shaded"]) > 0
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_rays_from_far_away_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    """Origins 1e6 from the bunny (the box tests' margins at their largest), and a render from there."""
+    need(precision)
+    shapes = mixed(scenes_dir)[:-1]
+    scene = scene_of(shapes)
+    origins, directions = rays_at(scene, seed=4, far=1e6)
+    one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions, hits=False)
+    assert np.isfinite(one["cast"]["depth"]).any()
+    lo, hi = shapes[0].box()
+    centre = 0.5 * (lo + hi)
+    far = pyclray.Scene(pyclray.Camera(tuple(centre + [0, 0, 1e6]), tuple(centre), (0, 1, 0), 0.00002),
+                        pyclray.Image(64, 48), tuple(shapes))
+    run = lambda: pyclray.render(far, EVERY, precision, acceleration="bvh")  # noqa: E731
+    same_bits(at_width(monkeypatch, 1, run), at_width(monkeypatch, 8 if precision == "fp32" else 4, run), "far render")
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_the_gpu_class_host_path_gives_the_same_bits(monkeypatch, scenes_dir, precision):
+    """A GPU's whole path on PoCL: one lane and the GPU class's host path ($PYCLRAY_GPU_CLASS=1: the rays
+    uploaded and cast in their order, engine/queries/cast_device.py) against the CPU's 8 lanes and host path."""
+    need(precision)
+    scene = scene_of(mixed(scenes_dir) + instances()[:2])
+    origins, directions = rays_at(scene, 5000, seed=8)  # (5000: a batch the CPU's host path orders)
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_GPU_CLASS", "1")
+        one = at_width(monkeypatch, 1, lambda: queries(scene, precision, origins, directions))
+    eight = at_width(monkeypatch, 8 if precision == "fp32" else 4, lambda: queries(scene, precision, origins, directions))
+    for name in one:
+        same_bits(one[name], eight[name], name)
+
+
+def test_occupancy_gives_the_same_answers(monkeypatch):
+    """occupancy's parity rays (count_hits with the surface test: the leaves entered at 0 noted as the
+    traversal reaches them, kernels/allhits.cl) through the pair nodes: the 8-lane path's answers, on
+    points inside, outside and on the surface of a closed mesh."""
+    rng = np.random.default_rng(11)
+    v, f = perturbed_sphere(16, 24, 1.0, 0.1, rng)
+    scene = scene_of([pyclray.Mesh(v, f)])  # one closed mesh: the count kernel's surface test decides
+    on = v[: len(v) // 2]  # its vertices: on the surface, whatever their parity rays' counts
+    points = np.concatenate([rng.uniform(-1.5, 1.5, (3000, 3)), on])
+    one = at_width(monkeypatch, 1, lambda: pyclray.occupancy(scene, points))
+    eight = at_width(monkeypatch, 8, lambda: pyclray.occupancy(scene, points))
+    same_bits(one, eight, "occupancy")
+    assert 0.05 < one.mean() < 0.95 and one[-len(on):].all()
+
+
+def test_a_refitted_frame_gives_the_same_bits(monkeypatch):
+    """An animation's frame refitted in place (some spheres moved): the handle's pair nodes are made
+    anew from the refitted boxes, and its render and cast at one lane are a fresh handle's at 8."""
+    rng = np.random.default_rng(9)
+    shapes = [pyclray.Sphere(tuple(rng.uniform(-1, 1, 3)), float(rng.uniform(0.05, 0.2))) for _ in range(60)]
+    scene = scene_of(shapes)
+    moved = list(shapes)
+    for i in (3, 17, 40):
+        moved[i] = pyclray.Sphere(tuple(np.array(shapes[i].center) + [0.6, -0.3, 0.2]), shapes[i].radius)
+    later = pyclray.Scene(scene.camera, scene.image, tuple(moved))
+    origins, directions = rays_at(later, 500, seed=6)
+
+    def one_lane():
+        tracer = pyclray.prepare(scene)
+        tracer.render(aovs=EVERY, acceleration="bvh")  # the pair nodes made for the first frame
+        tracer.cast(origins, directions, aovs=EVERY)
+        assert tracer.refit(later.shapes, [3, 17, 40])  # in place
+        return {"render": tracer.render(aovs=EVERY, acceleration="bvh"),
+                "cast": tracer.cast(origins, directions, aovs=EVERY)}
+
+    one = at_width(monkeypatch, 1, one_lane)
+    eight = at_width(monkeypatch, 8, lambda: {"render": pyclray.render(later, EVERY, acceleration="bvh"),
+                                              "cast": pyclray.cast(later, origins, directions, aovs=EVERY)})
+    for name in one:
+        same_bits(one[name], eight[name], name)
+
+
+def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes_dir):
+    """At a lane width of 1 the programs built for a render through the BVH and for every ray query
+    are the pair nodes' (their source has bvh_pairs.h's marker and the kernel takes PairNode nodes;
+    a ray query's work-item traces one ray);
+    at 8 (and with PYCLRAY_TRAVERSAL=wide) none is: the tests above compare two traversals."""
+    scene = scene_of([bunny(scenes_dir)])
+    lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0)),)
+    shaded = scene_of([bunny(scenes_dir)], lights=lights, shading=Shading(shadows=True))
+    origins, directions = rays_at(scene, 100)
+    built = []
+    original = programs._build
+
+    def recording(ctx, variant):
+        built.append((variant, variant.source()))
+        return original(ctx, variant)
+
+    monkeypatch.setattr(programs, "_build", recording)
+
+    def run():
+        programs.clear()
+        built.clear()
+        queries(scene, "fp32", origins, directions)
+        pyclray.render(shaded, ("shaded",), acceleration="bvh")
+        return {(v.query, v.shadows): source for v, source in built if v.query != "rebase"}
+
+    one = at_width(monkeypatch, 1, run)
+    assert {query for query, _ in one} == {"render", "cast", "occluded", "count_hits", "all_hits"}
+    assert ("render", True) in one
+    for query, source in one.items():
+        assert "#define PYCLRAY_PAIR_TRAVERSAL 1" in source and "PairNode*" in source, query
+        assert "WideNode* nodes" not in source and "BvhNode* nodes" not in source, query  # shadow rays too
+        if query[0] != "render":  # one ray per work-item (kernels/rays.h: CAST_GROUP)
+            assert "#define CAST_GROUP 1\n" in source, query
+    eight = at_width(monkeypatch, 8, run)
+    for query, source in eight.items():
+        assert "PYCLRAY_PAIR_TRAVERSAL" not in source and "#define CAST_GROUP 1\n" not in source, query
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_TRAVERSAL", "wide")
+        for query, source in at_width(monkeypatch, 1, run).items():
+            assert "PYCLRAY_PAIR_TRAVERSAL" not in source, query
+    programs.clear()
+
+
+def test_the_pair_nodes_hold_the_binary_trees_boxes_and_leaves():
+    """Each internal binary node is one pair node holding both children's packed boxes and codes
+    (a node's index, or its leaf's wide code); a tree of one leaf is one node with no second child."""
+    rng = np.random.default_rng(0)
+    lo = rng.uniform(-1, 1, (500, 3))
+    tree = build(np.stack([lo, lo + 0.01], axis=1), 4)
+    from pyclray.engine.bvh.tree import pack_nodes
+
+    binary = pack_nodes(tree, np.zeros(3))
+    pairs = pack_pairs(tree, binary, leaf_codes(tree))
+    assert pairs.dtype.itemsize == 64 and layout(PAIR_NODE, "fp32").itemsize == 64
+    inner = np.flatnonzero(tree.count == 0)
+    assert len(pairs) == len(inner)
+    index = {int(k): i for i, k in enumerate(inner)}
+    seen_leaves = []
+    for i, k in enumerate(inner):
+        for side, name in ((0, "left"), (1, "right")):
+            child = int(tree.first[k]) + side
+            assert np.array_equal(pairs[i][f"{name}_lo"][:3], binary[child]["lo"][:3])
+            assert np.array_equal(pairs[i][f"{name}_hi"][:3], binary[child]["hi"][:3])
+            code = int(pairs[i][f"{name}_lo"][3:].view(np.int32)[0])
+            if tree.count[child]:
+                assert code == ~(int(tree.first[child]) * 8 + int(tree.count[child]))
+                seen_leaves.append(child)
+            else:
+                assert code == index[child] and code > i  # children after their parents
+    assert sorted(seen_leaves) == sorted(np.flatnonzero(tree.count > 0).tolist())
+    one = build(np.stack([lo[:3], lo[:3] + 0.01], axis=1), 4)
+    single = pack_pairs(one, pack_nodes(one, np.zeros(3)), leaf_codes(one))
+    assert len(single) == 1 and int(single[0]["right_lo"][3:].view(np.int32)[0]) == 0
