@@ -29,7 +29,7 @@ from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.buffers import shares_host_memory
 from ..opencl.device import launch, launch_kept
-from .cast import _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
+from .cast import RayBatch, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -155,6 +155,25 @@ __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, l
 }
 POSITIONS(float)
 POSITIONS(double)
+
+/* the hit queries' rows (engine/queries/hits.py): each of a pass's rays' hits, stored by the all_hits
+   kernel from i * capacity on, copied to its ray's place in the CSR rows (offsets[ray], ray = rays[i]
+   where mapped: a second pass over the rays with more hits than the first had room for); a ray
+   with more hits than its pass's room is skipped (the second pass writes its rows) */
+__kernel void hit_rows(__global double *t_out, __global int *kind_out, __global int *k_out, __global int *sub_out,
+                       __global const double *t, __global const int *kind, __global const int *k,
+                       __global const int *sub, __global const int *counts, long n, int capacity,
+                       __global const long *offsets, __global const long *rays, int mapped) {
+    for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
+        const int c = counts[i];
+        if (c > capacity) continue;
+        const long to = offsets[mapped ? rays[i] : i], from = i * (long)capacity;
+        for (int j = 0; j < c; j++) {
+            t_out[to + j] = t[from + j]; kind_out[to + j] = kind[from + j];
+            k_out[to + j] = k[from + j]; sub_out[to + j] = sub[from + j];
+        }
+    }
+}
 """
 
 # the work-items of the helper kernels, each looping over its share of the rays: at most 65,536 (each
@@ -177,7 +196,8 @@ class DeviceKernels:
     def __init__(self, context):
         self.program = cl.Program(context, SOURCE).build()
         self.kernels = {name: getattr(self.program, name)
-                        for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double")}
+                        for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double",
+                                     "hit_rows")}
 
     def run(self, queue, name: str, n: int, *args):
         """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share; the
@@ -429,3 +449,169 @@ def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_st
 
 
 NO_ORDER = np.zeros(1, np.int32)  # (the kernel reads no order: ordered is 0)
+
+
+# -- the hit queries (engine/queries/hits.py) of host rays on a device of the GPU class ---------------
+class HitRays:
+    """Host rays uploaded once and checked on the device by the check's kernel (reach, repairing each
+    refused ray in the call's own copies), for count_hits' and all_hits' kernels: origins and
+    directions (the host's float64 arrays as given, flattened, for what the host derives from the
+    hits: positions), their buffers, tmin and tmax (hits.py's second pass gathers some rays), shape,
+    count, the check's partial results (read back with the first results: fine), and the kernels'
+    arguments (launch). A refused ray raises _Refused (the host path names it)."""
+
+    def __init__(self, tracer, origins, directions, tmin, tmax):
+        ctx = tracer.ctx
+        self.tracer, self.given = tracer, (origins, directions, tmin, tmax)
+        self.kernels = _kernels(tracer)
+        directions = _ray_array("directions", directions)
+        origins = _ray_array("origins", origins)
+        shape = directions.shape[:-1]
+        if origins.shape != directions.shape and origins.shape != (3,):
+            raise RequestError(
+                f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
+        inputs = tracer.cast_inputs()
+        self.anchor, self.block_lanes = inputs[1], inputs[4]
+        self.args, self.pairs = ray_arguments(tracer, inputs)
+        try:
+            tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+            tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+        except RequestError:  # the host path's first refusal (a bad ray's comes before a bad distance's)
+            self.refused()
+        self.bound = np.sqrt(np.finfo(REAL[tracer.precision]).max) / 4  # (as cast's: RayBatch)
+        self.shape, self.count = shape, math.prod(shape)
+        self.origins, self.directions = origins.reshape(-1, 3), directions.reshape(-1, 3)
+        self.tmin, self.tmax = tmin, tmax
+        self.stride = 1 if origins.shape == directions.shape else 0
+        if self.stride == 0:  # one origin: checked here (the kernel repairs no shared origin), even without rays
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not np.abs(origins - self.anchor[:3]).max() <= self.bound:
+                    self.refused()
+        self.items = check_groups(self.count)
+        self.partial = None
+        if self.count:
+            self.buffers = self.upload(self.origins, self.directions, tmin, tmax)
+            self.partial = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * self.items)
+            self.kernels.run(ctx.queue, "reach", self.count, self.partial, self.buffers[0], np.int32(self.stride),
+                             self.buffers[2], np.int64(self.count), *(np.float64(a) for a in self.anchor[:3]),
+                             np.float64(self.bound), np.int32(1))
+
+    # the points at distances along rays, as the host path's batch makes them (all_hits' positions)
+    unit_directions = RayBatch.unit_directions
+    positions = RayBatch.positions
+
+    def refused(self):
+        raise _Refused(self.given)
+
+    def upload(self, origins, directions, tmin, tmax) -> tuple:
+        """(origins, origin stride, directions, tmin, its stride, tmax, its stride): the buffers and
+        strides of rays (copies of the arrays: the check's kernel may repair them)."""
+        queue = self.tracer.ctx.queue
+        o_buffer, d_buffer = (cl_array.to_device(queue, np.ascontiguousarray(a)).data for a in (origins, directions))
+        return (o_buffer, 1 if len(origins) > 1 else 0, d_buffer, _constant(self.tracer, tmin), len(tmin) > 1,
+                _constant(self.tracer, tmax), len(tmax) > 1)
+
+    def launch(self, query: str, count: int, buffers: tuple, outputs: dict) -> None:
+        """Enqueue the query's kernel (count_hits, all_hits) over count rays in buffers (upload)."""
+        variant = Variant(query, self.tracer.prepared.types, (), self.tracer.precision, pairs=self.pairs)
+        o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride = buffers
+        _launch(self.tracer, variant, count, o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride,
+                self.anchor, self.args, outputs, *ray_group(self.pairs))
+
+    def read_checked(self, arrays: dict) -> None:
+        """Read back the device arrays into the host arrays (name -> (buffer, array)) behind one wait,
+        with the check's partial results: a refused batch raises _Refused."""
+        queue = self.tracer.ctx.queue
+        check = np.empty(self.items, np.float64)
+        if self.partial is not None:
+            cl.enqueue_copy(queue, check, self.partial, is_blocking=False)
+        for buffer, array in arrays.values():
+            if array.size:
+                cl.enqueue_copy(queue, array, buffer, is_blocking=False)
+        queue.finish()
+        if self.partial is not None and not _fine(check, self.bound):
+            self.refused()
+
+
+def hit_counts_device(tracer, origins, directions, tmin, tmax) -> np.ndarray:
+    """count_hits (hits.py: run_count_hits) of host rays on a device of the GPU class: uploaded once,
+    checked and counted on the device, the counts and the check's results read back once."""
+    try:
+        rays = HitRays(tracer, origins, directions, tmin, tmax)
+        counts = np.zeros(rays.count, np.int32)
+        if rays.count:
+            buffer = cl.Buffer(tracer.ctx.context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
+            rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
+            rays.read_checked({"counts": (buffer, counts)})
+        return counts.reshape(rays.shape)
+    except _Refused as refused:
+        return _host_names_it(tracer, "count_hits", refused)
+
+
+def _host_names_it(tracer, query: str, refused):
+    from .hits import run_all_hits, run_count_hits
+
+    origins, directions, tmin, tmax = refused.rays
+    if query == "count_hits":
+        result = run_count_hits(tracer, origins, directions, tmin, tmax, host=True)
+    else:
+        result = run_all_hits(tracer, origins, directions, tmin, tmax, ("depth",), host=True)
+    raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
+
+
+def all_hits_device(tracer, origins, directions, tmin, tmax, capacity: int):
+    """(rays, counts, t, kinds, entries, subs) of all_hits (hits.py: run_all_hits) of host rays on a
+    device of the GPU class: rays (HitRays) uploaded once and checked on the device; one pass of the
+    all_hits kernel with room for capacity hits a ray, its counts read back with the check's results
+    (the CSR offsets their cumulative sum, in numpy); the rays with more hits again, alone (gathered
+    on the host: numpy's fancy indexing of those rows), with room for the most; each pass's rows
+    copied into their CSR places on the device (kernel hit_rows) and the hits read back once."""
+    try:
+        return _all_hits(tracer, HitRays(tracer, origins, directions, tmin, tmax), capacity)
+    except _Refused as refused:
+        return _host_names_it(tracer, "all_hits", refused)
+
+
+def _stored_pass(rays: HitRays, count: int, buffers: tuple, capacity: int) -> tuple:
+    """The all_hits kernel over count rays in buffers with room for capacity hits each: its device
+    buffers (counts, t, kinds, entries, subs)."""
+    context = rays.tracer.ctx.context
+    rows = max(1, count * capacity)
+    out = (cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * count), cl.Buffer(context, cl.mem_flags.READ_WRITE, 8 * rows),
+           *(cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * rows) for _ in range(3)))
+    rays.launch("all_hits", count, buffers, {"hit_counts": out[0], "hit_capacity": np.int32(capacity), "hit_t": out[1],
+                                             "hit_kind": out[2], "hit_k": out[3], "hit_sub": out[4]})
+    return out
+
+
+def _all_hits(tracer, rays: HitRays, capacity: int):
+    ctx, n = tracer.ctx, rays.count
+    queue = ctx.queue
+    counts = np.zeros(n, np.int32)
+    if not n:
+        return rays, counts, np.zeros(0), *(np.zeros(0, np.int32) for _ in range(3))
+    first = _stored_pass(rays, n, rays.buffers, capacity)
+    rays.read_checked({"counts": (first[0], counts)})
+    offsets = np.zeros(n + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    total = int(offsets[-1])
+    hits = (np.empty(total, np.float64), *(np.empty(total, np.int32) for _ in range(3)))
+    if not total:
+        return (rays, counts, *hits)
+    outs = tuple(cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, a.nbytes) for a in hits)
+    offsets_buffer = cl_array.to_device(queue, offsets)
+    rays.kernels.run(queue, "hit_rows", n, *outs, *first[1:], first[0], np.int64(n), np.int32(capacity),
+                     offsets_buffer.data, offsets_buffer.data, np.int32(0))
+    over = np.flatnonzero(counts > capacity)
+    if len(over):  # those rays again, alone, with room for all their hits (the same hits)
+        pick = (lambda a: a[over] if len(a) > 1 else a)
+        buffers = rays.upload(pick(rays.origins), rays.directions[over], pick(rays.tmin), pick(rays.tmax))
+        most = int(counts[over].max())
+        second = _stored_pass(rays, len(over), buffers, most)
+        over_buffer = cl_array.to_device(queue, over.astype(np.int64))
+        rays.kernels.run(queue, "hit_rows", len(over), *outs, *second[1:], second[0], np.int64(len(over)),
+                         np.int32(most), offsets_buffer.data, over_buffer.data, np.int32(1))
+    for array, buffer in zip(hits, outs):
+        cl.enqueue_copy(queue, array, buffer, is_blocking=False)
+    queue.finish()
+    return (rays, counts, *hits)

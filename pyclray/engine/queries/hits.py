@@ -16,7 +16,7 @@ from ...model.errors import RequestError
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL
 from ..launch.signatures import arguments
-from ..opencl.device import launch
+from ..opencl.device import gpu_class, launch
 from .cast import RayBatch, label_of
 from .requests import Frame
 
@@ -81,8 +81,13 @@ def _counts(tracer, batch: RayBatch) -> np.ndarray:
     return counts
 
 
-def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
-    """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax)."""
+def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) -> np.ndarray:
+    """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax); on a device of
+    the GPU class (but with host) the rays checked and counted on the device (cast_device.py)."""
+    if not host and gpu_class(tracer.ctx.device):
+        from .cast_device import hit_counts_device
+
+        return hit_counts_device(tracer, origins, directions, tmin, tmax)
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
 
@@ -126,11 +131,16 @@ def _gather(counts: np.ndarray, capacity: int) -> np.ndarray:
     return starts + within
 
 
-def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
+def run_all_hits(tracer, origins, directions, tmin, tmax, aovs, host: bool = False) -> Frame:
     """Every hit t in (tmin, tmax) of each ray, nearest first: offsets (int64, N + 1), ray (int64 per
     hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
-    ray, and a second over the rays that have more, with room for the most of them."""
-    ctx, precision = tracer.ctx, tracer.precision
+    ray, and a second over the rays that have more, with room for the most of them; on a device of
+    the GPU class (but with host) the rays checked and both passes' rows put in place on the device
+    (cast_device.py: all_hits_device), the rest here as below."""
+    if not host and gpu_class(tracer.ctx.device):
+        from .cast_device import all_hits_device
+
+        return _hit_frame(tracer, *all_hits_device(tracer, origins, directions, tmin, tmax, CAPACITY), aovs)
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
     rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
@@ -149,7 +159,13 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
         order = np.argsort(owner, kind="stable")
         parts = [np.concatenate([p[np.repeat(counts <= CAPACITY, np.minimum(counts, CAPACITY))], np.asarray(m)[more_rows]])[order]
                  for p, m in zip(parts, more[1:])]
-    t, kinds, entries, subs = parts
+    return _hit_frame(tracer, batch, counts, *parts, aovs)
+
+
+def _hit_frame(tracer, batch, counts, t, kinds, entries, subs, aovs) -> Frame:
+    """all_hits' Frame of each ray's hits (counts) in ray order, nearest first (t, kinds, entries,
+    subs: the kernel's), of the batch's rays (its count, block lanes and positions)."""
+    ctx, precision = tracer.ctx, tracer.precision
     offsets = np.zeros(batch.count + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
