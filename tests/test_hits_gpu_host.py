@@ -148,3 +148,21 @@ def test_no_per_ray_host_work_on_the_gpu_class(tracer, monkeypatch):
     for n, frame in zip((1, 1000, 5000), expected):
         same(tracer.count_hits(origins[:n], directions[:n]), counts[:n])
         same_frames(tracer.all_hits(origins[:n], directions[:n], aovs=HIT_AOVS), frame)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_at_lane_width_one(monkeypatch, precision):
+    """The program a GPU builds (PYCLRAY_LANES=1: the pair nodes, one ray per work-item) on the GPU
+    class's host path: the bits of the CPU's host path at the CPU's own lane width."""
+    origins, directions = rays(3000, 45)
+    origins *= 2.0
+    with pyclray.prepare(stacked_scene(), precision=precision) as handle:
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        counts = handle.count_hits(origins, directions)
+        expected = handle.all_hits(origins, directions, aovs=HIT_AOVS)
+    monkeypatch.setenv("PYCLRAY_LANES", "1")
+    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+    with pyclray.prepare(stacked_scene(), precision=precision) as handle:
+        same(handle.count_hits(origins, directions), counts)
+        same_frames(handle.all_hits(origins, directions, aovs=HIT_AOVS), expected)
+    assert (counts > CAPACITY).sum() > 10
