@@ -511,9 +511,9 @@ class HitRays:
         return (o_buffer, 1 if len(origins) > 1 else 0, d_buffer, _constant(self.tracer, tmin), len(tmin) > 1,
                 _constant(self.tracer, tmax), len(tmax) > 1)
 
-    def launch(self, query: str, count: int, buffers: tuple, outputs: dict) -> None:
-        """Enqueue the query's kernel (count_hits, all_hits) over count rays in buffers (upload)."""
-        variant = Variant(query, self.tracer.prepared.types, (), self.tracer.precision, pairs=self.pairs)
+    def launch(self, query: str, count: int, buffers: tuple, outputs: dict, aovs: tuple = ()) -> None:
+        """Enqueue the query's kernel (count_hits, all_hits; with aovs) over count rays in buffers (upload)."""
+        variant = Variant(query, self.tracer.prepared.types, aovs, self.tracer.precision, pairs=self.pairs)
         o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride = buffers
         _launch(self.tracer, variant, count, o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride,
                 self.anchor, self.args, outputs, *ray_group(self.pairs))
@@ -533,26 +533,39 @@ class HitRays:
             self.refused()
 
 
-def hit_counts_device(tracer, origins, directions, tmin, tmax) -> np.ndarray:
+def hit_counts_device(tracer, origins, directions, tmin, tmax, surface: dict | None = None):
     """count_hits (hits.py: run_count_hits) of host rays on a device of the GPU class: uploaded once,
-    checked and counted on the device, the counts and the check's results read back once."""
+    checked and counted on the device, the counts and the check's results read back once; with
+    surface (occupancy's rays from points: hits.py's count_from_points, its surface test's
+    arguments), (counts, on) of the flat rays."""
     try:
         rays = HitRays(tracer, origins, directions, tmin, tmax)
         counts = np.zeros(rays.count, np.int32)
+        on = np.zeros(rays.count, np.uint8)
         if rays.count:
-            buffer = cl.Buffer(tracer.ctx.context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
-            rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
-            rays.read_checked({"counts": (buffer, counts)})
-        return counts.reshape(rays.shape)
+            context = tracer.ctx.context
+            buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
+            if surface is None:
+                rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
+                rays.read_checked({"counts": (buffer, counts)})
+            else:
+                on_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, on.nbytes)
+                rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer,
+                                                                     "surface_out": on_buffer}, ("surface",))
+                rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on)})
+        return counts.reshape(rays.shape) if surface is None else (counts, on)
     except _Refused as refused:
-        return _host_names_it(tracer, "count_hits", refused)
+        return _host_names_it(tracer, "count_hits", refused, surface)
 
 
-def _host_names_it(tracer, query: str, refused):
-    from .hits import run_all_hits, run_count_hits
+def _host_names_it(tracer, query: str, refused, surface: dict | None = None):
+    """The host path's call of the refused rays, which raises its RequestError naming the first bad row."""
+    from .hits import count_from_points, run_all_hits, run_count_hits
 
     origins, directions, tmin, tmax = refused.rays
-    if query == "count_hits":
+    if surface is not None:
+        result = count_from_points(tracer, origins, directions, surface, host=True)
+    elif query == "count_hits":
         result = run_count_hits(tracer, origins, directions, tmin, tmax, host=True)
     else:
         result = run_all_hits(tracer, origins, directions, tmin, tmax, ("depth",), host=True)

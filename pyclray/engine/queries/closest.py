@@ -24,7 +24,7 @@ from ..bvh.winding import winding_slots
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
-from ..opencl.device import launch
+from ..opencl.device import gpu_class, launch
 from .hits import count_from_points
 
 SIGNS = ("parity", "winding")
@@ -34,7 +34,11 @@ CLOSEST_OUTPUTS = ("position", "normal", "id", "primitive", "barycentric")
 
 # Points are visited in the order of a Morton code of their positions when there are at least this
 # many: neighbouring work-items then walk the same nodes and triangles, which stay in cache. Each
-# point is computed on its own, so the order changes no bit.
+# point is computed on its own, so the order changes no bit. A device of the GPU class
+# (engine/opencl/device.py: gpu_class) takes no order (its host does nothing per point: numba's
+# passes of point_passes.py and the parity grid's lookup are the CPU's; the parity rays' directions
+# there numpy's, the same directions), and its parity rays are counted through count_hits' device
+# path (cast_device.py: HitRays).
 COHERENT_FROM = 4096
 
 # the direction of the parity rays: any direction is exact (count_hits' tie rule), so each point's
@@ -184,7 +188,7 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
             return results
     variant = Variant("closest", inputs.types, tuple(outputs), precision)
     order = None
-    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
+    if count >= COHERENT_FROM and not gpu_class(ctx.device):  # numba's code, imported for large batches only
         from .point_passes import coherent_order
 
         # the points gathered in that order, their results scattered back below: the kernel then
@@ -249,7 +253,9 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     closed = tracer.mesh_handle(closed=True)
     if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
-        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
+        # (not on the GPU class: its rays are cheap, the grid's lookup a pass on the host; the same bits)
+        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM and not gpu_class(tracer.ctx.device) \
+            else None
         if grid is not None:
             decided, inside = grid.lookup(flat, sign)
             rest = np.flatnonzero(~decided)
@@ -357,7 +363,7 @@ def parity_directions(closed, points: np.ndarray) -> np.ndarray:
     lo, hi = (tree.lo[0], tree.hi[0]) if len(tree.lo) else (np.zeros(3), np.zeros(3))
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
         return np.broadcast_to(PARITY_DIRECTION, points.shape)
-    if len(points) < COHERENT_FROM:
+    if len(points) < COHERENT_FROM or gpu_class(closed.ctx.device):  # (numpy's argmin: the first nearest face too)
         gaps = np.concatenate([points - lo, hi - points], axis=1)
         return PARITY_FACES[np.argmin(gaps, axis=1)]
     from .point_passes import nearest_face_directions  # numba's code, for large batches only

@@ -92,11 +92,17 @@ def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) 
     return _counts(tracer, batch).reshape(batch.shape)
 
 
-def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict) -> tuple[np.ndarray, np.ndarray]:
+def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict,
+                      host: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(counts int32, on uint8) of rays from checked points (N, 3) along directions (N, 3): each
     one's number of hits t > 0, and where that is even whether the point lies on a surface (1; 0
     not, or an odd count; 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE); surface: that
-    test's arguments (the closest-point query's leaves, refs and world entries: closest.py)."""
+    test's arguments (the closest-point query's leaves, refs and world entries: closest.py); on a
+    device of the GPU class (but with host) checked and counted on the device (cast_device.py)."""
+    if not host and gpu_class(tracer.ctx.device):
+        from .cast_device import hit_counts_device
+
+        return hit_counts_device(tracer, points, directions, None, None, surface)
     batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
