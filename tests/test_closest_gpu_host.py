@@ -110,3 +110,25 @@ def test_a_far_point_raises_the_host_paths_line(monkeypatch):
             else:
                 errors.append(result.tolist())
     assert errors[0] == errors[1] and isinstance(errors[0], str) and "row 4" in errors[0]
+
+
+def test_the_parity_rays_directions_are_numbas(monkeypatch):
+    """The parity rays' directions of a large batch on the GPU class (numpy's passes over the columns)
+    are numba's (point_passes.nearest_face_directions): the first nearest face, ties included (points
+    at the box's centre and on its diagonals, equally near two or more faces)."""
+    from pyclray.engine.queries.closest import parity_directions
+
+    p = points(COHERENT_FROM + 100, 9)
+    with pyclray.prepare(one_closed()) as handle:
+        closed = handle.mesh_handle(closed=True)
+        tree = closed.prepared.bvh.tree
+        centre = 0.5 * (tree.lo[0] + tree.hi[0])
+        p[:3] = centre
+        p[3:10] = centre + np.linspace(-0.5, 0.5, 7)[:, None] * (tree.hi[0] - tree.lo[0])  # the diagonal
+        p[10] = tree.lo[0]
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        expected = parity_directions(closed, p)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+        got = parity_directions(closed, p)
+    same(got, expected)
+    assert len(np.unique(expected, axis=0)) == 6

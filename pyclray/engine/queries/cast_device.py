@@ -174,6 +174,26 @@ __kernel void hit_rows(__global double *t_out, __global int *kind_out, __global 
         }
     }
 }
+
+/* occupancy's parity grid (engine/queries/parity_grid.py: _lookup, the same operations): per point
+   decided (1 beyond the grid or in an empty cell) and inside (its empty cell's state) */
+__kernel void grid_lookup(__global uchar *decided, __global uchar *inside, __global const double *p, long n,
+                          double lo0, double lo1, double lo2, double size, long d0, long d1, long d2,
+                          __global const char *state) {
+    const double lo[3] = {lo0, lo1, lo2};
+    const long dims[3] = {d0, d1, d2};
+    for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
+        long cell = 0;
+        for (int axis = 2; axis >= 0; axis--) {
+            const double c = (p[3 * i + axis] - lo[axis]) / size;
+            if (!(c >= 0.0 && c < (double)dims[axis])) { cell = -1; break; }
+            cell = cell * dims[axis] + (long)c;
+        }
+        const char s = cell < 0 ? 0 : state[cell];
+        decided[i] = cell < 0 || s != -1;
+        inside[i] = (cell >= 0 && s != -1) ? (uchar)s : 0;
+    }
+}
 """
 
 # the work-items of the helper kernels, each looping over its share of the rays: at most 65,536 (each
@@ -197,7 +217,7 @@ class DeviceKernels:
         self.program = cl.Program(context, SOURCE).build()
         self.kernels = {name: getattr(self.program, name)
                         for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double",
-                                     "hit_rows")}
+                                     "hit_rows", "grid_lookup")}
 
     def run(self, queue, name: str, n: int, *args):
         """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share; the
@@ -628,3 +648,25 @@ def _all_hits(tracer, rays: HitRays, capacity: int):
         cl.enqueue_copy(queue, array, buffer, is_blocking=False)
     queue.finish()
     return (rays, counts, *hits)
+
+
+def grid_lookup_device(tracer, grid, points: np.ndarray, sign: str) -> tuple[np.ndarray, np.ndarray]:
+    """(decided, inside) per point, bool each: occupancy's parity grid (parity_grid.py:
+    ParityGrid.lookup) on a device of the GPU class, its states uploaded once per grid and sign
+    (kept on the grid), the points uploaded once, two bytes per point read back."""
+    queue = tracer.ctx.queue
+    count = len(points)
+    decided, inside = np.zeros(count, np.uint8), np.zeros(count, np.uint8)
+    if count:
+        kept = grid.__dict__.setdefault("device_states", {})
+        if sign not in kept:
+            kept[sign] = cl_array.to_device(queue, np.ascontiguousarray(grid.states[sign], np.int8))
+        outs = [cl_array.empty(queue, count, np.uint8) for _ in range(2)]
+        p = cl_array.to_device(queue, np.ascontiguousarray(points, np.float64))
+        _kernels(tracer).run(queue, "grid_lookup", count, outs[0].data, outs[1].data, p.data, np.int64(count),
+                             *(np.float64(x) for x in grid.lo), np.float64(grid.size),
+                             *(np.int64(d) for d in grid.dims), kept[sign].data)
+        for out, array in zip(outs, (decided, inside)):
+            cl.enqueue_copy(queue, array, out.data, is_blocking=False)
+        queue.finish()
+    return decided.view(bool), inside.view(bool)
