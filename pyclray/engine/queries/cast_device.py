@@ -12,6 +12,10 @@ path does (engine/queries/cast.py: _cast_rays). They are cast in the order given
 ray_order.py, is the host's: on a CPU device it pays only for scenes beyond the cache, and each ray is
 traced on its own, so no bit changes). What the host derives from the kernel's results (a block's
 primitive, label, position) is derived here by small device kernels, to the same bits.
+
+On the GPU class the hit queries (engine/queries/hits.py) of host rays take the same check (HitRays)
+and put all_hits' rows in their CSR places on the device (all_hits_device); occupancy's parity grid
+is looked up here too (grid_lookup_device: engine/queries/closest.py).
 """
 from __future__ import annotations
 
@@ -634,7 +638,7 @@ def _all_hits(tracer, rays: HitRays, capacity: int):
     outs = tuple(cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, a.nbytes) for a in hits)
     offsets_buffer = cl_array.to_device(queue, offsets)
     rays.kernels.run(queue, "hit_rows", n, *outs, *first[1:], first[0], np.int64(n), np.int32(capacity),
-                     offsets_buffer.data, offsets_buffer.data, np.int32(0))
+                     offsets_buffer.data, offsets_buffer.data, np.int32(0))  # (rays: not read, mapped 0)
     over = np.flatnonzero(counts > capacity)
     if len(over):  # those rays again, alone, with room for all their hits (the same hits)
         pick = (lambda a: a[over] if len(a) > 1 else a)
@@ -658,7 +662,7 @@ def grid_lookup_device(tracer, grid, points: np.ndarray, sign: str) -> tuple[np.
     count = len(points)
     decided, inside = np.zeros(count, np.uint8), np.zeros(count, np.uint8)
     if count:
-        kept = grid.__dict__.setdefault("device_states", {})
+        kept = grid.device_states
         if sign not in kept:
             kept[sign] = cl_array.to_device(queue, np.ascontiguousarray(grid.states[sign], np.int8))
         outs = [cl_array.empty(queue, count, np.uint8) for _ in range(2)]
