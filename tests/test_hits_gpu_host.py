@@ -166,3 +166,40 @@ def test_at_lane_width_one(monkeypatch, precision):
         same(handle.count_hits(origins, directions), counts)
         same_frames(handle.all_hits(origins, directions, aovs=HIT_AOVS), expected)
     assert (counts > CAPACITY).sum() > 10
+
+
+@pytest.mark.parametrize("switch", ["0", "1"])  # the CPU's class and the GPU's: device rays take the device path on both
+def test_device_rays(tracer, monkeypatch, switch):
+    """Rays given as pyopencl arrays (float64 and float32, one origin or one each, either array on the
+    device): the bits of the same rays given as host arrays (float32 rays: their exact float64
+    widening) on the CPU's host path; a bad device ray the host path's line."""
+    import pyopencl.array as cl_array
+
+    queue = tracer.ctx.queue
+    origins, directions = rays(3000, 46)
+    origins *= 2.0
+    origin = np.array([0.2, 0.1, 3.5])
+    cases = [(origins, directions, np.float64), (origins, directions, np.float32), (origin, directions, np.float64)]
+    for o, d, dtype in cases:
+        o, d = o.astype(dtype), d.astype(dtype)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        counts = tracer.count_hits(o, d, tmax=np.linspace(3.0, 9.0, len(d)))
+        expected = tracer.all_hits(o, d, tmax=np.linspace(3.0, 9.0, len(d)), aovs=HIT_AOVS)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+        for given in [(cl_array.to_device(queue, o), cl_array.to_device(queue, d)), (o, cl_array.to_device(queue, d)),
+                      (cl_array.to_device(queue, o), d)]:
+            same(tracer.count_hits(*given, tmax=np.linspace(3.0, 9.0, len(d))), counts)
+            same_frames(tracer.all_hits(*given, tmax=np.linspace(3.0, 9.0, len(d)), aovs=HIT_AOVS), expected)
+        assert (counts > CAPACITY).sum() > 10  # the second pass's rays (read back from the device)
+    bad = np.where(np.arange(3000)[:, None] == 17, np.nan, directions)
+    for query in ("count_hits", "all_hits"):
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        with pytest.raises(pyclray.RequestError) as host_error:
+            getattr(tracer, query)(origins, bad)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+        with pytest.raises(pyclray.RequestError) as device_error:
+            getattr(tracer, query)(cl_array.to_device(queue, origins), cl_array.to_device(queue, bad))
+        assert str(device_error.value) == str(host_error.value) and "row 17" in str(host_error.value)
+        with pytest.raises(pyclray.RequestError) as device_error:  # a bad ray before a bad distance, as on the host
+            getattr(tracer, query)(cl_array.to_device(queue, origins), cl_array.to_device(queue, bad), tmin=-1.0)
+        assert str(device_error.value) == str(host_error.value)

@@ -477,19 +477,26 @@ NO_ORDER = np.zeros(1, np.int32)  # (the kernel reads no order: ordered is 0)
 
 # -- the hit queries (engine/queries/hits.py) of host rays on a device of the GPU class ---------------
 class HitRays:
-    """Host rays uploaded once and checked on the device by the check's kernel (reach, repairing each
-    refused ray in the call's own copies), for count_hits' and all_hits' kernels: origins and
-    directions (the host's float64 arrays as given, flattened, for what the host derives from the
-    hits: positions), their buffers, tmin and tmax (hits.py's second pass gathers some rays), shape,
-    count, the check's partial results (read back with the first results: fine), and the kernels'
-    arguments (launch). A refused ray raises _Refused (the host path names it)."""
+    """Rays checked on the device by the check's kernel (reach) for count_hits' and all_hits' kernels:
+    host arrays uploaded once into the call's own copies, which the check repairs (each refused ray
+    made harmless, its partial results read back with the first results); device arrays (pyopencl
+    arrays on the handle's context, float32 widened there) the caller's, checked before the query
+    (a few kB read back). origins and directions: the host's float64 arrays, flattened, for what the
+    host derives from the hits (all_hits' positions, its second pass's rays): device rays read back
+    only then. Also their buffers, tmin and tmax, shape, count and the kernels' arguments (launch). A
+    refused ray raises _Refused (the host path names it)."""
 
     def __init__(self, tracer, origins, directions, tmin, tmax):
         ctx = tracer.ctx
         self.tracer, self.given = tracer, (origins, directions, tmin, tmax)
         self.kernels = _kernels(tracer)
-        directions = _ray_array("directions", directions)
-        origins = _ray_array("origins", origins)
+        self.device = is_device_array(origins) or is_device_array(directions)
+        if self.device:
+            directions = _device_rays(ctx, self.kernels, "directions", directions)
+            origins = _device_rays(ctx, self.kernels, "origins", origins)
+        else:
+            directions = _ray_array("directions", directions)
+            origins = _ray_array("origins", origins)
         shape = directions.shape[:-1]
         if origins.shape != directions.shape and origins.shape != (3,):
             raise RequestError(
@@ -501,30 +508,80 @@ class HitRays:
             tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
             tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
         except RequestError:  # the host path's first refusal (a bad ray's comes before a bad distance's)
-            self.refused()
+            self.check_now(origins, directions)
+            raise
         self.bound = np.sqrt(np.finfo(REAL[tracer.precision]).max) / 4  # (as cast's: RayBatch)
         self.shape, self.count = shape, math.prod(shape)
-        self.origins, self.directions = origins.reshape(-1, 3), directions.reshape(-1, 3)
-        self.tmin, self.tmax = tmin, tmax
         self.stride = 1 if origins.shape == directions.shape else 0
+        self._rays = (origins, directions)
+        self._host = None if self.device else (origins.reshape(-1, 3), directions.reshape(-1, 3))
+        self.tmin, self.tmax = tmin, tmax
         if self.stride == 0:  # one origin: checked here (the kernel repairs no shared origin), even without rays
+            origin = origins.get() if self.device else origins
             with np.errstate(over="ignore", invalid="ignore"):
-                if not np.abs(origins - self.anchor[:3]).max() <= self.bound:
+                if not np.abs(origin - self.anchor[:3]).max() <= self.bound:
                     self.refused()
         self.items = check_groups(self.count)
         self.partial = None
-        if self.count:
-            self.buffers = self.upload(self.origins, self.directions, tmin, tmax)
+        if self.count and self.device:  # the caller's rays: checked before the query, not repaired
+            self.buffers = (origins.data, self.stride, directions.data, _constant(tracer, tmin), len(tmin) > 1,
+                            _constant(tracer, tmax), len(tmax) > 1)
+            if not _fine(self.reach(cl_array.empty(ctx.queue, (self.items,), np.float64).data, repair=False),
+                         self.bound):
+                self.refused()
+        elif self.count:
+            self.buffers = self.upload(self._host[0], self._host[1], tmin, tmax)
             self.partial = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * self.items)
-            self.kernels.run(ctx.queue, "reach", self.count, self.partial, self.buffers[0], np.int32(self.stride),
-                             self.buffers[2], np.int64(self.count), *(np.float64(a) for a in self.anchor[:3]),
-                             np.float64(self.bound), np.int32(1))
+            self.reach(self.partial, repair=True)
+
+    def reach(self, partial, repair: bool):
+        """The check's kernel over the rays into partial; without repair, its results read back now."""
+        queue = self.tracer.ctx.queue
+        self.kernels.run(queue, "reach", self.count, partial, self.buffers[0], np.int32(self.stride), self.buffers[2],
+                         np.int64(self.count), *(np.float64(a) for a in self.anchor[:3]), np.float64(self.bound),
+                         np.int32(1 if repair else 0))
+        if not repair:
+            check = np.empty(self.items, np.float64)
+            cl.enqueue_copy(queue, check, partial)
+            return check
+
+    def check_now(self, origins, directions):
+        """Before a bad distance's line: a bad ray's, as on the host path (host rays: that path names
+        either; device rays: checked here, else the distance's line stands)."""
+        if not self.device:
+            self.refused()
+        count = math.prod(directions.shape[:-1])
+        if count:
+            self.count, self.items = count, check_groups(count)
+            self.stride = 1 if origins.shape == directions.shape else 0
+            self.bound = np.sqrt(np.finfo(REAL[self.tracer.precision]).max) / 4
+            self.buffers = (origins.data, self.stride, directions.data)
+            if not _fine(self.reach(cl_array.empty(self.tracer.ctx.queue, (self.items,), np.float64).data, False),
+                         self.bound):
+                self.refused()
+
+    @property
+    def origins(self):
+        return self.host()[0]
+
+    @property
+    def directions(self):
+        return self.host()[1]
+
+    def host(self) -> tuple:
+        """(origins, directions): the rays as float64 host arrays, flattened (device rays read back once)."""
+        if self._host is None:
+            self._host = tuple(a.get().reshape(-1, 3) for a in self._rays)
+        return self._host
 
     # the points at distances along rays, as the host path's batch makes them (all_hits' positions)
     unit_directions = RayBatch.unit_directions
     positions = RayBatch.positions
 
     def refused(self):
+        if self.device:  # the host path names the row of the rays as given, read back
+            origins, directions, tmin, tmax = self.given
+            raise _Refused(tuple(a.get() if is_device_array(a) else a for a in (origins, directions)) + (tmin, tmax))
         raise _Refused(self.given)
 
     def upload(self, origins, directions, tmin, tmax) -> tuple:

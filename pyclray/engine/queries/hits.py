@@ -81,10 +81,16 @@ def _counts(tracer, batch: RayBatch) -> np.ndarray:
     return counts
 
 
+def _on_device(*arrays) -> bool:
+    """Whether any of the rays' arrays is a pyopencl array (then the device path on any device)."""
+    return any(type(a).__module__.startswith("pyopencl") for a in arrays)
+
+
 def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) -> np.ndarray:
     """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax); on a device of
-    the GPU class (but with host) the rays checked and counted on the device (cast_device.py)."""
-    if not host and gpu_class(tracer.ctx.device):
+    the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and counted
+    on the device (cast_device.py)."""
+    if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
         from .cast_device import hit_counts_device
 
         return hit_counts_device(tracer, origins, directions, tmin, tmax)
@@ -141,9 +147,9 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs, host: bool = Fal
     """Every hit t in (tmin, tmax) of each ray, nearest first: offsets (int64, N + 1), ray (int64 per
     hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
     ray, and a second over the rays that have more, with room for the most of them; on a device of
-    the GPU class (but with host) the rays checked and both passes' rows put in place on the device
-    (cast_device.py: all_hits_device), the rest here as below."""
-    if not host and gpu_class(tracer.ctx.device):
+    the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and both
+    passes' rows put in place on the device (cast_device.py: all_hits_device), the rest here as below."""
+    if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
         from .cast_device import all_hits_device
 
         return _hit_frame(tracer, *all_hits_device(tracer, origins, directions, tmin, tmax, CAPACITY), aovs)
