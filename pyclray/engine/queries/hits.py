@@ -24,7 +24,8 @@ from .requests import Frame
 # where cast would not for a scene that fits the cache: each ray traverses the tree to its end, and
 # neighbouring rays then share more of it (docs/benchmarks.md, "Hit counts": 117 against 138 ms on
 # the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order. A device of the GPU
-# class takes none (engine/queries/cast.py: RayBatch; its host does no per-ray ordering).
+# class takes none: its rays go through cast_device.py (HitRays: checked on the device, traced in
+# their own order, all_hits' rows put in place there), as rays given as pyopencl arrays do anywhere.
 ORDER_ALWAYS = True
 
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
