@@ -259,12 +259,12 @@ def run_cast_device(tracer, query: str, origins, directions, tmax, aovs, tmin, o
         kept = tracer.ray_buffers
         with kept.lock:  # from the rays' writes to the results' reads
             return _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own=True, kept=kept)
-    except _Refused as refused:  # the host path's checks name the first bad row (of the rays as given)
+    except RaysRefused as refused:  # the host path's checks name the first bad row (of the rays as given)
         result = run_cast(tracer, query, *refused.rays, tmax, aovs, tmin)
         raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
 
 
-class _Refused(Exception):
+class RaysRefused(Exception):
     """The device's check refused a ray: the host path is to name it (outside the kept buffers' lock,
     which the host path takes)."""
 
@@ -280,7 +280,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     given = (origins, directions)
 
     def refused():
-        raise _Refused(given if own else (origins.get(), directions.get()))
+        raise RaysRefused(given if own else (origins.get(), directions.get()))
 
     if own:  # host arrays, their shapes checked as cast's (cast.py: _ray_array)
         directions = _ray_array("directions", directions)
@@ -484,7 +484,7 @@ class HitRays:
     (a few kB read back). origins and directions: the host's float64 arrays, flattened, for what the
     host derives from the hits (all_hits' positions, its second pass's rays): device rays read back
     only then. Also their buffers, tmin and tmax, shape, count and the kernels' arguments (launch). A
-    refused ray raises _Refused (the host path names it)."""
+    refused ray raises RaysRefused (the host path names it)."""
 
     def __init__(self, tracer, origins, directions, tmin, tmax):
         ctx = tracer.ctx
@@ -581,8 +581,8 @@ class HitRays:
     def refused(self):
         if self.device:  # the host path names the row of the rays as given, read back
             origins, directions, tmin, tmax = self.given
-            raise _Refused(tuple(a.get() if is_device_array(a) else a for a in (origins, directions)) + (tmin, tmax))
-        raise _Refused(self.given)
+            raise RaysRefused(tuple(a.get() if is_device_array(a) else a for a in (origins, directions)) + (tmin, tmax))
+        raise RaysRefused(self.given)
 
     def upload(self, origins, directions, tmin, tmax) -> tuple:
         """(origins, origin stride, directions, tmin, its stride, tmax, its stride): the buffers and
@@ -601,7 +601,7 @@ class HitRays:
 
     def read_checked(self, arrays: dict) -> None:
         """Read back the device arrays into the host arrays (name -> (buffer, array)) behind one wait,
-        with the check's partial results: a refused batch raises _Refused."""
+        with the check's partial results: a refused batch raises RaysRefused."""
         queue = self.tracer.ctx.queue
         check = np.empty(self.items, np.float64)
         if self.partial is not None:
@@ -618,39 +618,23 @@ def hit_counts_device(tracer, origins, directions, tmin, tmax, surface: dict | N
     """count_hits (hits.py: run_count_hits) of host rays on a device of the GPU class: uploaded once,
     checked and counted on the device, the counts and the check's results read back once; with
     surface (occupancy's rays from points: hits.py's count_from_points, its surface test's
-    arguments), (counts, on) of the flat rays."""
-    try:
-        rays = HitRays(tracer, origins, directions, tmin, tmax)
-        counts = np.zeros(rays.count, np.int32)
-        on = np.zeros(rays.count, np.uint8)
-        if rays.count:
-            context = tracer.ctx.context
-            buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
-            if surface is None:
-                rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
-                rays.read_checked({"counts": (buffer, counts)})
-            else:
-                on_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, on.nbytes)
-                rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer,
-                                                                     "surface_out": on_buffer}, ("surface",))
-                rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on)})
-        return counts.reshape(rays.shape) if surface is None else (counts, on)
-    except _Refused as refused:
-        return _host_names_it(tracer, "count_hits", refused, surface)
-
-
-def _host_names_it(tracer, query: str, refused, surface: dict | None = None):
-    """The host path's call of the refused rays, which raises its RequestError naming the first bad row."""
-    from .hits import count_from_points, run_all_hits, run_count_hits
-
-    origins, directions, tmin, tmax = refused.rays
-    if surface is not None:
-        result = count_from_points(tracer, origins, directions, surface, host=True)
-    elif query == "count_hits":
-        result = run_count_hits(tracer, origins, directions, tmin, tmax, host=True)
-    else:
-        result = run_all_hits(tracer, origins, directions, tmin, tmax, ("depth",), host=True)
-    raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
+    arguments), (counts, on) of the flat rays. A refused ray raises RaysRefused, whose rays the
+    caller's host path checks to name the first bad row (hits.py)."""
+    rays = HitRays(tracer, origins, directions, tmin, tmax)
+    counts = np.zeros(rays.count, np.int32)
+    on = np.zeros(rays.count, np.uint8)
+    if rays.count:
+        context = tracer.ctx.context
+        buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
+        if surface is None:
+            rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
+            rays.read_checked({"counts": (buffer, counts)})
+        else:
+            on_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, on.nbytes)
+            rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer,
+                                                                 "surface_out": on_buffer}, ("surface",))
+            rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on)})
+    return counts.reshape(rays.shape) if surface is None else (counts, on)
 
 
 def all_hits_device(tracer, origins, directions, tmin, tmax, capacity: int):
@@ -660,10 +644,7 @@ def all_hits_device(tracer, origins, directions, tmin, tmax, capacity: int):
     (the CSR offsets their cumulative sum, in numpy); the rays with more hits again, alone (gathered
     on the host: numpy's fancy indexing of those rows), with room for the most; each pass's rows
     copied into their CSR places on the device (kernel hit_rows) and the hits read back once."""
-    try:
-        return _all_hits(tracer, HitRays(tracer, origins, directions, tmin, tmax), capacity)
-    except _Refused as refused:
-        return _host_names_it(tracer, "all_hits", refused)
+    return _all_hits(tracer, HitRays(tracer, origins, directions, tmin, tmax), capacity)
 
 
 def _stored_pass(rays: HitRays, count: int, buffers: tuple, capacity: int) -> tuple:

@@ -18,6 +18,7 @@ from ..launch.run import REAL
 from ..launch.signatures import arguments
 from ..opencl.device import gpu_class, launch
 from .cast import RayBatch, label_of
+from .cast_device import RaysRefused, all_hits_device, hit_counts_device
 from .requests import Frame
 
 # The hit queries trace every large batch in cast's coherent order (engine/queries/ray_order.py), also
@@ -87,14 +88,22 @@ def _on_device(*arrays) -> bool:
     return any(type(a).__module__.startswith("pyopencl") for a in arrays)
 
 
+def _name_the_refused(tracer, refused: RaysRefused, host_query) -> None:
+    """Raise the host path's RequestError for rays the device's check refused (host_query: the same
+    query on the host, whose checks name the first bad row of the rays as given)."""
+    result = host_query(*refused.rays)
+    raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
+
+
 def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) -> np.ndarray:
     """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax); on a device of
     the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and counted
     on the device (cast_device.py)."""
     if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
-        from .cast_device import hit_counts_device
-
-        return hit_counts_device(tracer, origins, directions, tmin, tmax)
+        try:
+            return hit_counts_device(tracer, origins, directions, tmin, tmax)
+        except RaysRefused as refused:
+            _name_the_refused(tracer, refused, lambda *rays: run_count_hits(tracer, *rays, host=True))
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
 
@@ -107,9 +116,10 @@ def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surfac
     test's arguments (the closest-point query's leaves, refs and world entries: closest.py); on a
     device of the GPU class (but with host) checked and counted on the device (cast_device.py)."""
     if not host and gpu_class(tracer.ctx.device):
-        from .cast_device import hit_counts_device
-
-        return hit_counts_device(tracer, points, directions, None, None, surface)
+        try:
+            return hit_counts_device(tracer, points, directions, None, None, surface)
+        except RaysRefused as refused:
+            _name_the_refused(tracer, refused, lambda o, d, tmin, tmax: count_from_points(tracer, o, d, surface, host=True))
     batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
@@ -151,9 +161,10 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs, host: bool = Fal
     the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and both
     passes' rows put in place on the device (cast_device.py: all_hits_device), the rest here as below."""
     if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
-        from .cast_device import all_hits_device
-
-        return _hit_frame(tracer, *all_hits_device(tracer, origins, directions, tmin, tmax, CAPACITY), aovs)
+        try:
+            return _hit_frame(tracer, *all_hits_device(tracer, origins, directions, tmin, tmax, CAPACITY), aovs)
+        except RaysRefused as refused:
+            _name_the_refused(tracer, refused, lambda *rays: run_all_hits(tracer, *rays, ("depth",), host=True))
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
     rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
