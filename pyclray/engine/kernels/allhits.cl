@@ -218,6 +218,14 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
     } else if (!(n_hits & 1)) {
         const double3 p = S->ray_.world;
         for (int j = 0; j < S->n_surface_ && !surface; ++j) {
+            /* the leaf's slab first (surface_slabs: its triangles' dot products with a unit
+             * direction lie in [lo, hi], widened by the host over the rounding there and of the
+             * closest-point test's nearest points): a point beyond it by more than the rounding of
+             * its own dot product lies on none of them (each one's squared distance is not 0) */
+            __global const double* slab = surface_slabs + 5 * (size_t)S->surface_leaf_[j];
+            const double along = slab[0] * p.x + slab[1] * p.y + slab[2] * p.z;
+            const double rounding = 0x1p-40 * (fabs(p.x) + fabs(p.y) + fabs(p.z));  /* SLAB_SIZE_MARGIN */
+            if (along < slab[3] - rounding || along > slab[4] + rounding) continue;
             const int code = surface_leaf_codes[S->surface_leaf_[j]];
             const int first = (~code) >> 3, count = (~code) & 7;
             for (int q = first; q < first + count && !surface; ++q) {
