@@ -90,7 +90,10 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * (a point on a surface is inside, whatever its count) tests their shapes as the closest-point
  * query's search for a surface point at distance 0 does: the same <type>_closest of the same
  * float64 world entries (the closest-point query's leaf, surface_leaf_codes: per place of this
- * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0. A
+ * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0,
+ * unless the point lies beyond the leaf's slab (surface_slabs: engine/queries/closest.py's
+ * leaf_slabs), where none of them is at 0 (most leaves of points near a surface: a dot product
+ * instead of each triangle's nearest point). A
  * ray with more such leaves, or one that tests every bounded shape without the boxes, is not known
  * here (2: the host asks the closest-point query). */
 #ifdef PYCLRAY_AOV_SURFACE

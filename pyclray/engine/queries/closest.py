@@ -293,7 +293,7 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
 def _surface_arguments(closed) -> dict:
     """The count kernel's arguments of its surface test (kernels/allhits.cl: PYCLRAY_AOV_SURFACE):
     the closest-point query's refs and world entries, and per place of cast's refs where a leaf
-    starts the query's code of that leaf (the two programs' wide nodes are the same but for the
+    starts the query's code of that leaf and its slab (leaf_slabs: the test's pre-test) (the two programs' wide nodes are the same but for the
     leaves' codes, which cast renumbers: engine/queries/cast_blocks.py); made once per handle."""
     inputs = closed.closest_inputs()
     with closed.lock:
@@ -351,6 +351,20 @@ def leaf_slabs(inputs: ClosestInputs, codes: np.ndarray) -> np.ndarray:
             mine = np.flatnonzero(tree.leaf_type == position)
             world = inputs.worlds[t][tree.leaf_index[mine]]
             triangles[mine] = np.stack([world[v][:, :3] for v in ("a", "b", "c")], axis=1)
+    out = np.zeros((len(codes), 5))
+    out[:, 3], out[:, 4] = -np.inf, np.inf
+    for begin in range(0, len(codes), SLAB_CHUNK):  # a chunk of leaves at a time: bounded memory
+        part = slice(begin, begin + SLAB_CHUNK)
+        out[part] = _chunk_slabs(triangles, first[part], count[part])
+    return out
+
+
+# leaves per pass of leaf_slabs (its arrays about 1 KB a leaf)
+SLAB_CHUNK = 1 << 15
+
+
+def _chunk_slabs(triangles: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """leaf_slabs' rows of the leaves (first, count) over the triangles' corners per position."""
     slots = first[:, None] + np.arange(7)
     used = np.arange(7) < count[:, None]
     corners = triangles[np.where(used, np.minimum(slots, len(triangles) - 1), first[:, None])]  # (L, 7, 3, 3)
@@ -370,7 +384,7 @@ def leaf_slabs(inputs: ClosestInputs, codes: np.ndarray) -> np.ndarray:
         widen = SLAB_SIZE_MARGIN * size + SLAB_EXTENT_MARGIN * extent + SLAB_TINY
         good = (np.all(fat | ~used, axis=1) & (length > 0) & np.isfinite(lo) & np.isfinite(hi)
                 & np.isfinite(widen) & np.all(np.isfinite(normal), axis=1))
-    out = np.zeros((len(codes), 5))
+    out = np.zeros((len(first), 5))
     out[:, 3], out[:, 4] = -np.inf, np.inf
     out[good, :3] = normal[good]
     out[good, 3], out[good, 4] = lo[good] - widen[good], hi[good] + widen[good]
