@@ -148,13 +148,15 @@ def test_kept_buffers_grow_and_give_the_new_buffers_bits(tracer, monkeypatch):
         same(occluded, tracer.occluded(origins, directions))
 
 
-def test_the_hit_queries_refuse_device_arrays_clearly(tracer):
+def test_the_hit_queries_refuse_device_distances_clearly(tracer):
+    """The hit queries take device rays (tests/test_hits_gpu_host.py), but tmin and tmax stay numbers
+    or host arrays."""
     origins, directions = rays(10, 13)
     queue = tracer.ctx.queue
-    with pytest.raises(pyclray.RequestError, match="directions: a pyopencl array is taken by cast and occluded only"):
-        tracer.all_hits(origins, cl_array.to_device(queue, directions))
-    with pytest.raises(pyclray.RequestError, match="origins: a pyopencl array is taken by cast and occluded only"):
-        tracer.count_hits(cl_array.to_device(queue, origins), directions)
+    with pytest.raises(pyclray.RequestError, match="tmax: expected a number or a numpy array"):
+        tracer.all_hits(origins, cl_array.to_device(queue, directions), tmax=cl_array.to_device(queue, np.ones(10)))
+    with pytest.raises(pyclray.RequestError, match="tmin: expected a number or a numpy array"):
+        tracer.count_hits(cl_array.to_device(queue, origins), directions, tmin=cl_array.to_device(queue, np.ones(10)))
 
 
 def test_kept_buffers_of_a_device_without_shared_memory(monkeypatch):

@@ -21,24 +21,11 @@
 #define BVH_STACK BVH_BINARY_STACK
 
 /* The entry distance of a cast ray (BoxRay) into a child's box before limit, +inf where it misses:
- * box_entered's operations, in its order (also wide_entries' lane by lane). */
+ * box_entered's test (kernels/bvh_ray.h: box_span), the same operations in the same order. */
 inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, const float limit)
 {
-    const float3 lo = low.xyz, hi = high.xyz;
-    const float3 near = b->negative ? hi : lo, far = b->negative ? lo : hi;
-    float3 enter = (near - b->near_origin) * b->near_inverse;
-    if (b->flat) {
-        const float3 flat = (far - b->far_origin) * b->flat_inverse;
-        enter = flat > enter ? flat : enter;
-    }
-    const float3 leave = (far - b->far_origin) * b->far_inverse + b->far_add;
-    float entry = enter.y > enter.x ? enter.y : enter.x;
-    entry = enter.z > entry ? enter.z : entry;
-    entry = entry < 0.0f ? 0.0f : entry;
-    float exit = leave.y < leave.x ? leave.y : leave.x;
-    exit = leave.z < exit ? leave.z : exit;
-    exit = (limit < exit ? limit : exit) * BVH_GAMMA3_2;
-    return entry <= exit ? entry : INFINITY;
+    float entry;
+    return box_span(low.xyz, high.xyz, b, limit, &entry) ? entry : INFINITY;
 }
 
 /* PYCLRAY_TRAVERSE_STEP (kernels/bvh_ray.h) over pair nodes, with the same arguments and meaning:

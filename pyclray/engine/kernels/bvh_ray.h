@@ -75,15 +75,15 @@ inline float8 wide_entries(__global const WideNode* node, const BoxRay* b, const
     return wide_slabs(enter_x, enter_y, enter_z, leave_x, leave_y, leave_z, limit);
 }
 
-/* Whether the ray enters the box (lo xyz, hi xyz in box.s012, box.s345) before limit: wide_entries'
- * test of one box, in the same operations. cast tests the box of the root's children first: most
+/* Whether the ray enters the box (lo, hi) before limit, its entry distance in *entry_out: wide_entries'
+ * test of one box, in the same operations (box_entered: a wide node's box.s012, box.s345; the pair
+ * nodes' pair_entry, kernels/bvh_pairs.h). cast tests the box of the root's children first: most
  * of bench/secondary.py's view rays (from near the camera, many of them ending on the ground
  * around the spheres' field or going up) enter no child, and this costs less than the root's visit
  * (a float8 test of eight boxes and the stack). A child's box lies inside it, and a box that
  * contains another is entered no later and left no earlier: a child entered is within it. */
-inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
+inline bool box_span(const float3 lo, const float3 hi, const BoxRay* b, const float limit, float* entry_out)
 {
-    const float3 lo = box.s012, hi = box.s345;
     const float3 near = b->negative ? hi : lo, far = b->negative ? lo : hi;
     float3 enter = (near - b->near_origin) * b->near_inverse;
     if (b->flat) {
@@ -97,7 +97,14 @@ inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
     float exit = leave.y < leave.x ? leave.y : leave.x;
     exit = leave.z < exit ? leave.z : exit;
     exit = (limit < exit ? limit : exit) * BVH_GAMMA3_2;
+    *entry_out = entry;
     return entry <= exit;
+}
+
+inline bool box_entered(const float8 box, const BoxRay* b, const float limit)
+{
+    float entry;
+    return box_span(box.s012, box.s345, b, limit, &entry);
 }
 
 /* Visit every leaf position q whose box the ray enters before limit, nearest box first where

@@ -22,9 +22,9 @@ from .requests import Frame
 
 
 def _ray_array(name: str, value) -> np.ndarray:
-    if type(value).__module__.startswith("pyopencl"):  # (cast and occluded take them: cast_device.py)
-        raise RequestError(f"{name}: a pyopencl array is taken by cast and occluded only; pass a numpy array here "
-                           "(the device array's .get())")
+    if type(value).__module__.startswith("pyopencl"):  # (cast, occluded and the hit queries take them: cast_device.py)
+        raise RequestError(f"{name}: a pyopencl array is taken by cast, occluded, count_hits and all_hits only; pass a "
+                           "numpy array here (the device array's .get())")
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):

@@ -12,6 +12,10 @@ path does (engine/queries/cast.py: _cast_rays). They are cast in the order given
 ray_order.py, is the host's: on a CPU device it pays only for scenes beyond the cache, and each ray is
 traced on its own, so no bit changes). What the host derives from the kernel's results (a block's
 primitive, label, position) is derived here by small device kernels, to the same bits.
+
+On the GPU class the hit queries (engine/queries/hits.py) of host rays take the same check (HitRays)
+and put all_hits' rows in their CSR places on the device (all_hits_device); occupancy's parity grid
+is looked up here too (grid_lookup_device: engine/queries/closest.py).
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.buffers import shares_host_memory
 from ..opencl.device import launch, launch_kept
-from .cast import _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
+from .cast import RayBatch, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -155,6 +159,45 @@ __kernel void positions_##REAL(__global REAL *pos, __global const REAL *depth, l
 }
 POSITIONS(float)
 POSITIONS(double)
+
+/* the hit queries' rows (engine/queries/hits.py): each of a pass's rays' hits, stored by the all_hits
+   kernel from i * capacity on, copied to its ray's place in the CSR rows (offsets[ray], ray = rays[i]
+   where mapped: a second pass over the rays with more hits than the first had room for); a ray
+   with more hits than its pass's room is skipped (the second pass writes its rows) */
+__kernel void hit_rows(__global double *t_out, __global int *kind_out, __global int *k_out, __global int *sub_out,
+                       __global const double *t, __global const int *kind, __global const int *k,
+                       __global const int *sub, __global const int *counts, long n, int capacity,
+                       __global const long *offsets, __global const long *rays, int mapped) {
+    for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
+        const int c = counts[i];
+        if (c > capacity) continue;
+        const long to = offsets[mapped ? rays[i] : i], from = i * (long)capacity;
+        for (int j = 0; j < c; j++) {
+            t_out[to + j] = t[from + j]; kind_out[to + j] = kind[from + j];
+            k_out[to + j] = k[from + j]; sub_out[to + j] = sub[from + j];
+        }
+    }
+}
+
+/* occupancy's parity grid (engine/queries/parity_grid.py: _lookup, the same operations): per point
+   decided (1 beyond the grid or in an empty cell) and inside (its empty cell's state) */
+__kernel void grid_lookup(__global uchar *decided, __global uchar *inside, __global const double *p, long n,
+                          double lo0, double lo1, double lo2, double size, long d0, long d1, long d2,
+                          __global const char *state) {
+    const double lo[3] = {lo0, lo1, lo2};
+    const long dims[3] = {d0, d1, d2};
+    for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
+        long cell = 0;
+        for (int axis = 2; axis >= 0; axis--) {
+            const double c = (p[3 * i + axis] - lo[axis]) / size;
+            if (!(c >= 0.0 && c < (double)dims[axis])) { cell = -1; break; }
+            cell = cell * dims[axis] + (long)c;
+        }
+        const char s = cell < 0 ? 0 : state[cell];
+        decided[i] = cell < 0 || s != -1;
+        inside[i] = (cell >= 0 && s != -1) ? (uchar)s : 0;
+    }
+}
 """
 
 # the work-items of the helper kernels, each looping over its share of the rays: at most 65,536 (each
@@ -177,7 +220,8 @@ class DeviceKernels:
     def __init__(self, context):
         self.program = cl.Program(context, SOURCE).build()
         self.kernels = {name: getattr(self.program, name)
-                        for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double")}
+                        for name in ("widen", "reach", "block_primitives", "labels", "positions_float", "positions_double",
+                                     "hit_rows", "grid_lookup")}
 
     def run(self, queue, name: str, n: int, *args):
         """The kernel over n rays (a work-item per ray up to ITEMS, each looping over its share; the
@@ -429,3 +473,261 @@ def _launch(tracer, variant, count, o_buffer, stride, d_buffer, starts, start_st
 
 
 NO_ORDER = np.zeros(1, np.int32)  # (the kernel reads no order: ordered is 0)
+
+
+# -- the hit queries (engine/queries/hits.py) of host rays on a device of the GPU class ---------------
+class HitRays:
+    """Rays checked on the device by the check's kernel (reach) for count_hits' and all_hits' kernels:
+    host arrays uploaded once into the call's own copies, which the check repairs (each refused ray
+    made harmless, its partial results read back with the first results); device arrays (pyopencl
+    arrays on the handle's context, float32 widened there) the caller's, checked before the query
+    (a few kB read back). origins and directions: the host's float64 arrays, flattened, for what the
+    host derives from the hits (all_hits' positions, its second pass's rays): device rays read back
+    only then. Also their buffers, tmin and tmax, shape, count and the kernels' arguments (launch). A
+    refused ray raises _Refused (the host path names it)."""
+
+    def __init__(self, tracer, origins, directions, tmin, tmax):
+        ctx = tracer.ctx
+        self.tracer, self.given = tracer, (origins, directions, tmin, tmax)
+        self.kernels = _kernels(tracer)
+        self.device = is_device_array(origins) or is_device_array(directions)
+        if self.device:
+            directions = _device_rays(ctx, self.kernels, "directions", directions)
+            origins = _device_rays(ctx, self.kernels, "origins", origins)
+        else:
+            directions = _ray_array("directions", directions)
+            origins = _ray_array("origins", origins)
+        shape = directions.shape[:-1]
+        if origins.shape != directions.shape and origins.shape != (3,):
+            raise RequestError(
+                f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
+        inputs = tracer.cast_inputs()
+        self.anchor, self.block_lanes = inputs[1], inputs[4]
+        self.args, self.pairs = ray_arguments(tracer, inputs)
+        try:
+            tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+            tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+        except RequestError:  # the host path's first refusal (a bad ray's comes before a bad distance's)
+            self.check_now(origins, directions)
+            raise
+        self.bound = np.sqrt(np.finfo(REAL[tracer.precision]).max) / 4  # (as cast's: RayBatch)
+        self.shape, self.count = shape, math.prod(shape)
+        self.stride = 1 if origins.shape == directions.shape else 0
+        self._rays = (origins, directions)
+        self._host = None if self.device else (origins.reshape(-1, 3), directions.reshape(-1, 3))
+        self.tmin, self.tmax = tmin, tmax
+        if self.stride == 0:  # one origin: checked here (the kernel repairs no shared origin), even without rays
+            origin = origins.get() if self.device else origins
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not np.abs(origin - self.anchor[:3]).max() <= self.bound:
+                    self.refused()
+        self.items = check_groups(self.count)
+        self.partial = None
+        if self.count and self.device:  # the caller's rays: checked before the query, not repaired
+            self.buffers = (origins.data, self.stride, directions.data, _constant(tracer, tmin), len(tmin) > 1,
+                            _constant(tracer, tmax), len(tmax) > 1)
+            if not _fine(self.reach(cl_array.empty(ctx.queue, (self.items,), np.float64).data, repair=False),
+                         self.bound):
+                self.refused()
+        elif self.count:
+            self.buffers = self.upload(self._host[0], self._host[1], tmin, tmax)
+            self.partial = cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, 8 * self.items)
+            self.reach(self.partial, repair=True)
+
+    def reach(self, partial, repair: bool):
+        """The check's kernel over the rays into partial; without repair, its results read back now."""
+        queue = self.tracer.ctx.queue
+        self.kernels.run(queue, "reach", self.count, partial, self.buffers[0], np.int32(self.stride), self.buffers[2],
+                         np.int64(self.count), *(np.float64(a) for a in self.anchor[:3]), np.float64(self.bound),
+                         np.int32(1 if repair else 0))
+        if not repair:
+            check = np.empty(self.items, np.float64)
+            cl.enqueue_copy(queue, check, partial)
+            return check
+
+    def check_now(self, origins, directions):
+        """Before a bad distance's line: a bad ray's, as on the host path (host rays: that path names
+        either; device rays: checked here, else the distance's line stands)."""
+        if not self.device:
+            self.refused()
+        count = math.prod(directions.shape[:-1])
+        if count:
+            self.count, self.items = count, check_groups(count)
+            self.stride = 1 if origins.shape == directions.shape else 0
+            self.bound = np.sqrt(np.finfo(REAL[self.tracer.precision]).max) / 4
+            self.buffers = (origins.data, self.stride, directions.data)
+            if not _fine(self.reach(cl_array.empty(self.tracer.ctx.queue, (self.items,), np.float64).data, False),
+                         self.bound):
+                self.refused()
+
+    @property
+    def origins(self):
+        return self.host()[0]
+
+    @property
+    def directions(self):
+        return self.host()[1]
+
+    def host(self) -> tuple:
+        """(origins, directions): the rays as float64 host arrays, flattened (device rays read back once)."""
+        if self._host is None:
+            self._host = tuple(a.get().reshape(-1, 3) for a in self._rays)
+        return self._host
+
+    # the points at distances along rays, as the host path's batch makes them (all_hits' positions)
+    unit_directions = RayBatch.unit_directions
+    positions = RayBatch.positions
+
+    def refused(self):
+        if self.device:  # the host path names the row of the rays as given, read back
+            origins, directions, tmin, tmax = self.given
+            raise _Refused(tuple(a.get() if is_device_array(a) else a for a in (origins, directions)) + (tmin, tmax))
+        raise _Refused(self.given)
+
+    def upload(self, origins, directions, tmin, tmax) -> tuple:
+        """(origins, origin stride, directions, tmin, its stride, tmax, its stride): the buffers and
+        strides of rays (copies of the arrays: the check's kernel may repair them)."""
+        queue = self.tracer.ctx.queue
+        o_buffer, d_buffer = (cl_array.to_device(queue, np.ascontiguousarray(a)).data for a in (origins, directions))
+        return (o_buffer, 1 if len(origins) > 1 else 0, d_buffer, _constant(self.tracer, tmin), len(tmin) > 1,
+                _constant(self.tracer, tmax), len(tmax) > 1)
+
+    def launch(self, query: str, count: int, buffers: tuple, outputs: dict, aovs: tuple = ()) -> None:
+        """Enqueue the query's kernel (count_hits, all_hits; with aovs) over count rays in buffers (upload)."""
+        variant = Variant(query, self.tracer.prepared.types, aovs, self.tracer.precision, pairs=self.pairs)
+        o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride = buffers
+        _launch(self.tracer, variant, count, o_buffer, stride, d_buffer, starts, start_stride, limits, limit_stride,
+                self.anchor, self.args, outputs, *ray_group(self.pairs))
+
+    def read_checked(self, arrays: dict) -> None:
+        """Read back the device arrays into the host arrays (name -> (buffer, array)) behind one wait,
+        with the check's partial results: a refused batch raises _Refused."""
+        queue = self.tracer.ctx.queue
+        check = np.empty(self.items, np.float64)
+        if self.partial is not None:
+            cl.enqueue_copy(queue, check, self.partial, is_blocking=False)
+        for buffer, array in arrays.values():
+            if array.size:
+                cl.enqueue_copy(queue, array, buffer, is_blocking=False)
+        queue.finish()
+        if self.partial is not None and not _fine(check, self.bound):
+            self.refused()
+
+
+def hit_counts_device(tracer, origins, directions, tmin, tmax, surface: dict | None = None):
+    """count_hits (hits.py: run_count_hits) of host rays on a device of the GPU class: uploaded once,
+    checked and counted on the device, the counts and the check's results read back once; with
+    surface (occupancy's rays from points: hits.py's count_from_points, its surface test's
+    arguments), (counts, on) of the flat rays."""
+    try:
+        rays = HitRays(tracer, origins, directions, tmin, tmax)
+        counts = np.zeros(rays.count, np.int32)
+        on = np.zeros(rays.count, np.uint8)
+        if rays.count:
+            context = tracer.ctx.context
+            buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
+            if surface is None:
+                rays.launch("count_hits", rays.count, rays.buffers, {"hit_counts": buffer})
+                rays.read_checked({"counts": (buffer, counts)})
+            else:
+                on_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, on.nbytes)
+                rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer,
+                                                                     "surface_out": on_buffer}, ("surface",))
+                rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on)})
+        return counts.reshape(rays.shape) if surface is None else (counts, on)
+    except _Refused as refused:
+        return _host_names_it(tracer, "count_hits", refused, surface)
+
+
+def _host_names_it(tracer, query: str, refused, surface: dict | None = None):
+    """The host path's call of the refused rays, which raises its RequestError naming the first bad row."""
+    from .hits import count_from_points, run_all_hits, run_count_hits
+
+    origins, directions, tmin, tmax = refused.rays
+    if surface is not None:
+        result = count_from_points(tracer, origins, directions, surface, host=True)
+    elif query == "count_hits":
+        result = run_count_hits(tracer, origins, directions, tmin, tmax, host=True)
+    else:
+        result = run_all_hits(tracer, origins, directions, tmin, tmax, ("depth",), host=True)
+    raise RequestError(f"the rays were refused on the device but not on the host ({type(result).__name__})") from None
+
+
+def all_hits_device(tracer, origins, directions, tmin, tmax, capacity: int):
+    """(rays, counts, t, kinds, entries, subs) of all_hits (hits.py: run_all_hits) of host rays on a
+    device of the GPU class: rays (HitRays) uploaded once and checked on the device; one pass of the
+    all_hits kernel with room for capacity hits a ray, its counts read back with the check's results
+    (the CSR offsets their cumulative sum, in numpy); the rays with more hits again, alone (gathered
+    on the host: numpy's fancy indexing of those rows), with room for the most; each pass's rows
+    copied into their CSR places on the device (kernel hit_rows) and the hits read back once."""
+    try:
+        return _all_hits(tracer, HitRays(tracer, origins, directions, tmin, tmax), capacity)
+    except _Refused as refused:
+        return _host_names_it(tracer, "all_hits", refused)
+
+
+def _stored_pass(rays: HitRays, count: int, buffers: tuple, capacity: int) -> tuple:
+    """The all_hits kernel over count rays in buffers with room for capacity hits each: its device
+    buffers (counts, t, kinds, entries, subs)."""
+    context = rays.tracer.ctx.context
+    rows = max(1, count * capacity)
+    out = (cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * count), cl.Buffer(context, cl.mem_flags.READ_WRITE, 8 * rows),
+           *(cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * rows) for _ in range(3)))
+    rays.launch("all_hits", count, buffers, {"hit_counts": out[0], "hit_capacity": np.int32(capacity), "hit_t": out[1],
+                                             "hit_kind": out[2], "hit_k": out[3], "hit_sub": out[4]})
+    return out
+
+
+def _all_hits(tracer, rays: HitRays, capacity: int):
+    ctx, n = tracer.ctx, rays.count
+    queue = ctx.queue
+    counts = np.zeros(n, np.int32)
+    if not n:
+        return rays, counts, np.zeros(0), *(np.zeros(0, np.int32) for _ in range(3))
+    first = _stored_pass(rays, n, rays.buffers, capacity)
+    rays.read_checked({"counts": (first[0], counts)})
+    offsets = np.zeros(n + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    total = int(offsets[-1])
+    hits = (np.empty(total, np.float64), *(np.empty(total, np.int32) for _ in range(3)))
+    if not total:
+        return (rays, counts, *hits)
+    outs = tuple(cl.Buffer(ctx.context, cl.mem_flags.READ_WRITE, a.nbytes) for a in hits)
+    offsets_buffer = cl_array.to_device(queue, offsets)
+    rays.kernels.run(queue, "hit_rows", n, *outs, *first[1:], first[0], np.int64(n), np.int32(capacity),
+                     offsets_buffer.data, offsets_buffer.data, np.int32(0))  # (rays: not read, mapped 0)
+    over = np.flatnonzero(counts > capacity)
+    if len(over):  # those rays again, alone, with room for all their hits (the same hits)
+        pick = (lambda a: a[over] if len(a) > 1 else a)
+        buffers = rays.upload(pick(rays.origins), rays.directions[over], pick(rays.tmin), pick(rays.tmax))
+        most = int(counts[over].max())
+        second = _stored_pass(rays, len(over), buffers, most)
+        over_buffer = cl_array.to_device(queue, over.astype(np.int64))
+        rays.kernels.run(queue, "hit_rows", len(over), *outs, *second[1:], second[0], np.int64(len(over)),
+                         np.int32(most), offsets_buffer.data, over_buffer.data, np.int32(1))
+    for array, buffer in zip(hits, outs):
+        cl.enqueue_copy(queue, array, buffer, is_blocking=False)
+    queue.finish()
+    return (rays, counts, *hits)
+
+
+def grid_lookup_device(tracer, grid, points: np.ndarray, sign: str) -> tuple[np.ndarray, np.ndarray]:
+    """(decided, inside) per point, bool each: occupancy's parity grid (parity_grid.py:
+    ParityGrid.lookup) on a device of the GPU class, its states uploaded once per grid and sign
+    (kept on the grid), the points uploaded once, two bytes per point read back."""
+    queue = tracer.ctx.queue
+    count = len(points)
+    decided, inside = np.zeros(count, np.uint8), np.zeros(count, np.uint8)
+    if count:
+        kept = grid.device_states
+        if sign not in kept:
+            kept[sign] = cl_array.to_device(queue, np.ascontiguousarray(grid.states[sign], np.int8))
+        outs = [cl_array.empty(queue, count, np.uint8) for _ in range(2)]
+        p = cl_array.to_device(queue, np.ascontiguousarray(points, np.float64))
+        _kernels(tracer).run(queue, "grid_lookup", count, outs[0].data, outs[1].data, p.data, np.int64(count),
+                             *(np.float64(x) for x in grid.lo), np.float64(grid.size),
+                             *(np.int64(d) for d in grid.dims), kept[sign].data)
+        for out, array in zip(outs, (decided, inside)):
+            cl.enqueue_copy(queue, array, out.data, is_blocking=False)
+        queue.finish()
+    return decided.view(bool), inside.view(bool)

@@ -24,7 +24,7 @@ from ..bvh.winding import winding_slots
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
-from ..opencl.device import launch
+from ..opencl.device import gpu_class, launch
 from .hits import count_from_points
 
 SIGNS = ("parity", "winding")
@@ -34,7 +34,11 @@ CLOSEST_OUTPUTS = ("position", "normal", "id", "primitive", "barycentric")
 
 # Points are visited in the order of a Morton code of their positions when there are at least this
 # many: neighbouring work-items then walk the same nodes and triangles, which stay in cache. Each
-# point is computed on its own, so the order changes no bit.
+# point is computed on its own, so the order changes no bit. A device of the GPU class
+# (engine/opencl/device.py: gpu_class) takes no order, and its host makes no numba pass over the
+# points (point_passes.py's are the CPU's): the parity rays' directions by numpy's column passes (the
+# same directions), the parity grid's lookup by a device kernel (cast_device.py: grid_lookup_device),
+# the parity rays counted through count_hits' device path (cast_device.py: HitRays).
 COHERENT_FROM = 4096
 
 # the direction of the parity rays: any direction is exact (count_hits' tie rule), so each point's
@@ -184,7 +188,7 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
             return results
     variant = Variant("closest", inputs.types, tuple(outputs), precision)
     order = None
-    if count >= COHERENT_FROM:  # numba's code, imported for large batches only
+    if count >= COHERENT_FROM and not gpu_class(ctx.device):  # numba's code, imported for large batches only
         from .point_passes import coherent_order
 
         # the points gathered in that order, their results scattered back below: the kernel then
@@ -251,7 +255,12 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
         grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
         if grid is not None:
-            decided, inside = grid.lookup(flat, sign)
+            if gpu_class(tracer.ctx.device):  # the lookup on the device (the same operations)
+                from .cast_device import grid_lookup_device
+
+                decided, inside = grid_lookup_device(tracer, grid, flat, sign)
+            else:
+                decided, inside = grid.lookup(flat, sign)
             rest = np.flatnonzero(~decided)
         if sign == "parity" and len(closed.shapes) == 1 and _shares_boxes(closed):
             inside[rest] = _one_closed_mesh(closed, flat[rest])
@@ -438,6 +447,15 @@ def parity_directions(closed, points: np.ndarray) -> np.ndarray:
     if len(points) < COHERENT_FROM:
         gaps = np.concatenate([points - lo, hi - points], axis=1)
         return PARITY_FACES[np.argmin(gaps, axis=1)]
+    if gpu_class(closed.ctx.device):  # numpy's passes over the columns: the first nearest face too, no numba
+        best, face = points[:, 0] - lo[0], np.zeros(len(points), np.intp)
+        for index in range(1, 6):
+            axis = index % 3
+            gap = points[:, axis] - lo[axis] if index < 3 else hi[axis] - points[:, axis]
+            nearer = gap < best
+            face[nearer] = index
+            np.minimum(best, gap, out=best)
+        return PARITY_FACES[face]
     from .point_passes import nearest_face_directions  # numba's code, for large batches only
 
     return nearest_face_directions(points, lo, hi, PARITY_FACES)

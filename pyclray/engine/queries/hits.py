@@ -16,7 +16,7 @@ from ...model.errors import RequestError
 from ..launch.programs import Variant, kernel_for
 from ..launch.run import REAL
 from ..launch.signatures import arguments
-from ..opencl.device import launch
+from ..opencl.device import gpu_class, launch
 from .cast import RayBatch, label_of
 from .requests import Frame
 
@@ -24,7 +24,8 @@ from .requests import Frame
 # where cast would not for a scene that fits the cache: each ray traverses the tree to its end, and
 # neighbouring rays then share more of it (docs/benchmarks.md, "Hit counts": 117 against 138 ms on
 # the bunny's 100,000 incoherent rays). Each ray's hits are the same in any order. A device of the GPU
-# class takes none (engine/queries/cast.py: RayBatch; its host does no per-ray ordering).
+# class takes none: its rays go through cast_device.py (HitRays: checked on the device, traced in
+# their own order, all_hits' rows put in place there), as rays given as pyopencl arrays do anywhere.
 ORDER_ALWAYS = True
 
 # what all_hits can return per hit (and its default): the per-hit AOVs that hold for every hit
@@ -81,17 +82,35 @@ def _counts(tracer, batch: RayBatch) -> np.ndarray:
     return counts
 
 
-def run_count_hits(tracer, origins, directions, tmin, tmax) -> np.ndarray:
-    """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax)."""
+def _on_device(*arrays) -> bool:
+    """Whether any of the rays' arrays is a pyopencl array (then the device path on any device)."""
+    return any(type(a).__module__.startswith("pyopencl") for a in arrays)
+
+
+def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) -> np.ndarray:
+    """int32 of the rays' leading shape: each ray's number of hits t in (tmin, tmax); on a device of
+    the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and counted
+    on the device (cast_device.py)."""
+    if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
+        from .cast_device import hit_counts_device
+
+        return hit_counts_device(tracer, origins, directions, tmin, tmax)
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     return _counts(tracer, batch).reshape(batch.shape)
 
 
-def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict) -> tuple[np.ndarray, np.ndarray]:
+def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict,
+                      host: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(counts int32, on uint8) of rays from checked points (N, 3) along directions (N, 3): each
     one's number of hits t > 0, and where that is even whether the point lies on a surface (1; 0
     not, or an odd count; 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE); surface: that
-    test's arguments (the closest-point query's leaves, their slabs, refs and world entries: closest.py)."""
+    test's arguments (the closest-point query's leaves, their slabs, refs and world entries:
+    closest.py); on a device of the GPU class (but with host) checked and counted on the device
+    (cast_device.py)."""
+    if not host and gpu_class(tracer.ctx.device):
+        from .cast_device import hit_counts_device
+
+        return hit_counts_device(tracer, points, directions, None, None, surface)
     batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
@@ -126,11 +145,16 @@ def _gather(counts: np.ndarray, capacity: int) -> np.ndarray:
     return starts + within
 
 
-def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
+def run_all_hits(tracer, origins, directions, tmin, tmax, aovs, host: bool = False) -> Frame:
     """Every hit t in (tmin, tmax) of each ray, nearest first: offsets (int64, N + 1), ray (int64 per
     hit) and the aovs asked for (HIT_AOVS), one row per hit. One pass with room for CAPACITY hits a
-    ray, and a second over the rays that have more, with room for the most of them."""
-    ctx, precision = tracer.ctx, tracer.precision
+    ray, and a second over the rays that have more, with room for the most of them; on a device of
+    the GPU class (but with host), or of rays given as pyopencl arrays, the rays checked and both
+    passes' rows put in place on the device (cast_device.py: all_hits_device), the rest here as below."""
+    if not host and (gpu_class(tracer.ctx.device) or _on_device(origins, directions)):
+        from .cast_device import all_hits_device
+
+        return _hit_frame(tracer, *all_hits_device(tracer, origins, directions, tmin, tmax, CAPACITY), aovs)
     batch = RayBatch(tracer, origins, directions, tmin, tmax, ORDER_ALWAYS)
     counts, t, kinds, entries, subs = _stored(tracer, batch, CAPACITY)
     rows = _gather(np.minimum(counts, CAPACITY), CAPACITY)
@@ -149,7 +173,13 @@ def run_all_hits(tracer, origins, directions, tmin, tmax, aovs) -> Frame:
         order = np.argsort(owner, kind="stable")
         parts = [np.concatenate([p[np.repeat(counts <= CAPACITY, np.minimum(counts, CAPACITY))], np.asarray(m)[more_rows]])[order]
                  for p, m in zip(parts, more[1:])]
-    t, kinds, entries, subs = parts
+    return _hit_frame(tracer, batch, counts, *parts, aovs)
+
+
+def _hit_frame(tracer, batch, counts, t, kinds, entries, subs, aovs) -> Frame:
+    """all_hits' Frame of each ray's hits (counts) in ray order, nearest first (t, kinds, entries,
+    subs: the kernel's), of the batch's rays (its count, block lanes and positions)."""
+    ctx, precision = tracer.ctx, tracer.precision
     offsets = np.zeros(batch.count + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])

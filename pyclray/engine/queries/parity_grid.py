@@ -155,6 +155,7 @@ class ParityGrid:
     def __init__(self, lo: np.ndarray, size: float, dims: np.ndarray, region: np.ndarray, seeds: np.ndarray):
         self.lo, self.size, self.dims, self.region, self.seeds = lo, size, dims, region, seeds
         self.states: dict = {}
+        self.device_states: dict = {}  # per sign the states on a device (cast_device.py: grid_lookup_device)
 
     @classmethod
     def of(cls, corners) -> "ParityGrid | None":
