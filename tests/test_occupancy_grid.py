@@ -232,3 +232,88 @@ def test_points_in_many_leaves_boxes(monkeypatch):
     assert asked and asked[0] >= 200  # the corners at least: more than SURFACE_LEAVES leaves
     assert got[:200].all()
     assert np.array_equal(got.astype(bool), oracle.inside(scene, points))
+
+
+def _slabs_of(tracer):
+    """(slabs, codes, inputs): the closest-point tree's leaves' slabs (closest.leaf_slabs), their codes."""
+    closed = tracer.mesh_handle(closed=True)
+    inputs = closed.closest_inputs()
+    nodes = inputs.bvh.nodes(inputs.anchor)
+    codes = nodes["child"][nodes["child"] < 0]
+    return closest.leaf_slabs(inputs, codes), codes, inputs
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_leaf_slabs_hold_their_triangles(shift):
+    """Each leaf's slab (the count kernel's surface pre-test: a point beyond it lies on none of
+    the leaf's triangles) holds every point of its triangles: their corners and random points in
+    them (convex combinations, in exact rational arithmetic for a sample), near the origin and 1e6
+    from it; and it is thin (a fraction of the leaf's size), or the pre-test would decide nothing."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(21)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.05, rng)
+    mesh = pyclray.Mesh(v + shift, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        slabs, codes, inputs = _slabs_of(tracer)
+    first, count = (~codes.astype(np.int64)) >> 3, (~codes.astype(np.int64)) & 7
+    world = inputs.worlds["mesh"]
+    assert np.isfinite(slabs[:, 3:]).all()  # no sliver here: every leaf has its slab
+    thickness = slabs[:, 4] - slabs[:, 3]
+    extents = np.zeros(len(codes))
+    for leaf in range(len(codes)):
+        entries = world[first[leaf]:first[leaf] + count[leaf]]
+        corners = np.stack([entries[k][:, :3] for k in ("a", "b", "c")], axis=1)  # (count, 3, 3)
+        weights = rng.dirichlet(np.ones(3), (len(corners), 4))
+        points = np.concatenate([corners, np.einsum("tsk,tkd->tsd", weights, corners)], axis=1).reshape(-1, 3)
+        along = points @ slabs[leaf, :3]
+        assert (along >= slabs[leaf, 3]).all() and (along <= slabs[leaf, 4]).all()
+        extents[leaf] = float((corners.max(axis=(0, 1)) - corners.min(axis=(0, 1))).max())
+        if leaf % 50 == 0:  # exactly: every corner's dot product within the slab, in rationals
+            n = [Fraction(float(x)) for x in slabs[leaf, :3]]
+            for p in corners.reshape(-1, 3):
+                exact = sum(Fraction(float(x)) * y for x, y in zip(p, n))
+                assert Fraction(float(slabs[leaf, 3])) <= exact <= Fraction(float(slabs[leaf, 4]))
+    assert np.median(thickness / extents) < 0.5
+
+
+def test_leaf_slabs_leave_slivers_and_other_shapes_tested():
+    """A leaf with a sliver (a triangle whose corners are nearly on a line: its nearest points are
+    not within rounding of it) gets no slab (-inf, inf: always tested)."""
+    # a closed tetrahedron-like mesh with one face cut by a sliver: an almost straight fan
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
+                         [0.5, 0.5 + 1e-12, 0.0]])
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 4, 3], [4, 2, 3], [1, 2, 4]])
+    mesh = pyclray.Mesh(vertices, faces)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        slabs, codes, _ = _slabs_of(tracer)
+    assert len(codes) == 1 and slabs[0, 3] == -np.inf and slabs[0, 4] == np.inf
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_slab_pre_test_same_bits(monkeypatch, precision, shift):
+    """The count kernel's surface test with the slabs and without them (every leaf tested, as
+    before the pre-test): the same answers bit for bit, on points on the triangles (corners, edge
+    midpoints, points inside them), points 1e-12 to 1e-2 of the size off them, and uniform points."""
+    rng = np.random.default_rng(22)
+    v, f = perturbed_sphere(30, 45, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v + shift, f)
+    a, b, c = mesh.corners()
+    tri = rng.integers(0, len(a), COHERENT_FROM)
+    u = rng.uniform(0, 1, len(tri))
+    w = rng.uniform(0, 1 - u)
+    on = a[tri] + u[:, None] * (b[tri] - a[tri]) + w[:, None] * (c[tri] - a[tri])
+    off = on + rng.normal(size=on.shape) * 10.0 ** rng.uniform(-12, -2, (len(on), 1))
+    lo, hi = (np.asarray(x) for x in mesh.box())
+    sets = (np.vstack([a, 0.5 * (a + b), (a + b + c) / 3]), on, off, rng.uniform(lo, hi, (COHERENT_FROM, 3)))
+    with pyclray.prepare(scene_of(mesh), precision=precision) as tracer:
+        with_slabs = [tracer.occupancy(p) for p in sets]
+        slabs, _, _ = _slabs_of(tracer)
+        assert np.isfinite(slabs[:, 3:]).mean() > 0.9
+    everywhere = lambda inputs, codes: np.tile([0.0, 0.0, 0.0, -np.inf, np.inf], (len(codes), 1))
+    monkeypatch.setattr(closest, "leaf_slabs", everywhere)
+    with pyclray.prepare(scene_of(mesh), precision=precision) as tracer:
+        for points, got in zip(sets, with_slabs):
+            assert np.array_equal(tracer.occupancy(points), got)
+    assert with_slabs[0][:len(a)].all()  # the corners: on the surface

@@ -90,7 +90,10 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * (a point on a surface is inside, whatever its count) tests their shapes as the closest-point
  * query's search for a surface point at distance 0 does: the same <type>_closest of the same
  * float64 world entries (the closest-point query's leaf, surface_leaf_codes: per place of this
- * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0. A
+ * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0,
+ * unless the point lies beyond the leaf's slab (surface_slabs: engine/queries/closest.py's
+ * leaf_slabs), where none of them is at 0 (most leaves of points near a surface: a dot product
+ * instead of each triangle's nearest point). A
  * ray with more such leaves, or one that tests every bounded shape without the boxes, is not known
  * here (2: the host asks the closest-point query). */
 #ifdef PYCLRAY_AOV_SURFACE
@@ -218,6 +221,14 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
     } else if (!(n_hits & 1)) {
         const double3 p = S->ray_.world;
         for (int j = 0; j < S->n_surface_ && !surface; ++j) {
+            /* the leaf's slab first (surface_slabs: its triangles' dot products with a unit
+             * direction lie in [lo, hi], widened by the host over the rounding there and of the
+             * closest-point test's nearest points): a point beyond it by more than the rounding of
+             * its own dot product lies on none of them (each one's squared distance is not 0) */
+            __global const double* slab = surface_slabs + 5 * (size_t)S->surface_leaf_[j];
+            const double along = slab[0] * p.x + slab[1] * p.y + slab[2] * p.z;
+            const double rounding = 0x1p-40 * (fabs(p.x) + fabs(p.y) + fabs(p.z));  /* SLAB_SIZE_MARGIN */
+            if (along < slab[3] - rounding || along > slab[4] + rounding) continue;
             const int code = surface_leaf_codes[S->surface_leaf_[j]];
             const int first = (~code) >> 3, count = (~code) & 7;
             for (int q = first; q < first + count && !surface; ++q) {

@@ -277,6 +277,9 @@ COUNT_HITS = (
     # types' float64 world entries
     Parameter("surface_leaf_codes", "__global const int*", (_asked("surface"),)),
     Parameter("surface_refs", "__global const int*", (_asked("surface"),)),
+    # per leaf (its first place in refs, 5 float64s each) the slab of a direction that holds its
+    # triangles: the surface test's pre-test (kernels/allhits.cl, engine/queries/closest.py)
+    Parameter("surface_slabs", "__global const double*", (_asked("surface"),)),
     EachType((Parameter("{type}_surface_worlds", "__global const {World}*", (_asked("surface"),)),)),
     Parameter("surface_out", "__global uchar*", (_asked("surface"),)),
 )

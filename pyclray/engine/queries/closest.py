@@ -302,7 +302,7 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
 def _surface_arguments(closed) -> dict:
     """The count kernel's arguments of its surface test (kernels/allhits.cl: PYCLRAY_AOV_SURFACE):
     the closest-point query's refs and world entries, and per place of cast's refs where a leaf
-    starts the query's code of that leaf (the two programs' wide nodes are the same but for the
+    starts the query's code of that leaf and its slab (leaf_slabs: the test's pre-test) (the two programs' wide nodes are the same but for the
     leaves' codes, which cast renumbers: engine/queries/cast_blocks.py); made once per handle."""
     inputs = closed.closest_inputs()
     with closed.lock:
@@ -316,10 +316,88 @@ def _surface_arguments(closed) -> dict:
             places = (~cast_nodes["child"][leaf].astype(np.int64)) >> 3
             codes = np.zeros(int(places.max()) + 1 if len(places) else 1, np.int32)
             codes[places] = nodes["child"][leaf]
-            inputs.nbytes += codes.nbytes
+            slabs = np.zeros((len(codes), 5))
+            slabs[places] = leaf_slabs(inputs, nodes["child"][leaf])
+            inputs.nbytes += codes.nbytes + slabs.nbytes
             inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
+                                        "surface_slabs": input_buffer(ctx, slabs),
                                         **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
         return inputs.surface_arguments
+
+
+# the slabs' margins (leaf_slabs): of the leaf's coordinates' size (the kernel adds the same of the
+# point's: kernels/allhits.cl), far above float64's rounding of a dot product and of a sum of them;
+# of the leaf's extent, far above the closest-point test's barycentrics' rounding on a triangle that
+# is not a sliver (amplified by at most 1 / SLAB_SLIVER); the sliver bound: a triangle whose edges'
+# cross product is below SLAB_SLIVER of their lengths' product keeps its leaf tested
+SLAB_SIZE_MARGIN = 2.0**-40
+SLAB_EXTENT_MARGIN = 2.0**-24
+SLAB_SLIVER = 2.0**-19
+SLAB_TINY = 1e-150
+
+
+def leaf_slabs(inputs: ClosestInputs, codes: np.ndarray) -> np.ndarray:
+    """(L, 5) float64 per leaf code of the closest-point query's tree: a unit direction n and the
+    interval [lo, hi] that holds n . x for every point x of the leaf's triangles, widened by
+    SLAB_SIZE_MARGIN of the leaf's coordinates' size and SLAB_EXTENT_MARGIN of its extent (both
+    as sums of magnitudes); (0, 0, 0, -inf, inf) for a leaf with another shape, a sliver
+    or a coordinate not finite (the surface test then tests it: kernels/allhits.cl).
+
+    Why a point p beyond the slab by more than SLAB_SIZE_MARGIN of its own size (the kernel's test)
+    lies on none of the leaf's triangles as the closest-point query sees it (mesh_closest's squared
+    distance of 0): every point of a triangle lies within the slab (its corners do, the slab is
+    convex), so p is farther than the margins from each triangle; mesh_closest's nearest point of a
+    triangle that is not a sliver lies within a few float64 roundings of the leaf's size of the
+    triangle (its barycentrics within rounding of [0, 1]), and its distance over the face from its
+    unit normal, within rounding of the true one: neither is 0, nor underflows (SLAB_TINY)."""
+    tree = inputs.bvh
+    first = ((~codes.astype(np.int64)) >> 3)
+    count = (~codes.astype(np.int64)) & 7
+    positions = len(tree.leaf_type)
+    triangles = np.full((max(positions, 1), 3, 3), np.nan)
+    for position, t in enumerate(tree.types):
+        if REGISTRY[t].winding_number:  # the types whose entries are triangles (their corners a, b, c)
+            mine = np.flatnonzero(tree.leaf_type == position)
+            world = inputs.worlds[t][tree.leaf_index[mine]]
+            triangles[mine] = np.stack([world[v][:, :3] for v in ("a", "b", "c")], axis=1)
+    out = np.zeros((len(codes), 5))
+    out[:, 3], out[:, 4] = -np.inf, np.inf
+    for begin in range(0, len(codes), SLAB_CHUNK):  # a chunk of leaves at a time: bounded memory
+        part = slice(begin, begin + SLAB_CHUNK)
+        out[part] = _chunk_slabs(triangles, first[part], count[part])
+    return out
+
+
+# leaves per pass of leaf_slabs (its arrays about 1 KB a leaf)
+SLAB_CHUNK = 1 << 15
+
+
+def _chunk_slabs(triangles: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """leaf_slabs' rows of the leaves (first, count) over the triangles' corners per position."""
+    slots = first[:, None] + np.arange(7)
+    used = np.arange(7) < count[:, None]
+    corners = triangles[np.where(used, np.minimum(slots, len(triangles) - 1), first[:, None])]  # (L, 7, 3, 3)
+    ab, ac = corners[:, :, 1] - corners[:, :, 0], corners[:, :, 2] - corners[:, :, 0]
+    cross = np.cross(ab, ac)
+    with np.errstate(over="ignore", invalid="ignore"):
+        area2 = np.einsum("lsk,lsk->ls", cross, cross)
+        fat = area2 > SLAB_SLIVER**2 * np.einsum("lsk,lsk->ls", ab, ab) * np.einsum("lsk,lsk->ls", ac, ac)
+        normal = np.where(used[:, :, None], cross, 0.0).sum(axis=1)
+        length = np.sqrt(np.einsum("lk,lk->l", normal, normal))
+        normal = normal / np.where(length > 0, length, 1.0)[:, None]
+        along = np.einsum("lsck,lk->lsc", corners, normal)
+        lo = np.where(used[:, :, None], along, np.inf).min(axis=(1, 2))
+        hi = np.where(used[:, :, None], along, -np.inf).max(axis=(1, 2))
+        size = np.where(used[:, :, None], np.abs(corners).sum(axis=3), 0.0).max(axis=(1, 2))
+        extent = np.where(used[:, :, None], np.abs(corners - corners[:, :1, :1]).sum(axis=3), 0.0).max(axis=(1, 2))
+        widen = SLAB_SIZE_MARGIN * size + SLAB_EXTENT_MARGIN * extent + SLAB_TINY
+        good = (np.all(fat | ~used, axis=1) & (length > 0) & np.isfinite(lo) & np.isfinite(hi)
+                & np.isfinite(widen) & np.all(np.isfinite(normal), axis=1))
+    out = np.zeros((len(first), 5))
+    out[:, 3], out[:, 4] = -np.inf, np.inf
+    out[good, :3] = normal[good]
+    out[good, 3], out[good, 4] = lo[good] - widen[good], hi[good] + widen[good]
+    return out
 
 
 def _parity_grid(tracer, closed, sign: str):

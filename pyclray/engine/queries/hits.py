@@ -113,8 +113,9 @@ def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surfac
     """(counts int32, on uint8) of rays from checked points (N, 3) along directions (N, 3): each
     one's number of hits t > 0, and where that is even whether the point lies on a surface (1; 0
     not, or an odd count; 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE); surface: that
-    test's arguments (the closest-point query's leaves, refs and world entries: closest.py); on a
-    device of the GPU class (but with host) checked and counted on the device (cast_device.py)."""
+    test's arguments (the closest-point query's leaves, their slabs, refs and world entries:
+    closest.py); on a device of the GPU class (but with host) checked and counted on the device
+    (cast_device.py)."""
     if not host and gpu_class(tracer.ctx.device):
         try:
             return hit_counts_device(tracer, points, directions, None, None, surface)
