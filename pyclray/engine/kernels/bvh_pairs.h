@@ -70,17 +70,8 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
         }                                                                               \
     }
 
-#undef PYCLRAY_TRAVERSE
-#define PYCLRAY_TRAVERSE(nodes, box, limit, NEAREST_FIRST, LEAF_MASK, VISIT)            \
-    {                                                                                   \
-        int stack_child[BVH_STACK];                                                     \
-        float stack_entry[BVH_STACK];                                                   \
-        int top = 0;                                                                    \
-        stack_child[top] = 0;                                                           \
-        stack_entry[top++] = 0.0f;                                                      \
-        while (top > 0 && !(limit < 0.0f))                                              \
-            PYCLRAY_TRAVERSE_STEP(nodes, box, limit, stack_child, stack_entry, top, NEAREST_FIRST, LEAF_MASK, VISIT) \
-    }
+/* PYCLRAY_TRAVERSE (kernels/bvh_ray.h) runs these steps: its macro names PYCLRAY_TRAVERSE_STEP and
+ * BVH_STACK, expanded where it is used, so it takes the pair nodes' step and stack above. */
 #else
 /* A render's camera ray (a packet of one: LANES 1) through the pair nodes: every leaf whose box it
  * enters before its best (a real variable VISIT lowers), nearest first; each child's box tested by
