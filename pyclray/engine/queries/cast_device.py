@@ -273,6 +273,31 @@ class RaysRefused(Exception):
         self.rays = rays
 
 
+def _given_rays(ctx, kernels, origins, directions, tmin, tmax, bad_distance):
+    """The checks every device path makes of its arguments before any kernel, in the host path's
+    order: (origins, directions, shape, stride, tmin, tmax): device rays (pyopencl arrays, float32
+    widened) or host arrays as cast's (cast.py: _ray_array), their shapes (one origin: stride 0), and
+    tmin and tmax (cast.py: _distances). bad_distance(origins, directions) runs before a bad
+    distance's RequestError: the rays' own refusal comes first, as on the host path."""
+    if is_device_array(origins) or is_device_array(directions):
+        directions = _device_rays(ctx, kernels, "directions", directions)
+        origins = _device_rays(ctx, kernels, "origins", origins)
+    else:
+        directions = _ray_array("directions", directions)
+        origins = _ray_array("origins", origins)
+    shape = directions.shape[:-1]
+    if origins.shape != directions.shape and origins.shape != (3,):
+        raise RequestError(
+            f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
+    try:
+        tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
+        tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
+    except RequestError:
+        bad_distance(origins, directions)
+        raise
+    return origins, directions, shape, 1 if origins.shape == directions.shape else 0, tmin, tmax
+
+
 def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, kept):
     ctx, precision = tracer.ctx, tracer.precision
     queue = ctx.queue
@@ -282,28 +307,13 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     def refused():
         raise RaysRefused(given if own else (origins.get(), directions.get()))
 
-    if own:  # host arrays, their shapes checked as cast's (cast.py: _ray_array)
-        directions = _ray_array("directions", directions)
-        origins = _ray_array("origins", origins)
-    else:
-        directions = _device_rays(ctx, kernels, "directions", directions)
-        origins = _device_rays(ctx, kernels, "origins", origins)
-    shape = directions.shape[:-1]
-    if origins.shape != directions.shape and origins.shape != (3,):
-        raise RequestError(
-            f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
+    # (host rays: the host path's first refusal, a bad ray's before a bad distance's; device rays: the distance's)
+    origins, directions, shape, stride, tmin, tmax = _given_rays(
+        ctx, kernels, origins, directions, tmin, tmax, lambda *rays: refused() if own else None)
     count = math.prod(shape)
     inputs = tracer.cast_inputs()
     anchor, block_lanes = inputs[1], inputs[4]
     args, pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
-    try:
-        tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
-        tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
-    except RequestError:
-        if own:  # the host path's first refusal (a bad ray's comes before a bad distance's)
-            refused()
-        raise
-    stride = 1 if origins.shape == directions.shape else 0
     real = REAL[precision]
     # the distances the kernel squares must stay below the square root of the largest real (cast.py: RayBatch)
     bound = np.sqrt(np.finfo(real).max) / 4
@@ -491,28 +501,14 @@ class HitRays:
         self.tracer, self.given = tracer, (origins, directions, tmin, tmax)
         self.kernels = _kernels(tracer)
         self.device = is_device_array(origins) or is_device_array(directions)
-        if self.device:
-            directions = _device_rays(ctx, self.kernels, "directions", directions)
-            origins = _device_rays(ctx, self.kernels, "origins", origins)
-        else:
-            directions = _ray_array("directions", directions)
-            origins = _ray_array("origins", origins)
-        shape = directions.shape[:-1]
-        if origins.shape != directions.shape and origins.shape != (3,):
-            raise RequestError(
-                f"origins: expected shape {directions.shape} like directions, or (3,) for one origin, got {origins.shape}")
         inputs = tracer.cast_inputs()
         self.anchor, self.block_lanes = inputs[1], inputs[4]
+        # (before a bad distance's line, a bad ray's: check_now)
+        origins, directions, shape, self.stride, tmin, tmax = _given_rays(ctx, self.kernels, origins, directions, tmin,
+                                                                          tmax, self.check_now)
         self.args, self.pairs = ray_arguments(tracer, inputs)
-        try:
-            tmax = _distances("tmax", tmax, shape, np.inf, lambda v: v > 0, "numbers > 0 (inf for no limit)")
-            tmin = _distances("tmin", tmin, shape, 0.0, lambda v: (v >= 0) & (v < np.inf), "finite numbers >= 0")
-        except RequestError:  # the host path's first refusal (a bad ray's comes before a bad distance's)
-            self.check_now(origins, directions)
-            raise
         self.bound = np.sqrt(np.finfo(REAL[tracer.precision]).max) / 4  # (as cast's: RayBatch)
         self.shape, self.count = shape, math.prod(shape)
-        self.stride = 1 if origins.shape == directions.shape else 0
         self._rays = (origins, directions)
         self._host = None if self.device else (origins.reshape(-1, 3), directions.reshape(-1, 3))
         self.tmin, self.tmax = tmin, tmax
