@@ -444,18 +444,9 @@ def parity_directions(closed, points: np.ndarray) -> np.ndarray:
     lo, hi = (tree.lo[0], tree.hi[0]) if len(tree.lo) else (np.zeros(3), np.zeros(3))
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
         return np.broadcast_to(PARITY_DIRECTION, points.shape)
-    if len(points) < COHERENT_FROM:
+    if len(points) < COHERENT_FROM or gpu_class(closed.ctx.device):  # numpy's (a GPU's host: no numba pass)
         gaps = np.concatenate([points - lo, hi - points], axis=1)
-        return PARITY_FACES[np.argmin(gaps, axis=1)]
-    if gpu_class(closed.ctx.device):  # numpy's passes over the columns: the first nearest face too, no numba
-        best, face = points[:, 0] - lo[0], np.zeros(len(points), np.intp)
-        for index in range(1, 6):
-            axis = index % 3
-            gap = points[:, axis] - lo[axis] if index < 3 else hi[axis] - points[:, axis]
-            nearer = gap < best
-            face[nearer] = index
-            np.minimum(best, gap, out=best)
-        return PARITY_FACES[face]
+        return PARITY_FACES[np.argmin(gaps, axis=1)]  # the first nearest face, as numba's
     from .point_passes import nearest_face_directions  # numba's code, for large batches only
 
     return nearest_face_directions(points, lo, hi, PARITY_FACES)
