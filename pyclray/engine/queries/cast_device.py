@@ -33,7 +33,7 @@ from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments, image_parameter
 from ..opencl.buffers import shares_host_memory
 from ..opencl.device import launch, launch_kept
-from .cast import RayBatch, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
+from .cast import _BOUNDS, RayBatch, _block_lanes_table, _distances, _ray_array, ray_arguments, run_cast
 from .requests import Frame
 
 OUTS = ("host", "device")
@@ -316,7 +316,7 @@ def _cast(tracer, query, origins, directions, tmax, aovs, tmin, out, own: bool, 
     args, pairs = ray_arguments(tracer, inputs)  # the tree: pair nodes (GPUs) or wide ones
     real = REAL[precision]
     # the distances the kernel squares must stay below the square root of the largest real (cast.py: RayBatch)
-    bound = np.sqrt(np.finfo(real).max) / 4
+    bound = _BOUNDS[precision]
     partial = None  # the check's largest distance per work-item, where it is read back after the cast
     items = check_groups(count)  # the check's partial results
     needed = set(aovs) | ({"id"} if "label" in aovs else set()) | ({"depth"} if "position" in aovs else set())
@@ -507,7 +507,7 @@ class HitRays:
         origins, directions, shape, self.stride, tmin, tmax = _given_rays(ctx, self.kernels, origins, directions, tmin,
                                                                           tmax, self.check_now)
         self.args, self.pairs = ray_arguments(tracer, inputs)
-        self.bound = np.sqrt(np.finfo(REAL[tracer.precision]).max) / 4  # (as cast's: RayBatch)
+        self.bound = _BOUNDS[tracer.precision]  # (as cast's: RayBatch)
         self.shape, self.count = shape, math.prod(shape)
         self._rays = (origins, directions)
         self._host = None if self.device else (origins.reshape(-1, 3), directions.reshape(-1, 3))
@@ -550,7 +550,7 @@ class HitRays:
         if count:
             self.count, self.items = count, check_groups(count)
             self.stride = 1 if origins.shape == directions.shape else 0
-            self.bound = np.sqrt(np.finfo(REAL[self.tracer.precision]).max) / 4
+            self.bound = _BOUNDS[self.tracer.precision]
             self.buffers = (origins.data, self.stride, directions.data)
             if not _fine(self.reach(cl_array.empty(self.tracer.ctx.queue, (self.items,), np.float64).data, False),
                          self.bound):
