@@ -439,22 +439,22 @@ def test_amodal_masks_are_the_objects_rendered_alone():
     assert hidden >= 20 and reaching_out >= 10, (hidden, reaching_out)  # the cases the test is for did happen
 
 
-def test_object_frame_box_holds_the_object():
-    """The box the hidden pixels are bounded by (views.py: _object_frame): a turned mesh's model box
-    in its own frame holds its world vertices taken there, and is tighter than its world box; a shape
+def test_object_space_box_holds_the_object():
+    """The box the hidden pixels are bounded by (views.py: _object_space): a turned mesh's model box
+    in its own space holds its world vertices taken there, and is tighter than its world box; a shape
     without a model (a sphere) has its world box and the identity."""
-    from pyclray.io.dataset.views import _object_frame
+    from pyclray.io.dataset.views import _object_space
 
     vertices, faces = torus()
     mesh = pyclray.Mesh(vertices, faces, scale=(0.5, 0.3, 0.2), axis=(1.0, 1.0, 0.0), angle=35.0, translate=(1.0, 2.0, 3.0))
-    low, high, object_from_world = _object_frame(mesh)
+    low, high, object_from_world = _object_space(mesh)
     world = mesh.world_vertices()
     local = world @ object_from_world[:3, :3].T + object_from_world[:3, 3]
     assert np.allclose(local.min(axis=0), low) and np.allclose(local.max(axis=0), high)
     box = mesh.box()
     assert np.prod(high - low) * abs(np.linalg.det(mesh.object_pose()[:3, :3])) < 0.7 * np.prod(box[1] - box[0])
     sphere = pyclray.Sphere((1.0, 2.0, 3.0), 0.5)
-    low, high, object_from_world = _object_frame(sphere)
+    low, high, object_from_world = _object_space(sphere)
     assert np.array_equal(np.stack([low, high]), sphere.box()) and np.array_equal(object_from_world, np.eye(4))
 
 

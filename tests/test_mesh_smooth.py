@@ -64,7 +64,7 @@ def test_given_normals_light_the_mesh(precision):
     every mesh pixel is albedo E max(0, n0.L) (the interpolation of equal unit normals is n0), which a
     geometric normal (0, 0, 1) would not give."""
     vertices, faces = grid(6, 6, 2.0)  # in the xz plane: turned about x by 90 degrees to face +z
-    n0 = np.array([0.6, 0.0, 0.8])  # in the world; in the grid's own frame (0.6, 0.8, 0)
+    n0 = np.array([0.6, 0.0, 0.8])  # in the world; in the grid's own space (0.6, 0.8, 0)
     mesh = pyclray.Mesh(vertices, faces, smooth=True, normals=np.tile([0.6, 0.8, 0.0], (len(vertices), 1)),
                         axis=(1, 0, 0), angle=90.0, material=pyclray.Material((0.5, 0.5, 0.5)))
     assert np.allclose(mesh.vertex_normals(), n0)

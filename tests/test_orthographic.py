@@ -155,7 +155,7 @@ def check_every_aov(scene, frame, precision):
         with np.errstate(invalid="ignore"):  # inf - inf where both miss (judged rays hit)
             zdepth_error = np.abs(mine["zdepth"].astype(np.float64) - truth["depth"] * along)
         assert np.all(zdepth_error[judged] <= (slack * np.abs(along))[judged])
-    # object_coordinates: the hit point in its shape's own frame (carried back to the world, the
+    # object_coordinates: the hit point in its shape's own space (carried back to the world, the
     # oracle's hit point); flow: 0 in a scene that does not move; both 0 on a miss
     if "object_coordinates" in frame:
         from pyclray.engine.queries.motion import _world_points

@@ -57,7 +57,7 @@ TABLE = {
         # or a shape without one
         Aov("label", 1, False, "-1", ("label",), False, from_aov="id"),
         # data sets (engine/queries/motion.py, from the hit point, the shape and its primitive): the
-        # hit point in its shape's own frame (Shape.object_poses), and the forward optical flow in
+        # hit point in its shape's own space (Shape.object_poses), and the forward optical flow in
         # pixels to the next frame (t + 1/fps: the shapes moved, the camera there)
         Aov("object_coordinates", 3, True, "(0, 0, 0)", ("O.X", "O.Y", "O.Z"), False,
             from_aov=("position", "id", "primitive")),

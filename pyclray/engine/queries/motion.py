@@ -1,5 +1,5 @@
 """The data sets' images derived on the host after the kernel, from the hit point (`position`), the
-shape (`id`) and its primitive: `object_coordinates`, the hit point in its shape's own frame
+shape (`id`) and its primitive: `object_coordinates`, the hit point in its shape's own space
 (Shape.object_poses), and `flow`, the forward optical flow in pixels.
 
 Flow is exact per pixel, not estimated from images: the hit point X in its shape's frame at t is

@@ -1,4 +1,4 @@
-"""A data set's object models: each labelled shape's triangles in its own frame, in millimetres, with
+"""A data set's object models: each labelled shape's triangles in its own space, in millimetres, with
 the rigid pose that places them (BOP's models/ and cam_R_m2c, cam_t_m2c), written as PLY with vertex
 normals, and BOP's models_info (3D box and diameter)."""
 from __future__ import annotations

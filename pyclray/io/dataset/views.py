@@ -56,7 +56,7 @@ class DatasetViews:
         state["_tracers"] = None  # each process prepares its own
         state.pop("_object_boxes", None)
         state.pop("_object_ids", None)
-        state.pop("_object_frames", None)
+        state.pop("_object_spaces", None)
         return state
 
     # -- the handles ---------------------------------------------------------------------------
@@ -77,7 +77,7 @@ class DatasetViews:
         self._object_boxes = [tracer.scene.shapes[0].box() for tracer in tracers[1:]]  # for their windows
         objects = self.format.objects(scene) if self.format.needs_alone else []
         self._object_ids = [next(i for i, s in enumerate(scene.shapes) if s is shape) for shape in objects]
-        self._object_frames = [_object_frame(tracer.scene.shapes[0]) for tracer in tracers[1:]]
+        self._object_spaces = [_object_space(tracer.scene.shapes[0]) for tracer in tracers[1:]]
         for k, tracer in enumerate(tracers):
             tracer.render(aovs=self.format.aovs if k == 0 else ("id",), window=(0, 0, 1, 1))
 
@@ -153,7 +153,7 @@ class DatasetViews:
         - In the image, where the frame has id and zdepth and the camera is a pinhole (the rays
           from K and the pose): only over the box of the pixels where the object may lie hidden
           (_hidden_window: another shape seen there, not beyond where the pixel's ray leaves the
-          box of the object's model in its own frame, _object_frame). Everywhere else the object alone is hit exactly where the scene shows it
+          box of the object's model in its own space, _object_space). Everywhere else the object alone is hit exactly where the scene shows it
           (the same ray meets the same triangles: a pixel that sees nothing meets none of them,
           one that sees a shape beyond the object's box cannot meet the object, which would be
           nearer), so its mask there is its visible pixels (_finish_alone). Otherwise over the
@@ -168,7 +168,7 @@ class DatasetViews:
         hidden = pinhole and frame is not None and "id" in frame and "zdepth" in frame
         canvas_camera = None
         for tracer, box, shape_id, own in zip(self._tracers[1:], self._object_boxes, self._object_ids,
-                                              self._object_frames):
+                                              self._object_spaces):
             window = _projected_window(box, K, pose)  # in image pixels, or None: anywhere
             inside = _clip(window, 0, 0, width, height)
             reaches_out = window is None or inside != window
@@ -299,8 +299,8 @@ HIDDEN_BOX_MARGIN = 1e-3  # of the box's largest side
 HIDDEN_DEPTH_MARGIN = 1e-3  # of the depth seen
 
 
-def _object_frame(shape):
-    """(low, high, object_from_world 4x4) of the box holding the shape in its own frame (its
+def _object_space(shape):
+    """(low, high, object_from_world 4x4) of the box holding the shape in its own space (its
     model's box, where it has a model and an invertible pose: tighter than the world box of a
     turned object), else its world box and the identity."""
     model, pose = shape.object_model(), shape.object_pose()
@@ -317,9 +317,9 @@ def _hidden_window(ids, zdepth, shape_id: int, window, own, K, pose):
     """(x, y, width, height) of the pixels of window (in the image) where the object shape_id may
     lie behind what the scene's render shows there, or None where it can nowhere: where another
     shape is seen (ids, zdepth: the scene's images) and the pixel's ray leaves the object's box
-    (own: _object_frame's, grown by the margins) no nearer than that shape's depth. The ray of
+    (own: _object_space's, grown by the margins) no nearer than that shape's depth. The ray of
     pixel (u, v) is R K^-1 [u, v, 1] from the eye (OpenCV's pixel centres, as K), whose parameter is
-    the depth along the optical axis; taken into the object's frame it keeps its parameter, so it
+    the depth along the optical axis; taken into the object's space it keeps its parameter, so it
     compares with zdepth as it is."""
     x, y, w, h = window
     ids = ids[y:y + h, x:x + w]
