@@ -12,6 +12,7 @@ also gives open, self-intersecting and multi-part meshes an inside. A point on a
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -21,7 +22,7 @@ from ...model.errors import RequestError
 from ...model.shapes import REGISTRY
 from ..bvh.scene import primitives_bvh
 from ..bvh.winding import winding_slots
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
 from ..opencl.device import gpu_class, launch
@@ -89,7 +90,8 @@ class ClosestInputs:
     """What the closest-point query needs of a scene, made at its first call and kept by the handle
     until its shapes change: per type its world entries (float64), ids and primitive indices in the
     BVH's leaf order, the wide BVH around the scene's anchor and its refs, on the device; the winding
-    number's expansions when first asked for."""
+    number's expansions and the BVH's pair nodes (one point per work-item: a lane width of 1) when
+    first asked for."""
 
     def __init__(self, prepared, shapes: tuple):
         ctx = self.ctx = prepared.ctx
@@ -116,10 +118,23 @@ class ClosestInputs:
                               f"{t}_primitives": input_buffer(ctx, _int32(primitives[t])),
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
-        self._winding = None
+        self._winding = self._pairs = None
+        self._lock = threading.Lock()
         # occupancy's grid of a closed mesh (engine/queries/parity_grid.py) and the count kernel's
         # arguments of its surface test, where asked for
         self.parity_grid = self.surface_arguments = None
+
+    def pair_nodes(self):
+        """The pair nodes of this query's own BVH around its anchor (engine/bvh/pairs.py: the binary
+        tree's boxes, rounded as its wide nodes' are, and its leaves), on the device: the search's
+        nodes at a lane width of 1. The prepared scene's BVH where the query shares it (not a mesh
+        instance among the shapes), else the tree of the shapes' own entries."""
+        with self._lock:
+            if self._pairs is None:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    self._pairs = input_buffer(self.ctx, self.bvh.pair_nodes(self.anchor))
+                self.nbytes += self._pairs.size
+            return self._pairs
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -186,7 +201,10 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         outputs = tuple(k for k in outputs if k != "winding")
         if not outputs:
             return results
-    variant = Variant("closest", inputs.types, tuple(outputs), precision)
+    # through the pair nodes at a lane width of 1 (a GPU's: programs.pairs_for), but for the winding
+    # number, whose expansions are the wide nodes' children's
+    pairs = "winding" not in outputs and pairs_for(lanes_for(ctx.device, precision))
+    variant = Variant("closest", inputs.types, tuple(outputs), precision, pairs=pairs)
     order = None
     if count >= COHERENT_FROM and not gpu_class(ctx.device):  # numba's code, imported for large batches only
         from .point_passes import coherent_order
@@ -198,6 +216,8 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         points = points[order]
     args = {"n_points": np.int32(count), "order": input_buffer(ctx, np.zeros(1, np.int32)), "ordered": np.int32(0),
             "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
+    if variant.through_pairs():
+        args["nodes"] = inputs.pair_nodes()
     if "winding" in outputs:
         args["winding_slots"] = inputs.winding()
     flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
