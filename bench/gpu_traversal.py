@@ -3,6 +3,7 @@ tree they replace at a lane width of 1 (issue 41, item 1), on bench.meshes' bunn
 and 1,000,000-triangle mesh:
 
     python -m bench.gpu_traversal [--rounds 3] [--block 5] [--size 512] [--rays 100000] [--sample 2000]
+                                  [--points 100000] [--parts trees,reads,rays,closest]
 
 - the trees: nodes and bytes of the wide tree (224 bytes a node), the binary one (32) and the pair
   nodes (64), and the conversion's time at prepare time (the binary nodes packed around the anchor,
@@ -15,8 +16,12 @@ and 1,000,000-triangle mesh:
 - PoCL at a lane width of 1 (PYCLRAY_LANES=1, the programs a GPU builds): the pair nodes against
   the wide tree at one lane (PYCLRAY_TRAVERSAL=wide), render of size x size (depth, normal, id,
   primitive) and cast of `--rays` incoherent rays, each call's wall time in alternating blocks
-  (bench.open3d_compare.blocks); the 8-lane default beside them for scale.
-Prints one table; the machine is shared: compare ratios, note the load printed.
+  (bench.open3d_compare.blocks); the 8-lane default beside them for scale;
+- the closest-point query likewise (issue 41, item 3): closest_points (every output) of `--points`
+  points uniform in the mesh's box and as many near its surface (bench.points.near_points: within 1%
+  of the box's size), the pair nodes' search against the wide tree's at one lane and the 8 lanes'.
+`--parts` picks the parts (trees, reads, rays, closest; all by default).
+Prints one table a part; the machine is shared: compare ratios, note the load printed.
 """
 from __future__ import annotations
 
@@ -37,6 +42,7 @@ from pyclray.model.layout import layout
 
 from .meshes import camera_for, incoherent_rays, meshes
 from .open3d_compare import blocks
+from .points import near_points
 
 AOVS = ("depth", "normal", "id", "primitive")
 
@@ -107,29 +113,49 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--rays", type=int, default=100_000)
     parser.add_argument("--sample", type=int, default=2000)
+    parser.add_argument("--points", type=int, default=100_000)
+    parser.add_argument("--parts", default="trees,reads,rays,closest")
     args = parser.parse_args(argv)
+    parts = set(args.parts.split(","))
     ctx = context_for(None)
-    trees, reads, timing = [], [], []
+    trees, reads, timing, closest = [], [], [], []
+
+    def at(lanes, traversal, fn):
+        def call():
+            with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
+                return fn()
+        return call
+
     for label, mesh in meshes(None).items():
         scene = camera_for(mesh, args.size)
         tracer = tracer_for(scene, ctx, "fp32")
-        trees += tree_rows(label, tracer)
+        if "trees" in parts:
+            trees += tree_rows(label, tracer)
+        if "closest" in parts:
+            rng = np.random.default_rng(2)
+            lo, hi = mesh.box()
+            for kind, points in (("uniform", rng.uniform(lo, hi, (args.points, 3))),
+                                 ("near the surface", near_points(tracer, lo, hi, args.points, rng))):
+                query = lambda points=points: pyclray.closest_points(scene, points)  # noqa: E731
+                systems = {"pairs, 1 lane": at(1, "pairs", query), "wide, 1 lane": at(1, "wide", query),
+                           "wide, 8 lanes": at(8, "wide", query)}
+                timed = blocks(systems, args.rounds, args.block)
+                closest.append((f"{label}: {args.points:,} points {kind}", *(timed[s]["median"] for s in systems)))
+        if not parts & {"reads", "rays"}:
+            continue
         origins, directions = incoherent_rays(mesh, args.rays)
         sample = slice(0, args.sample)
-        depth = pyclray.cast(scene, origins[sample], directions[sample], aovs=("depth",))["depth"].astype(np.float64)
-        reads.append((f"{label}: {args.sample} incoherent rays",
-                      *reads_per_ray(tracer.prepared.bvh, origins[sample], directions[sample], depth)))
-        from pyclray.reference import oracle
+        if "reads" in parts:
+            depth = pyclray.cast(scene, origins[sample], directions[sample], aovs=("depth",))["depth"].astype(np.float64)
+            reads.append((f"{label}: {args.sample} incoherent rays",
+                          *reads_per_ray(tracer.prepared.bvh, origins[sample], directions[sample], depth)))
+            from pyclray.reference import oracle
 
-        cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
-        cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
-        reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
-
-        def at(lanes, traversal, fn):
-            def call():
-                with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
-                    return fn()
-            return call
+            cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
+            cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
+            reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
+        if "rays" not in parts:
+            continue
 
         render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
         cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
@@ -140,16 +166,20 @@ def main(argv=None):
             what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{args.rays:,} incoherent rays cast"
             timing.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
     print(f"PoCL on {ctx.device.name.strip()}; load {os.getloadavg()[0]:.1f}")
-    print("| tree | nodes | MiB | |\n|---|---|---|---|")
-    for row in trees:
-        print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
-    print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
-    for case, pair, wide, leaves in reads:
-        ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
-        print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
-    print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
-    for case, pairs, wide, eight in timing:
-        print(f"| {case} | {pairs:.2f} | {wide:.2f} | {pairs / wide:.2f} | {eight:.2f} |")
+    if trees:
+        print("| tree | nodes | MiB | |\n|---|---|---|---|")
+        for row in trees:
+            print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
+    if reads:
+        print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
+        for case, pair, wide, leaves in reads:
+            ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
+            print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
+    for rows in (timing, closest):
+        if rows:
+            print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
+        for case, pairs, wide, eight in rows:
+            print(f"| {case} | {pairs:.2f} | {wide:.2f} | {pairs / wide:.2f} | {eight:.2f} |")
 
 
 if __name__ == "__main__":

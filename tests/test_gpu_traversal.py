@@ -518,3 +518,22 @@ def test_the_lane_width_one_closest_programs_search_the_pair_nodes(monkeypatch, 
         for aovs, source in at_width(monkeypatch, 1, run).items():
             assert "#define PYCLRAY_PAIRS" not in source and "WideNode* nodes" in source, aovs
     programs.clear()
+
+
+def test_a_one_lane_handle_holds_the_closest_querys_pair_nodes_alone(monkeypatch, scenes_dir):
+    """The closest-point query's nodes are made when first asked: at one lane its pair nodes (the
+    bytes of its own BVH's pair nodes), at 8 its wide nodes; neither handle holds the other's."""
+    scene = scene_of([bunny(scenes_dir)])
+    points = points_around(scene.shapes, 200, np.random.default_rng(28))
+
+    def held():
+        with pyclray.prepare(scene) as tracer:
+            tracer.closest_inputs()
+            before = tracer.nbytes
+            tracer.distance(points)
+            inputs = tracer.closest_inputs()
+            return tracer.nbytes - before, inputs.bvh.pair_nodes(inputs.anchor).nbytes, inputs.bvh.nodes(inputs.anchor).nbytes
+
+    one, pairs, wide = at_width(monkeypatch, 1, held)
+    eight = at_width(monkeypatch, 8, held)[0]
+    assert one == pairs and eight == wide and pairs != wide

@@ -89,9 +89,9 @@ def check_sign(sign) -> str:
 class ClosestInputs:
     """What the closest-point query needs of a scene, made at its first call and kept by the handle
     until its shapes change: per type its world entries (float64), ids and primitive indices in the
-    BVH's leaf order, the wide BVH around the scene's anchor and its refs, on the device; the winding
-    number's expansions and the BVH's pair nodes (one point per work-item: a lane width of 1) when
-    first asked for."""
+    BVH's leaf order and its refs, on the device; its nodes around the scene's anchor (the wide ones,
+    or the pair nodes at a lane width of 1: one point per work-item) and the winding number's
+    expansions when first asked for."""
 
     def __init__(self, prepared, shapes: tuple):
         ctx = self.ctx = prepared.ctx
@@ -110,7 +110,7 @@ class ClosestInputs:
             self.anchor = np.zeros(3)
         self.args = {"scene_anchor": np.append(self.anchor, 0.0).view(cl.cltypes.double4)[0]}
         if tree.types:
-            self.args.update(nodes=input_buffer(ctx, tree.nodes(self.anchor)), refs=input_buffer(ctx, tree.refs(self.types)))
+            self.args.update(refs=input_buffer(ctx, tree.refs(self.types)))
         for t in self.types:
             world = worlds[t] if len(worlds[t]) else np.zeros(1, worlds[t].dtype)
             self.args.update({f"{t}_worlds": input_buffer(ctx, np.ascontiguousarray(world)),
@@ -118,23 +118,26 @@ class ClosestInputs:
                               f"{t}_primitives": input_buffer(ctx, _int32(primitives[t])),
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
-        self._winding = self._pairs = None
+        self._winding = None
+        self._nodes: dict = {}  # pairs (bool) -> the BVH's nodes on the device (see nodes)
         self._lock = threading.Lock()
         # occupancy's grid of a closed mesh (engine/queries/parity_grid.py) and the count kernel's
         # arguments of its surface test, where asked for
         self.parity_grid = self.surface_arguments = None
 
-    def pair_nodes(self):
-        """The pair nodes of this query's own BVH around its anchor (engine/bvh/pairs.py: the binary
-        tree's boxes, rounded as its wide nodes' are, and its leaves), on the device: the search's
-        nodes at a lane width of 1. The prepared scene's BVH where the query shares it (not a mesh
-        instance among the shapes), else the tree of the shapes' own entries."""
+    def nodes(self, pairs: bool):
+        """This query's BVH's nodes around its anchor on the device, made when first asked: the wide
+        nodes, or with pairs (a lane width of 1) its pair nodes (engine/bvh/pairs.py: the binary
+        tree's boxes, rounded as the wide nodes' are, and the same leaves). The BVH is the prepared
+        scene's where the query shares it (no mesh instance among the shapes), else the tree of the
+        shapes' own entries (_own_entries)."""
         with self._lock:
-            if self._pairs is None:
+            if pairs not in self._nodes:
                 with np.errstate(over="ignore", invalid="ignore"):
-                    self._pairs = input_buffer(self.ctx, self.bvh.pair_nodes(self.anchor))
-                self.nbytes += self._pairs.size
-            return self._pairs
+                    nodes = self.bvh.pair_nodes(self.anchor) if pairs else self.bvh.nodes(self.anchor)
+                self._nodes[pairs] = input_buffer(self.ctx, nodes)
+                self.nbytes += self._nodes[pairs].size
+            return self._nodes[pairs]
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -216,8 +219,8 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         points = points[order]
     args = {"n_points": np.int32(count), "order": input_buffer(ctx, np.zeros(1, np.int32)), "ordered": np.int32(0),
             "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
-    if variant.through_pairs():
-        args["nodes"] = inputs.pair_nodes()
+    if inputs.bvh.types:
+        args["nodes"] = inputs.nodes(variant.through_pairs())
     if "winding" in outputs:
         args["winding_slots"] = inputs.winding()
     flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
