@@ -6,12 +6,12 @@
  * file of each shape type present (their type_closest, type_inside: kernels/closest.h).
  *
  * One point per work-item, in float64 from the point as given and the shapes' float64 world
- * entries: no lanes (the same code at every lane width). The bounded shapes are found through the
+ * entries: no lanes (a point's code whatever the lane width). The bounded shapes are found through the
  * wide BVH (its float boxes around the scene's anchor), nearest box first, pruned by the best
  * distance so far: a box is skipped only where even its float lower bound is beyond that distance.
  * With PYCLRAY_PAIRS (a lane width of 1: GPUs) the same search and the inside test go through the
  * BVH's pair nodes instead (kernels/bvh_pairs.h: the same boxes, bounds and leaves; the same bits);
- * the winding number's expansions are the wide nodes', which that program then has. */
+ * the winding number's program keeps the wide nodes (its expansions are per wide child). */
 
 /* the best candidate so far: an exact tie of distances keeps the lower id, then the lower primitive
  * (the same winner whatever the traversal's order) */
