@@ -447,26 +447,31 @@ def test_closest_queries_far_away_give_the_same_bits(monkeypatch, scenes_dir, pr
 
 @pytest.mark.parametrize("meshes", [1, 2])
 def test_closest_ties_give_the_same_bits(monkeypatch, meshes):
-    """Points exactly midway between two parallel grids (y = 1 and y = -1, the tree's leaves split
-    between them): every point inside is as near to a triangle of each, and to several at a vertex
-    or an edge; the tie rule keeps the lower id (two meshes), then the lower primitive (one mesh:
-    the upper grid's triangles come first), whatever order either traversal visits them in."""
-    v, f = grid(12, 12, 2.0)
+    """Two parallel grids (y = 1 and y = -1, coordinates multiples of 1/8: every point below exact,
+    the tree's leaves split between them). Points midway (y = 0): every one inside is as near to a
+    triangle of each, and to several at a vertex or an edge; the tie rule keeps the lower id (two
+    meshes), then the lower primitive (one mesh: the upper grid's triangles come first), whatever
+    order either traversal visits them in. Points exactly on the upper grid: on its vertices, its
+    edges (their midpoints, the cells' diagonals included) and its faces, at distance 0."""
+    v, f = grid(8, 8, 2.0)
     top, bottom = v + [0.0, 1.0, 0.0], v - [0.0, 1.0, 0.0]
     if meshes == 2:
         shapes = [pyclray.Mesh(top, f), pyclray.Mesh(bottom, f.copy())]
     else:
         shapes = [pyclray.Mesh(np.concatenate([top, bottom]), np.concatenate([f, f + len(v)]))]
     rng = np.random.default_rng(25)
-    xz = np.concatenate([v[:, [0, 2]], rng.uniform(-1.2, 1.2, (3000, 2)), (v[:-1, [0, 2]] + v[1:, [0, 2]]) / 2])
-    points = np.stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]], axis=1)
-    one = assert_closest_same_at_widths(monkeypatch, scene_of(shapes), "fp32", points)
+    corners = v[f][:, :, [0, 2]]  # (F, 3, 2): each triangle's corners' x, z
+    edges = np.concatenate([(corners[:, k] + corners[:, (k + 1) % 3]) / 2 for k in range(3)])
+    xz = np.concatenate([v[:, [0, 2]], edges, rng.uniform(-1.2, 1.2, (3000, 2))])
+    midway = np.stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]], axis=1)
+    on = np.stack([xz[:, 0], np.ones(len(xz)), xz[:, 1]], axis=1)
+    one = assert_closest_same_at_widths(monkeypatch, scene_of(shapes), "fp32", np.concatenate([midway, on]))
     inside = np.all(np.abs(xz) <= 1.0, axis=1)
-    assert (one["distance"][inside] == 1.0).all()
+    assert (one["distance"][: len(xz)][inside] == 1.0).all() and (one["distance"][len(xz):][inside] == 0.0).all()
     if meshes == 2:
-        assert (one["closest id"][inside] == 0).all()
+        assert (one["closest id"][: len(xz)][inside] == 0).all()
     else:
-        assert (one["closest primitive"][inside] < len(f)).all()
+        assert (one["closest primitive"][: len(xz)][inside] < len(f)).all()
 
 
 def test_the_gpu_class_host_path_gives_the_same_closest_bits(monkeypatch, scenes_dir):
