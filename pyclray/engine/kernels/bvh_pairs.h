@@ -155,8 +155,8 @@ inline float pair_box_distance(const float4 lo, const float4 hi, const float3 pf
     {                                                                                   \
         int top = 0;                                                                    \
         int code = 0;  /* the root */                                                   \
+        float bound = (BOUND);                                                          \
         for (;;) {                                                                      \
-            const float bound = (BOUND);                                                \
             while (code >= 0) {  /* down: a node per level */                           \
                 const PairNode node = nodes[code];                                      \
                 const int left = PAIR_CODE(node.left_lo), right = PAIR_CODE(node.right_lo); \
@@ -175,14 +175,14 @@ inline float pair_box_distance(const float4 lo, const float4 hi, const float3 pf
                     break;  /* neither kept: code stays a node's, no leaf */            \
                 }                                                                       \
             }                                                                           \
-            if (code < 0) {  /* a leaf: its shapes */                                   \
+            if (code < 0) {  /* a leaf: its shapes, which may lower the bound */        \
                 const int first = (~code) >> 3, count = (~code) & 7;                    \
                 VISIT(first, count)                                                     \
+                bound = (BOUND);                                                        \
             }                                                                           \
             if (DONE) break;                                                            \
-            /* up: the last pushed child still within the bound, which a leaf may have lowered */ \
-            const float after = (BOUND);                                                \
-            while (top > 0 && stack_entry[top - 1] > after) --top;                      \
+            /* up: the last pushed child still within the bound */                      \
+            while (top > 0 && stack_entry[top - 1] > bound) --top;                      \
             if (top == 0) break;                                                        \
             code = stack_child[--top];                                                  \
         }                                                                               \
