@@ -154,7 +154,8 @@ def main(argv=None):
 
             cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
             cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
-            reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
+            reads.append((f"{label}: camera rays (every 64th pixel)",
+                          *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
         if "rays" not in parts:
             continue
 

@@ -400,8 +400,9 @@ def test_closest_queries_among_analytic_shapes_give_the_same_bits(monkeypatch, s
     v, f = perturbed_sphere(10, 14, 0.05, 0.2, rng)
     shapes = mixed(scenes_dir)
     lo, hi = shapes[0].box()
-    extra = ([pyclray.Mesh(v, f, translate=tuple(hi))] if tree == "shared"
-             else [base.placed(translate=tuple(hi)), base.placed(translate=tuple(lo), scale=1.5)] if (base := pyclray.Mesh(v, f)) else [])
+    base = pyclray.Mesh(v, f)
+    extra = ([pyclray.Mesh(v, f, translate=tuple(hi))] if tree == "shared"  # arrays of its own
+             else [base.placed(translate=tuple(hi)), base.placed(translate=tuple(lo), scale=1.5)])  # instances
     shapes = shapes + extra + [pyclray.Mesh(*grid(4, 4, 0.2), translate=tuple(0.5 * (lo + hi))),  # open: winding's
                                pyclray.Sphere(tuple(lo), 0.05), pyclray.Box(tuple(hi), (0.02, 0.03, 0.04)),
                                pyclray.Cylinder(tuple(hi), tuple(hi + [0.1, 0.0, 0.0]), 0.02, caps=False),
