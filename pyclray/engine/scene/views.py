@@ -251,7 +251,7 @@ class ViewInputs:
                              f"{t}_primitives": kind.primitives_buffer})
             else:
                 args[f"{t}s"] = kind.in_view
-            args.update(shared_arguments(t, kind.shared))
+            args.update(shared_arguments(t, prepared.shared_of(kind, pairs)))
             if acceleration == "bvh" or shadows:
                 args[f"n_{t}s"] = np.int32(kind.count)
             if acceleration != "bvh":
