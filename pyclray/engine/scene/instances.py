@@ -20,6 +20,8 @@ from .indexed import indexed_bounds
 
 # leaves of the mesh's own tree: as a mesh's in the scene's tree (Mesh.leaf_size: about a packet's lanes)
 LEAF_SIZE = 7
+# the node after each tree's binary nodes (an even count: pair_nodes): never read
+_SPARE_NODE = np.zeros(1, layout(NODE, "fp32").dtype)
 
 
 def pack_shared(cls, meshes, world) -> list[np.ndarray]:
@@ -63,10 +65,6 @@ def pack_shared(cls, meshes, world) -> list[np.ndarray]:
     # the vertex normals only where some instance is smooth (else one entry: the kernel reads none)
     normals = np.concatenate(normals) if smooth else normals[0][:1]
     return [np.concatenate(vertices), np.concatenate(faces).astype(np.int32), np.concatenate(nodes), normals]
-
-
-# the node after each tree's: never read
-_SPARE_NODE = np.zeros(1, layout(NODE, "fp32").dtype)
 
 
 def pair_nodes(binary: np.ndarray, roots) -> np.ndarray:
