@@ -77,8 +77,8 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
  * enters before its best (a real variable VISIT lowers), nearest first; each child's box tested by
  * box_entries_of (kernels/bvh_packet.h), the test the wide traversal gives a child it pops. Its
  * shadow rays likewise, with their own box tests (kernels/shading.h); and in every query a ray in a
- * mesh instance's own tree (kernels/instance_pairs.cl), which the binary tree's packets of one
- * (kernels/bvh_packet.h: PYCLRAY_TRAVERSE_PACKET) test the same boxes of, with the same tests. */
+ * mesh instance's own tree (kernels/instance.cl: INSTANCE_TRAVERSE), the same boxes and tests as
+ * the binary tree's packets of one there (kernels/bvh_packet.h: PYCLRAY_TRAVERSE_PACKET). */
 #if LANES != 1
 #error "the pair nodes' traversal is one ray per work-item (LANES 1)"
 #endif

@@ -8,7 +8,7 @@ traverses it with kernels/bvh_packet.h's packet traversal from nodes + root). Ea
 number of binary nodes (its 2L - 1 and a spare one, L its leaves), so that at one ray per work-item
 (a GPU's lane width) its pair nodes, L slots a tree (engine/bvh/pairs.py: L - 1 nodes, or one for a
 tree that is a leaf), start at root / 2 in the trees' pair nodes (pair_nodes, made when a program
-traversing them first asks: kernels/instance_pairs.cl), with no other field in the entries."""
+traversing them first asks), found from the entry's root alone (kernels/instance.cl: INSTANCE_ROOT)."""
 from __future__ import annotations
 
 import numpy as np
