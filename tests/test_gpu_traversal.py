@@ -453,7 +453,7 @@ def test_the_lane_width_one_programs_traverse_the_instances_pair_nodes(monkeypat
             for key, source in at_width(monkeypatch, width, run).items():
                 assert binary_tree in source and pair_tree not in source and "#define PYCLRAY_PAIRS 1" not in source, key
     for key, source in at_width(monkeypatch, 1, lambda: run(plain)).items():
-        assert "INSTANCE_TRAVERSE" not in source and "instance_nodes" not in source, key
+        assert "#define INSTANCE_TRAVERSE" not in source and "instance_nodes" not in source, key
     programs.clear()
 
 
