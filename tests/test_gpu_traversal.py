@@ -159,8 +159,9 @@ def test_mesh_instances_give_the_same_bits(monkeypatch, precision):
 
 def instances_of_meshes(scenes_dir, offset=(0.0, 0.0, 0.0)):
     """Three shared meshes, each placed several times (rotated, scaled, mirrored: a negative
-    determinant), about offset: a perturbed sphere, the bunny (80,000 triangles: a deep tree) and a
-    mesh of a single triangle (its tree a leaf); and a floor of its own (not an instance)."""
+    determinant), about offset: a perturbed sphere (168 triangles), the bunny (5,000 triangles: a tree
+    15 levels deep) and a mesh of a single triangle (its tree a leaf); and a floor of its own (not an
+    instance)."""
     rng = np.random.default_rng(21)
     v, f = perturbed_sphere(8, 12, 0.6, 0.2, rng)
     ball = pyclray.Mesh(v, f)
