@@ -1,9 +1,11 @@
 """The pair nodes (one ray per work-item: engine/bvh/pairs.py, kernels/bvh_pairs.h) beside the wide
-tree they replace at a lane width of 1 (issue 41, item 1), on bench.meshes' bunny (80,000 triangles)
-and 1,000,000-triangle mesh:
+tree they replace at a lane width of 1 (issue 41, items 1 and 3), on bench.meshes' bunny (80,000
+triangles) and 1,000,000-triangle mesh, and on `--instances` instances of the bunny (its own tree's
+pair nodes: kernels/instance.cl):
 
     python -m bench.gpu_traversal [--rounds 3] [--block 5] [--size 512] [--rays 100000] [--sample 2000]
-                                  [--points 100000] [--parts trees,reads,rays,closest]
+                                  [--instances 50] [--cases bunny,1M,instances] [--points 100000]
+                                  [--parts trees,reads,rays,closest]
 
 - the trees: nodes and bytes of the wide tree (224 bytes a node), the binary one (32) and the pair
   nodes (64), and the conversion's time at prepare time (the binary nodes packed around the anchor,
@@ -16,10 +18,14 @@ and 1,000,000-triangle mesh:
 - PoCL at a lane width of 1 (PYCLRAY_LANES=1, the programs a GPU builds): the pair nodes against
   the wide tree at one lane (PYCLRAY_TRAVERSAL=wide), render of size x size (depth, normal, id,
   primitive) and cast of `--rays` incoherent rays, each call's wall time in alternating blocks
-  (bench.open3d_compare.blocks); the 8-lane default beside them for scale;
-- the closest-point query likewise (issue 41, item 3): closest_points (every output) of `--points`
-  points uniform in the mesh's box and as many near its surface (bench.points.near_points: within 1%
-  of the box's size), the pair nodes' search against the wide tree's at one lane and the 8 lanes'.
+  (bench.open3d_compare.blocks); the 8-lane default beside them for scale. The instances (the bunny
+  placed on a square grid, each turned about y and scaled by 0.8-1.2, a mirrored one in every
+  three): the same rows, the camera over the grid, the incoherent rays from within its box; no tree
+  or read rows (their trees are the bunny's);
+- the closest-point query likewise, on the bunny and the 1M mesh (issue 41, item 3): closest_points
+  (every output) of `--points` points uniform in the mesh's box and as many near its surface
+  (bench.points.near_points: within 1% of the box's size), the pair nodes' search against the wide
+  tree's at one lane and the 8 lanes', with the ratio of the process CPU times.
 `--parts` picks the parts (trees, reads, rays, closest; all by default).
 Prints one table a part; the machine is shared: compare ratios, note the load printed.
 """
@@ -106,6 +112,61 @@ def tree_rows(label, tracer):
              f"conversion {np.median(times):.1f} ms")]
 
 
+def instances_of(mesh, count: int) -> list:
+    """A scene's shapes: the mesh placed count times on a square grid (mesh instances: one shared
+    copy), each turned about y, scaled by 0.8-1.2 and every third mirrored, as one list."""
+    rng = np.random.default_rng(2)
+    lo, hi = mesh.box()
+    size = float(np.max(hi - lo))
+    side = int(np.ceil(np.sqrt(count)))
+    shapes = []
+    for k in range(count):
+        scale = float(rng.uniform(0.8, 1.2))
+        shapes.append(mesh.placed(scale=(-scale if k % 3 == 2 else scale, scale, scale), axis=(0.0, 1.0, 0.0),
+                                  angle=float(rng.uniform(0, 360)),
+                                  translate=tuple(1.3 * size * np.array([k % side, 0.0, k // side]) - 0.5 * (lo + hi))))
+    return shapes
+
+
+def at(lanes, traversal, fn):
+    """fn, called with $PYCLRAY_LANES and $PYCLRAY_TRAVERSAL set."""
+    def call():
+        with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
+            return fn()
+    return call
+
+
+def timing_rows(label, scene, origins, directions, args):
+    """The render's and the cast's medians: pairs at one lane, the wide tree at one lane and at 8."""
+    rows = []
+    render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
+    cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
+    for name, fn in (("render", render), ("cast", cast)):
+        systems = {"pairs, 1 lane": at(1, "pairs", fn), "wide, 1 lane": at(1, "wide", fn),
+                   "wide, 8 lanes": at(8, "wide", fn)}
+        timed = blocks(systems, args.rounds, args.block)
+        what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{len(origins):,} incoherent rays cast"
+        rows.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
+    return rows
+
+
+def closest_rows(label, mesh, scene, tracer, args):
+    """closest_points' medians, uniform and near points: pairs at one lane, the wide tree at one
+    lane and at 8, and the ratio of the first two's process CPU times."""
+    rows = []
+    rng = np.random.default_rng(2)
+    lo, hi = mesh.box()
+    for kind, points in (("uniform", rng.uniform(lo, hi, (args.points, 3))),
+                         ("near the surface", near_points(tracer, lo, hi, args.points, rng))):
+        query = lambda points=points: pyclray.closest_points(scene, points)  # noqa: E731
+        systems = {"pairs, 1 lane": at(1, "pairs", query), "wide, 1 lane": at(1, "wide", query),
+                   "wide, 8 lanes": at(8, "wide", query)}
+        timed = blocks(systems, args.rounds, args.block)
+        rows.append((f"{label}: {args.points:,} points {kind}", *(timed[s]["median"] for s in systems),
+                     timed["pairs, 1 lane"]["cpu"] / timed["wide, 1 lane"]["cpu"]))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -113,35 +174,24 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--rays", type=int, default=100_000)
     parser.add_argument("--sample", type=int, default=2000)
+    parser.add_argument("--instances", type=int, default=50)
+    parser.add_argument("--cases", default="bunny,1M,instances")
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--parts", default="trees,reads,rays,closest")
     args = parser.parse_args(argv)
-    parts = set(args.parts.split(","))
+    cases, parts = args.cases.split(","), set(args.parts.split(","))
     ctx = context_for(None)
     trees, reads, timing, closest = [], [], [], []
-
-    def at(lanes, traversal, fn):
-        def call():
-            with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
-                return fn()
-        return call
-
-    for label, mesh in meshes(None).items():
+    every = meshes(None)
+    for label, mesh in every.items():
+        if label not in cases:
+            continue
         scene = camera_for(mesh, args.size)
         tracer = tracer_for(scene, ctx, "fp32")
         if "trees" in parts:
             trees += tree_rows(label, tracer)
         if "closest" in parts:
-            rng = np.random.default_rng(2)
-            lo, hi = mesh.box()
-            for kind, points in (("uniform", rng.uniform(lo, hi, (args.points, 3))),
-                                 ("near the surface", near_points(tracer, lo, hi, args.points, rng))):
-                query = lambda points=points: pyclray.closest_points(scene, points)  # noqa: E731
-                systems = {"pairs, 1 lane": at(1, "pairs", query), "wide, 1 lane": at(1, "wide", query),
-                           "wide, 8 lanes": at(8, "wide", query)}
-                timed = blocks(systems, args.rounds, args.block)
-                closest.append((f"{label}: {args.points:,} points {kind}", *(timed[s]["median"] for s in systems),
-                                timed["pairs, 1 lane"]["cpu"] / timed["wide, 1 lane"]["cpu"]))
+            closest += closest_rows(label, mesh, scene, tracer, args)
         if not parts & {"reads", "rays"}:
             continue
         origins, directions = incoherent_rays(mesh, args.rays)
@@ -156,27 +206,31 @@ def main(argv=None):
             cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
             reads.append((f"{label}: camera rays (every 64th pixel)",
                           *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
-        if "rays" not in parts:
-            continue
-
-        render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
-        cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
-        for name, fn in (("render", render), ("cast", cast)):
-            systems = {"pairs, 1 lane": at(1, "pairs", fn), "wide, 1 lane": at(1, "wide", fn),
-                       "wide, 8 lanes": at(8, "wide", fn)}
-            timed = blocks(systems, args.rounds, args.block)
-            what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{args.rays:,} incoherent rays cast"
-            timing.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
+        if "rays" in parts:
+            timing += timing_rows(label, scene, origins, directions, args)
+    if "instances" in cases and "rays" in parts:
+        shapes = instances_of(every["bunny"], args.instances)
+        lo = np.min([s.box()[0] for s in shapes], axis=0)
+        hi = np.max([s.box()[1] for s in shapes], axis=0)
+        centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+        eye = centre + np.array([0.0, 0.6, 0.8]) * radius * 1.6
+        scene = pyclray.Scene(pyclray.Camera(tuple(eye), tuple(centre), fov=45.0),
+                              pyclray.Image(args.size, args.size), tuple(shapes))
+        assert "instance" in tracer_for(scene, ctx, "fp32").prepared.types
+        rng = np.random.default_rng(1)
+        origins = rng.uniform(lo, hi, (args.rays, 3))
+        directions = rng.normal(size=(args.rays, 3))
+        timing += timing_rows(f"{args.instances} bunny instances", scene, origins, directions, args)
     print(f"PoCL on {ctx.device.name.strip()}; load {os.getloadavg()[0]:.1f}")
-    if trees:
+    if trees:  # (the meshes' cases)
         print("| tree | nodes | MiB | |\n|---|---|---|---|")
-        for row in trees:
-            print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
+    for row in trees:
+        print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
     if reads:
         print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
-        for case, pair, wide, leaves in reads:
-            ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
-            print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
+    for case, pair, wide, leaves in reads:
+        ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
+        print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
     if timing:
         print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
     for case, pairs, wide, eight in timing:
