@@ -1,13 +1,16 @@
 """One ray per work-item through the pair nodes (engine/bvh/pairs.py, kernels/bvh_pairs.h): the
-traversal a lane width of 1 (a GPU's) compiles in, for a render through the BVH and the ray queries
-(cast, occluded, count_hits, all_hits). PoCL at PYCLRAY_LANES=1 builds the same programs as a GPU.
+traversal a lane width of 1 (a GPU's) compiles in, for a render through the BVH, the ray queries
+(cast, occluded, count_hits, all_hits) and the closest-point queries' search (a point per
+work-item: closest_points, distance, signed_distance, occupancy). PoCL at PYCLRAY_LANES=1 builds the
+same programs as a GPU.
 
 Why every result is the same bits as the 8-lane path's (the wide tree's packets, the CPU's): the
 pair nodes hold the binary tree's boxes rounded as the wide nodes hold them, tested by the same
 operations, with the same leaves; every shape test is the same function, and every tie rule
-(render's id and key, cast's id) picks one winner whatever order the leaves are visited in. So
-the tests compare bits (np.array_equal of the raw bytes), no tolerance: a traversal that dropped
-a leaf a ray's hit lies in, or tested a box otherwise, would show in some pixel or ray."""
+(render's id and key, cast's id, the closest point's id and primitive) picks one winner whatever
+order the leaves are visited in. So the tests compare bits (np.array_equal of the raw bytes), no
+tolerance: a traversal that dropped a leaf a ray's hit lies in, or tested a box otherwise, would
+show in some pixel or ray."""
 from __future__ import annotations
 
 import numpy as np
