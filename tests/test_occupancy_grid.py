@@ -199,7 +199,7 @@ def test_nested_shells_regions_against_the_oracle(turned):
         assert got[cavity].all() == (sign == "winding" and not turned) and got[cavity].any() == got[cavity].all()
         with pyclray.prepare(scene) as tracer:
             grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
-            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign]).tolist())
+            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign][0]).tolist())
 
 
 def test_points_in_many_leaves_boxes(monkeypatch):
