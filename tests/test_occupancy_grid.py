@@ -6,11 +6,13 @@ hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the closest-point query where 
 SURFACE_LEAVES do). Held to truths known by construction (points exactly on the triangles, written
 in float64; points just off a convex mesh's faces), to the float64 oracle, and to the general path
 (the parity count of every point, then the closest-point query's surface search) bit for bit."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.queries import closest
+from pyclray.engine.queries import closest, parity_grid
 from pyclray.engine.queries.closest import COHERENT_FROM
 from pyclray.engine.queries.parity_grid import INSIDE, OUTSIDE, SURFACE
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere, torus
@@ -317,3 +319,161 @@ def test_slab_pre_test_same_bits(monkeypatch, precision, shift):
         for points, got in zip(sets, with_slabs):
             assert np.array_equal(tracer.occupancy(points), got)
     assert with_slabs[0][:len(a)].all()  # the corners: on the surface
+
+
+# the parity grid's fine level (engine/queries/parity_grid.py: each coarse surface cell refined into
+# BLOCK^3 fine cells, their empty ones joined to the regions): its answers are the rays' too
+
+BUNNY = pyclray.Mesh.load(Path(__file__).resolve().parent.parent / "scenes" / "meshes" / "bunny.ply")
+
+
+def near_surface(tracer, mesh, band: float, count: int, rng) -> np.ndarray:
+    """count points within band of the mesh's size from its surface: the nearest surface points of
+    uniform points in the box, moved by up to band along random directions."""
+    lo, hi = (np.asarray(x) for x in mesh.box())
+    on = tracer.closest_points(rng.uniform(lo, hi, (count, 3)))["position"].astype(np.float64)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    return on + direction * rng.uniform(-band, band, (count, 1)) * float(np.max(hi - lo))
+
+
+def fine_decided(grid, points, sign="parity") -> np.ndarray:
+    """Per point: whether the grid decides it in a fine cell (a coarse surface cell's block)."""
+    decided, _ = grid.lookup(points, sign)
+    cells = np.floor((points - grid.lo) / grid.size).astype(np.int64)
+    inner = np.all((cells >= 0) & (cells < grid.dims), axis=1)
+    index = np.zeros(len(points), np.int64)
+    index[inner] = (cells[inner, 2] * grid.dims[1] + cells[inner, 1]) * grid.dims[0] + cells[inner, 0]
+    return decided & inner & (grid.region[index] < 0)
+
+
+def test_the_fine_coordinate_is_block_times_the_coarse():
+    """The module's claim: fl((x - lo) / (size / BLOCK)) == BLOCK * fl((x - lo) / size) exactly
+    (BLOCK a power of two: scaling by it commutes with rounding), so a point's coarse cell (its fine
+    cell's index divided by BLOCK) is the one-level grid's floor((x - lo) / size); on random
+    coordinates and sizes near 0 and near 1e6, and on the grid's own cell sides."""
+    rng = np.random.default_rng(31)
+    for shift in (0.0, 1e6):
+        lo = shift + rng.normal(size=200_000)
+        size = rng.uniform(1e-3, 1.0, 200_000) * 10.0 ** rng.integers(-3, 3, 200_000)
+        x = lo + rng.uniform(0, 300, 200_000) * size
+        sides = lo[:1000] + np.arange(1000) * size[:1000]  # points on cells' sides (as rounded)
+        for xs, los, sizes in ((x, lo, size), (sides, lo[:1000], size[:1000])):
+            coarse = (xs - los) / sizes
+            fine = (xs - los) / (sizes / parity_grid.BLOCK)
+            assert np.array_equal(fine, parity_grid.BLOCK * coarse)
+            assert np.array_equal(np.floor(fine) // parity_grid.BLOCK, np.floor(coarse))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_near_points_same_bits_as_the_general_path(precision, shift):
+    """The bunny (5,000 triangles) and a perturbed sphere, near the origin and 1e6 from it: points
+    within 1%, 0.1% and 1e-6 of the size from the surface, the vertices, edge midpoints and face
+    centroids: occupancy (both rules) and signed distance's sign are the general path's, bit for
+    bit, and the fine level decides some of the points within 1%."""
+    rng = np.random.default_rng(32)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    for mesh in (pyclray.Mesh(BUNNY.vertices + shift, BUNNY.faces), pyclray.Mesh(v + shift, f)):
+        a, b, c = mesh.corners()
+        with pyclray.prepare(scene_of(mesh), precision=precision) as tracer:
+            sets = [near_surface(tracer, mesh, band, COHERENT_FROM + 500, rng) for band in (1e-2, 1e-3, 1e-6)]
+            sets.append(np.vstack([a, 0.5 * (a + b), (a + b + c) / 3]))
+            for points in sets:
+                for sign in ("parity", "winding"):
+                    expected = general_path(tracer, points, sign)
+                    assert np.array_equal(tracer.occupancy(points, sign), expected)
+                    signed = tracer.signed_distance(points, sign)
+                    distance = tracer.distance(points)
+                    assert np.array_equal(signed, np.where(expected.astype(bool) & (distance > 0), -distance, distance))
+            grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+            assert fine_decided(grid, sets[0]).mean() > 0.05
+
+
+def test_the_fine_level_decides_a_large_share_of_near_points():
+    """A perturbed sphere of 60,000 triangles (edges about 1.5% of the size; a fine cell is 1/512
+    of it, 0.2%): of the points 0.4% to 1% of the size from the surface, most in coarse surface
+    cells (1/64 of the size), more than half are decided in empty fine cells (a test that fails if
+    the refinement decides nothing: the coarse level alone decides about 10% of them), and of all
+    the points within 1% more than 15%; their answers are the general path's."""
+    rng = np.random.default_rng(33)
+    v, f = perturbed_sphere(150, 200, 1.0, 0.02, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = near_surface(tracer, mesh, 1e-2, 3 * COHERENT_FROM, rng)
+        distance = tracer.distance(points) / 2.0
+        band = (distance > 0.004) & (distance < 0.01)
+        got = tracer.occupancy(points)
+        assert np.array_equal(got, general_path(tracer, points))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        fine = fine_decided(grid, points)
+    assert band.sum() > 1000
+    assert fine[band].mean() > 0.5
+    assert fine.mean() > 0.15
+    assert 0 < got[fine].mean() < 1  # inside and outside both decided there
+
+
+def test_the_seeds_lie_in_their_own_empty_cells():
+    """Each region's decided point lies in an empty cell of its own region (by the lookup's own
+    formula): the grid decides it, as its own ray does; of the nested shells (one region beyond,
+    one in the shell, one in the cavity) and the fine pockets."""
+    rng = np.random.default_rng(34)
+    v, f = perturbed_sphere(20, 30, 1.0, 0.05, rng)
+    mesh = pyclray.Mesh(np.vstack([v, 0.5 * v]), np.vstack([f, f[:, ::-1] + len(v)]))
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        tracer.occupancy(rng.uniform(-1, 1, (COHERENT_FROM, 3)))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        decided, inside = grid.lookup(grid.seeds, "parity")
+        assert decided.all()
+        assert np.array_equal(inside, closest._mesh_inside(tracer, grid.seeds, "parity"))
+    assert len(grid.seeds) >= 3 and (grid.blocks >= 0).any()
+
+
+@pytest.mark.parametrize("cap", ["blocks", "work"])
+def test_the_fine_level_falls_back_where_capped(monkeypatch, cap):
+    """With room for 20 refined blocks only (MAX_FINE_CELLS; fewer kept where all of a block's fine
+    cells are surface cells), the other coarse surface cells stay coarse (their points to their rays); with the marking's work over FINE_WORK no block is refined:
+    the same answers as the general path, and fewer points decided than with the whole fine level."""
+    rng = np.random.default_rng(35)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = near_surface(tracer, mesh, 1e-2, COHERENT_FROM + 500, rng)
+        tracer.occupancy(points)
+        whole = fine_decided(closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity"), points).sum()
+    if cap == "blocks":
+        monkeypatch.setattr(parity_grid, "MAX_FINE_CELLS", 20 * parity_grid.BLOCK**3)
+    else:
+        monkeypatch.setattr(parity_grid, "FINE_WORK", 100)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        for sign in ("parity", "winding"):
+            assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        refined = int((grid.blocks >= 0).sum())
+        assert (0 < refined <= 20 if cap == "blocks" else refined == 0) and (grid.region < 0).sum() > 20
+        assert fine_decided(grid, points).sum() < whole
+
+
+@pytest.mark.parametrize("sign", ["parity", "winding"])
+def test_the_device_lookup_is_the_hosts(monkeypatch, sign):
+    """The GPU class's lookup (cast_device.py: grid_lookup_device, run here on PoCL) gives the
+    host's (decided, inside) bit for bit on points near the surface (fine cells), uniform points and
+    points beyond the grid; and the GPU class's occupancy and signed distance are the CPU's."""
+    from pyclray.engine.queries.cast_device import grid_lookup_device
+
+    rng = np.random.default_rng(36)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v + 1e6, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = np.vstack([near_surface(tracer, mesh, 1e-2, COHERENT_FROM, rng),
+                            rng.uniform(1e6 - 1.5, 1e6 + 1.5, (COHERENT_FROM, 3))])
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        occupied, signed = tracer.occupancy(points, sign), tracer.signed_distance(points, sign)
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        host = grid.lookup(points, sign)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+        device = grid_lookup_device(tracer, grid, points, sign)
+        assert np.array_equal(tracer.occupancy(points, sign), occupied)
+        assert np.array_equal(tracer.signed_distance(points, sign), signed)
+    assert np.array_equal(device[0], host[0]) and np.array_equal(device[1], host[1])
+    assert fine_decided(grid, points, sign).sum() > 100 and 0 < host[1][host[0]].mean() < 1

@@ -253,14 +253,9 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     closed = tracer.mesh_handle(closed=True)
     if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
-        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
-        if grid is not None:
-            if gpu_class(tracer.ctx.device):  # the lookup on the device (the same operations)
-                from .cast_device import grid_lookup_device
-
-                decided, inside = grid_lookup_device(tracer, grid, flat, sign)
-            else:
-                decided, inside = grid.lookup(flat, sign)
+        answers = _grid_answers(tracer, closed, flat, sign)
+        if answers is not None:
+            decided, inside = answers
             rest = np.flatnonzero(~decided)
         if sign == "parity" and len(closed.shapes) == 1 and _shares_boxes(closed):
             inside[rest] = _one_closed_mesh(closed, flat[rest])
@@ -419,6 +414,21 @@ def _parity_grid(tracer, closed, sign: str):
         return grid
 
 
+def _grid_answers(tracer, closed, points: np.ndarray, sign: str):
+    """(decided, inside) per point by the parity grid of a scene of closed meshes alone (closed:
+    their handle; see _parity_grid), bool each, for a batch of COHERENT_FROM points or more (the
+    grid's build pays off there); else None. On a device of the GPU class the lookup is the
+    device's (cast_device.py: grid_lookup_device, the same operations)."""
+    grid = _parity_grid(tracer, closed, sign) if len(points) >= COHERENT_FROM else None
+    if grid is None:
+        return None
+    if gpu_class(tracer.ctx.device):
+        from .cast_device import grid_lookup_device
+
+        return grid_lookup_device(tracer, grid, points, sign)
+    return grid.lookup(points, sign)
+
+
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
     """The generalized winding number of all the scene's meshes at each point (float64): the open
     meshes' summed hierarchically (the kernel's expansions, within 1e-3), the closed meshes' exactly,
@@ -492,10 +502,19 @@ def _exact_along(a, b, c, direction) -> float:
 
 def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
     """Inside any solid: the kernel's analytic solids and surface points (out["inside"]), and for
-    the other points the meshes' inside (_mesh_inside)."""
+    the other points the meshes' inside (_mesh_inside); in a scene of closed meshes alone the
+    points of a large batch in the parity grid's empty cells by the grid (the same answers as
+    their rays: engine/queries/parity_grid.py)."""
     inside = out["inside"].astype(bool)
-    rest = ~inside
-    if rest.any():
+    rest = np.flatnonzero(~inside)
+    closed = tracer.mesh_handle(closed=True)
+    if len(rest) and closed is not None and len(closed.shapes) == len(tracer.shapes):
+        answers = _grid_answers(tracer, closed, points[rest], sign)
+        if answers is not None:
+            decided, grid_inside = answers
+            inside[rest[decided]] = grid_inside[decided]
+            rest = rest[~decided]
+    if len(rest):
         inside[rest] = _mesh_inside(tracer, points[rest], sign)
     return inside
 

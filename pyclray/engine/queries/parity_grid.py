@@ -42,7 +42,8 @@ cells; of the points near the surface most are in empty fine cells.
 The fine level's cost is bounded: at most MAX_FINE_CELLS fine cells (the coarse surface cells
 beyond them, in the cells' order, are left coarse), and no fine level where the triangles' widened
 boxes hold more than FINE_WORK fine cells in all (the marking's work: a mesh of large tilted
-triangles), the coarse answers then alone.
+triangles), the coarse answers then alone. A block whose fine cells are all surface cells (within
+a large triangle's box) is left coarse too: it would decide nothing.
 """
 from __future__ import annotations
 
@@ -321,6 +322,13 @@ class ParityGrid:
             cells = cells[:0]
         blocks[cells] = np.arange(len(cells), dtype=np.int32)
         fine_surface = _mark_fine(low, high, lo, fine_size, dims, BLOCK, blocks, len(cells))
+        # a block whose fine cells are all surface cells decides nothing: left coarse
+        full = fine_surface.reshape(len(cells), BLOCK**3).all(axis=1)
+        if full.any():
+            fine_surface = fine_surface.reshape(len(cells), BLOCK**3)[~full].reshape(-1)
+            blocks[cells[full]] = -1
+            cells = cells[~full]
+            blocks[cells] = np.arange(len(cells), dtype=np.int32)
         nodes, firsts = _regions(surface, dims, blocks, cells.astype(np.int64), fine_surface, BLOCK)
         # each region's decided point, in its first cell (which must hold it, by the lookup's formula:
         # checked), the fine coordinates of that cell's corner
