@@ -1,11 +1,14 @@
-"""The parity grid of closed meshes: occupancy's shortcut for a scene of closed meshes alone
-(engine/queries/closest.py), made at its first large batch and kept with the meshes' handle.
+"""The parity grid of closed meshes: occupancy's (and signed distance's sign's) shortcut for a
+scene of closed meshes alone (engine/queries/closest.py), made at its first large batch and kept
+with the meshes' handle.
 
 Two levels. A coarse grid of cells around the meshes' box (GRID_CELLS along its largest side, one
-more beyond it on each side); a coarse cell is a surface cell where the box of some triangle,
-widened (SURFACE_MARGIN, CLEARANCE of a coarse cell), meets it, else empty. Each coarse surface cell
-(up to MAX_FINE_CELLS of fine cells in all, in the cells' order) is refined into a block of
-BLOCK^3 fine cells, marked alike by the same widened boxes: a fine surface cell, or an empty one.
+more beyond it on each side); each coarse surface cell (below) is refined into a block of BLOCK^3
+fine cells (up to MAX_FINE_CELLS fine cells in all, in the coarse cells' order). At each level a
+cell is a surface cell where some triangle may come within margin of it (margin: SURFACE_MARGIN
+of the largest coordinate, and at least CLEARANCE of a coarse cell, at both levels): where the
+triangle's box widened by margin meets the cell, and its plane widened too (_meets) meets it;
+else it is empty.
 
 A point's fine cell is floor((x - lo) / (size / BLOCK)) per axis in float64, its coarse cell that
 floor divided by BLOCK (rounded down): the fine coordinate is a function of each coordinate that
@@ -14,36 +17,47 @@ fine cell form a box, and those of one coarse cell too (BLOCK^3 fine cells' boxe
 As BLOCK is a power of two, fl((x - lo) / (size / BLOCK)) == BLOCK * fl((x - lo) / size) exactly
 (scaling by a power of two commutes with rounding, barring overflow and subnormals, where both are
 beyond the grid or in its first cell): the coarse cell is the one-level grid's floor((x - lo) /
-size) (tests/test_occupancy_grid.py checks). The empty cells, coarse ones and the fine ones of the
-refined blocks, are joined into connected regions by their face neighbours (two fine cells side by
-side, in one block or two; a fine cell on a block's side and the empty coarse cell beyond it); the
-points of a cell and of a face neighbour's form a box, or two boxes whose common face holds the
-smaller one's (a fine cell and a coarse one), so a path between any two points of a region stays
-within its cells. So:
+size) (tests/test_occupancy_grid.py checks).
 
-- a point of an empty cell is on no triangle (that triangle's box would meet the cell), and all
-  the points of a connected region of empty cells have one inside: a path between two of them
-  stays within boxes that no triangle meets, and for a closed mesh (every edge shared by two faces)
-  the parity of a path's crossings depends on its ends alone, as does its signed count (the
-  winding number), mesh by mesh. One point of each region (near the centre of its first cell, by
-  the fine coordinate's formula: checked) is decided by its exact rays (count_hits' tie rule: each
-  mesh's parity, or the signed crossings for sign="winding"), and every point of an empty cell
-  takes its region's answer without a ray;
+Why an empty cell holds no point within margin of a triangle: a point p of the cell within margin
+of a point q of the triangle lies in the widened box, whose cells (by the same monotone formula)
+include p's; and along the computed unit normal n, |n.(q - a)| is within REACH of the triangle's
+extent (n within 2^-31 of the exact normal: the triangle is no sliver, SLIVER) and |n.(p - q)|
+within margin, while p lies within half a side (plus slack: the rounding of the cell's index and
+of its computed centre, SLACK of the grid's coordinates) of the cell's centre c per axis: so
+|n.(c - a)| <= sum |n_k| (side / 2 + slack) + reach, which _meets tests with room for its own
+roundings. A sliver's cells are those of its box.
+
+The empty cells, coarse ones and the fine ones of the refined blocks, are joined into connected
+regions by their face neighbours (two fine cells side by side, in one block or two; a fine cell on
+a block's side and the empty coarse cell beyond it): the points of a cell and of a face
+neighbour's form a box, or two boxes whose common face holds the smaller one's (a fine cell and a
+coarse one), so a path between any two points of a region stays within its cells. So:
+
+- a point of an empty cell is on no triangle, and all the points of a connected region of empty
+  cells have one inside: a path between two of them stays within cells that no triangle meets,
+  and for a closed mesh (every edge shared by two faces) the parity of a path's crossings depends
+  on its ends alone, as does its signed count (the winding number), mesh by mesh. One point of
+  each region (near the centre of its first cell, by the fine coordinate's formula: checked) is
+  decided by its exact rays (count_hits' tie rule: each mesh's parity, or the signed crossings
+  for sign="winding"), and every point of an empty cell takes its region's answer without a ray;
 - a point beyond the grid is beyond the meshes' box: outside, on no surface;
 - a point of a fine surface cell, or of a coarse surface cell not refined, is left to its own ray
   (and surface test), as without the grid.
 
-A point of an empty cell lies at least CLEARANCE of a coarse cell from every triangle (the same
-margin at both levels), far beyond the float32 rounding of a triangle tested from it: its own
-parity ray counts as the grid answers (the same bits as without the grid:
-tests/test_occupancy_grid.py). On uniform points in a mesh's box most points are in empty coarse
-cells; of the points near the surface most are in empty fine cells.
+A point of an empty cell lies farther than margin, at least CLEARANCE of a coarse cell, from every
+triangle (the same margin at both levels), far beyond the float32 rounding of a triangle tested
+from it: its own parity ray counts as the grid answers (the same bits as without the grid:
+tests/test_occupancy_grid.py); and a point that the closest-point query finds at distance 0 (its
+computed nearest point a few ulps off the triangle) is in a surface cell. On uniform points in a
+mesh's box most points are in empty coarse cells; of the points near the surface many are in
+empty fine cells.
 
 The fine level's cost is bounded: at most MAX_FINE_CELLS fine cells (the coarse surface cells
 beyond them, in the cells' order, are left coarse), and no fine level where the triangles' widened
 boxes hold more than FINE_WORK fine cells in all (the marking's work: a mesh of large tilted
-triangles), the coarse answers then alone. A block whose fine cells are all surface cells (within
-a large triangle's box) is left coarse too: it would decide nothing.
+triangles), the coarse answers then alone. A block whose fine cells are all surface cells (near a
+large triangle) is left coarse too: it would decide nothing.
 """
 from __future__ import annotations
 
@@ -55,7 +69,8 @@ GRID_CELLS = 64
 # fine cells along each side of a refined coarse cell (a power of two, see the module's text; at
 # least 4: a block's cells are whole words of 64 bits in the lookup)
 BLOCK = 8
-# the most fine cells (BLOCK^3 per refined coarse cell): memory about 5 bytes each, 1 per sign rule
+# the most fine cells (BLOCK^3 per refined coarse cell): kept, a byte each (their regions) and 2
+# bits per sign rule (the states); during the build about 10 bytes each
 MAX_FINE_CELLS = 1 << 24
 # the most fine cells that the triangles' widened boxes may hold in all (the fine marking's work)
 FINE_WORK = 1 << 27
@@ -64,15 +79,24 @@ FINE_WORK = 1 << 27
 # centre, away from the cell's sides and from the surfaces beyond them
 REFERENCE_AT = np.array([0.5123, 0.4769, 0.5351])
 
-# a triangle's box is widened by this much of the mesh's largest coordinate (thousands of float64
-# ulps) and by TINY: a point that the closest-point query finds at distance 0 from a triangle (its
-# computed nearest point, a few ulps off the exact triangle at most, or at a distance whose square
-# underflows) lies in one of the triangle's surface cells too
+# a triangle's box and plane are widened by this much of the mesh's largest coordinate (thousands of
+# float64 ulps) and by TINY: a point that the closest-point query finds at distance 0 from a
+# triangle (its computed nearest point, a few ulps off the exact triangle at most, or at a distance
+# whose square underflows) lies in one of the triangle's surface cells too
 SURFACE_MARGIN = 2.0**-40
 TINY = 1e-150
 # ... and by at least this much of a coarse cell (at both levels): a point of an empty cell is that
 # far from every triangle
 CLEARANCE = 2.0**-10
+
+# a triangle's plane is widened too (the cells that its widened box meets are marked where the
+# widened plane meets them as well): by REACH of the triangle's extent (the computed unit normal's
+# error, a few float64 roundings over the sine of its angle at a, at least SLIVER: a triangle
+# thinner than that is marked by its box alone), by the margin, by SLACK of the magnitudes of the
+# cell's centre's terms (the rounding of the cell's place and of the dot product)
+SLIVER = 2.0**-19
+REACH = 2.0**-28
+SLACK = 2.0**-40
 
 # the cell states
 SURFACE, OUTSIDE, INSIDE = -1, 0, 1
@@ -86,12 +110,32 @@ def _cell(x, lo, fine_size):
 
 
 @numba.njit(cache=True, nogil=True)
-def _mark(low, high, lo, fine_size, dims, block):
-    """(fits, surface): uint8 per coarse cell (x fastest), 1 where the box [low, high] of some
-    triangle meets it; fits is False (and the marks unfinished) where a box reaches beyond the grid."""
+def _meets(t, x, y, z, side, lo, normals, corners, reach, slack):
+    """Whether triangle t's plane, widened, may meet the cell of index (x, y, z) and side side
+    (coarse or fine): the distance along the unit normal from the cell's computed centre to the
+    triangle's corner within the cell's half-width along it (each half side widened by slack, the
+    cell's rounding) plus reach[t], plus SLACK of the dot product's terms' magnitudes (its
+    rounding), the whole bound widened by SLACK (its own rounding); always where the normal is 0
+    (a sliver). See the module's text."""
+    d0 = lo[0] + (x + 0.5) * side - corners[t, 0]
+    d1 = lo[1] + (y + 0.5) * side - corners[t, 1]
+    d2 = lo[2] + (z + 0.5) * side - corners[t, 2]
+    n0, n1, n2 = normals[t, 0], normals[t, 1], normals[t, 2]
+    along = n0 * d0 + n1 * d1 + n2 * d2
+    weight = abs(n0) + abs(n1) + abs(n2)
+    rounding = SLACK * (abs(n0 * d0) + abs(n1 * d1) + abs(n2 * d2))
+    return abs(along) <= (weight * (0.5 * side + slack) + reach[t] + rounding) * (1.0 + SLACK)
+
+
+@numba.njit(cache=True, nogil=True)
+def _mark(low, high, lo, fine_size, dims, block, normals, corners, reach, slack):
+    """(fits, surface): uint8 per coarse cell (x fastest), 1 where some triangle's widened box and
+    widened plane (_meets) both meet it; fits is False (and the marks unfinished) where a box
+    reaches beyond the grid."""
     surface = np.zeros(dims[0] * dims[1] * dims[2], np.uint8)
     first = np.empty(3, np.int64)
     last = np.empty(3, np.int64)
+    size = fine_size * block
     for t in range(low.shape[0]):
         for axis in range(3):
             a = _cell(low[t, axis], lo[axis], fine_size)
@@ -103,15 +147,16 @@ def _mark(low, high, lo, fine_size, dims, block):
             for y in range(first[1], last[1] + 1):
                 row = (z * dims[1] + y) * dims[0]
                 for x in range(first[0], last[0] + 1):
-                    surface[row + x] = 1
+                    if not surface[row + x] and _meets(t, x, y, z, size, lo, normals, corners, reach, slack):
+                        surface[row + x] = 1
     return True, surface
 
 
 @numba.njit(cache=True, nogil=True)
-def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count):
+def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count, normals, corners, reach, slack):
     """uint8 per fine cell of the count refined blocks (blocks: per coarse cell its block's index or
-    -1; in a block x fastest), 1 where the box [low, high] of some triangle meets it (the boxes fit
-    the grid: _mark)."""
+    -1; in a block x fastest), 1 where some triangle's widened box and widened plane (_meets) both
+    meet it (the boxes fit the grid: _mark)."""
     cube = block * block * block
     surface = np.zeros(count * cube, np.uint8)
     first = np.empty(3, np.int64)
@@ -131,8 +176,29 @@ def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count):
                         for y in range(max(first[1], cy * block), min(last[1], cy * block + block - 1) + 1):
                             row = base + ((z - cz * block) * block + (y - cy * block)) * block - cx * block
                             for x in range(max(first[0], cx * block), min(last[0], cx * block + block - 1) + 1):
-                                surface[row + x] = 1
+                                if not surface[row + x] and _meets(t, x, y, z, fine_size, lo, normals, corners, reach, slack):
+                                    surface[row + x] = 1
     return surface
+
+
+def _planes(a, b, c, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(normals, reach): per triangle (corners a, b, c) its computed unit normal (0 for a sliver,
+    whose angle at a has a sine below SLIVER, or a normal not finite) and how far along it from the
+    plane through a a point within margin of the triangle may lie: REACH of the triangle's extent
+    (the triangle's own points: the normal's direction is within about 8 float64 roundings over
+    that sine, 2^-31, of the exact one) plus margin (times 1 + SLACK: the normal's length within
+    roundings of 1)."""
+    ab, ac = b - a, c - a  # each within half an ulp of the exact difference (of its own magnitude)
+    cross = np.cross(ab, ac)
+    with np.errstate(over="ignore", invalid="ignore"):
+        area2 = np.einsum("ij,ij->i", cross, cross)
+        length = np.sqrt(area2)
+        fat = (area2 > SLIVER**2 * np.einsum("ij,ij->i", ab, ab) * np.einsum("ij,ij->i", ac, ac)) & (length > 0)
+        normals = cross / np.where(fat, length, 1.0)[:, None]
+        extent = np.abs(ab).sum(axis=1) + np.abs(ac).sum(axis=1)
+        good = fat & np.isfinite(normals).all(axis=1) & np.isfinite(extent)
+    normals[~good] = 0.0
+    return np.ascontiguousarray(normals), np.where(good, REACH * extent, 0.0) + margin * (1.0 + SLACK)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -311,7 +377,12 @@ class ParityGrid:
         dims = (np.floor((box_hi + margin - lo) / size) + 2).astype(np.int64)
         if not np.all(dims <= 4 * GRID_CELLS):
             return None
-        fits, surface = _mark(low, high, lo, fine_size, dims, BLOCK)
+        # the cells' own reach beyond their sides (a point's computed cell index against its exact
+        # place: a few roundings of the grid's coordinates)
+        slack = SLACK * float(np.abs(np.stack([lo, lo + dims * size])).max())
+        normals, reach = _planes(a, b, c, margin)
+        plane = (normals, np.ascontiguousarray(a), reach, slack)
+        fits, surface = _mark(low, high, lo, fine_size, dims, BLOCK, *plane)
         if not fits:
             return None
         # the refined blocks: the first coarse surface cells, within the caps
@@ -321,7 +392,7 @@ class ParityGrid:
         if float(np.prod(extent, axis=1).sum()) > FINE_WORK:
             cells = cells[:0]
         blocks[cells] = np.arange(len(cells), dtype=np.int32)
-        fine_surface = _mark_fine(low, high, lo, fine_size, dims, BLOCK, blocks, len(cells))
+        fine_surface = _mark_fine(low, high, lo, fine_size, dims, BLOCK, blocks, len(cells), *plane)
         # a block whose fine cells are all surface cells decides nothing: left coarse
         full = fine_surface.reshape(len(cells), BLOCK**3).all(axis=1)
         if full.any():
