@@ -477,3 +477,78 @@ def test_the_device_lookup_is_the_hosts(monkeypatch, sign):
         assert np.array_equal(tracer.signed_distance(points, sign), signed)
     assert np.array_equal(device[0], host[0]) and np.array_equal(device[1], host[1])
     assert fine_decided(grid, points, sign).sum() > 100 and 0 < host[1][host[0]].mean() < 1
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_points_within_the_margin_are_in_surface_cells(shift):
+    """The marks' claim (the widened boxes and planes): no point within the margin of a triangle
+    lies in an empty cell, coarse or fine. Points on random triangles of a tilted mesh (the
+    octahedron's faces, the perturbed sphere's) and of a sliver (a fan whose triangle's angle is
+    below SLIVER: marked by its box), moved by 0.999 of the margin along the face normal and along
+    random directions, near the origin and 1e6 from it: the grid decides none of them."""
+    rng = np.random.default_rng(37)
+    v, f = perturbed_sphere(30, 45, 1.0, 0.08, rng)
+    sliver = pyclray.Mesh(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
+                                    [0.5, 0.5 + 1e-12, 0.0]]) + shift,
+                          np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 4, 3], [4, 2, 3], [1, 2, 4]]))
+    for mesh in (octahedron(8, shift), pyclray.Mesh(v + shift, f), sliver):
+        a, b, c = mesh.corners()
+        grid = parity_grid.ParityGrid.of((a, b, c))
+        grid.decide("parity", lambda points: np.zeros(len(points), bool))
+        lo, hi = np.minimum(np.minimum(a, b), c).min(axis=0), np.maximum(np.maximum(a, b), c).max(axis=0)
+        margin = max(parity_grid.SURFACE_MARGIN * float(np.abs(np.stack([lo, hi])).max()) + parity_grid.TINY,
+                     parity_grid.CLEARANCE * grid.size)
+        tri = rng.integers(0, len(a), 20_000)
+        u = rng.uniform(0, 1, len(tri))
+        w = rng.uniform(0, 1 - u)
+        on = a[tri] + u[:, None] * (b[tri] - a[tri]) + w[:, None] * (c[tri] - a[tri])
+        direction = rng.normal(size=on.shape)
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        normal = np.cross(b[tri] - a[tri], c[tri] - a[tri])
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        normal = np.where(length > 0, normal / np.where(length > 0, length, 1.0), direction)  # (1e6: the sliver is flat)
+        for step in (normal, -normal, direction):
+            decided, _ = grid.lookup(on + 0.999 * margin * step, "parity")
+            assert not decided.any()
+        assert (grid.blocks >= 0).any() == (mesh is not sliver)  # the sliver's big faces: over FINE_WORK
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_a_plane_passing_within_the_margin_of_a_cell_marks_it(shift):
+    """The widened planes' margin itself: triangles whose plane passes beyond a cell's corner by
+    less than the margin (the cell on the other side of the plane, so that only the widening marks
+    it), each with a point in that cell within the margin of the triangle: no such point is decided
+    by the grid, at the coarse level (a corner on a coarse cell's side) or the fine one. Near the
+    origin and 1e6 from it; the grid's box fixed by two small triangles at [0, 1]^3's corners."""
+    rng = np.random.default_rng(38)
+    frame = [np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]]),
+             np.array([[1.0, 1.0, 1.0], [0.99, 1.0, 1.0], [1.0, 0.99, 1.0]])]
+    corners = [np.array(t) + shift for t in frame]
+    probe = parity_grid.ParityGrid.of(tuple(np.stack([t[k] for t in corners]) for k in range(3)))
+    lo, fine = probe.lo, probe.fine_size
+    margin = max(parity_grid.SURFACE_MARGIN * (1.0 + shift) + parity_grid.TINY, parity_grid.CLEARANCE * probe.size)
+    points = []
+    for k in range(300):
+        index = rng.integers(40, 470, 3)
+        if k % 3 == 0:  # on a coarse cell's corner
+            index -= index % parity_grid.BLOCK
+        normal = rng.uniform(0.2, 1.0, 3)
+        normal /= np.linalg.norm(normal)
+        corner = lo + index * fine  # the cell's corner nearest the plane (the normal's components > 0)
+        foot = corner - rng.uniform(0.001, 0.98) * margin * normal  # the plane's point nearest the corner
+        u = np.cross(normal, [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)
+        corners.append(np.array([foot + 0.5 * fine * u, foot - 0.3 * fine * u + 0.4 * fine * w,
+                                 foot - 0.3 * fine * u - 0.4 * fine * w]))
+        point = corner + 0.01 * margin / normal.sum()  # in the cell, within the margin of the plane
+        if np.array_equal(np.floor((point - lo) / fine), index.astype(float)):
+            points.append(point)
+    grid = parity_grid.ParityGrid.of(tuple(np.stack([t[k] for t in corners]) for k in range(3)))
+    assert np.array_equal(grid.lo, lo) and grid.fine_size == fine
+    grid.decide("parity", lambda p: np.zeros(len(p), bool))
+    points = np.array(points)
+    assert len(points) > 250
+    decided, _ = grid.lookup(points, "parity")
+    assert not decided.any()
+    assert (grid.blocks >= 0).sum() > 250  # the test triangles' coarse cells refined: the fine level tested
