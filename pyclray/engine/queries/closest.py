@@ -408,9 +408,12 @@ def _parity_grid(tracer, closed, sign: str):
 
             corners = [mesh.corners() for mesh in closed.shapes]
             inputs.parity_grid = ParityGrid.of(tuple(np.concatenate(c) for c in zip(*corners))) or False
+            inputs.nbytes += inputs.parity_grid.nbytes if inputs.parity_grid else 0  # counted with the handle's
         grid = inputs.parity_grid or None
         if grid is not None:  # the exact inside of points on no surface
+            held = grid.nbytes
             grid.decide(sign, lambda points: _mesh_inside(tracer, points, sign))
+            inputs.nbytes += grid.nbytes - held  # the sign's states
         return grid
 
 

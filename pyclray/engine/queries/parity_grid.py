@@ -339,9 +339,10 @@ class ParityGrid:
     of side size (fine ones of size / block), dims coarse cells per axis; per coarse cell its empty
     region (region, int32, x fastest; -1 for a surface cell) and its refined block (blocks, int32;
     -1 for none); per fine cell of the blocks (block by block, x fastest in each) its region
-    (fine_region; -1 for a fine surface cell); each region's decided point (seeds); per sign rule
-    ("parity", "winding": a closed mesh's winding number is constant on a region too) the states
-    (SURFACE, OUTSIDE, INSIDE) of the coarse and the fine cells, made when first asked for (decide)."""
+    (fine_region, of the narrowest signed type; -1 for a fine surface cell); each region's decided
+    point (seeds); per sign rule ("parity", "winding": a closed mesh's winding number is constant on
+    a region too) the coarse cells' states (SURFACE, OUTSIDE, INSIDE: int8) and the fine cells'
+    (fine_bits), made when first asked for (decide)."""
 
     def __init__(self, lo, size, dims, block, region, blocks, fine_region, seeds):
         self.lo, self.size, self.dims, self.block = lo, size, dims, block
