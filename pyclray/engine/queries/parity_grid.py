@@ -211,7 +211,7 @@ def _regions(surface, dims, blocks, cells, fine_surface, block):
     cube = block * block * block
     count = coarse + fine_surface.shape[0]
     region = np.full(count, -1, np.int32)
-    firsts = np.empty(count, np.int32)
+    firsts = np.empty(1024, np.int32)  # grown as regions are found (most meshes have few)
     queue = np.empty(count, np.int32)
     layer = dims[0] * dims[1]
     coarse_strides = np.array([1, dims[0], layer])
@@ -225,6 +225,10 @@ def _regions(surface, dims, blocks, cells, fine_surface, block):
         if region[seed] >= 0 or (surface[seed] if seed < coarse else fine_surface[seed - coarse]):
             continue
         region[seed] = regions
+        if regions == len(firsts):
+            grown = np.empty(2 * len(firsts), np.int32)
+            grown[:regions] = firsts
+            firsts = grown
         firsts[regions] = seed
         head, tail = 0, 1
         queue[0] = seed
