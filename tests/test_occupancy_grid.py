@@ -422,7 +422,7 @@ def test_the_seeds_lie_in_their_own_empty_cells():
     mesh = pyclray.Mesh(np.vstack([v, 0.5 * v]), np.vstack([f, f[:, ::-1] + len(v)]))
     with pyclray.prepare(scene_of(mesh)) as tracer:
         tracer.occupancy(rng.uniform(-1, 1, (COHERENT_FROM, 3)))
-        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity", fine=True)
         decided, inside = grid.lookup(grid.seeds, "parity")
         assert decided.all()
         assert np.array_equal(inside, closest._mesh_inside(tracer, grid.seeds, "parity"))
@@ -465,7 +465,7 @@ def test_the_device_lookup_is_the_hosts(monkeypatch, sign):
     v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
     mesh = pyclray.Mesh(v + 1e6, f)
     with pyclray.prepare(scene_of(mesh)) as tracer:
-        points = np.vstack([near_surface(tracer, mesh, 1e-2, COHERENT_FROM, rng),
+        points = np.vstack([near_surface(tracer, mesh, 1e-2, 3 * COHERENT_FROM, rng),
                             rng.uniform(1e6 - 1.5, 1e6 + 1.5, (COHERENT_FROM, 3))])
         monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
         occupied, signed = tracer.occupancy(points, sign), tracer.signed_distance(points, sign)
@@ -552,3 +552,27 @@ def test_a_plane_passing_within_the_margin_of_a_cell_marks_it(shift):
     decided, _ = grid.lookup(points, "parity")
     assert not decided.any()
     assert (grid.blocks >= 0).sum() > 250  # the test triangles' coarse cells refined: the fine level tested
+
+
+def test_the_fine_level_is_made_for_batches_near_the_surface():
+    """A uniform batch (its points mostly in empty coarse cells) is answered by the coarse level
+    alone, made without the fine one; the first batch near the surface (most of its points in coarse
+    surface cells: closest.FINE_FROM) makes the fine level, which then serves every batch: the same
+    answers as the general path each time."""
+    rng = np.random.default_rng(39)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        closed = tracer.mesh_handle(closed=True)
+        uniform = rng.uniform(-1.2, 1.2, (COHERENT_FROM + 500, 3))
+        assert np.array_equal(tracer.occupancy(uniform), general_path(tracer, uniform))
+        coarse = closest._parity_grid(tracer, closed, "parity")
+        assert not coarse.refined and not (coarse.blocks >= 0).any()
+        near = near_surface(tracer, mesh, 1e-2, COHERENT_FROM + 500, rng)
+        assert np.array_equal(tracer.occupancy(near), general_path(tracer, near))
+        fine = closest._parity_grid(tracer, closed, "parity")
+        assert fine is not coarse and fine.refined and (fine.blocks >= 0).any()
+        assert np.array_equal(fine.states["parity"][0], coarse.states["parity"][0])  # the same coarse cells' answers
+        assert fine_decided(fine, near).mean() > 0.1
+        assert np.array_equal(tracer.occupancy(uniform), general_path(tracer, uniform))
+        assert closest._parity_grid(tracer, closed, "parity") is fine

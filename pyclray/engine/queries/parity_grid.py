@@ -57,7 +57,8 @@ The fine level's cost is bounded: at most MAX_FINE_CELLS fine cells (the coarse 
 beyond them, in the cells' order, are left coarse), and no fine level where the triangles' widened
 boxes hold more than FINE_WORK fine cells in all (the marking's work: a mesh of large tilted
 triangles), the coarse answers then alone. A block whose fine cells are all surface cells (near a
-large triangle) is left coarse too: it would decide nothing.
+large triangle) is left coarse too: it would decide nothing. The fine level is made where asked
+for (of: refine): closest.py asks at the first batch with many points in coarse surface cells.
 """
 from __future__ import annotations
 
@@ -348,10 +349,11 @@ class ParityGrid:
     a region too) the coarse cells' states (SURFACE, OUTSIDE, INSIDE: int8) and the fine cells'
     (fine_bits), made when first asked for (decide)."""
 
-    def __init__(self, lo, size, dims, block, region, blocks, fine_region, seeds):
+    def __init__(self, lo, size, dims, block, region, blocks, fine_region, seeds, refined=True):
         self.lo, self.size, self.dims, self.block = lo, size, dims, block
         self.fine_size = size / block
         self.region, self.blocks, self.fine_region, self.seeds = region, blocks, fine_region, seeds
+        self.refined = refined  # whether the fine level was asked for (of: refine)
         self.states: dict = {}
         self.device_states: dict = {}  # per sign the states on a device (cast_device.py: grid_lookup_device)
 
@@ -362,10 +364,11 @@ class ParityGrid:
         return sum(a.nbytes for a in arrays)
 
     @classmethod
-    def of(cls, corners) -> "ParityGrid | None":
+    def of(cls, corners, refine: bool = True) -> "ParityGrid | None":
         """The grid of closed meshes' triangles (corners: a, b, c, (F, 3) float64 each, in world
-        space), or None where it cannot be made (no triangle, no extent, a mesh too large for the
-        grid's float64 cells)."""
+        space), with its fine level where refine (within the caps) or its coarse level alone, or
+        None where it cannot be made (no triangle, no extent, a mesh too large for the grid's
+        float64 cells)."""
         a, b, c = corners
         if not len(a):
             return None
@@ -393,8 +396,11 @@ class ParityGrid:
         # the refined blocks: the first coarse surface cells, within the caps
         blocks = np.full(len(surface), -1, np.int32)
         cells = np.flatnonzero(surface)[:MAX_FINE_CELLS // BLOCK**3]
-        extent = np.floor((high - lo) / fine_size) - np.floor((low - lo) / fine_size) + 1
-        if float(np.prod(extent, axis=1).sum()) > FINE_WORK:
+        if refine:  # the fine marks' work: the fine cells of the triangles' boxes
+            extent = np.floor((high - lo) / fine_size) - np.floor((low - lo) / fine_size) + 1
+            if float(np.prod(extent, axis=1).sum()) > FINE_WORK:
+                cells = cells[:0]
+        else:
             cells = cells[:0]
         blocks[cells] = np.arange(len(cells), dtype=np.int32)
         fine_surface = _mark_fine(low, high, lo, fine_size, dims, BLOCK, blocks, len(cells), *plane)
@@ -420,7 +426,7 @@ class ParityGrid:
             return None
         fine_region = nodes[len(surface):]  # kept in the narrowest type that holds the regions' indices
         fine_region = fine_region.astype(np.min_scalar_type(-max(len(seeds), 1)))
-        return cls(lo, size, dims, BLOCK, nodes[:len(surface)], blocks, fine_region, seeds)
+        return cls(lo, size, dims, BLOCK, nodes[:len(surface)], blocks, fine_region, seeds, refine)
 
     def decide(self, sign: str, rule) -> None:
         """The cells' states by a sign rule, where not made yet: rule(points (N, 3)) -> bool, the
