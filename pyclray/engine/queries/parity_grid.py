@@ -54,9 +54,9 @@ mesh's box most points are in empty coarse cells; of the points near the surface
 empty fine cells.
 
 The fine level's cost is bounded: at most MAX_FINE_CELLS fine cells (the coarse surface cells
-beyond them, in the cells' order, are left coarse), and no fine level where the triangles' widened
-boxes hold more than FINE_WORK fine cells in all (the marking's work: a mesh of large tilted
-triangles), the coarse answers then alone. A block whose fine cells are all surface cells (near a
+beyond them, in the cells' order, are left coarse), and no fine level where the fine marks would
+test more than FINE_WORK fine cells in all (per triangle those of its widened box within refined
+blocks: many large triangles), the coarse answers then alone. A block whose fine cells are all surface cells (near a
 large triangle) is left coarse too: it would decide nothing. The fine level is made where asked
 for (of: refine): closest.py asks at the first batch with many points in coarse surface cells.
 """
@@ -73,7 +73,7 @@ BLOCK = 8
 # the most fine cells (BLOCK^3 per refined coarse cell): kept, a byte each (their regions) and 2
 # bits per sign rule (the states); during the build about 10 bytes each
 MAX_FINE_CELLS = 1 << 24
-# the most fine cells that the triangles' widened boxes may hold in all (the fine marking's work)
+# the most fine cells that the fine marks may test in all (_fine_work)
 FINE_WORK = 1 << 27
 
 # where in its cell a region's decided point lies (a fraction of the cell per axis): near its
@@ -180,6 +180,22 @@ def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count, normals, co
                                 if not surface[row + x] and _meets(t, x, y, z, fine_size, lo, normals, corners, reach, slack):
                                     surface[row + x] = 1
     return surface
+
+
+def _fine_work(low, high, lo, fine_size, dims, refined) -> float:
+    """The fine marks' work (_mark_fine: the fine cells tested): per triangle the fine cells of its
+    box, at most BLOCK^3 per refined coarse cell in it (refined: bool per coarse cell; counted by a
+    summed-volume table of them), summed."""
+    first = np.floor((low - lo) / fine_size).astype(np.int64)
+    last = np.floor((high - lo) / fine_size).astype(np.int64)
+    box = np.prod((last - first + 1).astype(np.float64), axis=1)
+    table = np.zeros((dims[2] + 1, dims[1] + 1, dims[0] + 1), np.int64)
+    table[1:, 1:, 1:] = refined.reshape(dims[2], dims[1], dims[0]).cumsum(0).cumsum(1).cumsum(2)
+    x0, y0, z0 = (first // BLOCK).T
+    x1, y1, z1 = (last // BLOCK + 1).T
+    count = (table[z1, y1, x1] - table[z0, y1, x1] - table[z1, y0, x1] - table[z1, y1, x0]
+             + table[z0, y0, x1] + table[z0, y1, x0] + table[z1, y0, x0] - table[z0, y0, x0])
+    return float(np.minimum(box, count * float(BLOCK**3)).sum())
 
 
 def _planes(a, b, c, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -396,13 +412,10 @@ class ParityGrid:
         # the refined blocks: the first coarse surface cells, within the caps
         blocks = np.full(len(surface), -1, np.int32)
         cells = np.flatnonzero(surface)[:MAX_FINE_CELLS // BLOCK**3]
-        if refine:  # the fine marks' work: the fine cells of the triangles' boxes
-            extent = np.floor((high - lo) / fine_size) - np.floor((low - lo) / fine_size) + 1
-            if float(np.prod(extent, axis=1).sum()) > FINE_WORK:
-                cells = cells[:0]
-        else:
-            cells = cells[:0]
         blocks[cells] = np.arange(len(cells), dtype=np.int32)
+        if not refine or _fine_work(low, high, lo, fine_size, dims, blocks >= 0) > FINE_WORK:
+            blocks[cells] = -1
+            cells = cells[:0]
         fine_surface = _mark_fine(low, high, lo, fine_size, dims, BLOCK, blocks, len(cells), *plane)
         # a block whose fine cells are all surface cells decides nothing: left coarse
         full = fine_surface.reshape(len(cells), BLOCK**3).all(axis=1)
