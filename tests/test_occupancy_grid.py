@@ -432,7 +432,8 @@ def test_the_seeds_lie_in_their_own_empty_cells():
 @pytest.mark.parametrize("cap", ["blocks", "work"])
 def test_the_fine_level_falls_back_where_capped(monkeypatch, cap):
     """With room for 20 refined blocks only (MAX_FINE_CELLS; fewer kept where all of a block's fine
-    cells are surface cells), the other coarse surface cells stay coarse (their points to their rays); with the marking's work over FINE_WORK no block is refined:
+    cells are surface cells), the other coarse surface cells stay coarse (their points to their
+    rays); with the marking's work over FINE_WORK no block is refined:
     the same answers as the general path, and fewer points decided than with the whole fine level."""
     rng = np.random.default_rng(35)
     v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
@@ -506,7 +507,8 @@ def test_points_within_the_margin_are_in_surface_cells(shift):
         direction /= np.linalg.norm(direction, axis=1, keepdims=True)
         normal = np.cross(b[tri] - a[tri], c[tri] - a[tri])
         length = np.linalg.norm(normal, axis=1, keepdims=True)
-        normal = np.where(length > 0, normal / np.where(length > 0, length, 1.0), direction)  # (1e6: the sliver is flat)
+        # (at 1e6 the sliver is flat: a random direction instead of its normal)
+        normal = np.where(length > 0, normal / np.where(length > 0, length, 1.0), direction)
         for step in (normal, -normal, direction):
             decided, _ = grid.lookup(on + 0.999 * margin * step, "parity")
             assert not decided.any()

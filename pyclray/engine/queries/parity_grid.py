@@ -56,9 +56,10 @@ empty fine cells.
 The fine level's cost is bounded: at most MAX_FINE_CELLS fine cells (the coarse surface cells
 beyond them, in the cells' order, are left coarse), and no fine level where the fine marks would
 test more than FINE_WORK fine cells in all (per triangle those of its widened box within refined
-blocks: many large triangles), the coarse answers then alone. A block whose fine cells are all surface cells (near a
-large triangle) is left coarse too: it would decide nothing. The fine level is made where asked
-for (of: refine): closest.py asks at the first batch with many points in coarse surface cells.
+blocks: many large triangles), the coarse answers then alone. A block whose fine cells are all
+surface cells (near a large triangle) is left coarse too: it would decide nothing. The fine level
+is made where asked for (of: refine): closest.py asks at the first batch with many points in
+coarse surface cells.
 """
 from __future__ import annotations
 
@@ -177,7 +178,8 @@ def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count, normals, co
                         for y in range(max(first[1], cy * block), min(last[1], cy * block + block - 1) + 1):
                             row = base + ((z - cz * block) * block + (y - cy * block)) * block - cx * block
                             for x in range(max(first[0], cx * block), min(last[0], cx * block + block - 1) + 1):
-                                if not surface[row + x] and _meets(t, x, y, z, fine_size, lo, normals, corners, reach, slack):
+                                if not surface[row + x] and _meets(t, x, y, z, fine_size, lo, normals, corners,
+                                                                   reach, slack):
                                     surface[row + x] = 1
     return surface
 
@@ -376,7 +378,8 @@ class ParityGrid:
     @property
     def nbytes(self) -> int:
         """The host memory of the grid's arrays (its states included)."""
-        arrays = [self.region, self.blocks, self.fine_region, self.seeds] + [s for pair in self.states.values() for s in pair]
+        arrays = [self.region, self.blocks, self.fine_region, self.seeds]
+        arrays += [s for pair in self.states.values() for s in pair]
         return sum(a.nbytes for a in arrays)
 
     @classmethod
@@ -428,9 +431,11 @@ class ParityGrid:
         # each region's decided point, in its first cell (which must hold it, by the lookup's formula:
         # checked), the fine coordinates of that cell's corner
         coarse = firsts < len(surface)
-        first_cell = np.where(coarse, firsts, cells[np.maximum(firsts - len(surface), 0) // BLOCK**3] if len(cells) else 0)
+        block_of = cells[np.maximum(firsts - len(surface), 0) // BLOCK**3] if len(cells) else 0
+        first_cell = np.where(coarse, firsts, block_of)
         local = np.where(coarse, 0, (firsts - len(surface)) % BLOCK**3)
-        at = (np.stack([first_cell % dims[0], (first_cell // dims[0]) % dims[1], first_cell // (dims[0] * dims[1])], axis=1) * BLOCK
+        layer = dims[0] * dims[1]
+        at = (np.stack([first_cell % dims[0], (first_cell // dims[0]) % dims[1], first_cell // layer], axis=1) * BLOCK
               + np.stack([local % BLOCK, (local // BLOCK) % BLOCK, local // BLOCK**2], axis=1))
         span = np.where(coarse, BLOCK, 1)[:, None]  # a coarse cell spans BLOCK fine ones per axis
         seeds = lo + (at + REFERENCE_AT * span) * fine_size
