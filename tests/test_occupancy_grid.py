@@ -1,6 +1,6 @@
 """Occupancy of a scene of closed meshes (engine/queries/closest.py: occupancy, _one_closed_mesh): a
 large batch's points are looked up in the meshes' parity grid (engine/queries/parity_grid.py: its empty
-cells' regions decided by one exact ray each), the others counted by their parity rays, whose
+cells' regions, coarse and fine, decided by one exact ray each), the others counted by their parity rays, whose
 kernel also tests a point with an even count for lying on the surface, over the leaves whose boxes
 hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the closest-point query where more than
 SURFACE_LEAVES do). Held to truths known by construction (points exactly on the triangles, written
