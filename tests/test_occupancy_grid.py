@@ -163,7 +163,8 @@ def test_several_closed_meshes(sign):
     """Two overlapping closed meshes (a torus through a perturbed sphere: winding 2 where both
     hold a point) and a third apart: the grid of all their triangles decides the points of its
     empty cells by the rule's own test of one point per region; the same answers as the general
-    path, and the oracle's off the surfaces."""
+    path on uniform points and on points near the surfaces (the fine level), and the oracle's off
+    the surfaces."""
     rng = np.random.default_rng(16)
     v, f = perturbed_sphere(16, 24, 0.8, 0.1, rng)
     shapes = (pyclray.Mesh(*torus(16, 24, 1.0, 0.3)), pyclray.Mesh(v + [1.0, 0.0, 0.0], f),
@@ -176,6 +177,12 @@ def test_several_closed_meshes(sign):
         grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
         decided, _ = grid.lookup(points, sign)
         assert decided.mean() > 0.5  # most points decided by the grid
+        # points within 1% of the size from the surfaces: the fine level made and used
+        on = tracer.closest_points(points)["position"].astype(np.float64)
+        near = on + rng.normal(size=on.shape) * rng.uniform(0, 0.03, (len(on), 1))
+        assert np.array_equal(tracer.occupancy(near, sign), general_path(tracer, near, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        assert grid.refined and fine_decided(grid, near, sign).mean() > 0.1
     clear = oracle.closest_points(scene, points)["distance"] > 0
     assert np.array_equal(got.astype(bool)[clear], oracle.inside(scene, points, sign)[clear])
 
