@@ -187,10 +187,12 @@ def _mark_fine(low, high, lo, fine_size, dims, block, blocks, count, normals, co
 def _fine_work(low, high, lo, fine_size, dims, refined) -> float:
     """The fine marks' work (_mark_fine: the fine cells tested): per triangle the fine cells of its
     box, at most BLOCK^3 per refined coarse cell in it (refined: bool per coarse cell; counted by a
-    summed-volume table of them), summed."""
+    summed-volume table of them), summed; or the whole boxes' sum where that is within FINE_WORK."""
     first = np.floor((low - lo) / fine_size).astype(np.int64)
     last = np.floor((high - lo) / fine_size).astype(np.int64)
     box = np.prod((last - first + 1).astype(np.float64), axis=1)
+    if float(box.sum()) <= FINE_WORK:  # within the cap counted in the whole boxes: no table needed
+        return float(box.sum())
     table = np.zeros((dims[2] + 1, dims[1] + 1, dims[0] + 1), np.int64)
     table[1:, 1:, 1:] = refined.reshape(dims[2], dims[1], dims[0]).cumsum(0).cumsum(1).cumsum(2)
     x0, y0, z0 = (first // BLOCK).T
