@@ -82,7 +82,8 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * and writes its count. */
 /* With PYCLRAY_AOV_SURFACE (count_hits for occupancy: engine/queries/closest.py), also whether the
  * ray's origin, a point, lies on a surface (surface_out[r]: 1 on, 0 not or an odd count, 2 not
- * known here). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
+ * known here, 3 the count's parity not known here: a crossing within rounding of the origin,
+ * kernels/mesh_blocks.cl's MESH_BLOCK_DOUBT, whose point the host decides exactly). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
  * box_ray's margin (2^-20 of the origin's size) makes it for every box that holds the float64
  * origin, or within the closest-point query's 4 times smaller margin of the same float boxes
  * (kernels/closest.cl). The traversal notes the first SURFACE_LEAVES such leaves as it reaches them
@@ -104,7 +105,10 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
         if (S->n_surface_ < SURFACE_LEAVES) S->surface_leaf_[S->n_surface_] = first; \
         S->n_surface_ += S->n_surface_ <= SURFACE_LEAVES;                           \
     }
-#define HITS_SURFACE_STATE(X) X(int, n_surface)
+#define HITS_SURFACE_STATE(X) X(int, n_surface) X(int, undecided)
+/* a crossing whose sign of s the rounding may have turned (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT):
+ * the point is undecided (3), whatever its count and surface */
+#define HITS_UNDECIDED undecided = 1
 #define HITS_VISIT_ALL(q) n_surface = SURFACE_LEAVES + 1; PYCLRAY_CAST_VISIT(q)
 #define HITS_ON_SURFACE_KIND(Type, type)                                            \
     if (kind == KIND_##type && type##_closest(&type##_surface_worlds[k], p).d2 == 0.0) surface = 1;
@@ -136,7 +140,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
     PYCLRAY_CAST_RAY
     int n_hits = 0;
 #ifdef PYCLRAY_AOV_SURFACE
-    int n_surface = 0;
+    int n_surface = 0, undecided = 0;
 #endif
 #ifdef PYCLRAY_STORE_HITS
     const long hits_at = (long)r * hit_capacity;
@@ -170,6 +174,9 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
 #define o (S->o_)
 #define box_direction (S->box_direction_)
 #define limit (S->limit_)
+#ifdef PYCLRAY_AOV_SURFACE
+#define undecided (S->undecided_)
+#endif
 inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 {
     int top = S->top_;
@@ -194,6 +201,9 @@ inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 #undef o
 #undef box_direction
 #undef limit
+#ifdef PYCLRAY_AOV_SURFACE
+#undef undecided
+#endif
 #endif
 
 inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
@@ -216,7 +226,9 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
     hit_counts[r] = n_hits;
 #ifdef PYCLRAY_AOV_SURFACE
     uchar surface = 0;
-    if (!(n_hits & 1) && S->n_surface_ > SURFACE_LEAVES) {
+    if (S->undecided_) {
+        surface = 3;
+    } else if (!(n_hits & 1) && S->n_surface_ > SURFACE_LEAVES) {
         surface = 2;
     } else if (!(n_hits & 1)) {
         const double3 p = S->ray_.world;

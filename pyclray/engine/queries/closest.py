@@ -251,7 +251,8 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     flat, shape = check_points(points)
     inside, rest = np.zeros(len(flat), bool), slice(None)
     closed = tracer.mesh_handle(closed=True)
-    if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
+    alone = closed is not None and len(closed.shapes) == len(tracer.shapes)
+    if alone:  # closed meshes alone
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
         grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
         if grid is not None:
@@ -273,6 +274,12 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     other = ~found
     if other.any():
         found[other] = run_closest(tracer, points[other], ("inside",), within=0.0)["inside"].astype(bool)
+        claimed = np.flatnonzero(other)[found[other]]
+        if alone and len(claimed):  # at float64's distance 0 of a closed mesh: on it exactly, or outside
+            from .parity_exact import exact_on_surface
+
+            nearest = run_closest(tracer, points[claimed], ("distance",) + CLOSEST_OUTPUTS)
+            found[claimed] = exact_on_surface(tracer.shapes, points[claimed], nearest["id"], nearest["primitive"])
     inside[rest] = found
     return inside.astype(np.uint8).reshape(shape)
 
@@ -291,12 +298,40 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search visits no other leaf),
     and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
     the query's from every point."""
-    counts, on = count_from_points(closed, points, parity_directions(closed, points), _surface_arguments(closed))
-    found = (counts & 1).astype(bool) | (on == 1)
+    directions = parity_directions(closed, points)
+    counts, on = count_from_points(closed, points, directions, _surface_arguments(closed))
+    found = (counts & 1).astype(bool)
     unknown = np.flatnonzero(on == 2)
     if len(unknown):
-        found[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"].astype(bool)
+        on[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"]
+    # decided exactly (parity_exact.py): a point the kernel finds at distance 0 (float64's: perhaps
+    # a rounding off the surface, on either side) and a crossing within rounding of the point
+    # (kernels/mesh_blocks.cl), first by the nearest triangle (a point on it is inside)
+    exact = np.flatnonzero((on == 1) | (on == UNDECIDED))
+    if len(exact):
+        from .parity_exact import exact_inside
+
+        nearest = run_closest(closed, points[exact], ("distance",) + CLOSEST_OUTPUTS)["primitive"]
+        found[exact] = exact_inside(closed.shapes[0], points[exact], directions[exact], nearest)
     return found
+
+
+# the count kernel's surface output for a point whose parity it cannot decide: a crossing of its
+# ray within rounding of the point (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT), decided exactly on
+# the host (engine/queries/parity_exact.py)
+UNDECIDED = 3
+
+
+def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The points (indices) whose parity rays along directions the hit queries may count wrongly: a
+    crossing within rounding of the point, by the count kernel's band (its surface variant, whose
+    block tests run the band: kernels/mesh_blocks.cl), for the paths that count by all_hits (several
+    closed meshes, the signed crossings). A handle whose rays do not traverse the closest-point
+    query's tree (meshes drawn as instances) has no band: none."""
+    if not len(points) or not _shares_boxes(closed):
+        return np.zeros(0, np.int64)
+    on = count_from_points(closed, points, directions, _surface_arguments(closed))[1]
+    return np.flatnonzero(on == UNDECIDED)
 
 
 def _surface_arguments(closed) -> dict:
@@ -457,6 +492,7 @@ def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
     where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
     the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
     directions = parity_directions(closed, points)
+    undecided = _undecided(closed, points, directions)
     one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
     hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
     ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
@@ -476,7 +512,18 @@ def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
         for i in np.flatnonzero(doubt):
             along[i] = _exact_along(a[i], b[i], c[i], d[i])
         signs[mine] = np.sign(along)
-    return np.bincount(ray, weights=signs, minlength=len(points))
+    total = np.bincount(ray, weights=signs, minlength=len(points))
+    if len(undecided):  # their signed crossings exactly, per mesh; a point on a surface as inside (1)
+        from .parity_exact import exact_crossings
+
+        total[undecided] = 0.0
+        on = np.zeros(len(undecided), bool)
+        for mesh in closed.shapes:
+            _, signed, on_mesh = exact_crossings(mesh, points[undecided], directions[undecided])
+            total[undecided] += signed
+            on |= on_mesh
+        total[undecided[on]] = np.maximum(total[undecided[on]], 1.0)
+    return total
 
 
 def _exact_along(a, b, c, direction) -> float:
@@ -507,6 +554,8 @@ def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
     closed = tracer.mesh_handle(closed=True)
     if closed is None or not len(points):
         return np.zeros(len(points), bool)
+    if len(closed.shapes) == 1 and _shares_boxes(closed):  # its count's band and surface test (exact)
+        return _one_closed_mesh(closed, points)
     directions = parity_directions(closed, points)
     if len(closed.shapes) == 1:
         return (closed.count_hits(points, directions) & 1).astype(bool)
@@ -514,7 +563,14 @@ def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
     hits = closed.all_hits(points, directions, aovs=("id",))
     ray, ids = np.asarray(hits["ray"]), np.asarray(hits["id"]).astype(np.int64)
     per = np.bincount(ray * len(closed.shapes) + ids, minlength=len(points) * len(closed.shapes))
-    return (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
+    inside = (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
+    undecided = _undecided(closed, points, directions)
+    if len(undecided):  # each mesh's inside exactly
+        from .parity_exact import exact_inside
+
+        inside[undecided] = np.any([exact_inside(mesh, points[undecided], directions[undecided])
+                                    for mesh in closed.shapes], axis=0)
+    return inside
 
 
 def meshes_scene(scene, closed: bool):
