@@ -307,6 +307,11 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     # decided exactly (parity_exact.py): a point the kernel finds at distance 0 (float64's: perhaps
     # a rounding off the surface, on either side) and a crossing within rounding of the point
     # (kernels/mesh_blocks.cl), first by the nearest triangle (a point on it is inside)
+    if closed.precision != "fp64":  # fp32's undecided points: first the same count in float64
+        again = np.flatnonzero(on == UNDECIDED)
+        if len(again):
+            on[again] = 0
+            found[again] = _one_closed_mesh(closed.mesh_handle(closed=True, precision="fp64"), points[again])
     exact = np.flatnonzero((on == 1) | (on == UNDECIDED))
     if len(exact):
         from .parity_exact import exact_inside
@@ -331,7 +336,11 @@ def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray
     if not len(points) or not _shares_boxes(closed):
         return np.zeros(0, np.int64)
     on = count_from_points(closed, points, directions, _surface_arguments(closed))[1]
-    return np.flatnonzero(on == UNDECIDED)
+    undecided = np.flatnonzero(on == UNDECIDED)
+    if closed.precision != "fp64" and len(undecided):  # fp32's narrowed by the same band in float64
+        twin = closed.mesh_handle(closed=True, precision="fp64")
+        undecided = undecided[_undecided(twin, points[undecided], directions[undecided])]
+    return undecided
 
 
 def _surface_arguments(closed) -> dict:

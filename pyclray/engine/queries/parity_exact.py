@@ -49,13 +49,32 @@ def exact_crossings(mesh, points: np.ndarray, directions: np.ndarray):
     along the ray, -1 where it enters) and whether the point lies on the surface (bool), exactly."""
     a, b, c = mesh.corners()
     valid = np.any(mesh.face_normals() != 0, axis=1)
-    out = [_crossings(a, b, c, valid, p, d) for p, d in zip(points, directions)]
-    count, signed, on = (np.array([o[k] for o in out], dtype) for k, dtype in ((0, np.int64), (1, np.int64), (2, bool)))
-    return count.reshape(len(points)), signed.reshape(len(points)), on.reshape(len(points))
+    a, b, c = a[valid], b[valid], c[valid]
+    lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    count, signed, on = np.zeros(len(points), np.int64), np.zeros(len(points), np.int64), np.zeros(len(points), bool)
+    for i, (p, d) in enumerate(zip(points, directions)):
+        rows = _reached(lo, hi, p, d)
+        count[i], signed[i], on[i] = _crossings(a[rows], b[rows], c[rows], p, d)
+    return count, signed, on
 
 
-def _crossings(a, b, c, valid, p, d) -> tuple[int, int, bool]:
-    rows = crossed(a, b, c, valid, p, d)
+def _reached(lo, hi, p, d) -> np.ndarray:
+    """The triangles (of boxes lo, hi) the ray p + t d may cross at t >= 0: its interval in each box,
+    widened by far more than float64's rounding of the slabs (2^-30 of the coordinates' size), ends
+    at t >= 0. A triangle crossed at t >= 0 has that point in its box."""
+    margin = 2.0**-30 * (np.abs(lo).sum(axis=1) + np.abs(hi).sum(axis=1) + float(np.abs(p).sum()))
+    widened_lo, widened_hi = lo - margin[:, None], hi + margin[:, None]
+    within = (widened_lo <= p) & (p <= widened_hi)  # along an axis the ray does not move: in the slab or never
+    with np.errstate(divide="ignore", invalid="ignore"):
+        near, far = (widened_lo - p) / d, (widened_hi - p) / d
+    enter = np.where(d != 0, np.minimum(near, far), np.where(within, -np.inf, np.inf))
+    leave = np.where(d != 0, np.maximum(near, far), np.where(within, np.inf, -np.inf))
+    first, last = enter.max(axis=1), leave.min(axis=1)
+    return np.flatnonzero((first <= last + margin) & (last >= -margin))
+
+
+def _crossings(a, b, c, p, d) -> tuple[int, int, bool]:
+    rows = crossed(a, b, c, np.ones(len(a), bool), p, d)
     sides = _plane_signs(a[rows], b[rows], c[rows], p)  # sign of n . (p - a)
     if (sides == 0).any():  # the line crosses a triangle at the point: on the surface
         return 0, 0, True
@@ -63,7 +82,7 @@ def _crossings(a, b, c, valid, p, d) -> tuple[int, int, bool]:
     # t = n . (a - p) / n . d > 0: the point behind the triangle's plane as seen along d
     ahead = sides * along < 0
     count = int(np.count_nonzero(ahead))
-    return count, int(along[ahead].sum()), _on_surface(a[valid], b[valid], c[valid], p)
+    return count, int(along[ahead].sum()), _on_surface(a, b, c, p)
 
 
 def _plane_signs(a, b, c, p) -> np.ndarray:
