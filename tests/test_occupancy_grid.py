@@ -229,7 +229,7 @@ def test_points_in_many_leaves_boxes(monkeypatch):
 
     monkeypatch.setattr(closest, "run_closest", recording)
     got = pyclray.occupancy(scene, points)
-    assert asked and asked[0] >= 200  # the corners at least: more than SURFACE_LEAVES leaves
+    assert asked and max(asked) >= 200  # the corners at least: more than SURFACE_LEAVES leaves (the grid's regions' points first)
     assert got[:200].all()
     assert np.array_equal(got.astype(bool), oracle.inside(scene, points))
 

@@ -299,20 +299,23 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
     the query's from every point."""
     directions = parity_directions(closed, points)
-    counts, on = count_from_points(closed, points, directions, _surface_arguments(closed))
+    surface = _surface_arguments(closed)
+    counts, on = count_from_points(closed, points, directions, surface)
     found = (counts & 1).astype(bool)
-    unknown = np.flatnonzero(on == 2)
+    unknown = np.flatnonzero(on == 2)  # in many leaves' boxes: the closest-point query's distance
     if len(unknown):
-        on[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"]
-    # decided exactly (parity_exact.py): a point the kernel finds at distance 0 (float64's: perhaps
-    # a rounding off the surface, on either side) and a crossing within rounding of the point
-    # (kernels/mesh_blocks.cl), first by the nearest triangle (a point on it is inside)
+        d = run_closest(closed, points[unknown], ("distance",))["distance"]
+        reach = float(surface["surface_band"]) + 2.0**-50 * np.abs(points[unknown]).sum(axis=1)
+        on[unknown] = np.where(d <= reach, UNDECIDED, 0)
     if closed.precision != "fp64":  # fp32's undecided points: first the same count in float64
         again = np.flatnonzero(on == UNDECIDED)
         if len(again):
             on[again] = 0
             found[again] = _one_closed_mesh(closed.mesh_handle(closed=True, precision="fp64"), points[again])
-    exact = np.flatnonzero((on == 1) | (on == UNDECIDED))
+    # the points left undecided (a crossing within rounding of the point: kernels/mesh_blocks.cl;
+    # a triangle within the band, or at float64's distance 0: on the surface, or a rounding off it),
+    # decided exactly (parity_exact.py), first by the nearest triangle (a point on it is inside)
+    exact = np.flatnonzero(on == UNDECIDED)
     if len(exact):
         from .parity_exact import exact_inside
 
@@ -364,9 +367,31 @@ def _surface_arguments(closed) -> dict:
             slabs[places] = leaf_slabs(inputs, nodes["child"][leaf])
             inputs.nbytes += codes.nbytes + slabs.nbytes
             inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
-                                        "surface_slabs": input_buffer(ctx, slabs),
+                                        "surface_slabs": input_buffer(ctx, slabs), "surface_band": surface_band(closed),
                                         **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
         return inputs.surface_arguments
+
+
+# the unit roundoff of each precision's triangle test (kernels/mesh_blocks.cl: MESH_BAND_EPSILON)
+EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}
+# surface_band's factor: the count from a point runs on the triangles' corners rounded relative to
+# it (by <= u |corner - p|) and their projections rounded (by <= about 6 u of the corners' size, in
+# length): 16 u of the largest triangle's size bounds how far that moves the surface near the point
+SURFACE_BAND_K = 16.0
+
+
+def surface_band(closed) -> np.float64:
+    """The distance (float64) from the closed meshes' surface (their handle) within which the count
+    kernel's parity may be off by the rounding of the triangles' corners relative to the point:
+    SURFACE_BAND_K unit roundoffs of the precision's triangle test times the largest coordinate
+    extent of a triangle; such points are decided again (kernels/allhits.cl: PYCLRAY_AOV_SURFACE)."""
+    largest = 0.0
+    for mesh in closed.shapes:
+        a, b, c = mesh.corners()
+        if len(a):
+            extent = np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c)
+            largest = max(largest, float(extent.max()))
+    return np.float64(SURFACE_BAND_K * EPSILON[closed.precision] * largest)
 
 
 # the slabs' margins (leaf_slabs): of the leaf's coordinates' size (the kernel adds the same of the
