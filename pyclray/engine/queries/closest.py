@@ -292,21 +292,16 @@ def _shares_boxes(closed) -> bool:
 
 
 def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
-    """Inside by parity in a scene of one closed mesh (its handle; points checked): an odd count of
-    the parity ray, or a point on the surface. The count's kernel also decides whether a point with
-    an even count lies on a surface, by the closest-point query's test of the leaves whose boxes
-    hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search visits no other leaf),
-    and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
-    the query's from every point."""
+    """Inside by parity in a scene of one closed mesh (its handle; points checked), exactly: an odd
+    count of the parity ray, or a point on the surface. The count's kernel also says where its
+    parity may not be the point's inside (_banded_count): a crossing within rounding of the point,
+    or a triangle within the band of the corners' rounding (by the closest-point query's test of
+    the leaves whose boxes hold the point: kernels/allhits.cl, PYCLRAY_AOV_SURFACE), at distance 0
+    included; those points are counted again in float64 (fp32), and the ones still undecided
+    decided exactly on the host (parity_exact.py)."""
     directions = parity_directions(closed, points)
-    surface = _surface_arguments(closed)
-    counts, on = count_from_points(closed, points, directions, surface)
+    counts, on = _banded_count(closed, points, directions)
     found = (counts & 1).astype(bool)
-    unknown = np.flatnonzero(on == 2)  # in many leaves' boxes: the closest-point query's distance
-    if len(unknown):
-        d = run_closest(closed, points[unknown], ("distance",))["distance"]
-        reach = float(surface["surface_band"]) + 2.0**-50 * np.abs(points[unknown]).sum(axis=1)
-        on[unknown] = np.where(d <= reach, UNDECIDED, 0)
     if closed.precision != "fp64":  # fp32's undecided points: first the same count in float64
         again = np.flatnonzero(on == UNDECIDED)
         if len(again):
@@ -325,9 +320,23 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
 
 
 # the count kernel's surface output for a point whose parity it cannot decide: a crossing of its
-# ray within rounding of the point (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT), decided exactly on
-# the host (engine/queries/parity_exact.py)
+# ray within rounding of the point (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT) or a triangle within
+# surface_band of it (kernels/allhits.cl), decided exactly on the host (engine/queries/parity_exact.py)
 UNDECIDED = 3
+
+
+def _banded_count(closed, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(counts, on) of the count kernel's surface variant from the points (kernels/allhits.cl): on
+    is UNDECIDED where the count's parity may not be the point's inside, else 0 (a point in more
+    leaves' boxes than the kernel notes: by the closest-point query's distance against the band)."""
+    surface = _surface_arguments(closed)
+    counts, on = count_from_points(closed, points, directions, surface)
+    unknown = np.flatnonzero(on == 2)
+    if len(unknown):
+        d = run_closest(closed, points[unknown], ("distance",))["distance"]
+        reach = float(surface["surface_band"]) + 2.0**-50 * np.abs(points[unknown]).sum(axis=1)
+        on[unknown] = np.where(d <= reach, UNDECIDED, 0)
+    return counts, on
 
 
 def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -338,8 +347,7 @@ def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray
     query's tree (meshes drawn as instances) has no band: none."""
     if not len(points) or not _shares_boxes(closed):
         return np.zeros(0, np.int64)
-    on = count_from_points(closed, points, directions, _surface_arguments(closed))[1]
-    undecided = np.flatnonzero(on == UNDECIDED)
+    undecided = np.flatnonzero(_banded_count(closed, points, directions)[1] == UNDECIDED)
     if closed.precision != "fp64" and len(undecided):  # fp32's narrowed by the same band in float64
         twin = closed.mesh_handle(closed=True, precision="fp64")
         undecided = undecided[_undecided(twin, points[undecided], directions[undecided])]
