@@ -163,14 +163,18 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     if (!*hits) return (blockv)(MISS);  /* most blocks a ray reaches it misses: no division */
     const blockv numerator = (e0 * Az + e1 * Bz) + e2 * Cz;
 #ifdef PYCLRAY_AOV_SURFACE
-    {  /* the crossings in doubt (MESH_BLOCK_DOUBT), lane by lane (a few a ray) */
+    {  /* the crossings in doubt (MESH_BLOCK_DOUBT), lane by lane (a few a ray): each corner's
+        * coordinates as rounded above, read again (the lanes' vectors stay in registers) */
         MeshBlockLanes N, Det;
         N.v = numerator;
         Det.v = det;
         for (int mask = *hits; mask != 0; mask &= mask - 1) {
             const int l = BVH_LOWEST_BIT(mask);
-            const real largest = fmax(fmax(fmax(fabs(Ax_.s[l]), fabs(Ay_.s[l])), fmax(fabs(Az_.s[l]), fabs(Bx_.s[l]))),
-                                      fmax(fmax(fabs(By_.s[l]), fabs(Bz_.s[l])), fmax(fmax(fabs(Cx_.s[l]), fabs(Cy_.s[l])), fabs(Cz_.s[l]))));
+            real largest = 0;
+            for (int v = 0; v < 3; ++v) {
+                const int i = corner[v * count + l];
+                largest = fmax(largest, fmax(fmax(fabs((real)(X[i] - ox)), fabs((real)(Y[i] - oy))), fabs((real)(Z[i] - oz))));
+            }
             const real scaled = largest * dz;
             const real band = largest * (MESH_BAND_EPSILON * ((real)256 * (scaled * scaled) + (real)8 * fabs(Det.s[l])));
             if (!(fabs(N.s[l]) > band)) *doubt |= 1 << l;
