@@ -1,8 +1,10 @@
 """The pair nodes (one ray per work-item: engine/bvh/pairs.py, kernels/bvh_pairs.h) beside the wide
-tree they replace at a lane width of 1 (issue 41, item 1), on bench.meshes' bunny (80,000 triangles)
-and 1,000,000-triangle mesh:
+tree they replace at a lane width of 1 (issue 41, items 1 and 3), on bench.meshes' bunny (80,000
+triangles) and 1,000,000-triangle mesh, and on `--instances` instances of the bunny (its own tree's
+pair nodes: kernels/instance.cl):
 
     python -m bench.gpu_traversal [--rounds 3] [--block 5] [--size 512] [--rays 100000] [--sample 2000]
+                                  [--instances 50] [--cases bunny,1M,instances]
 
 - the trees: nodes and bytes of the wide tree (224 bytes a node), the binary one (32) and the pair
   nodes (64), and the conversion's time at prepare time (the binary nodes packed around the anchor,
@@ -15,7 +17,10 @@ and 1,000,000-triangle mesh:
 - PoCL at a lane width of 1 (PYCLRAY_LANES=1, the programs a GPU builds): the pair nodes against
   the wide tree at one lane (PYCLRAY_TRAVERSAL=wide), render of size x size (depth, normal, id,
   primitive) and cast of `--rays` incoherent rays, each call's wall time in alternating blocks
-  (bench.open3d_compare.blocks); the 8-lane default beside them for scale.
+  (bench.open3d_compare.blocks); the 8-lane default beside them for scale. The instances (the bunny
+  placed on a square grid, each turned about y and scaled by 0.8-1.2, a mirrored one in every
+  three): the same rows, the camera over the grid, the incoherent rays from within its box; no tree
+  or read rows (their trees are the bunny's).
 Prints one table; the machine is shared: compare ratios, note the load printed.
 """
 from __future__ import annotations
@@ -100,6 +105,43 @@ def tree_rows(label, tracer):
              f"conversion {np.median(times):.1f} ms")]
 
 
+def instances_of(mesh, count: int) -> list:
+    """A scene's shapes: the mesh placed count times on a square grid (mesh instances: one shared
+    copy), each turned about y, scaled by 0.8-1.2 and every third mirrored, as one list."""
+    rng = np.random.default_rng(2)
+    lo, hi = mesh.box()
+    size = float(np.max(hi - lo))
+    side = int(np.ceil(np.sqrt(count)))
+    shapes = []
+    for k in range(count):
+        scale = float(rng.uniform(0.8, 1.2))
+        shapes.append(mesh.placed(scale=(-scale if k % 3 == 2 else scale, scale, scale), axis=(0.0, 1.0, 0.0),
+                                  angle=float(rng.uniform(0, 360)),
+                                  translate=tuple(1.3 * size * np.array([k % side, 0.0, k // side]) - 0.5 * (lo + hi))))
+    return shapes
+
+
+def timing_rows(label, scene, origins, directions, args):
+    """The render's and the cast's medians: pairs at one lane, the wide tree at one lane and at 8."""
+
+    def at(lanes, traversal, fn):
+        def call():
+            with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
+                return fn()
+        return call
+
+    rows = []
+    render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
+    cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
+    for name, fn in (("render", render), ("cast", cast)):
+        systems = {"pairs, 1 lane": at(1, "pairs", fn), "wide, 1 lane": at(1, "wide", fn),
+                   "wide, 8 lanes": at(8, "wide", fn)}
+        timed = blocks(systems, args.rounds, args.block)
+        what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{len(origins):,} incoherent rays cast"
+        rows.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -107,10 +149,16 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--rays", type=int, default=100_000)
     parser.add_argument("--sample", type=int, default=2000)
+    parser.add_argument("--instances", type=int, default=50)
+    parser.add_argument("--cases", default="bunny,1M,instances")
     args = parser.parse_args(argv)
+    cases = args.cases.split(",")
     ctx = context_for(None)
     trees, reads, timing = [], [], []
-    for label, mesh in meshes(None).items():
+    every = meshes(None)
+    for label, mesh in every.items():
+        if label not in cases:
+            continue
         scene = camera_for(mesh, args.size)
         tracer = tracer_for(scene, ctx, "fp32")
         trees += tree_rows(label, tracer)
@@ -124,26 +172,27 @@ def main(argv=None):
         cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
         cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
         reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
-
-        def at(lanes, traversal, fn):
-            def call():
-                with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
-                    return fn()
-            return call
-
-        render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
-        cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
-        for name, fn in (("render", render), ("cast", cast)):
-            systems = {"pairs, 1 lane": at(1, "pairs", fn), "wide, 1 lane": at(1, "wide", fn),
-                       "wide, 8 lanes": at(8, "wide", fn)}
-            timed = blocks(systems, args.rounds, args.block)
-            what = f"{args.size}x{args.size} primary rays" if name == "render" else f"{args.rays:,} incoherent rays cast"
-            timing.append((f"{label}: {what}", *(timed[s]["median"] for s in systems)))
+        timing += timing_rows(label, scene, origins, directions, args)
+    if "instances" in cases:
+        shapes = instances_of(every["bunny"], args.instances)
+        lo = np.min([s.box()[0] for s in shapes], axis=0)
+        hi = np.max([s.box()[1] for s in shapes], axis=0)
+        centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+        eye = centre + np.array([0.0, 0.6, 0.8]) * radius * 1.6
+        scene = pyclray.Scene(pyclray.Camera(tuple(eye), tuple(centre), fov=45.0),
+                              pyclray.Image(args.size, args.size), tuple(shapes))
+        assert "instance" in tracer_for(scene, ctx, "fp32").prepared.types
+        rng = np.random.default_rng(1)
+        origins = rng.uniform(lo, hi, (args.rays, 3))
+        directions = rng.normal(size=(args.rays, 3))
+        timing += timing_rows(f"{args.instances} bunny instances", scene, origins, directions, args)
     print(f"PoCL on {ctx.device.name.strip()}; load {os.getloadavg()[0]:.1f}")
-    print("| tree | nodes | MiB | |\n|---|---|---|---|")
+    if trees:  # (the meshes' cases)
+        print("| tree | nodes | MiB | |\n|---|---|---|---|")
     for row in trees:
         print(f"| {row[0]} | {row[1]:,} | {row[2]:.2f} | {row[3]} |")
-    print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
+    if reads:
+        print("\n| rays | pair nodes read | wide nodes read | bytes: pairs / wide | leaves entered |\n|---|---|---|---|---|")
     for case, pair, wide, leaves in reads:
         ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
         print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")

@@ -20,7 +20,7 @@ from pyclray.engine.bvh.tree import build
 from pyclray.engine.launch import programs
 from pyclray.engine.opencl.device import context_for, has_fp64
 from pyclray.model.layout import layout
-from pyclray.model.lights import PointLight, Shading
+from pyclray.model.lights import DirectionalLight, PointLight, Shading
 from pyclray.model.shapes.mesh_shapes import grid, perturbed_sphere
 
 EVERY = ("depth", "normal", "id", "primitive", "barycentric")
@@ -123,10 +123,14 @@ def queries(scene, precision, origins, directions, hits=True):
     return out
 
 
+def widest(precision) -> int:
+    """The CPU's lane width at this precision (8 floats, 4 doubles)."""
+    return programs.MAX_LANE_BITS // (32 if precision == "fp32" else 64)
+
+
 def assert_same_at_widths(monkeypatch, scene, precision, origins, directions, hits=True):
     one = at_width(monkeypatch, 1, lambda: queries(scene, precision, origins, directions, hits))
-    eight = at_width(monkeypatch, programs.MAX_LANE_BITS // (32 if precision == "fp32" else 64),
-                     lambda: queries(scene, precision, origins, directions, hits))
+    eight = at_width(monkeypatch, widest(precision), lambda: queries(scene, precision, origins, directions, hits))
     for name in one:
         same_bits(one[name], eight[name], name)
     return one
@@ -151,6 +155,114 @@ def test_mesh_instances_give_the_same_bits(monkeypatch, precision):
     origins, directions = rays_at(scene, seed=1)
     one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions)
     assert len(np.unique(one["render"]["id"])) > 8
+
+
+def instances_of_meshes(scenes_dir, offset=(0.0, 0.0, 0.0)):
+    """Three shared meshes, each placed several times (rotated, scaled, mirrored: a negative
+    determinant), about offset: a perturbed sphere (168 triangles), the bunny (5,000 triangles: a tree
+    15 levels deep) and a mesh of a single triangle (its tree a leaf); and a floor of its own (not an
+    instance)."""
+    rng = np.random.default_rng(21)
+    v, f = perturbed_sphere(8, 12, 0.6, 0.2, rng)
+    ball = pyclray.Mesh(v, f)
+    rabbit = bunny(scenes_dir)
+    lo, hi = rabbit.box()
+    rabbit = pyclray.Mesh(1.2 / np.max(hi - lo) * (rabbit.vertices - 0.5 * (lo + hi)), rabbit.faces)  # 1.2 across
+    triangle = pyclray.Mesh(np.array([[-0.5, -0.4, 0.0], [0.6, -0.3, 0.1], [0.0, 0.7, -0.2]]), np.array([[0, 1, 2]]))
+    scales = [(1.0, 1.0, 1.0), (1.3, 0.6, 0.9), (-1.0, 1.0, 1.0), (0.8, -1.1, 1.2)]
+    shapes = []
+    for m, mesh in enumerate((ball, rabbit, triangle)):
+        for i in range(4):
+            shapes.append(mesh.placed(scale=scales[(i + m) % 4], axis=tuple(rng.normal(size=3)),
+                                      angle=float(rng.uniform(0, 360)),
+                                      translate=tuple(np.add(offset, (1.6 * (i - 1.5), 0.7 + 0.2 * m, 1.6 * (m - 1))))))
+    v, f = grid(4, 4, 8.0)
+    shapes.append(pyclray.Mesh(v + np.array(offset), f))
+    return shapes
+
+
+def grazing_rays(scene):
+    """Rays along the world boxes' faces and edges of the instances (axis-parallel, and within a
+    few float steps of it), and rays through their meshes' vertices: the box tests at their limits."""
+    rng = np.random.default_rng(13)
+    origins, directions = [], []
+    for shape in scene.shapes[:-1]:
+        lo, hi = shape.box()
+        for axis in range(3):
+            for side in (lo, hi):
+                for other in range(3):
+                    if other == axis:
+                        continue
+                    start = 0.5 * (lo + hi)
+                    start[axis] = side[axis]  # on the face's plane
+                    start[other] = lo[other] - 1.0  # before the box, running along `other`
+                    d = np.zeros(3)
+                    d[other] = 1.0
+                    for tilt in (0.0, 1e-7, -1e-7):
+                        direction = d.copy()
+                        direction[axis] = tilt
+                        origins.append(start)
+                        directions.append(direction)
+        corner = np.where(rng.uniform(size=3) < 0.5, lo, hi)  # along an edge of the box
+        origins.append(corner - 2.0 * np.eye(3)[0])
+        directions.append(np.eye(3)[0])
+    for shape in scene.shapes[:-1]:  # through some of each placed mesh's vertices
+        m = shape.transform()
+        picked = shape.vertices[rng.choice(len(shape.vertices), 4)]
+        through = picked @ m[:3, :3].T + m[:3, 3]
+        start = through + rng.normal(size=(4, 3))
+        origins += list(start)
+        directions += list(through - start)
+    return np.array(origins), np.array(directions)
+
+
+def lit(shapes, **keys):
+    """A scene of these shapes lit by a point light and a directional one, with shadows."""
+    lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0), name="point"),
+              DirectionalLight(direction=(-0.3, -1.0, -0.5), irradiance=(0.8, 0.8, 0.8), name="sun"))
+    return scene_of(shapes, lights=lights, shading=Shading(shadows=True), **keys)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_instances_of_several_meshes_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    """Instances of three meshes (a deep tree, a tree of one leaf; rotated, scaled and mirrored
+    placements) through their pair nodes at one lane: every query, the shaded image with shadows
+    onto and among them, rays grazing their boxes and through their vertices, and occupancy."""
+    need(precision)
+    scene = lit(instances_of_meshes(scenes_dir))
+    prepared = tracer_for(scene, context_for(), precision).prepared
+    assert "instance" in prepared.types and prepared.kinds["instance"].count == 12
+    random_rays = rays_at(scene, 1500, seed=10)
+    grazing = grazing_rays(scene)
+    origins, directions = (np.concatenate([a, b]) for a, b in zip(random_rays, grazing))
+    one = assert_same_at_widths(monkeypatch, scene, precision, origins, directions)
+    assert len(np.unique(one["render"]["id"])) >= 12 and len(np.unique(one["cast"]["id"])) >= 12
+    assert np.isfinite(one["cast"]["depth"][-len(grazing[0]):]).mean() > 0.3  # the grazing rays hit
+    run = lambda: pyclray.render(scene, ("shaded", "depth", "id"), precision, acceleration="bvh")  # noqa: E731
+    shaded = at_width(monkeypatch, 1, run)
+    same_bits(shaded, at_width(monkeypatch, widest(precision), run), "shaded")
+    assert np.ptp(shaded["shaded"]) > 0
+    points = np.concatenate([origins[:1000], origins[:1000] + 0.02 * directions[:1000]])
+    inside = at_width(monkeypatch, 1, lambda: pyclray.occupancy(scene, points, precision=precision))
+    same_bits(inside, at_width(monkeypatch, widest(precision), lambda: pyclray.occupancy(scene, points, precision=precision)),
+              "occupancy")
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_instances_far_from_the_origin_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    """The same instances placed 1e6 from the origin (a view and rays among them), and rays from 1e6
+    away toward them near the origin."""
+    need(precision)
+    far = lit(instances_of_meshes(scenes_dir, offset=(1e6, -1e6, 1e6)))
+    origins, directions = rays_at(far, 1000, seed=11)
+    one = assert_same_at_widths(monkeypatch, far, precision, origins, directions)
+    assert np.isfinite(one["cast"]["depth"]).mean() > 0.2
+    run = lambda: pyclray.render(far, ("shaded", "depth", "id"), precision, acceleration="bvh")  # noqa: E731
+    same_bits(at_width(monkeypatch, 1, run), at_width(monkeypatch, widest(precision), run), "shaded")
+    near = scene_of(instances_of_meshes(scenes_dir))
+    origins, directions = rays_at(near, 1000, seed=12, far=1e6)
+    one = assert_same_at_widths(monkeypatch, near, precision, origins, directions, hits=False)
+    assert np.isfinite(one["cast"]["depth"]).any()
 
 
 def test_a_sphere_batch_gives_the_same_bits(monkeypatch):
@@ -300,6 +412,103 @@ def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes
         for query, source in at_width(monkeypatch, 1, run).items():
             assert "PYCLRAY_PAIR_TRAVERSAL" not in source, query
     programs.clear()
+
+
+def test_the_lane_width_one_programs_traverse_the_instances_pair_nodes(monkeypatch, scenes_dir):
+    """At a lane width of 1 every program that traverses pair nodes takes the instances' own trees as
+    pair nodes too (instance_nodes of PairNode, under PYCLRAY_PAIRS: kernels/instance.cl's
+    INSTANCE_TRAVERSE is bvh_pairs.h's), shadow rays' included; a render through tile lists (no pair
+    nodes) keeps their binary nodes, as every program at 8 lanes and with PYCLRAY_TRAVERSAL=wide
+    does; a scene without instances compiles none of their code."""
+    scene = lit(instances_of_meshes(scenes_dir)[8:])  # the one-triangle mesh's instances and the floor
+    plain = scene_of([bunny(scenes_dir)])
+    origins, directions = rays_at(scene, 100)
+    built = []
+    original = programs._build
+
+    def recording(ctx, variant):
+        built.append((variant, variant.source()))
+        return original(ctx, variant)
+
+    monkeypatch.setattr(programs, "_build", recording)
+
+    def run(target=scene):
+        programs.clear()
+        built.clear()
+        queries(target, "fp32", origins, directions)
+        pyclray.render(target, ("shaded",), acceleration="bvh")
+        pyclray.render(target, ("depth",), acceleration="tiles")
+        return {(v.query, v.shadows, v.bvh): source for v, source in built if v.query != "rebase"}
+
+    pair_tree, binary_tree = "__global const PairNode* instance_nodes", "__global const BvhNode* instance_nodes"
+    one = at_width(monkeypatch, 1, run)
+    assert {query for query, _, _ in one} == {"render", "cast", "occluded", "count_hits", "all_hits"}
+    assert ("render", True, True) in one and ("render", False, False) in one
+    for key, source in one.items():
+        through_pairs = key[0] != "render" or key[2]
+        assert (pair_tree in source) == through_pairs and (binary_tree in source) != through_pairs, key
+        assert ("#define PYCLRAY_PAIRS 1" in source) == through_pairs, key
+    for width, traversal in ((8, ""), (1, "wide")):
+        with monkeypatch.context() as patch:
+            patch.setenv("PYCLRAY_TRAVERSAL", traversal)
+            for key, source in at_width(monkeypatch, width, run).items():
+                assert binary_tree in source and pair_tree not in source and "#define PYCLRAY_PAIRS 1" not in source, key
+    for key, source in at_width(monkeypatch, 1, lambda: run(plain)).items():
+        assert "#define INSTANCE_TRAVERSE" not in source and "instance_nodes" not in source, key
+    programs.clear()
+
+
+def test_the_instances_pair_nodes_start_at_half_their_root():
+    """Each shared mesh's tree takes an even count of binary nodes (a spare one after its own), and its
+    pair nodes start at root / 2, within the tree's half of the slots: pair node p of binary node k
+    holds k's children's boxes and codes (a pair node's index from the tree's first, or a leaf's
+    ~(first * 8 + count)), so that the kernel finds them from the instance's root alone."""
+    from pyclray.engine.scene import instances as instance_trees
+
+    rng = np.random.default_rng(4)
+    meshes = []
+    for rings in (3, 12):  # a small tree and a larger one
+        v, f = perturbed_sphere(rings, rings + 2, 1.0, 0.2, rng)
+        meshes.append(pyclray.Mesh(v, f))
+    meshes.append(pyclray.Mesh(np.eye(3), np.array([[0, 1, 2]])))  # one triangle: a tree that is a leaf
+    scene = scene_of([m.placed(translate=(float(i), 0.0, 0.0)) for m in meshes for i in range(2)])
+    kind = tracer_for(scene, context_for(), "fp32").prepared.kinds["instance"]
+    binary, roots = kind.shared_host[2], np.unique(kind.world["root"])  # (instances.SHARED's order)
+    assert len(roots) == 3 and not (roots % 2).any() and len(binary) % 2 == 0
+    pairs = instance_trees.pair_nodes(binary, kind.world["root"])
+    assert len(pairs) == len(binary) // 2
+
+    def code_of(node, name):
+        return int(node[f"{name}_lo"][3:].view(np.int32)[0])
+
+    def first_count(k):
+        return int(binary[k]["lo"][3:].view(np.int32)[0]), int(binary[k]["hi"][3:].view(np.int32)[0])
+
+    for root, end in zip(roots, [*roots[1:], len(binary)]):
+        base, leaves = root // 2, []
+
+        def walk(k, p):  # binary node root + k is pair node base + p
+            assert 0 <= p < (end - root) // 2
+            first, _ = first_count(root + k)
+            for side, name in ((0, "left"), (1, "right")):
+                child = root + first + side
+                assert np.array_equal(pairs[base + p][f"{name}_lo"][:3], binary[child]["lo"][:3])
+                assert np.array_equal(pairs[base + p][f"{name}_hi"][:3], binary[child]["hi"][:3])
+                child_first, child_count = first_count(child)
+                if child_count:
+                    assert code_of(pairs[base + p], name) == ~(child_first * 8 + child_count)
+                    leaves.append(child)
+                else:
+                    assert code_of(pairs[base + p], name) > p  # children after their parents
+                    walk(first + side, code_of(pairs[base + p], name))
+
+        first, count = first_count(root)
+        if count:  # a tree that is a leaf: one pair node, the leaf its first child, no second
+            assert code_of(pairs[base], "left") == ~(first * 8 + count) and code_of(pairs[base], "right") == 0
+            assert np.array_equal(pairs[base]["left_lo"][:3], binary[root]["lo"][:3])
+        else:
+            walk(0, 0)
+            assert len(leaves) == (end - root) // 2  # every leaf of the tree (2L - 1 nodes and a spare one)
 
 
 def test_the_pair_nodes_hold_the_binary_trees_boxes_and_leaves():

@@ -72,11 +72,13 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
 
 /* PYCLRAY_TRAVERSE (kernels/bvh_ray.h) runs these steps: its macro names PYCLRAY_TRAVERSE_STEP and
  * BVH_STACK, expanded where it is used, so it takes the pair nodes' step and stack above. */
-#else
+#endif
 /* A render's camera ray (a packet of one: LANES 1) through the pair nodes: every leaf whose box it
  * enters before its best (a real variable VISIT lowers), nearest first; each child's box tested by
  * box_entries_of (kernels/bvh_packet.h), the test the wide traversal gives a child it pops. Its
- * shadow rays likewise, with their own box tests (kernels/shading.h). */
+ * shadow rays likewise, with their own box tests (kernels/shading.h); and in every query a ray in a
+ * mesh instance's own tree (kernels/instance.cl: INSTANCE_TRAVERSE), the same boxes and tests as
+ * the binary tree's packets of one there (kernels/bvh_packet.h: PYCLRAY_TRAVERSE_PACKET). */
 #if LANES != 1
 #error "the pair nodes' traversal is one ray per work-item (LANES 1)"
 #endif
@@ -125,4 +127,3 @@ inline realv pair_box_entries(const float4 lo, const float4 hi, const BoxPacket*
             code = stack_child[--top];                                                  \
         }                                                                               \
     }
-#endif

@@ -72,6 +72,27 @@ inline void instance_rebase(__global const InstanceWorld* world, PYCLRAY_REBASE_
  * meshes as their own triangles, though (engine/queries/render.py), so this only completes the type */
 #define PYCLRAY_FLAT_instance 1
 
+/* The instance's own tree: its binary nodes from root, traversed as a packet (kernels/bvh_packet.h);
+ * where the program traverses pair nodes (one ray per work-item, a GPU's lane width: PYCLRAY_PAIRS)
+ * its pair nodes from root / 2 (engine/scene/instances.py: instance_nodes holds them there), walked
+ * by kernels/bvh_pairs.h. A pair node holds its two children's binary boxes, tested by the same
+ * operations, so the leaves are the same, and every search below keeps its winner by a rule that
+ * does not depend on the order of the visit (tests/test_gpu_traversal.py: the same bits). */
+#ifdef PYCLRAY_PAIRS
+#define INSTANCE_NODE PairNode
+#define INSTANCE_ROOT(root) ((root) >> 1)
+#define INSTANCE_TRAVERSE(nodes, box, best, VISIT) PYCLRAY_TRAVERSE_PAIRS(nodes, box, best, VISIT)
+/* with another box test: ENTRIES of a binary node, ENTRIES_OF of a pair node's child box (lo, hi) */
+#define INSTANCE_TRAVERSE_WITH(nodes, ENTRIES, ENTRIES_OF, boxes, best, VISIT) \
+    PYCLRAY_TRAVERSE_PAIRS_WITH(nodes, ENTRIES_OF, boxes, best, VISIT)
+#else
+#define INSTANCE_NODE BvhNode
+#define INSTANCE_ROOT(root) root
+#define INSTANCE_TRAVERSE PYCLRAY_TRAVERSE_PACKET
+#define INSTANCE_TRAVERSE_WITH(nodes, ENTRIES, ENTRIES_OF, boxes, best, VISIT) \
+    PYCLRAY_TRAVERSE_PACKET_WITH(nodes, ENTRIES, boxes, best, VISIT)
+#endif
+
 /* a face's corners rebased on the object-space eye: each vertex's float64 difference rounded once; w
  * 1, or 0 for a zero-area triangle (kernels/mesh.cl then never hits it) */
 #define INSTANCE_CORNERS(vertices, f, eye)                                                            \
@@ -166,7 +187,7 @@ inline RayPacket instance_ray(SHAPE_SPACE const Instance* inst, const RayPacket*
  * counts, so that the caller's lowest-id rule sees it), or MISS; which: its triangle's position in
  * the tree's leaf order (the lowest on a tie), -1 where none. */
 inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit,
-                             __global const double4* vertices, __global const int4* faces, __global const BvhNode* nodes,
+                             __global const double4* vertices, __global const int4* faces, __global const INSTANCE_NODE* nodes,
                              intv* which)
 {
     const real scale = inst->m0.w;
@@ -187,7 +208,7 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
 #define INSTANCE_EXACT_DIRECTION
 #endif
     const double3 eye = inst->eye.xyz;
-    __global const BvhNode* tree = nodes + inst->root;
+    __global const INSTANCE_NODE* tree = nodes + INSTANCE_ROOT(inst->root);
     __global const int4* own = faces + inst->first;
     realv nearest = limit * SPLAT(scale);  /* in the tree's units: exact */
     intv found = SPLAT_INT(0), leaf = SPLAT_INT(-1);
@@ -203,7 +224,7 @@ inline realv instance_search(SHAPE_SPACE const Instance* inst, const RayPacket* 
             found = found || take;                                                                    \
         }                                                                                             \
     }
-    PYCLRAY_TRAVERSE_PACKET(tree, box, nearest, INSTANCE_VISIT)
+    INSTANCE_TRAVERSE(tree, box, nearest, INSTANCE_VISIT)
 #undef INSTANCE_VISIT
 #undef INSTANCE_EXACT_DIRECTION
     *which = leaf;
@@ -275,10 +296,10 @@ typedef struct {
     realv margin;
 } InstanceShadowBoxes;
 
-inline realv instance_shadow_entries(__global const BvhNode* node, const InstanceShadowBoxes* s, const realv limit)
+/* a box (lo, hi) against the lanes' origins, widened by their margin */
+inline realv instance_shadow_entries_of(const float4 lo, const float4 hi, const InstanceShadowBoxes* s, const realv limit)
 {
     const BoxPacket* b = &s->box;
-    const float4 lo = node->lo, hi = node->hi;
     const realv m = s->margin;
     const realv near_x = (b->negative_x ? SPLAT(hi.x) + m : SPLAT(lo.x) - m) - s->origin.x;
     const realv near_y = (b->negative_y ? SPLAT(hi.y) + m : SPLAT(lo.y) - m) - s->origin.y;
@@ -293,9 +314,15 @@ inline realv instance_shadow_entries(__global const BvhNode* node, const Instanc
     return enter <= leave ? enter : SPLAT(INFINITY);
 }
 
+/* a binary node's box (the packets' traversal) */
+inline realv instance_shadow_entries(__global const BvhNode* node, const InstanceShadowBoxes* s, const realv limit)
+{
+    return instance_shadow_entries_of(node->lo, node->hi, s, limit);
+}
+
 inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPacket* ray, const realv limit, const intv skip,
                                  __global const double4* vertices, __global const int4* faces,
-                                 __global const BvhNode* nodes)
+                                 __global const INSTANCE_NODE* nodes)
 {
     const real scale = inst->m0.w;
     RayPacket object = instance_ray(inst, ray);
@@ -313,7 +340,7 @@ inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPack
     boxes.margin = SPLAT(0x1p-20) * ((v_abs(boxes.origin.x) + v_abs(boxes.origin.y)) + v_abs(boxes.origin.z))
                    + SPLAT(0x1p-20) * ((v_abs(o.x) + v_abs(o.y)) + v_abs(o.z)) + SPLAT(inst->box.w);
     const double3 eye = inst->eye.xyz;
-    __global const BvhNode* tree = nodes + inst->root;
+    __global const INSTANCE_NODE* tree = nodes + INSTANCE_ROOT(inst->root);
     __global const int4* own = faces + inst->first;
     const realv bound = limit * SPLAT(scale);  /* in the tree's units */
     realv reach = bound;
@@ -326,7 +353,7 @@ inline realv instance_shadow_hit(SHAPE_SPACE const Instance* inst, const RayPack
         blocked = blocked || hit;                                                                     \
         reach = blocked ? SPLAT(-INFINITY) : reach;                                                   \
     }
-    PYCLRAY_TRAVERSE_PACKET_WITH(tree, instance_shadow_entries, &boxes, reach, INSTANCE_SHADOW_VISIT)
+    INSTANCE_TRAVERSE_WITH(tree, instance_shadow_entries, instance_shadow_entries_of, &boxes, reach, INSTANCE_SHADOW_VISIT)
 #undef INSTANCE_SHADOW_VISIT
     return blocked ? SPLAT(0) : SPLAT(MISS);
 }
@@ -378,14 +405,14 @@ inline vec3v instance_smooth_normal(SHAPE_SPACE const Instance* inst, const RayP
 /* cast's and occluded's one ray (LANES 1): its nearest hit in the instance; the winner's triangle is
  * found again for its normal (the same search gives the same bits) */
 inline real instance_cast_hit(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
-                              __global const int4* faces, __global const BvhNode* nodes)
+                              __global const int4* faces, __global const INSTANCE_NODE* nodes)
 {
     int which;
     return instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
 }
 
 inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
-                                  __global const int4* faces, __global const BvhNode* nodes)
+                                  __global const int4* faces, __global const INSTANCE_NODE* nodes)
 {
     int which;
     instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
@@ -409,17 +436,17 @@ inline vec3v instance_cast_normal(const Instance* inst, const RayPacket* ray, __
         const RayPacket object_ = instance_ray(inst_, (ray));                                         \
         const BoxPacket box_ = box_packet(object_.dir, inst_->box);                                   \
         const double3 eye_ = inst_->eye.xyz;                                                          \
-        __global const BvhNode* tree_ = instance_nodes + inst_->root;                                 \
+        __global const INSTANCE_NODE* tree_ = instance_nodes + INSTANCE_ROOT(inst_->root);            \
         __global const int4* own_ = instance_faces + inst_->first;                                    \
         const double from_ = (from);                                                                  \
         const int kind_ = (kind), instance_k_ = (k);                                                  \
         const realv reach_ = SPLAT(MISS);                                                             \
-        PYCLRAY_TRAVERSE_PACKET(tree_, box_, reach_, INSTANCE_ALL_VISIT)                              \
+        INSTANCE_TRAVERSE(tree_, box_, reach_, INSTANCE_ALL_VISIT)                                    \
     }
 #endif
 /* cast's winner's triangle index in its mesh and its barycentrics (found again, as for its normal) */
 inline int instance_cast_primitive(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
-                                   __global const int4* faces, __global const BvhNode* nodes)
+                                   __global const int4* faces, __global const INSTANCE_NODE* nodes)
 {
     int which;
     instance_search(inst, ray, MISS, vertices, faces, nodes, &which);
@@ -427,7 +454,7 @@ inline int instance_cast_primitive(const Instance* inst, const RayPacket* ray, _
 }
 
 inline void instance_cast_barycentric(const Instance* inst, const RayPacket* ray, __global const double4* vertices,
-                                      __global const int4* faces, __global const BvhNode* nodes, real* u, real* v)
+                                      __global const int4* faces, __global const INSTANCE_NODE* nodes, real* u, real* v)
 {
     int which;
     instance_search(inst, ray, MISS, vertices, faces, nodes, &which);

@@ -89,10 +89,13 @@ class Parameter:
 
 @dataclass(frozen=True)
 class SharedArrays:
-    """A type's shared arrays (Shape.shared: mesh instances' triangles and BVHs), {type}_{array} each."""
+    """A type's shared arrays (Shape.shared: mesh instances' triangles and BVHs), {type}_{array} each;
+    where the program traverses pair nodes, a tree of BvhNode is its pair nodes (PreparedScene.shared_of)."""
 
-    def resolve(self, type_: str) -> list[tuple[str, str]]:
-        return [(f"__global const {c_type}*", f"{type_}_{array}") for array, c_type in KINDS[type_].shared]
+    def resolve(self, type_: str, variant) -> list[tuple[str, str]]:
+        pairs = variant.through_pairs()
+        return [(f"__global const {'PairNode' if pairs and c_type == 'BvhNode' else c_type}*", f"{type_}_{array}")
+                for array, c_type in KINDS[type_].shared]
 
 
 @dataclass(frozen=True)
@@ -318,7 +321,7 @@ def parameters(variant) -> tuple[tuple[str, str], ...]:
                 names = _templates(variant, type_)
                 for parameter in item.parameters:
                     if isinstance(parameter, SharedArrays):
-                        out += parameter.resolve(type_)
+                        out += parameter.resolve(type_, variant)
                     elif parameter.present(variant, type_):
                         out.append((parameter.c_type.format(**names), parameter.name.format(**names)))
         elif item.present(variant):

@@ -280,6 +280,16 @@ class PairNodes:
                     self._buffer = input_buffer(self.prepared.ctx, pairs)
         return self._buffer
 
+    def arguments(self) -> dict:
+        """The pair nodes' arguments in place of the wide tree's: the nodes, and the arrays the
+        kinds' entries share as a program traversing pair nodes takes them (mesh instances' own
+        trees: PreparedScene.shared_of)."""
+        shared = {}
+        for name, kind in self.prepared.kinds.items():
+            if kind.shared:
+                shared.update(shared_arguments(name, self.prepared.shared_of(kind, True)))
+        return {"nodes": self.buffer(), **shared}
+
 
 def ray_arguments(tracer, inputs) -> tuple[dict, bool]:
     """(the cast inputs' arguments, pairs): pairs where this device's lane width traverses the pair
@@ -287,7 +297,7 @@ def ray_arguments(tracer, inputs) -> tuple[dict, bool]:
     pairs = pairs_for(lanes_for(tracer.ctx.device, tracer.precision))
     args = inputs[0]
     if pairs and inputs[5] is not None:
-        args = {**args, "nodes": inputs[5].buffer()}
+        args = {**args, **inputs[5].arguments()}
     return args, pairs
 
 

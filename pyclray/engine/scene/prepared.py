@@ -62,6 +62,10 @@ class Kind:
     smooth_host: np.ndarray | None = None
     shared: tuple = ()  # the arrays its entries share (SharedArrays.shared: mesh instances' triangles and BVHs)
     shared_host: tuple = ()
+    # the same where a program traverses pair nodes: the trees' pair nodes in place of their binary
+    # nodes (PreparedScene.shared_of), made when first asked
+    pair_shared: tuple | None = None
+    pair_nodes_host: np.ndarray | None = None
     indexed: IndexedEntries | None = None  # a from-world scene's triangles: shared vertices and faces
     shapes: tuple = ()  # its shapes and the leaf order of their entries (indexed: to pack world on demand)
     order: np.ndarray | None = None
@@ -240,6 +244,21 @@ class PreparedScene(Refit):
                     self._pairs = _buffer(self.ctx, self._pairs_host)
         return self._pairs
 
+    def shared_of(self, kind: Kind, pairs: bool) -> tuple:
+        """The arrays the kind's entries share, on the device (Kind.shared); pairs: for a program that
+        traverses pair nodes (Variant.through_pairs), where the trees among them (of BvhNode) are
+        their pair nodes instead (engine/scene/instances.py: pair_nodes), made when first asked:
+        only a GPU's lane width traverses them."""
+        if not pairs or not kind.shared:
+            return kind.shared
+        if kind.pair_shared is None:
+            with self.lock:
+                if kind.pair_shared is None:
+                    tree = [c_type for _, c_type in kind.cls.shared].index("BvhNode")
+                    kind.pair_nodes_host = aligned(instances.pair_nodes(kind.shared_host[tree], kind.world["root"]))
+                    kind.pair_shared = (*kind.shared[:tree], _buffer(self.ctx, kind.pair_nodes_host), *kind.shared[tree + 1:])
+        return kind.pair_shared
+
     # A refit keeps the tree's topology: shapes that wander far apart make its boxes overlap and
     # rays visit more of them. A frame rebuilds the scene where the refitted tree's SAH cost exceeds
     # the built tree's by this factor (docs/benchmarks.md, "Why the engine does what it does": REFIT_COST_MAX).
@@ -282,6 +301,7 @@ class PreparedScene(Refit):
                 total += kind.world.nbytes + kind.in_view_host.nbytes
             total += 0 if kind.smooth_host is None else kind.smooth_host.nbytes
             total += sum(a.nbytes for a in kind.shared_host)
+            total += 0 if kind.pair_nodes_host is None else kind.pair_nodes_host.nbytes
         if self.bvh.types:
             total += self._wide_host.nbytes + self._refs_host.nbytes
             total += 0 if self._nodes_host is None else self._nodes_host.nbytes

@@ -227,7 +227,8 @@ class ViewInputs:
         """The render kernel's shape arguments by name (engine/launch/signatures.py): a from-world scene's eye
         space; the BVH (the wide nodes, with shadows the binary ones too, refs) and per type its
         entries and count, or per type its entries and tile lists (and with shadows its count);
-        pairs: the pair nodes in place of the wide ones (Variant.through_pairs)."""
+        pairs: the pair nodes in place of the wide ones (Variant.through_pairs), and the mesh
+        instances' own trees as pair nodes too (PreparedScene.shared_of)."""
         args = {}
         if prepared.from_world:  # the eye's space (the eye, the camera's axes), float64: each shape is rebased on it
             for name, v in zip(("space_origin", "space_u", "space_v", "space_w"), (self.eye, *self.rows)):
@@ -251,7 +252,7 @@ class ViewInputs:
                              f"{t}_primitives": kind.primitives_buffer})
             else:
                 args[f"{t}s"] = kind.in_view
-            args.update(shared_arguments(t, kind.shared))
+            args.update(shared_arguments(t, prepared.shared_of(kind, pairs)))
             if acceleration == "bvh" or shadows:
                 args[f"n_{t}s"] = np.int32(kind.count)
             if acceleration != "bvh":

@@ -34,7 +34,9 @@ from .mesh_sharing import shared_key
 # the shared arrays the kernel takes after the instances' array: (name, OpenCL C element type)
 # (each distinct mesh once: its object-space vertices (float64, w 0), its faces in its tree's leaf order
 # (three vertex indices into the vertices and its index in its mesh, ~index where it has zero area), the
-# tree's nodes, and the vertices' unit object-space normals where an instance is smooth: engine/scene/instances.py)
+# tree's binary nodes (where a program traverses pair nodes, one ray per work-item, the trees' pair nodes
+# instead: engine/scene/prepared.py, shared_of), and the vertices' unit object-space normals where an
+# instance is smooth: engine/scene/instances.py)
 SHARED = (("vertices", "double4"), ("faces", "int4"), ("nodes", "BvhNode"), ("normals", "double4"))
 
 
