@@ -84,7 +84,9 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * count's parity is the point's inside (surface_out[r]: 0 it is; 3 undecided: a crossing within
  * rounding of the point, kernels/mesh_blocks.cl's MESH_BLOCK_DOUBT, or a triangle within
  * surface_band of it, or at distance 0 (on the surface, or a rounding off it), whose point the
- * host decides exactly; 2 not known here: the host asks the closest-point query's distance). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
+ * host decides exactly; 2 not known here: the host asks the closest-point query's distance), and
+ * the crossings signed, +1 out of a mesh and -1 into it, summed (surface_signed_out: a closed
+ * mesh's winding number, sign="winding"). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
  * box_ray's margin (2^-20 of the origin's size) makes it for every box that holds the float64
  * origin, or within the closest-point query's 4 times smaller margin of the same float boxes
  * (kernels/closest.cl). The traversal notes the first SURFACE_LEAVES such leaves as it reaches them
@@ -105,7 +107,9 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
         if (S->n_surface_ < SURFACE_LEAVES) S->surface_leaf_[S->n_surface_] = first; \
         S->n_surface_ += S->n_surface_ <= SURFACE_LEAVES;                           \
     }
-#define HITS_SURFACE_STATE(X) X(int, n_surface) X(int, undecided)
+#define HITS_SURFACE_STATE(X) X(int, n_surface) X(int, undecided) X(int, signed_count)
+/* the signed count of the crossings (kernels/mesh_blocks.cl: +1 out, -1 in): surface_signed_out */
+#define HITS_SIGNED(change) signed_count += (change);
 /* a crossing whose sign of s the rounding may have turned (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT):
  * the point is undecided (3), whatever its count and surface */
 #define HITS_UNDECIDED undecided = 1
@@ -140,7 +144,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
     PYCLRAY_CAST_RAY
     int n_hits = 0;
 #ifdef PYCLRAY_AOV_SURFACE
-    int n_surface = 0, undecided = 0;
+    int n_surface = 0, undecided = 0, signed_count = 0;
 #endif
 #ifdef PYCLRAY_STORE_HITS
     const long hits_at = (long)r * hit_capacity;
@@ -176,6 +180,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
 #define limit (S->limit_)
 #ifdef PYCLRAY_AOV_SURFACE
 #define undecided (S->undecided_)
+#define signed_count (S->signed_count_)
 #endif
 inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 {
@@ -203,6 +208,7 @@ inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 #undef limit
 #ifdef PYCLRAY_AOV_SURFACE
 #undef undecided
+#undef signed_count
 #endif
 #endif
 
@@ -256,6 +262,7 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
         }
     }
     surface_out[r] = surface;
+    surface_signed_out[r] = S->signed_count_;
 #endif
 }
 

@@ -58,7 +58,7 @@ inline int mesh_block_bits(const blockmask m)
  * exactly on the host (engine/queries/closest.py). A lane whose edge functions were recomputed in
  * double (fp32: mesh_exact_lane, scaled) is in doubt wherever it crosses. */
 #ifdef PYCLRAY_AOV_SURFACE
-#define MESH_BLOCK_DOUBT , int* doubt
+#define MESH_BLOCK_DOUBT , int* doubt, int* leaving
 #ifdef PYCLRAY_FP64
 #define MESH_BAND_EPSILON 0x1p-53
 #else
@@ -158,7 +158,7 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
 #endif
     *hits = mesh_block_bits(inside) & lanes;
 #ifdef PYCLRAY_AOV_SURFACE
-    *doubt = 0;
+    *doubt = *leaving = 0;
 #endif
     if (!*hits) return (blockv)(MISS);  /* most blocks a ray reaches it misses: no division */
     const blockv numerator = (e0 * Az + e1 * Bz) + e2 * Cz;
@@ -187,6 +187,11 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     const blockv s = numerator / (inside ? det * Dz : (blockv)(1));
     const blockmask hit = inside && s > (blockv)(0);
     *hits &= mesh_block_bits(hit);
+#ifdef PYCLRAY_AOV_SURFACE
+    /* the crossings out of the mesh: its outward normal along the ray, n . d = det dz (the
+     * projected triangle's signed area along the ray, of the homogeneous shear's scale dz^2) > 0 */
+    *leaving = mesh_block_bits(det * Dz > (blockv)(0)) & *hits;
+#endif
     return hit ? s : (blockv)(MISS);
 }
 
@@ -204,11 +209,15 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
 
 /* occupancy's count: a block's crossings in doubt from the ray's own origin (s0 = 0: a moved ray
  * starts before all of the mesh, where no crossing is near 0) make the ray's point undecided
- * (kernels/allhits.cl: HITS_UNDECIDED) */
+ * (kernels/allhits.cl: HITS_UNDECIDED); its crossings signed, +1 out of the mesh and -1 into it,
+ * summed (HITS_SIGNED: the winding number of closed meshes; every hit of a ray from a point
+ * counts, its t_max infinite) */
 #ifdef PYCLRAY_AOV_SURFACE
-#define MESH_BLOCK_DOUBT_STATE , doubt
-#define MESH_BLOCK_DOUBT_ARGUMENT , &doubt
-#define MESH_BLOCK_DOUBT_TAKE if (doubt != 0 && s0 == 0.0) HITS_UNDECIDED;
+#define MESH_BLOCK_DOUBT_STATE , doubt, leaving
+#define MESH_BLOCK_DOUBT_ARGUMENT , &doubt, &leaving
+#define MESH_BLOCK_DOUBT_TAKE                                                       \
+    if (doubt != 0 && s0 == 0.0) HITS_UNDECIDED;                                    \
+    HITS_SIGNED(2 * popcount(leaving) - popcount(hits))
 #else
 #define MESH_BLOCK_DOUBT_STATE
 #define MESH_BLOCK_DOUBT_ARGUMENT

@@ -288,6 +288,8 @@ COUNT_HITS = (
     # triangles' corners relative to it (engine/queries/closest.py: surface_band)
     Parameter("surface_band", "const double", (_asked("surface"),)),
     Parameter("surface_out", "__global uchar*", (_asked("surface"),)),
+    # the rays' crossings signed, +1 out of a mesh and -1 into it, summed (kernels/mesh_blocks.cl)
+    Parameter("surface_signed_out", "__global int*", (_asked("surface"),)),
 )
 ALL_HITS = (
     *RAYS,

@@ -300,7 +300,7 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
     included; those points are counted again in float64 (fp32), and the ones still undecided
     decided exactly on the host (parity_exact.py)."""
     directions = parity_directions(closed, points)
-    counts, on = _banded_count(closed, points, directions)
+    counts, on, _ = _banded_count(closed, points, directions)
     found = (counts & 1).astype(bool)
     if closed.precision != "fp64":  # fp32's undecided points: first the same count in float64
         again = np.flatnonzero(on == UNDECIDED)
@@ -325,18 +325,19 @@ def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
 UNDECIDED = 3
 
 
-def _banded_count(closed, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(counts, on) of the count kernel's surface variant from the points (kernels/allhits.cl): on
-    is UNDECIDED where the count's parity may not be the point's inside, else 0 (a point in more
-    leaves' boxes than the kernel notes: by the closest-point query's distance against the band)."""
+def _banded_count(closed, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(counts, on, signed) of the count kernel's surface variant from the points
+    (kernels/allhits.cl): on is UNDECIDED where the count (and its signed sum) may not be the
+    point's, else 0 (a point in more leaves' boxes than the kernel notes: by the closest-point
+    query's distance against the band)."""
     surface = _surface_arguments(closed)
-    counts, on = count_from_points(closed, points, directions, surface)
+    counts, on, signed = count_from_points(closed, points, directions, surface)
     unknown = np.flatnonzero(on == 2)
     if len(unknown):
         d = run_closest(closed, points[unknown], ("distance",))["distance"]
         reach = float(surface["surface_band"]) + 2.0**-50 * np.abs(points[unknown]).sum(axis=1)
         on[unknown] = np.where(d <= reach, UNDECIDED, 0)
-    return counts, on
+    return counts, on, signed
 
 
 def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -531,10 +532,14 @@ def parity_directions(closed, points: np.ndarray) -> np.ndarray:
 
 def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
     """Per point, the crossings of its parity ray out of its closed meshes less those into them: +1
-    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
-    the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
+    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters.
+    Where the handle's rays traverse the closest-point query's tree, the count kernel's signed sum
+    (its facing from the watertight test's det) with its band, the undecided points again in
+    float64 (fp32) and then exactly (_banded_signed); else from all_hits, the sign from the float64
+    normal, in exact arithmetic where that is within rounding of 0."""
     directions = parity_directions(closed, points)
-    undecided = _undecided(closed, points, directions)
+    if len(points) and _shares_boxes(closed):
+        return _banded_signed(closed, points, directions)
     one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
     hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
     ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
@@ -554,17 +559,29 @@ def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
         for i in np.flatnonzero(doubt):
             along[i] = _exact_along(a[i], b[i], c[i], d[i])
         signs[mine] = np.sign(along)
-    total = np.bincount(ray, weights=signs, minlength=len(points))
-    if len(undecided):  # their signed crossings exactly, per mesh; a point on a surface as inside (1)
+    return np.bincount(ray, weights=signs, minlength=len(points))
+
+
+def _banded_signed(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The signed crossings of the points' rays (float64), exact: the count kernel's signed sum,
+    its undecided points counted again in float64 (fp32) and the rest exactly on the host, per
+    mesh (parity_exact.py; a point on a surface as 1: inside)."""
+    _, on, signed = _banded_count(closed, points, directions)
+    total = signed.astype(np.float64)
+    undecided = np.flatnonzero(on == UNDECIDED)
+    if len(undecided) and closed.precision != "fp64":
+        twin = closed.mesh_handle(closed=True, precision="fp64")
+        total[undecided] = _banded_signed(twin, points[undecided], directions[undecided])
+    elif len(undecided):
         from .parity_exact import exact_crossings
 
         total[undecided] = 0.0
-        on = np.zeros(len(undecided), bool)
+        on_surface = np.zeros(len(undecided), bool)
         for mesh in closed.shapes:
-            _, signed, on_mesh = exact_crossings(mesh, points[undecided], directions[undecided])
-            total[undecided] += signed
-            on |= on_mesh
-        total[undecided[on]] = np.maximum(total[undecided[on]], 1.0)
+            _, signed_exact, on_mesh = exact_crossings(mesh, points[undecided], directions[undecided])
+            total[undecided] += signed_exact
+            on_surface |= on_mesh
+        total[undecided[on_surface]] = np.maximum(total[undecided[on_surface]], 1.0)
     return total
 
 
