@@ -1,16 +1,18 @@
 """Occupancy of a scene of closed meshes (engine/queries/closest.py: occupancy, _one_closed_mesh): a
 large batch's points are looked up in the meshes' parity grid (engine/queries/parity_grid.py: its empty
-cells' regions decided by one exact ray each), the others counted by their parity rays, whose
+cells' regions, coarse and fine, decided by one exact ray each), the others counted by their parity rays, whose
 kernel also tests a point with an even count for lying on the surface, over the leaves whose boxes
 hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the closest-point query where more than
 SURFACE_LEAVES do). Held to truths known by construction (points exactly on the triangles, written
 in float64; points just off a convex mesh's faces), to the float64 oracle, and to the general path
 (the parity count of every point, then the closest-point query's surface search) bit for bit."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import pyclray
-from pyclray.engine.queries import closest
+from pyclray.engine.queries import closest, parity_grid
 from pyclray.engine.queries.closest import COHERENT_FROM
 from pyclray.engine.queries.parity_grid import INSIDE, OUTSIDE, SURFACE
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere, torus
@@ -161,7 +163,8 @@ def test_several_closed_meshes(sign):
     """Two overlapping closed meshes (a torus through a perturbed sphere: winding 2 where both
     hold a point) and a third apart: the grid of all their triangles decides the points of its
     empty cells by the rule's own test of one point per region; the same answers as the general
-    path, and the oracle's off the surfaces."""
+    path on uniform points and on points near the surfaces (the fine level), and the oracle's off
+    the surfaces."""
     rng = np.random.default_rng(16)
     v, f = perturbed_sphere(16, 24, 0.8, 0.1, rng)
     shapes = (pyclray.Mesh(*torus(16, 24, 1.0, 0.3)), pyclray.Mesh(v + [1.0, 0.0, 0.0], f),
@@ -174,6 +177,12 @@ def test_several_closed_meshes(sign):
         grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
         decided, _ = grid.lookup(points, sign)
         assert decided.mean() > 0.5  # most points decided by the grid
+        # points within 1% of the size from the surfaces: the fine level made and used
+        on = tracer.closest_points(points)["position"].astype(np.float64)
+        near = on + rng.normal(size=on.shape) * rng.uniform(0, 0.03, (len(on), 1))
+        assert np.array_equal(tracer.occupancy(near, sign), general_path(tracer, near, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        assert grid.refined and fine_decided(grid, near, sign).mean() > 0.1
     clear = oracle.closest_points(scene, points)["distance"] > 0
     assert np.array_equal(got.astype(bool)[clear], oracle.inside(scene, points, sign)[clear])
 
@@ -199,7 +208,7 @@ def test_nested_shells_regions_against_the_oracle(turned):
         assert got[cavity].all() == (sign == "winding" and not turned) and got[cavity].any() == got[cavity].all()
         with pyclray.prepare(scene) as tracer:
             grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
-            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign]).tolist())
+            assert {SURFACE, OUTSIDE, INSIDE} <= set(np.unique(grid.states[sign][0]).tolist())
 
 
 def test_points_in_many_leaves_boxes(monkeypatch):
@@ -317,3 +326,278 @@ def test_slab_pre_test_same_bits(monkeypatch, precision, shift):
         for points, got in zip(sets, with_slabs):
             assert np.array_equal(tracer.occupancy(points), got)
     assert with_slabs[0][:len(a)].all()  # the corners: on the surface
+
+
+# the parity grid's fine level (engine/queries/parity_grid.py: each coarse surface cell refined into
+# BLOCK^3 fine cells, their empty ones joined to the regions): its answers are the rays' too
+
+BUNNY = pyclray.Mesh.load(Path(__file__).resolve().parent.parent / "scenes" / "meshes" / "bunny.ply")
+
+
+def near_surface(tracer, mesh, band: float, count: int, rng) -> np.ndarray:
+    """count points within band of the mesh's size from its surface: the nearest surface points of
+    uniform points in the box, moved by up to band along random directions."""
+    lo, hi = (np.asarray(x) for x in mesh.box())
+    on = tracer.closest_points(rng.uniform(lo, hi, (count, 3)))["position"].astype(np.float64)
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    return on + direction * rng.uniform(-band, band, (count, 1)) * float(np.max(hi - lo))
+
+
+def fine_decided(grid, points, sign="parity") -> np.ndarray:
+    """Per point: whether the grid decides it in a fine cell (a coarse surface cell's block)."""
+    decided, _ = grid.lookup(points, sign)
+    cells = np.floor((points - grid.lo) / grid.size).astype(np.int64)
+    inner = np.all((cells >= 0) & (cells < grid.dims), axis=1)
+    index = np.zeros(len(points), np.int64)
+    index[inner] = (cells[inner, 2] * grid.dims[1] + cells[inner, 1]) * grid.dims[0] + cells[inner, 0]
+    return decided & inner & (grid.region[index] < 0)
+
+
+def test_the_fine_coordinate_is_block_times_the_coarse():
+    """The module's claim: fl((x - lo) / (size / BLOCK)) == BLOCK * fl((x - lo) / size) exactly
+    (BLOCK a power of two: scaling by it commutes with rounding), so a point's coarse cell (its fine
+    cell's index divided by BLOCK) is the one-level grid's floor((x - lo) / size); on random
+    coordinates and sizes near 0 and near 1e6, and on the grid's own cell sides."""
+    rng = np.random.default_rng(31)
+    for shift in (0.0, 1e6):
+        lo = shift + rng.normal(size=200_000)
+        size = rng.uniform(1e-3, 1.0, 200_000) * 10.0 ** rng.integers(-3, 3, 200_000)
+        x = lo + rng.uniform(0, 300, 200_000) * size
+        sides = lo[:1000] + np.arange(1000) * size[:1000]  # points on cells' sides (as rounded)
+        for xs, los, sizes in ((x, lo, size), (sides, lo[:1000], size[:1000])):
+            coarse = (xs - los) / sizes
+            fine = (xs - los) / (sizes / parity_grid.BLOCK)
+            assert np.array_equal(fine, parity_grid.BLOCK * coarse)
+            assert np.array_equal(np.floor(fine) // parity_grid.BLOCK, np.floor(coarse))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_near_points_same_bits_as_the_general_path(precision, shift):
+    """The bunny (5,000 triangles) and a perturbed sphere, near the origin and 1e6 from it: points
+    within 1%, 0.1% and 1e-6 of the size from the surface, the vertices, edge midpoints and face
+    centroids: occupancy (both rules) and signed distance's sign are the general path's, bit for
+    bit, and the fine level decides some of the points within 1%."""
+    rng = np.random.default_rng(32)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    for mesh in (pyclray.Mesh(BUNNY.vertices + shift, BUNNY.faces), pyclray.Mesh(v + shift, f)):
+        a, b, c = mesh.corners()
+        with pyclray.prepare(scene_of(mesh), precision=precision) as tracer:
+            sets = [near_surface(tracer, mesh, band, COHERENT_FROM + 500, rng) for band in (1e-2, 1e-3, 1e-6)]
+            sets.append(np.vstack([a, 0.5 * (a + b), (a + b + c) / 3]))
+            for points in sets:
+                for sign in ("parity", "winding"):
+                    expected = general_path(tracer, points, sign)
+                    assert np.array_equal(tracer.occupancy(points, sign), expected)
+                    signed = tracer.signed_distance(points, sign)
+                    distance = tracer.distance(points)
+                    assert np.array_equal(signed, np.where(expected.astype(bool) & (distance > 0), -distance, distance))
+            grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+            assert fine_decided(grid, sets[0]).mean() > 0.05
+
+
+def test_the_fine_level_decides_a_large_share_of_near_points():
+    """A perturbed sphere of 60,000 triangles (edges about 1.5% of the size; a fine cell is 1/512
+    of it, 0.2%): of the points 0.4% to 1% of the size from the surface, most in coarse surface
+    cells (1/64 of the size), more than half are decided in empty fine cells (a test that fails if
+    the refinement decides nothing: the coarse level alone decides about 10% of them), and of all
+    the points within 1% more than 15%; their answers are the general path's."""
+    rng = np.random.default_rng(33)
+    v, f = perturbed_sphere(150, 200, 1.0, 0.02, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = near_surface(tracer, mesh, 1e-2, 3 * COHERENT_FROM, rng)
+        distance = tracer.distance(points) / 2.0
+        band = (distance > 0.004) & (distance < 0.01)
+        got = tracer.occupancy(points)
+        assert np.array_equal(got, general_path(tracer, points))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        fine = fine_decided(grid, points)
+    assert band.sum() > 1000
+    assert fine[band].mean() > 0.5
+    assert fine.mean() > 0.15
+    assert 0 < got[fine].mean() < 1  # inside and outside both decided there
+
+
+def test_the_seeds_lie_in_their_own_empty_cells():
+    """Each region's decided point lies in an empty cell of its own region (by the lookup's own
+    formula): the grid decides it, as its own ray does; of the nested shells (one region beyond,
+    one in the shell, one in the cavity) and the fine pockets."""
+    rng = np.random.default_rng(34)
+    v, f = perturbed_sphere(20, 30, 1.0, 0.05, rng)
+    mesh = pyclray.Mesh(np.vstack([v, 0.5 * v]), np.vstack([f, f[:, ::-1] + len(v)]))
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        tracer.occupancy(rng.uniform(-1, 1, (COHERENT_FROM, 3)))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity", fine=True)
+        decided, inside = grid.lookup(grid.seeds, "parity")
+        assert decided.all()
+        assert np.array_equal(inside, closest._mesh_inside(tracer, grid.seeds, "parity"))
+    assert len(grid.seeds) >= 3 and (grid.blocks >= 0).any()
+
+
+@pytest.mark.parametrize("cap", ["blocks", "work"])
+def test_the_fine_level_falls_back_where_capped(monkeypatch, cap):
+    """With room for 20 refined blocks only (MAX_FINE_CELLS; fewer kept where all of a block's fine
+    cells are surface cells), the other coarse surface cells stay coarse (their points to their
+    rays); with the marking's work over FINE_WORK no block is refined:
+    the same answers as the general path, and fewer points decided than with the whole fine level."""
+    rng = np.random.default_rng(35)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = near_surface(tracer, mesh, 1e-2, COHERENT_FROM + 500, rng)
+        tracer.occupancy(points)
+        whole = fine_decided(closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity"), points).sum()
+    if cap == "blocks":
+        monkeypatch.setattr(parity_grid, "MAX_FINE_CELLS", 20 * parity_grid.BLOCK**3)
+    else:
+        monkeypatch.setattr(parity_grid, "FINE_WORK", 100)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        for sign in ("parity", "winding"):
+            assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        refined = int((grid.blocks >= 0).sum())
+        assert (0 < refined <= 20 if cap == "blocks" else refined == 0) and (grid.region < 0).sum() > 20
+        assert fine_decided(grid, points).sum() < whole
+
+
+@pytest.mark.parametrize("sign", ["parity", "winding"])
+def test_the_device_lookup_is_the_hosts(monkeypatch, sign):
+    """The GPU class's lookup (cast_device.py: grid_lookup_device, run here on PoCL) gives the
+    host's (decided, inside) bit for bit on points near the surface (fine cells), uniform points and
+    points beyond the grid; and the GPU class's occupancy and signed distance are the CPU's."""
+    from pyclray.engine.queries.cast_device import grid_lookup_device
+
+    rng = np.random.default_rng(36)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v + 1e6, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = np.vstack([near_surface(tracer, mesh, 1e-2, 3 * COHERENT_FROM, rng),
+                            rng.uniform(1e6 - 1.5, 1e6 + 1.5, (COHERENT_FROM, 3))])
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
+        occupied, signed = tracer.occupancy(points, sign), tracer.signed_distance(points, sign)
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), sign)
+        host = grid.lookup(points, sign)
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
+        device = grid_lookup_device(tracer, grid, points, sign)
+        assert np.array_equal(tracer.occupancy(points, sign), occupied)
+        assert np.array_equal(tracer.signed_distance(points, sign), signed)
+    assert np.array_equal(device[0], host[0]) and np.array_equal(device[1], host[1])
+    assert fine_decided(grid, points, sign).sum() > 100 and 0 < host[1][host[0]].mean() < 1
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_points_within_the_margin_are_in_surface_cells(shift):
+    """The marks' claim (the widened boxes and planes): no point within the margin of a triangle
+    lies in an empty cell, coarse or fine. Points on random triangles of a tilted mesh (the
+    octahedron's faces, the perturbed sphere's) and of a sliver (a fan whose triangle's angle is
+    below SLIVER: marked by its box), moved by 0.999 of the margin along the face normal and along
+    random directions, near the origin and 1e6 from it: the grid decides none of them."""
+    rng = np.random.default_rng(37)
+    v, f = perturbed_sphere(30, 45, 1.0, 0.08, rng)
+    sliver = pyclray.Mesh(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
+                                    [0.5, 0.5 + 1e-12, 0.0]]) + shift,
+                          np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 4, 3], [4, 2, 3], [1, 2, 4]]))
+    for mesh in (octahedron(8, shift), pyclray.Mesh(v + shift, f), sliver):
+        a, b, c = mesh.corners()
+        grid = parity_grid.ParityGrid.of((a, b, c))
+        grid.decide("parity", lambda points: np.zeros(len(points), bool))
+        lo, hi = np.minimum(np.minimum(a, b), c).min(axis=0), np.maximum(np.maximum(a, b), c).max(axis=0)
+        margin = max(parity_grid.SURFACE_MARGIN * float(np.abs(np.stack([lo, hi])).max()) + parity_grid.TINY,
+                     parity_grid.CLEARANCE * grid.size)
+        tri = rng.integers(0, len(a), 20_000)
+        u = rng.uniform(0, 1, len(tri))
+        w = rng.uniform(0, 1 - u)
+        on = a[tri] + u[:, None] * (b[tri] - a[tri]) + w[:, None] * (c[tri] - a[tri])
+        direction = rng.normal(size=on.shape)
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        normal = np.cross(b[tri] - a[tri], c[tri] - a[tri])
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        # (at 1e6 the sliver is flat: a random direction instead of its normal)
+        normal = np.where(length > 0, normal / np.where(length > 0, length, 1.0), direction)
+        for step in (normal, -normal, direction):
+            decided, _ = grid.lookup(on + 0.999 * margin * step, "parity")
+            assert not decided.any()
+        assert (grid.blocks >= 0).any()  # the fine level tested (the sliver's big faces' too: within FINE_WORK)
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e6])
+def test_a_plane_passing_within_the_margin_of_a_cell_marks_it(shift):
+    """The widened planes' margin itself: triangles whose plane passes beyond a cell's corner by
+    less than the margin (the cell on the other side of the plane, so that only the widening marks
+    it), each with a point in that cell within the margin of the triangle: no such point is decided
+    by the grid, at the coarse level (a corner on a coarse cell's side) or the fine one. Near the
+    origin and 1e6 from it; the grid's box fixed by two small triangles at [0, 1]^3's corners."""
+    rng = np.random.default_rng(38)
+    frame = [np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]]),
+             np.array([[1.0, 1.0, 1.0], [0.99, 1.0, 1.0], [1.0, 0.99, 1.0]])]
+    corners = [np.array(t) + shift for t in frame]
+    probe = parity_grid.ParityGrid.of(tuple(np.stack([t[k] for t in corners]) for k in range(3)))
+    lo, fine = probe.lo, probe.fine_size
+    margin = max(parity_grid.SURFACE_MARGIN * (1.0 + shift) + parity_grid.TINY, parity_grid.CLEARANCE * probe.size)
+    points = []
+    for k in range(300):
+        index = rng.integers(40, 470, 3)
+        if k % 3 == 0:  # on a coarse cell's corner
+            index -= index % parity_grid.BLOCK
+        normal = rng.uniform(0.2, 1.0, 3)
+        normal /= np.linalg.norm(normal)
+        corner = lo + index * fine  # the cell's corner nearest the plane (the normal's components > 0)
+        foot = corner - rng.uniform(0.001, 0.98) * margin * normal  # the plane's point nearest the corner
+        u = np.cross(normal, [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)
+        corners.append(np.array([foot + 0.5 * fine * u, foot - 0.3 * fine * u + 0.4 * fine * w,
+                                 foot - 0.3 * fine * u - 0.4 * fine * w]))
+        point = corner + 0.01 * margin / normal.sum()  # in the cell, within the margin of the plane
+        if np.array_equal(np.floor((point - lo) / fine), index.astype(float)):
+            points.append(point)
+    grid = parity_grid.ParityGrid.of(tuple(np.stack([t[k] for t in corners]) for k in range(3)))
+    assert np.array_equal(grid.lo, lo) and grid.fine_size == fine
+    grid.decide("parity", lambda p: np.zeros(len(p), bool))
+    points = np.array(points)
+    assert len(points) > 250
+    decided, _ = grid.lookup(points, "parity")
+    assert not decided.any()
+    assert (grid.blocks >= 0).sum() > 250  # the test triangles' coarse cells refined: the fine level tested
+
+
+def test_the_fine_level_is_made_for_batches_near_the_surface():
+    """A uniform batch (its points mostly in empty coarse cells) is answered by the coarse level
+    alone, made without the fine one; the first batch near the surface (most of its points in coarse
+    surface cells: closest.FINE_FROM) makes the fine level, which then serves every batch: the same
+    answers as the general path each time."""
+    rng = np.random.default_rng(39)
+    v, f = perturbed_sphere(40, 60, 1.0, 0.08, rng)
+    mesh = pyclray.Mesh(v, f)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        closed = tracer.mesh_handle(closed=True)
+        uniform = rng.uniform(-1.2, 1.2, (COHERENT_FROM + 500, 3))
+        assert np.array_equal(tracer.occupancy(uniform), general_path(tracer, uniform))
+        coarse = closest._parity_grid(tracer, closed, "parity")
+        assert not coarse.refined and not (coarse.blocks >= 0).any()
+        near = near_surface(tracer, mesh, 1e-2, COHERENT_FROM + 500, rng)
+        assert np.array_equal(tracer.occupancy(near), general_path(tracer, near))
+        fine = closest._parity_grid(tracer, closed, "parity")
+        assert fine is not coarse and fine.refined and (fine.blocks >= 0).any()
+        assert np.array_equal(fine.states["parity"][0], coarse.states["parity"][0])  # the same coarse cells' answers
+        assert fine_decided(fine, near).mean() > 0.1
+        assert np.array_equal(tracer.occupancy(uniform), general_path(tracer, uniform))
+        assert closest._parity_grid(tracer, closed, "parity") is fine
+
+
+def test_large_tilted_triangles_are_refined():
+    """The octahedron of 8 triangles, each one's box an eighth of the grid's volume: the fine marks'
+    work counts its box's fine cells within refined blocks only (parity_grid._fine_work), so the
+    fine level is made, thin along the tilted faces: more than 30% of the points within 1% of the
+    size decided in fine cells (46% here), the same answers as the general path."""
+    rng = np.random.default_rng(40)
+    mesh = octahedron(1)
+    with pyclray.prepare(scene_of(mesh)) as tracer:
+        points = near_surface(tracer, mesh, 1e-2, COHERENT_FROM + 500, rng)
+        for sign in ("parity", "winding"):
+            assert np.array_equal(tracer.occupancy(points, sign), general_path(tracer, points, sign))
+        grid = closest._parity_grid(tracer, tracer.mesh_handle(closed=True), "parity")
+        assert (grid.blocks >= 0).sum() > 1000
+        assert fine_decided(grid, points).mean() > 0.3

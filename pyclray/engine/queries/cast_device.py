@@ -180,22 +180,40 @@ __kernel void hit_rows(__global double *t_out, __global int *kind_out, __global 
 }
 
 /* occupancy's parity grid (engine/queries/parity_grid.py: _lookup, the same operations): per point
-   decided (1 beyond the grid or in an empty cell) and inside (its empty cell's state) */
+   decided (1 beyond the grid, in an empty coarse cell or in an empty fine cell of a refined block)
+   and inside (its empty cell's state) */
 __kernel void grid_lookup(__global uchar *decided, __global uchar *inside, __global const double *p, long n,
-                          double lo0, double lo1, double lo2, double size, long d0, long d1, long d2,
-                          __global const char *state) {
+                          double lo0, double lo1, double lo2, double fine_size, long d0, long d1, long d2,
+                          int shift, __global const char *state, __global const int *blocks,
+                          __global const ulong *fine_bits) {
     const double lo[3] = {lo0, lo1, lo2};
     const long dims[3] = {d0, d1, d2};
+    const long block = 1L << shift, mask = block - 1, words = (block * block * block) >> 6;
     for (long i = get_global_id(0); i < n; i += get_global_size(0)) {
-        long cell = 0;
+        long cell = 0, fine[3];
         for (int axis = 2; axis >= 0; axis--) {
-            const double c = (p[3 * i + axis] - lo[axis]) / size;
-            if (!(c >= 0.0 && c < (double)dims[axis])) { cell = -1; break; }
-            cell = cell * dims[axis] + (long)c;
+            const double c = (p[3 * i + axis] - lo[axis]) / fine_size;
+            if (!(c >= 0.0 && c < (double)(dims[axis] * block))) { cell = -1; break; }
+            fine[axis] = (long)c;
+            cell = cell * dims[axis] + (fine[axis] >> shift);
         }
-        const char s = cell < 0 ? 0 : state[cell];
-        decided[i] = cell < 0 || s != -1;
-        inside[i] = (cell >= 0 && s != -1) ? (uchar)s : 0;
+        uchar d = 1, occupied = 0;
+        if (cell >= 0) {
+            const char s = state[cell];
+            if (s != -1) {
+                occupied = (uchar)s;
+            } else if (blocks[cell] >= 0) {
+                const long place = ((((fine[2] & mask) << shift) + (fine[1] & mask)) << shift) + (fine[0] & mask);
+                const long at = (long)blocks[cell] * 2 * words + (place >> 6);
+                const ulong bit = (ulong)(place & 63);
+                d = !((fine_bits[at] >> bit) & 1UL);
+                occupied = d ? (uchar)((fine_bits[at + words] >> bit) & 1UL) : 0;
+            } else {
+                d = 0;
+            }
+        }
+        decided[i] = d;
+        inside[i] = occupied;
     }
 }
 """
@@ -692,20 +710,24 @@ def _all_hits(tracer, rays: HitRays, capacity: int):
 
 def grid_lookup_device(tracer, grid, points: np.ndarray, sign: str) -> tuple[np.ndarray, np.ndarray]:
     """(decided, inside) per point, bool each: occupancy's parity grid (parity_grid.py:
-    ParityGrid.lookup) on a device of the GPU class, its states uploaded once per grid and sign
-    (kept on the grid), the points uploaded once, two bytes per point read back."""
+    ParityGrid.lookup) on a device of the GPU class, its arrays (the coarse cells' states and
+    blocks, the fine cells' bits) uploaded once per grid and sign (kept on the grid), the points
+    uploaded once, two bytes per point read back."""
     queue = tracer.ctx.queue
     count = len(points)
     decided, inside = np.zeros(count, np.uint8), np.zeros(count, np.uint8)
     if count:
         kept = grid.device_states
         if sign not in kept:
-            kept[sign] = cl_array.to_device(queue, np.ascontiguousarray(grid.states[sign], np.int8))
+            state, bits = grid.states[sign]
+            kept[sign] = [cl_array.to_device(queue, np.ascontiguousarray(a, dtype))
+                          for a, dtype in ((state, np.int8), (grid.blocks, np.int32), (bits, np.uint64))]
         outs = [cl_array.empty(queue, count, np.uint8) for _ in range(2)]
         p = cl_array.to_device(queue, np.ascontiguousarray(points, np.float64))
+        shift = int(grid.block).bit_length() - 1  # block = 2^shift
         _kernels(tracer).run(queue, "grid_lookup", count, outs[0].data, outs[1].data, p.data, np.int64(count),
-                             *(np.float64(x) for x in grid.lo), np.float64(grid.size),
-                             *(np.int64(d) for d in grid.dims), kept[sign].data)
+                             *(np.float64(x) for x in grid.lo), np.float64(grid.fine_size),
+                             *(np.int64(d) for d in grid.dims), np.int32(shift), *(a.data for a in kept[sign]))
         for out, array in zip(outs, (decided, inside)):
             cl.enqueue_copy(queue, array, out.data, is_blocking=False)
         queue.finish()

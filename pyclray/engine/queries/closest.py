@@ -254,14 +254,9 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     alone = closed is not None and len(closed.shapes) == len(tracer.shapes)
     if alone:  # closed meshes alone
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
-        grid = _parity_grid(tracer, closed, sign) if len(flat) >= COHERENT_FROM else None
-        if grid is not None:
-            if gpu_class(tracer.ctx.device):  # the lookup on the device (the same operations)
-                from .cast_device import grid_lookup_device
-
-                decided, inside = grid_lookup_device(tracer, grid, flat, sign)
-            else:
-                decided, inside = grid.lookup(flat, sign)
+        answers = _grid_answers(tracer, closed, flat, sign)
+        if answers is not None:
+            decided, inside = answers
             rest = np.flatnonzero(~decided)
         if sign == "parity" and len(closed.shapes) == 1 and _shares_boxes(closed):
             inside[rest] = _one_closed_mesh(closed, flat[rest])
@@ -478,23 +473,63 @@ def _chunk_slabs(triangles: np.ndarray, first: np.ndarray, count: np.ndarray) ->
     return out
 
 
-def _parity_grid(tracer, closed, sign: str):
+def _parity_grid(tracer, closed, sign: str, fine: bool = False):
     """The grid of a scene of closed meshes alone (tracer; closed: the handle of those meshes,
     which keeps it with its closest-point inputs: engine/queries/parity_grid.py), made at its first
-    call, with its cells decided by the sign rule; None where the meshes have none. Each closed
+    call (its coarse level, and with fine its fine level too: made again where the kept grid has
+    none), with its cells decided by the sign rule; None where the meshes have none. Each closed
     mesh's parity and winding number is constant on a region no triangle meets: so is whether some
     mesh holds a point, decided by the rule's own test of one point per region (_mesh_inside)."""
     inputs = closed.closest_inputs()
     with closed.lock:
-        if inputs.parity_grid is None:
+        kept = inputs.parity_grid
+        if kept is None or (fine and kept and not kept.refined):
             from .parity_grid import ParityGrid  # numba's code, for large batches only
 
             corners = [mesh.corners() for mesh in closed.shapes]
-            inputs.parity_grid = ParityGrid.of(tuple(np.concatenate(c) for c in zip(*corners))) or False
+            grid = ParityGrid.of(tuple(np.concatenate(c) for c in zip(*corners)), refine=fine) or False
+            inputs.nbytes += (grid.nbytes if grid else 0) - (kept.nbytes if kept else 0)  # counted with the handle's
+            inputs.parity_grid = grid
         grid = inputs.parity_grid or None
         if grid is not None:  # the exact inside of points on no surface
+            held = grid.nbytes
             grid.decide(sign, lambda points: _mesh_inside(tracer, points, sign))
+            inputs.nbytes += grid.nbytes - held  # the sign's states
         return grid
+
+
+# the parity grid's fine level is made at the first batch that leaves at least this share of its
+# points (and COHERENT_FROM points or more) in coarse surface cells: a batch near the surface, not
+# a uniform one (a uniform batch's points are mostly in empty coarse cells; the fine level's build
+# is several times the coarse one's: docs/benchmarks.md, "two-level parity grid")
+FINE_FROM = 1 / 8
+
+
+def _grid_answers(tracer, closed, points: np.ndarray, sign: str):
+    """(decided, inside) per point by the parity grid of a scene of closed meshes alone (closed:
+    their handle; see _parity_grid), bool each, for a batch of COHERENT_FROM points or more (the
+    grid's build pays off there); else None. The points the coarse level leaves are looked up again
+    in the fine level, made for them where they are many (FINE_FROM). On a device of the GPU class
+    the lookup is the device's (cast_device.py: grid_lookup_device, the same operations)."""
+    grid = _parity_grid(tracer, closed, sign) if len(points) >= COHERENT_FROM else None
+    if grid is None:
+        return None
+    decided, inside = _grid_lookup(tracer, grid, points, sign)
+    left = len(decided) - int(np.count_nonzero(decided))
+    if not grid.refined and left >= max(COHERENT_FROM, FINE_FROM * len(points)):
+        grid = _parity_grid(tracer, closed, sign, fine=True)
+        rest = np.flatnonzero(~decided)
+        decided[rest], inside[rest] = _grid_lookup(tracer, grid, points[rest], sign)
+    return decided, inside
+
+
+def _grid_lookup(tracer, grid, points: np.ndarray, sign: str):
+    """The grid's (decided, inside) of the points: the device's lookup on a device of the GPU class."""
+    if gpu_class(tracer.ctx.device):
+        from .cast_device import grid_lookup_device
+
+        return grid_lookup_device(tracer, grid, points, sign)
+    return grid.lookup(points, sign)
 
 
 def winding_numbers(tracer, points: np.ndarray) -> np.ndarray:
@@ -598,10 +633,19 @@ def _exact_along(a, b, c, direction) -> float:
 
 def _inside(tracer, points: np.ndarray, out: dict, sign: str) -> np.ndarray:
     """Inside any solid: the kernel's analytic solids and surface points (out["inside"]), and for
-    the other points the meshes' inside (_mesh_inside)."""
+    the other points the meshes' inside (_mesh_inside); in a scene of closed meshes alone the
+    points of a large batch in the parity grid's empty cells by the grid (the same answers as
+    their rays: engine/queries/parity_grid.py)."""
     inside = out["inside"].astype(bool)
-    rest = ~inside
-    if rest.any():
+    rest = np.flatnonzero(~inside)
+    closed = tracer.mesh_handle(closed=True)
+    if len(rest) and closed is not None and len(closed.shapes) == len(tracer.shapes):
+        answers = _grid_answers(tracer, closed, points[rest], sign)
+        if answers is not None:
+            decided, grid_inside = answers
+            inside[rest[decided]] = grid_inside[decided]
+            rest = rest[~decided]
+    if len(rest):
         inside[rest] = _mesh_inside(tracer, points[rest], sign)
     return inside
 
