@@ -247,19 +247,6 @@ def crossings(a, b, c, valid, origin, direction):
     size), else exactly (fractions.Fraction of the float64 vertices, origin and direction). So a ray
     through a shared edge or vertex crosses exactly one triangle there where it crosses the surface,
     and the parity from a point is exact. t is float64 (the plane's). valid: the triangles of area."""
-    rows = crossed(a, b, c, valid, origin, direction)
-    O, D = np.asarray(origin, np.float64), np.asarray(direction, np.float64)
-    n = np.cross(b[rows] - a[rows], c[rows] - a[rows])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (n * (a[rows] - O)).sum(axis=1) / (n @ D)
-    keep = np.isfinite(t) & (t > 0)
-    return t[keep], rows[keep]
-
-
-def crossed(a, b, c, valid, origin, direction) -> np.ndarray:
-    """The triangles (indices) whose projection along the line origin + t direction (any t) holds
-    the line's point, by kernels/mesh.cl's edge functions and tie rule in exact arithmetic (see
-    crossings): each crossing of the line with the surface once."""
     from fractions import Fraction
 
     O = np.asarray(origin, np.float64)
@@ -294,7 +281,12 @@ def crossed(a, b, c, valid, origin, direction) -> np.ndarray:
         signs = [_exact_tie(f, px, py, qx, qy) for f, (px, py), (qx, qy) in
                  ((f0, (pbx, pby), (pcx, pcy)), (f1, (pcx, pcy), (pax, pay)), (f2, (pax, pay), (pbx, pby)))]
         inside[i] = signs[0] != 0 and signs[0] == signs[1] == signs[2]
-    return np.flatnonzero(inside)
+    rows = np.flatnonzero(inside)
+    n = np.cross(b[rows] - a[rows], c[rows] - a[rows])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (n * (a[rows] - O)).sum(axis=1) / (n @ D)
+    keep = np.isfinite(t) & (t > 0)
+    return t[keep], rows[keep]
 
 
 def _exact_tie(f, px, py, qx, qy) -> int:
