@@ -299,16 +299,18 @@ class Tracer:
                 self._closest_inputs = closest_queries.ClosestInputs(prepared, prepared.shapes)
             return self._closest_inputs
 
-    def mesh_handle(self, closed: bool):
+    def mesh_handle(self, closed: bool, precision: str | None = None):
         """A handle of this scene's closed meshes alone (closed=True: sign="parity" counts their
-        crossings, "winding" signs them), or of its open ones (their hierarchical winding number);
-        None where it has none; made when first asked for."""
+        crossings, "winding" signs them), or of its open ones (their hierarchical winding number),
+        in this handle's precision or the one given (occupancy's fp32 count narrows its undecided
+        points in fp64: engine/queries/closest.py); None where it has none; made when first asked for."""
+        key = (closed, precision or self.precision)
         with self.lock:
             self.prepared
-            if closed not in self._mesh_handles:
+            if key not in self._mesh_handles:
                 scene = closest_queries.meshes_scene(replace(self._scene, shapes=self.prepared.shapes), closed)
-                self._mesh_handles[closed] = None if scene is None else Tracer(scene, self.ctx.device, self.precision)
-            return self._mesh_handles[closed]
+                self._mesh_handles[key] = None if scene is None else Tracer(scene, self.ctx.device, key[1])
+            return self._mesh_handles[key]
 
     def _drop_closest(self) -> None:
         self._closest_inputs = None

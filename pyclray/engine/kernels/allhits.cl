@@ -81,15 +81,18 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
  * its unbounded shapes, its box ray, the root pushed), hits_step is one step, hits_end sorts its rows
  * and writes its count. */
 /* With PYCLRAY_AOV_SURFACE (count_hits for occupancy: engine/queries/closest.py), also whether the
- * ray's origin, a point, lies on a surface (surface_out[r]: 1 on, 0 not or an odd count, 2 not
- * known here). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
+ * count's parity is the point's inside (surface_out[r]: 0 it is; 3 undecided: a crossing within
+ * rounding of the point, kernels/mesh_blocks.cl's MESH_BLOCK_DOUBT, or a triangle within
+ * surface_band of it, or at distance 0 (on the surface, or a rounding off it), whose point the
+ * host decides exactly; 2 not known here: the host asks the closest-point query's distance), and
+ * the crossings signed, +1 out of a mesh and -1 into it, summed (surface_signed_out: a closed
+ * mesh's winding number, sign="winding"). Only a point in the box of some leaf may: that leaf's box is entered at 0, as
  * box_ray's margin (2^-20 of the origin's size) makes it for every box that holds the float64
  * origin, or within the closest-point query's 4 times smaller margin of the same float boxes
  * (kernels/closest.cl). The traversal notes the first SURFACE_LEAVES such leaves as it reaches them
- * (their entry is the one it found: no box is tested for this), and where the count is even
- * (a point on a surface is inside, whatever its count) tests their shapes as the closest-point
- * query's search for a surface point at distance 0 does: the same <type>_closest of the same
- * float64 world entries (the closest-point query's leaf, surface_leaf_codes: per place of this
+ * (their entry is the one it found: no box is tested for this), and tests their shapes as the
+ * closest-point query's search does, for a squared distance within surface_band's square: the
+ * same <type>_closest of the same float64 world entries (the closest-point query's leaf, surface_leaf_codes: per place of this
  * program's refs where a leaf starts, that leaf in the query's refs), a squared distance of 0,
  * unless the point lies beyond the leaf's slab (surface_slabs: engine/queries/closest.py's
  * leaf_slabs), where none of them is at 0 (most leaves of points near a surface: a dot product
@@ -104,10 +107,15 @@ inline bool allhits_before(__global const double* hit_t, __global const int* hit
         if (S->n_surface_ < SURFACE_LEAVES) S->surface_leaf_[S->n_surface_] = first; \
         S->n_surface_ += S->n_surface_ <= SURFACE_LEAVES;                           \
     }
-#define HITS_SURFACE_STATE(X) X(int, n_surface)
+#define HITS_SURFACE_STATE(X) X(int, n_surface) X(int, undecided) X(int, signed_count)
+/* the signed count of the crossings (kernels/mesh_blocks.cl: +1 out, -1 in): surface_signed_out */
+#define HITS_SIGNED(change) signed_count += (change);
+/* a crossing whose sign of s the rounding may have turned (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT):
+ * the point is undecided (3), whatever its count and surface */
+#define HITS_UNDECIDED undecided = 1
 #define HITS_VISIT_ALL(q) n_surface = SURFACE_LEAVES + 1; PYCLRAY_CAST_VISIT(q)
 #define HITS_ON_SURFACE_KIND(Type, type)                                            \
-    if (kind == KIND_##type && type##_closest(&type##_surface_worlds[k], p).d2 == 0.0) surface = 1;
+    if (kind == KIND_##type && !(type##_closest(&type##_surface_worlds[k], p).d2 > reach * reach)) surface = 3;
 #else
 #define HITS_SURFACE_STATE(X)
 #define HITS_VISIT_ALL(q) PYCLRAY_CAST_VISIT(q)
@@ -136,7 +144,7 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
     PYCLRAY_CAST_RAY
     int n_hits = 0;
 #ifdef PYCLRAY_AOV_SURFACE
-    int n_surface = 0;
+    int n_surface = 0, undecided = 0, signed_count = 0;
 #endif
 #ifdef PYCLRAY_STORE_HITS
     const long hits_at = (long)r * hit_capacity;
@@ -170,6 +178,10 @@ inline void hits_start(HitsRay* S, const int r, const CastDirection* direction, 
 #define o (S->o_)
 #define box_direction (S->box_direction_)
 #define limit (S->limit_)
+#ifdef PYCLRAY_AOV_SURFACE
+#define undecided (S->undecided_)
+#define signed_count (S->signed_count_)
+#endif
 inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 {
     int top = S->top_;
@@ -194,6 +206,10 @@ inline void hits_step(HitsRay* S, PYCLRAY_PARAMETERS)
 #undef o
 #undef box_direction
 #undef limit
+#ifdef PYCLRAY_AOV_SURFACE
+#undef undecided
+#undef signed_count
+#endif
 #endif
 
 inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
@@ -215,29 +231,38 @@ inline void hits_end(const HitsRay* S, PYCLRAY_PARAMETERS)
 #endif
     hit_counts[r] = n_hits;
 #ifdef PYCLRAY_AOV_SURFACE
+    /* a point within surface_band of a triangle (of the leaves whose boxes hold it) is undecided
+     * too: its count is exact on the corners as rounded relative to it, which may have moved the
+     * surface across it (kernels/mesh_blocks.cl, MESH_BLOCK_DOUBT); and at distance 0 (even count)
+     * on the surface, which the host confirms exactly */
     uchar surface = 0;
-    if (!(n_hits & 1) && S->n_surface_ > SURFACE_LEAVES) {
+    if (S->undecided_) {
+        surface = 3;
+    } else if (S->n_surface_ > SURFACE_LEAVES) {
         surface = 2;
-    } else if (!(n_hits & 1)) {
+    } else {
         const double3 p = S->ray_.world;
-        for (int j = 0; j < S->n_surface_ && !surface; ++j) {
+        /* the band, and the closest-point test's own rounding (a few eps64 of the point's size) */
+        const double reach = surface_band + 0x1p-50 * (fabs(p.x) + fabs(p.y) + fabs(p.z));
+        for (int j = 0; j < S->n_surface_ && surface != 3; ++j) {
             /* the leaf's slab first (surface_slabs: its triangles' dot products with a unit
              * direction lie in [lo, hi], widened by the host over the rounding there and of the
              * closest-point test's nearest points): a point beyond it by more than the rounding of
-             * its own dot product lies on none of them (each one's squared distance is not 0) */
+             * its own dot product and the band is farther than the band from each of them */
             __global const double* slab = surface_slabs + 5 * (size_t)S->surface_leaf_[j];
             const double along = slab[0] * p.x + slab[1] * p.y + slab[2] * p.z;
-            const double rounding = 0x1p-40 * (fabs(p.x) + fabs(p.y) + fabs(p.z));  /* SLAB_SIZE_MARGIN */
+            const double rounding = 0x1p-40 * (fabs(p.x) + fabs(p.y) + fabs(p.z)) + reach;  /* SLAB_SIZE_MARGIN */
             if (along < slab[3] - rounding || along > slab[4] + rounding) continue;
             const int code = surface_leaf_codes[S->surface_leaf_[j]];
             const int first = (~code) >> 3, count = (~code) & 7;
-            for (int q = first; q < first + count && !surface; ++q) {
+            for (int q = first; q < first + count && surface != 3; ++q) {
                 const int ref = surface_refs[q], kind = ref & 15, k = ref >> 4;
                 PYCLRAY_BOUNDED(HITS_ON_SURFACE_KIND)
             }
         }
     }
     surface_out[r] = surface;
+    surface_signed_out[r] = S->signed_count_;
 #endif
 }
 

@@ -44,9 +44,33 @@ inline int mesh_block_bits(const blockmask m)
 #endif
 }
 
+/* Occupancy's parity band (the count from points, kernels/allhits.cl: PYCLRAY_AOV_SURFACE): the lanes
+ * whose crossing's sign of s the rounding may have turned, as bits, in *doubt (MESH_BLOCK_DOUBT).
+ * The test runs on the corners rounded relative to the origin and on their rounded shear, each
+ * corner's own (the same for every triangle of it): an exact count on a moved copy of the mesh,
+ * whose parity is the mesh's unless the moves or the rounding of s carry a crossing across s = 0.
+ * With u the unit roundoff and m the largest |coordinate| of the three corners relative to the
+ * origin, each corner is off by <= u m, its projected (homogeneous) coordinates, of size <= P =
+ * 2 m |dz|, by <= 3 u P, each edge function by <= 16 u P^2, so the numerator N = e0 Az + e1 Bz +
+ * e2 Cz is off by at most m (50 u P^2 + 5 u |det|) (the edge functions of a crossed triangle have
+ * one sign: their magnitudes sum to |det|); a crossing with |N| within a bound above that,
+ * MESH_BAND_N (m (256 u m^2 dz^2 + 8 u |det|)), is in doubt: its point's inside is decided
+ * exactly on the host (engine/queries/closest.py). A lane whose edge functions were recomputed in
+ * double (fp32: mesh_exact_lane, scaled) is in doubt wherever it crosses. */
+#ifdef PYCLRAY_AOV_SURFACE
+#define MESH_BLOCK_DOUBT , int* doubt, int* leaving
+#ifdef PYCLRAY_FP64
+#define MESH_BAND_EPSILON 0x1p-53
+#else
+#define MESH_BAND_EPSILON 0x1p-24f
+#endif
+#else
+#define MESH_BLOCK_DOUBT
+#endif
+
 /* Per lane the triangle's s > 0 along ray->dir from ray->world (the moved origin), else MISS; the
  * lanes hit, as bits, in *hits. */
-inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray, int* hits)
+inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray, int* hits MESH_BLOCK_DOUBT)
 {
     const int head = as_int2(block[0]).x, count = head & 255, unique = head >> 8;
     __global const double* rows = block + 1;
@@ -87,6 +111,9 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     const int lanes = (1 << count) - 1;
 #ifdef PYCLRAY_MESH_EXACT
     const int zero = mesh_block_bits(e0 == (blockv)(0) || e1 == (blockv)(0) || e2 == (blockv)(0)) & lanes;
+#ifdef PYCLRAY_AOV_SURFACE
+    const int rescaled = zero;
+#endif
     if (zero) {  /* those lanes' edge functions exactly signed, in double */
         MeshBlockLanes Sax, Say, Sbx, Sby, Scx, Scy, E0, E1, E2;
         Sax.v = ax_; Say.v = ay_; Sbx.v = bx_; Sby.v = by_; Scx.v = cx_; Scy.v = cy_;
@@ -130,11 +157,41 @@ inline blockv mesh_block_hits(__global const double* block, const RayPacket* ray
     const blockmask inside = !(negative && positive) && det != (blockv)(0);
 #endif
     *hits = mesh_block_bits(inside) & lanes;
+#ifdef PYCLRAY_AOV_SURFACE
+    *doubt = *leaving = 0;
+#endif
     if (!*hits) return (blockv)(MISS);  /* most blocks a ray reaches it misses: no division */
     const blockv numerator = (e0 * Az + e1 * Bz) + e2 * Cz;
+#ifdef PYCLRAY_AOV_SURFACE
+    {  /* the crossings in doubt (MESH_BLOCK_DOUBT), lane by lane (a few a ray): each corner's
+        * coordinates as rounded above, read again (the lanes' vectors stay in registers) */
+        MeshBlockLanes N, Det;
+        N.v = numerator;
+        Det.v = det;
+        for (int mask = *hits; mask != 0; mask &= mask - 1) {
+            const int l = BVH_LOWEST_BIT(mask);
+            real largest = 0;
+            for (int v = 0; v < 3; ++v) {
+                const int i = corner[v * count + l];
+                largest = fmax(largest, fmax(fmax(fabs((real)(X[i] - ox)), fabs((real)(Y[i] - oy))), fabs((real)(Z[i] - oz))));
+            }
+            const real scaled = largest * dz;
+            const real band = largest * (MESH_BAND_EPSILON * ((real)256 * (scaled * scaled) + (real)8 * fabs(Det.s[l])));
+            if (!(fabs(N.s[l]) > band)) *doubt |= 1 << l;
+        }
+#ifdef PYCLRAY_MESH_EXACT
+        *doubt |= rescaled & *hits;
+#endif
+    }
+#endif
     const blockv s = numerator / (inside ? det * Dz : (blockv)(1));
     const blockmask hit = inside && s > (blockv)(0);
     *hits &= mesh_block_bits(hit);
+#ifdef PYCLRAY_AOV_SURFACE
+    /* the crossings out of the mesh: its outward normal along the ray, n . d = det dz (the
+     * projected triangle's signed area along the ray, of the homogeneous shear's scale dz^2) > 0 */
+    *leaving = mesh_block_bits(det * Dz > (blockv)(0)) & *hits;
+#endif
     return hit ? s : (blockv)(MISS);
 }
 
@@ -150,15 +207,32 @@ inline vec3v mesh_block_normal(__global const double* block, const int lane)
     return v3((real)n.x, (real)n.y, (real)n.z);
 }
 
+/* occupancy's count: a block's crossings in doubt from the ray's own origin (s0 = 0: a moved ray
+ * starts before all of the mesh, where no crossing is near 0) make the ray's point undecided
+ * (kernels/allhits.cl: HITS_UNDECIDED); its crossings signed, +1 out of the mesh and -1 into it,
+ * summed (HITS_SIGNED: the winding number of closed meshes; every hit of a ray from a point
+ * counts, its t_max infinite) */
+#ifdef PYCLRAY_AOV_SURFACE
+#define MESH_BLOCK_DOUBT_STATE , doubt, leaving
+#define MESH_BLOCK_DOUBT_ARGUMENT , &doubt, &leaving
+#define MESH_BLOCK_DOUBT_TAKE                                                       \
+    if (doubt != 0 && s0 == 0.0) HITS_UNDECIDED;                                    \
+    HITS_SIGNED(2 * popcount(leaving) - popcount(hits))
+#else
+#define MESH_BLOCK_DOUBT_STATE
+#define MESH_BLOCK_DOUBT_ARGUMENT
+#define MESH_BLOCK_DOUBT_TAKE
+#endif
 /* kernels/rays.h's cast visit of a block (PYCLRAY_CAST_MODE_<type> BLOCKS): its lanes hit, in
  * lane order (the leaf's order: the same winner on an exact tie as one by one) */
 #define MESH_BLOCKS(type) ((__global const double*)type##_worlds)
 #define PYCLRAY_CAST_TEST_BLOCKS(Type, type)                                        \
     {                                                                               \
         __global const double* block = MESH_BLOCKS(type) + 8 * (size_t)k;           \
-        int hits;                                                                   \
+        int hits MESH_BLOCK_DOUBT_STATE;                                            \
         MeshBlockLanes lane_s;                                                      \
-        lane_s.v = mesh_block_hits(block, &moved, &hits);                           \
+        lane_s.v = mesh_block_hits(block, &moved, &hits MESH_BLOCK_DOUBT_ARGUMENT); \
+        MESH_BLOCK_DOUBT_TAKE                                                       \
         for (; hits != 0; hits &= hits - 1) {                                       \
             const int lane = BVH_LOWEST_BIT(hits);                                  \
             const double t = s0 + (double)lane_s.s[lane] * ray_length;              \

@@ -285,7 +285,12 @@ COUNT_HITS = (
     # triangles: the surface test's pre-test (kernels/allhits.cl, engine/queries/closest.py)
     Parameter("surface_slabs", "__global const double*", (_asked("surface"),)),
     EachType((Parameter("{type}_surface_worlds", "__global const {World}*", (_asked("surface"),)),)),
+    # the distance from the surface within which a point's count may be off by the rounding of the
+    # triangles' corners relative to it (engine/queries/closest.py: surface_band)
+    Parameter("surface_band", "const double", (_asked("surface"),)),
     Parameter("surface_out", "__global uchar*", (_asked("surface"),)),
+    # the rays' crossings signed, +1 out of a mesh and -1 into it, summed (kernels/mesh_blocks.cl)
+    Parameter("surface_signed_out", "__global int*", (_asked("surface"),)),
 )
 ALL_HITS = (
     *RAYS,

@@ -632,11 +632,12 @@ def hit_counts_device(tracer, origins, directions, tmin, tmax, surface: dict | N
     """count_hits (hits.py: run_count_hits) of host rays on a device of the GPU class: uploaded once,
     checked and counted on the device, the counts and the check's results read back once; with
     surface (occupancy's rays from points: hits.py's count_from_points, its surface test's
-    arguments), (counts, on) of the flat rays. A refused ray raises RaysRefused, whose rays the
-    caller's host path checks to name the first bad row (hits.py)."""
+    arguments), (counts, on, signed) of the flat rays. A refused ray raises RaysRefused, whose rays
+    the caller's host path checks to name the first bad row (hits.py)."""
     rays = HitRays(tracer, origins, directions, tmin, tmax)
     counts = np.zeros(rays.count, np.int32)
     on = np.zeros(rays.count, np.uint8)
+    signed = np.zeros(rays.count, np.int32)
     if rays.count:
         context = tracer.ctx.context
         buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, counts.nbytes)
@@ -645,10 +646,11 @@ def hit_counts_device(tracer, origins, directions, tmin, tmax, surface: dict | N
             rays.read_checked({"counts": (buffer, counts)})
         else:
             on_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, on.nbytes)
-            rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer,
-                                                                 "surface_out": on_buffer}, ("surface",))
-            rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on)})
-    return counts.reshape(rays.shape) if surface is None else (counts, on)
+            signed_buffer = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, signed.nbytes)
+            rays.launch("count_hits", rays.count, rays.buffers, {**surface, "hit_counts": buffer, "surface_out": on_buffer,
+                                                                 "surface_signed_out": signed_buffer}, ("surface",))
+            rays.read_checked({"counts": (buffer, counts), "on": (on_buffer, on), "signed": (signed_buffer, signed)})
+    return counts.reshape(rays.shape) if surface is None else (counts, on, signed)
 
 
 def all_hits_device(tracer, origins, directions, tmin, tmax, capacity: int):

@@ -274,7 +274,8 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     flat, shape = check_points(points)
     inside, rest = np.zeros(len(flat), bool), slice(None)
     closed = tracer.mesh_handle(closed=True)
-    if closed is not None and len(closed.shapes) == len(tracer.shapes):  # closed meshes alone
+    alone = closed is not None and len(closed.shapes) == len(tracer.shapes)
+    if alone:  # closed meshes alone
         # a large batch's points of the meshes' grid's empty cells and beyond it decided there first
         answers = _grid_answers(tracer, closed, flat, sign)
         if answers is not None:
@@ -291,6 +292,12 @@ def occupancy(tracer, points, sign: str = "parity") -> np.ndarray:
     other = ~found
     if other.any():
         found[other] = run_closest(tracer, points[other], ("inside",), within=0.0)["inside"].astype(bool)
+        claimed = np.flatnonzero(other)[found[other]]
+        if alone and len(claimed):  # at float64's distance 0 of a closed mesh: on it exactly, or outside
+            from .parity_exact import exact_on_surface
+
+            nearest = run_closest(tracer, points[claimed], ("distance",) + CLOSEST_OUTPUTS)
+            found[claimed] = exact_on_surface(tracer.shapes, points[claimed], nearest["id"], nearest["primitive"])
     inside[rest] = found
     return inside.astype(np.uint8).reshape(shape)
 
@@ -303,18 +310,67 @@ def _shares_boxes(closed) -> bool:
 
 
 def _one_closed_mesh(closed, points: np.ndarray) -> np.ndarray:
-    """Inside by parity in a scene of one closed mesh (its handle; points checked): an odd count of
-    the parity ray, or a point on the surface. The count's kernel also decides whether a point with
-    an even count lies on a surface, by the closest-point query's test of the leaves whose boxes
-    hold it (kernels/allhits.cl: PYCLRAY_AOV_SURFACE; the query's own search visits no other leaf),
-    and where it cannot say (a point in many leaves' boxes), the query itself: the same answers as
-    the query's from every point."""
-    counts, on = count_from_points(closed, points, parity_directions(closed, points), _surface_arguments(closed))
-    found = (counts & 1).astype(bool) | (on == 1)
+    """Inside by parity in a scene of one closed mesh (its handle; points checked), exactly: an odd
+    count of the parity ray, or a point on the surface. The count's kernel also says where its
+    parity may not be the point's inside (_banded_count): a crossing within rounding of the point,
+    or a triangle within the band of the corners' rounding (by the closest-point query's test of
+    the leaves whose boxes hold the point: kernels/allhits.cl, PYCLRAY_AOV_SURFACE), at distance 0
+    included; those points are counted again in float64 (fp32), and the ones still undecided
+    decided exactly on the host (parity_exact.py)."""
+    directions = parity_directions(closed, points)
+    counts, on, _ = _banded_count(closed, points, directions)
+    found = (counts & 1).astype(bool)
+    if closed.precision != "fp64":  # fp32's undecided points: first the same count in float64
+        again = np.flatnonzero(on == UNDECIDED)
+        if len(again):
+            on[again] = 0
+            found[again] = _one_closed_mesh(closed.mesh_handle(closed=True, precision="fp64"), points[again])
+    # the points left undecided (a crossing within rounding of the point: kernels/mesh_blocks.cl;
+    # a triangle within the band, or at float64's distance 0: on the surface, or a rounding off it),
+    # decided exactly (parity_exact.py), first by the nearest triangle (a point on it is inside)
+    exact = np.flatnonzero(on == UNDECIDED)
+    if len(exact):
+        from .parity_exact import exact_inside
+
+        nearest = run_closest(closed, points[exact], ("distance",) + CLOSEST_OUTPUTS)["primitive"]
+        found[exact] = exact_inside(closed.shapes[0], points[exact], directions[exact], nearest)
+    return found
+
+
+# the count kernel's surface output for a point whose parity it cannot decide: a crossing of its
+# ray within rounding of the point (kernels/mesh_blocks.cl: MESH_BLOCK_DOUBT) or a triangle within
+# surface_band of it (kernels/allhits.cl), decided exactly on the host (engine/queries/parity_exact.py)
+UNDECIDED = 3
+
+
+def _banded_count(closed, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(counts, on, signed) of the count kernel's surface variant from the points
+    (kernels/allhits.cl): on is UNDECIDED where the count (and its signed sum) may not be the
+    point's, else 0 (a point in more leaves' boxes than the kernel notes: by the closest-point
+    query's distance against the band)."""
+    surface = _surface_arguments(closed)
+    counts, on, signed = count_from_points(closed, points, directions, surface)
     unknown = np.flatnonzero(on == 2)
     if len(unknown):
-        found[unknown] = run_closest(closed, points[unknown], ("inside",), within=0.0)["inside"].astype(bool)
-    return found
+        d = run_closest(closed, points[unknown], ("distance",))["distance"]
+        reach = float(surface["surface_band"]) + 2.0**-50 * np.abs(points[unknown]).sum(axis=1)
+        on[unknown] = np.where(d <= reach, UNDECIDED, 0)
+    return counts, on, signed
+
+
+def _undecided(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The points (indices) whose parity rays along directions the hit queries may count wrongly: a
+    crossing within rounding of the point, by the count kernel's band (its surface variant, whose
+    block tests run the band: kernels/mesh_blocks.cl), for the paths that count by all_hits (several
+    closed meshes, the signed crossings). A handle whose rays do not traverse the closest-point
+    query's tree (meshes drawn as instances) has no band: none."""
+    if not len(points) or not _shares_boxes(closed):
+        return np.zeros(0, np.int64)
+    undecided = np.flatnonzero(_banded_count(closed, points, directions)[1] == UNDECIDED)
+    if closed.precision != "fp64" and len(undecided):  # fp32's narrowed by the same band in float64
+        twin = closed.mesh_handle(closed=True, precision="fp64")
+        undecided = undecided[_undecided(twin, points[undecided], directions[undecided])]
+    return undecided
 
 
 def _surface_arguments(closed) -> dict:
@@ -338,9 +394,31 @@ def _surface_arguments(closed) -> dict:
             slabs[places] = leaf_slabs(inputs, nodes["child"][leaf])
             inputs.nbytes += codes.nbytes + slabs.nbytes
             inputs.surface_arguments = {"surface_leaf_codes": input_buffer(ctx, codes), "surface_refs": inputs.args["refs"],
-                                        "surface_slabs": input_buffer(ctx, slabs),
+                                        "surface_slabs": input_buffer(ctx, slabs), "surface_band": surface_band(closed),
                                         **{f"{t}_surface_worlds": inputs.args[f"{t}_worlds"] for t in inputs.types}}
         return inputs.surface_arguments
+
+
+# the unit roundoff of each precision's triangle test (kernels/mesh_blocks.cl: MESH_BAND_EPSILON)
+EPSILON = {"fp32": 2.0**-24, "fp64": 2.0**-53}
+# surface_band's factor: the count from a point runs on the triangles' corners rounded relative to
+# it (by <= u |corner - p|) and their projections rounded (by <= about 6 u of the corners' size, in
+# length): 16 u of the largest triangle's size bounds how far that moves the surface near the point
+SURFACE_BAND_K = 16.0
+
+
+def surface_band(closed) -> np.float64:
+    """The distance (float64) from the closed meshes' surface (their handle) within which the count
+    kernel's parity may be off by the rounding of the triangles' corners relative to the point:
+    SURFACE_BAND_K unit roundoffs of the precision's triangle test times the largest coordinate
+    extent of a triangle; such points are decided again (kernels/allhits.cl: PYCLRAY_AOV_SURFACE)."""
+    largest = 0.0
+    for mesh in closed.shapes:
+        a, b, c = mesh.corners()
+        if len(a):
+            extent = np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c)
+            largest = max(largest, float(extent.max()))
+    return np.float64(SURFACE_BAND_K * EPSILON[closed.precision] * largest)
 
 
 # the slabs' margins (leaf_slabs): of the leaf's coordinates' size (the kernel adds the same of the
@@ -512,9 +590,14 @@ def parity_directions(closed, points: np.ndarray) -> np.ndarray:
 
 def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
     """Per point, the crossings of its parity ray out of its closed meshes less those into them: +1
-    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters;
-    the sign from the float64 normal, in exact arithmetic where that is within rounding of 0."""
+    where the ray leaves through a triangle (its outward normal along the ray), -1 where it enters.
+    Where the handle's rays traverse the closest-point query's tree, the count kernel's signed sum
+    (its facing from the watertight test's det) with its band, the undecided points again in
+    float64 (fp32) and then exactly (_banded_signed); else from all_hits, the sign from the float64
+    normal, in exact arithmetic where that is within rounding of 0."""
     directions = parity_directions(closed, points)
+    if len(points) and _shares_boxes(closed):
+        return _banded_signed(closed, points, directions)
     one = len(closed.shapes) == 1  # then every hit's id is 0: not asked for
     hits = closed.all_hits(points, directions, aovs=("primitive",) if one else ("id", "primitive"))
     ray, primitive = (np.asarray(hits[k]).astype(np.int64) for k in ("ray", "primitive"))
@@ -535,6 +618,29 @@ def _signed_crossings(closed, points: np.ndarray) -> np.ndarray:
             along[i] = _exact_along(a[i], b[i], c[i], d[i])
         signs[mine] = np.sign(along)
     return np.bincount(ray, weights=signs, minlength=len(points))
+
+
+def _banded_signed(closed, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The signed crossings of the points' rays (float64), exact: the count kernel's signed sum,
+    its undecided points counted again in float64 (fp32) and the rest exactly on the host, per
+    mesh (parity_exact.py; a point on a surface as 1: inside)."""
+    _, on, signed = _banded_count(closed, points, directions)
+    total = signed.astype(np.float64)
+    undecided = np.flatnonzero(on == UNDECIDED)
+    if len(undecided) and closed.precision != "fp64":
+        twin = closed.mesh_handle(closed=True, precision="fp64")
+        total[undecided] = _banded_signed(twin, points[undecided], directions[undecided])
+    elif len(undecided):
+        from .parity_exact import exact_crossings
+
+        total[undecided] = 0.0
+        on_surface = np.zeros(len(undecided), bool)
+        for mesh in closed.shapes:
+            _, signed_exact, on_mesh = exact_crossings(mesh, points[undecided], directions[undecided])
+            total[undecided] += signed_exact
+            on_surface |= on_mesh
+        total[undecided[on_surface]] = np.maximum(total[undecided[on_surface]], 1.0)
+    return total
 
 
 def _exact_along(a, b, c, direction) -> float:
@@ -574,6 +680,8 @@ def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
     closed = tracer.mesh_handle(closed=True)
     if closed is None or not len(points):
         return np.zeros(len(points), bool)
+    if len(closed.shapes) == 1 and _shares_boxes(closed):  # its count's band and surface test (exact)
+        return _one_closed_mesh(closed, points)
     directions = parity_directions(closed, points)
     if len(closed.shapes) == 1:
         return (closed.count_hits(points, directions) & 1).astype(bool)
@@ -581,7 +689,14 @@ def _mesh_inside(tracer, points: np.ndarray, sign: str) -> np.ndarray:
     hits = closed.all_hits(points, directions, aovs=("id",))
     ray, ids = np.asarray(hits["ray"]), np.asarray(hits["id"]).astype(np.int64)
     per = np.bincount(ray * len(closed.shapes) + ids, minlength=len(points) * len(closed.shapes))
-    return (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
+    inside = (per.reshape(len(points), len(closed.shapes)) & 1).any(axis=1)
+    undecided = _undecided(closed, points, directions)
+    if len(undecided):  # each mesh's inside exactly
+        from .parity_exact import exact_inside
+
+        inside[undecided] = np.any([exact_inside(mesh, points[undecided], directions[undecided])
+                                    for mesh in closed.shapes], axis=0)
+    return inside
 
 
 def meshes_scene(scene, closed: bool):

@@ -109,11 +109,11 @@ def run_count_hits(tracer, origins, directions, tmin, tmax, host: bool = False) 
 
 
 def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surface: dict,
-                      host: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(counts int32, on uint8) of rays from checked points (N, 3) along directions (N, 3): each
-    one's number of hits t > 0, and where that is even whether the point lies on a surface (1; 0
-    not, or an odd count; 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE); surface: that
-    test's arguments (the closest-point query's leaves, their slabs, refs and world entries:
+                      host: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(counts int32, on uint8, signed int32) of rays from checked points (N, 3) along directions
+    (N, 3): each one's number of hits t > 0, whether that count's parity is the point's inside (0;
+    3 undecided, 2 not known: kernels/allhits.cl, PYCLRAY_AOV_SURFACE), and its meshes' crossings
+    signed (+1 out, -1 in) and summed; surface: that test's arguments (the closest-point query's leaves, their slabs, refs and world entries:
     closest.py); on a device of the GPU class (but with host) checked and counted on the device
     (cast_device.py)."""
     if not host and gpu_class(tracer.ctx.device):
@@ -124,10 +124,11 @@ def count_from_points(tracer, points: np.ndarray, directions: np.ndarray, surfac
     batch = RayBatch(tracer, points, directions, None, None, ORDER_ALWAYS)
     counts = np.zeros(batch.count, np.int32)
     on = np.zeros(batch.count, np.uint8)
+    signed = np.zeros(batch.count, np.int32)
     if batch.count:
         variant = Variant("count_hits", tracer.prepared.types, ("surface",), tracer.precision, pairs=batch.pairs)
-        _run(tracer.ctx, variant, batch, surface, {"hit_counts": counts, "surface_out": on})
-    return counts, on
+        _run(tracer.ctx, variant, batch, surface, {"hit_counts": counts, "surface_out": on, "surface_signed_out": signed})
+    return counts, on, signed
 
 
 # all_hits' rows per ray in its one pass: a ray with more hits is cast again with room for all of them
