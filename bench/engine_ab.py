@@ -15,7 +15,9 @@ called, so that both sides run the same script. The workloads (512x512 unless sa
 - bunny (80,000 triangles, subdivided) and 1M (the 998,000-triangle perturbed sphere): primary rays
   (depth, normal, id, primitive) and 100,000 incoherent rays' cast;
 - 100k spheres: cast and occluded of 100,000 rays from the field's box;
-- shaded with shadows: the 100k-sphere field lit by a point light (shaded).
+- shaded with shadows: the 100k-sphere field lit by a point light (shaded);
+- bunny and 1M: closest_points and signed_distance of 100,000 points uniform in the mesh's box.
+`--only name,...` times the workloads whose names contain one of those words (all by default).
 """
 from __future__ import annotations
 
@@ -75,6 +77,9 @@ def _workloads():
         directions = rng.normal(size=(100_000, 3))
         work[f"{label} primary"] = lambda scene=scene: pyclray.render(scene, ("depth", "normal", "id", "primitive"))
         work[f"{label} incoherent cast 100k"] = lambda scene=scene, o=origins, d=directions: pyclray.cast(scene, o, d)
+        points = rng.uniform(lo, hi, (100_000, 3))
+        work[f"{label} closest_points 100k"] = lambda scene=scene, p=points: pyclray.closest_points(scene, p)
+        work[f"{label} signed_distance 100k"] = lambda scene=scene, p=points: pyclray.signed_distance(scene, p)
     return work
 
 
@@ -92,11 +97,13 @@ def subdivided(vertices, faces, times: int):
     return vertices, faces
 
 
-def worker(block: int) -> None:
-    """Time every workload (a block of calls each) and print one JSON line: name -> [wall ms, CPU ms]."""
+def worker(block: int, only: str = "") -> None:
+    """Time every workload (a block of calls each; only: those whose names contain one of its
+    comma-separated words, where given) and print one JSON line: name -> [wall ms, CPU ms]."""
     import pyclray
 
-    work = _workloads()
+    words = [w for w in only.split(",") if w]
+    work = {k: v for k, v in _workloads().items() if not words or any(w in k for w in words)}
     for run in work.values():  # programs compiled, scenes prepared
         run()
     out = {"pyclray": str(Path(pyclray.__file__).parent)}
@@ -118,17 +125,19 @@ def main(argv=None) -> None:
     parser.add_argument("--against", required=True, help="the other checkout's root (its pyclray/ is imported)")
     parser.add_argument("--rounds", type=int, default=4)
     parser.add_argument("--block", type=int, default=5)
+    parser.add_argument("--only", default="", help="comma-separated words: the workloads whose names contain one")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
-        worker(args.block)
+        worker(args.block, args.only)
         return
     sides = {"this": str(REPO), "other": str(Path(args.against).resolve())}
     results = {side: [] for side in sides}
     for round_ in range(args.rounds):
         for side, root in sides.items():
             env = dict(os.environ, PYTHONPATH=root)
-            done = subprocess.run([sys.executable, __file__, "--worker", "--against", root, "--block", str(args.block)],
+            done = subprocess.run([sys.executable, __file__, "--worker", "--against", root, "--block", str(args.block),
+                                   "--only", args.only],
                                   env=env, capture_output=True, text=True, check=True)
             line = json.loads(done.stdout.strip().splitlines()[-1])
             assert line.pop("pyclray") == str(Path(root) / "pyclray"), "the other checkout's pyclray was not imported"

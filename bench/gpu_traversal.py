@@ -4,7 +4,8 @@ triangles) and 1,000,000-triangle mesh, and on `--instances` instances of the bu
 pair nodes: kernels/instance.cl):
 
     python -m bench.gpu_traversal [--rounds 3] [--block 5] [--size 512] [--rays 100000] [--sample 2000]
-                                  [--instances 50] [--cases bunny,1M,instances]
+                                  [--instances 50] [--cases bunny,1M,instances] [--points 100000]
+                                  [--parts trees,reads,rays,closest]
 
 - the trees: nodes and bytes of the wide tree (224 bytes a node), the binary one (32) and the pair
   nodes (64), and the conversion's time at prepare time (the binary nodes packed around the anchor,
@@ -20,8 +21,13 @@ pair nodes: kernels/instance.cl):
   (bench.open3d_compare.blocks); the 8-lane default beside them for scale. The instances (the bunny
   placed on a square grid, each turned about y and scaled by 0.8-1.2, a mirrored one in every
   three): the same rows, the camera over the grid, the incoherent rays from within its box; no tree
-  or read rows (their trees are the bunny's).
-Prints one table; the machine is shared: compare ratios, note the load printed.
+  or read rows (their trees are the bunny's);
+- the closest-point query likewise, on the bunny and the 1M mesh (issue 41, item 3): closest_points
+  (every output) of `--points` points uniform in the mesh's box and as many near its surface
+  (bench.points.near_points: within 1% of the box's size), the pair nodes' search against the wide
+  tree's at one lane and the 8 lanes', with the ratio of the process CPU times.
+`--parts` picks the parts (trees, reads, rays, closest; all by default).
+Prints one table a part; the machine is shared: compare ratios, note the load printed.
 """
 from __future__ import annotations
 
@@ -42,6 +48,7 @@ from pyclray.model.layout import layout
 
 from .meshes import camera_for, incoherent_rays, meshes
 from .open3d_compare import blocks
+from .points import near_points
 
 AOVS = ("depth", "normal", "id", "primitive")
 
@@ -121,15 +128,16 @@ def instances_of(mesh, count: int) -> list:
     return shapes
 
 
+def at(lanes, traversal, fn):
+    """fn, called with $PYCLRAY_LANES and $PYCLRAY_TRAVERSAL set."""
+    def call():
+        with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
+            return fn()
+    return call
+
+
 def timing_rows(label, scene, origins, directions, args):
     """The render's and the cast's medians: pairs at one lane, the wide tree at one lane and at 8."""
-
-    def at(lanes, traversal, fn):
-        def call():
-            with environment(PYCLRAY_LANES=lanes, PYCLRAY_TRAVERSAL=traversal):
-                return fn()
-        return call
-
     rows = []
     render = lambda: pyclray.render(scene, AOVS, acceleration="bvh")  # noqa: E731
     cast = lambda: pyclray.cast(scene, origins, directions, aovs=AOVS)  # noqa: E731
@@ -142,6 +150,23 @@ def timing_rows(label, scene, origins, directions, args):
     return rows
 
 
+def closest_rows(label, mesh, scene, tracer, args):
+    """closest_points' medians, uniform and near points: pairs at one lane, the wide tree at one
+    lane and at 8, and the ratio of the first two's process CPU times."""
+    rows = []
+    rng = np.random.default_rng(2)
+    lo, hi = mesh.box()
+    for kind, points in (("uniform", rng.uniform(lo, hi, (args.points, 3))),
+                         ("near the surface", near_points(tracer, lo, hi, args.points, rng))):
+        query = lambda points=points: pyclray.closest_points(scene, points)  # noqa: E731
+        systems = {"pairs, 1 lane": at(1, "pairs", query), "wide, 1 lane": at(1, "wide", query),
+                   "wide, 8 lanes": at(8, "wide", query)}
+        timed = blocks(systems, args.rounds, args.block)
+        rows.append((f"{label}: {args.points:,} points {kind}", *(timed[s]["median"] for s in systems),
+                     timed["pairs, 1 lane"]["cpu"] / timed["wide, 1 lane"]["cpu"]))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -151,29 +176,39 @@ def main(argv=None):
     parser.add_argument("--sample", type=int, default=2000)
     parser.add_argument("--instances", type=int, default=50)
     parser.add_argument("--cases", default="bunny,1M,instances")
+    parser.add_argument("--points", type=int, default=100_000)
+    parser.add_argument("--parts", default="trees,reads,rays,closest")
     args = parser.parse_args(argv)
-    cases = args.cases.split(",")
+    cases, parts = args.cases.split(","), set(args.parts.split(","))
     ctx = context_for(None)
-    trees, reads, timing = [], [], []
+    trees, reads, timing, closest = [], [], [], []
     every = meshes(None)
     for label, mesh in every.items():
         if label not in cases:
             continue
         scene = camera_for(mesh, args.size)
         tracer = tracer_for(scene, ctx, "fp32")
-        trees += tree_rows(label, tracer)
+        if "trees" in parts:
+            trees += tree_rows(label, tracer)
+        if "closest" in parts:
+            closest += closest_rows(label, mesh, scene, tracer, args)
+        if not parts & {"reads", "rays"}:
+            continue
         origins, directions = incoherent_rays(mesh, args.rays)
         sample = slice(0, args.sample)
-        depth = pyclray.cast(scene, origins[sample], directions[sample], aovs=("depth",))["depth"].astype(np.float64)
-        reads.append((f"{label}: {args.sample} incoherent rays",
-                      *reads_per_ray(tracer.prepared.bvh, origins[sample], directions[sample], depth)))
-        from pyclray.reference import oracle
+        if "reads" in parts:
+            depth = pyclray.cast(scene, origins[sample], directions[sample], aovs=("depth",))["depth"].astype(np.float64)
+            reads.append((f"{label}: {args.sample} incoherent rays",
+                          *reads_per_ray(tracer.prepared.bvh, origins[sample], directions[sample], depth)))
+            from pyclray.reference import oracle
 
-        cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
-        cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
-        reads.append((f"{label}: camera rays (every 64th pixel)", *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
-        timing += timing_rows(label, scene, origins, directions, args)
-    if "instances" in cases:
+            cam_o, cam_d = (a.reshape(-1, 3)[::64] for a in oracle.camera_rays(scene))
+            cam_depth = pyclray.cast(scene, cam_o, cam_d, aovs=("depth",))["depth"].astype(np.float64)
+            reads.append((f"{label}: camera rays (every 64th pixel)",
+                          *reads_per_ray(tracer.prepared.bvh, cam_o, cam_d, cam_depth)))
+        if "rays" in parts:
+            timing += timing_rows(label, scene, origins, directions, args)
+    if "instances" in cases and "rays" in parts:
         shapes = instances_of(every["bunny"], args.instances)
         lo = np.min([s.box()[0] for s in shapes], axis=0)
         hi = np.max([s.box()[1] for s in shapes], axis=0)
@@ -196,9 +231,15 @@ def main(argv=None):
     for case, pair, wide, leaves in reads:
         ratio = (pair * layout(PAIR_NODE, "fp32").itemsize) / (wide * layout(WIDE_NODE, "fp32").itemsize)
         print(f"| {case} | {pair:.1f} | {wide:.1f} | {ratio:.2f} | {leaves:.1f} |")
-    print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
+    if timing:
+        print("\n| case (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide | wide, 8 lanes |\n|---|---|---|---|---|")
     for case, pairs, wide, eight in timing:
         print(f"| {case} | {pairs:.2f} | {wide:.2f} | {pairs / wide:.2f} | {eight:.2f} |")
+    if closest:  # (and the ratio of the process CPU times: steadier on a shared machine)
+        print("\n| closest_points (ms, medians) | pairs, 1 lane | wide, 1 lane | pairs / wide (CPU) | wide, 8 lanes |"
+              "\n|---|---|---|---|---|")
+    for case, pairs, wide, eight, cpu in closest:
+        print(f"| {case} | {pairs:.2f} | {wide:.2f} | {pairs / wide:.2f} ({cpu:.2f}) | {eight:.2f} |")
 
 
 if __name__ == "__main__":

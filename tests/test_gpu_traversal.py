@@ -1,13 +1,16 @@
 """One ray per work-item through the pair nodes (engine/bvh/pairs.py, kernels/bvh_pairs.h): the
-traversal a lane width of 1 (a GPU's) compiles in, for a render through the BVH and the ray queries
-(cast, occluded, count_hits, all_hits). PoCL at PYCLRAY_LANES=1 builds the same programs as a GPU.
+traversal a lane width of 1 (a GPU's) compiles in, for a render through the BVH, the ray queries
+(cast, occluded, count_hits, all_hits) and the closest-point queries' search (a point per
+work-item: closest_points, distance, signed_distance, occupancy). PoCL at PYCLRAY_LANES=1 builds the
+same programs as a GPU.
 
 Why every result is the same bits as the 8-lane path's (the wide tree's packets, the CPU's): the
 pair nodes hold the binary tree's boxes rounded as the wide nodes hold them, tested by the same
 operations, with the same leaves; every shape test is the same function, and every tie rule
-(render's id and key, cast's id) picks one winner whatever order the leaves are visited in. So
-the tests compare bits (np.array_equal of the raw bytes), no tolerance: a traversal that dropped
-a leaf a ray's hit lies in, or tested a box otherwise, would show in some pixel or ray."""
+(render's id and key, cast's id, the closest point's id and primitive) picks one winner whatever
+order the leaves are visited in. So the tests compare bits (np.array_equal of the raw bytes), no
+tolerance: a traversal that dropped a leaf a ray's hit lies in, or tested a box otherwise, would
+show in some pixel or ray."""
 from __future__ import annotations
 
 import numpy as np
@@ -541,3 +544,222 @@ def test_the_pair_nodes_hold_the_binary_trees_boxes_and_leaves():
     one = build(np.stack([lo[:3], lo[:3] + 0.01], axis=1), 4)
     single = pack_pairs(one, pack_nodes(one, np.zeros(3)), leaf_codes(one))
     assert len(single) == 1 and int(single[0]["right_lo"][3:].view(np.int32)[0]) == 0
+
+
+# -- the closest-point queries (engine/queries/closest.py): a point per work-item, through the pair
+# nodes of the query's own BVH at one lane (kernels/bvh_pairs.h: PAIR_CLOSEST_TRAVERSE), against the
+# wide tree's search at 8. Both keep every child box whose distance can still beat or tie the best,
+# and closest_take's tie rule picks one winner whatever the order: every output is the same bits.
+def closest_queries(scene, precision, points, signs=("parity",)):
+    """closest_points (every output), distance, signed_distance and occupancy (each sign asked)."""
+    out = {f"closest {k}": v for k, v in pyclray.closest_points(scene, points, precision=precision).items()}
+    out["distance"] = pyclray.distance(scene, points, precision=precision)
+    for sign in signs:
+        out[f"signed {sign}"] = pyclray.signed_distance(scene, points, sign, precision=precision)
+        out[f"occupancy {sign}"] = pyclray.occupancy(scene, points, sign, precision=precision)
+    return out
+
+
+def at_default_width(monkeypatch, fn):
+    """fn at the device's own lane width (8 lanes fp32, 4 fp64 on PoCL's CPU; no $PYCLRAY_LANES: the
+    occupancy's exact pass takes its own fp64 handle, which a width of 8 would not fit)."""
+    with monkeypatch.context() as patch:
+        patch.delenv("PYCLRAY_LANES", raising=False)
+        assert programs.lanes_for(context_for().device, "fp32") == 8
+        return fn()
+
+
+def assert_closest_same_at_widths(monkeypatch, scene, precision, points, signs=("parity",)):
+    one = at_width(monkeypatch, 1, lambda: closest_queries(scene, precision, points, signs))
+    eight = at_default_width(monkeypatch, lambda: closest_queries(scene, precision, points, signs))
+    same_bits(one, eight, "closest")
+    return one
+
+
+def surface_points(mesh, offset: float, rng) -> np.ndarray:
+    """A mesh's vertices, its edges' midpoints and its faces' centroids (on its surface, to rounding),
+    and the centroids moved off the face by offset either way."""
+    v = mesh.world_vertices()
+    a, b, c = (v[mesh.faces[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    centroid = (a + b + c) / 3
+    off = centroid + offset * rng.choice([-1.0, 1.0], (len(centroid), 1)) * normal
+    return np.concatenate([v, 0.5 * (a + b), 0.5 * (b + c), centroid, off])
+
+
+def points_around(shapes, count, rng, grow=0.3):
+    """Uniform points in the bounded shapes' box grown by grow of its size each way."""
+    boxes = [s.box() for s in shapes if s.bounded]
+    lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    return rng.uniform(lo - grow * (hi - lo), hi + grow * (hi - lo), (count, 3))
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_closest_queries_on_a_mesh_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    """The bunny: uniform points around it, its vertices, edges' midpoints and faces' centroids, and
+    points just off its faces (more than COHERENT_FROM: the points' Morton order on the host)."""
+    need(precision)
+    mesh = bunny(scenes_dir)
+    rng = np.random.default_rng(21)
+    points = np.concatenate([points_around([mesh], 3000, rng), surface_points(mesh, 1e-3, rng)])
+    assert len(points) > 4096
+    one = assert_closest_same_at_widths(monkeypatch, scene_of([mesh]), precision, points)
+    assert (one["distance"][3000:3000 + len(mesh.vertices)] == 0).all()  # its vertices: on the surface
+    assert 0.05 < one["occupancy parity"].mean() < 0.95 and (one["signed parity"] < 0).any()
+
+
+@pytest.mark.parametrize("tree", ["shared", "own"])
+def test_closest_queries_among_analytic_shapes_give_the_same_bits(monkeypatch, scenes_dir, tree):
+    """Meshes, a sphere batch, spheres, boxes, cylinders, disks, rectangles and a plane: through the
+    prepared scene's BVH (two meshes of their own arrays: "shared"), or through the query's own tree
+    where mesh instances share their arrays ("own": the instances' triangles as the query's entries,
+    ClosestInputs); both signs (an open mesh's winding number keeps the wide nodes: its expansions
+    are theirs)."""
+    rng = np.random.default_rng(22)
+    v, f = perturbed_sphere(10, 14, 0.05, 0.2, rng)
+    shapes = mixed(scenes_dir)
+    lo, hi = shapes[0].box()
+    base = pyclray.Mesh(v, f)
+    extra = ([pyclray.Mesh(v, f, translate=tuple(hi))] if tree == "shared"  # arrays of its own
+             else [base.placed(translate=tuple(hi)), base.placed(translate=tuple(lo), scale=1.5)])  # instances
+    shapes = shapes + extra + [pyclray.Mesh(*grid(4, 4, 0.2), translate=tuple(0.5 * (lo + hi))),  # open: winding's
+                               pyclray.Sphere(tuple(lo), 0.05), pyclray.Box(tuple(hi), (0.02, 0.03, 0.04)),
+                               pyclray.Cylinder(tuple(hi), tuple(hi + [0.1, 0.0, 0.0]), 0.02, caps=False),
+                               pyclray.Disk(tuple(lo), (1, 1, 0), 0.04)]
+    scene = scene_of(shapes)
+    inputs = tracer_for(scene, context_for(), "fp32").closest_inputs()
+    assert (inputs.bvh is tracer_for(scene, context_for(), "fp32").prepared.bvh) == (tree == "shared")
+    points = np.concatenate([points_around(shapes[:-1], 3000, rng), surface_points(shapes[0], 1e-4, rng)[::4]])
+    one = assert_closest_same_at_widths(monkeypatch, scene, "fp32", points, ("parity", "winding"))
+    assert len(np.unique(one["closest id"])) >= 10 and 0 < one["occupancy winding"].mean() < 1
+
+
+def test_closest_queries_on_a_sphere_batch_give_the_same_bits(monkeypatch):
+    """20,000 spheres of one batch (leaves of up to 7): points around them, their centres (every
+    point of the sphere equally near) and points on them."""
+    rng = np.random.default_rng(23)
+    centres, radii = rng.uniform(-1, 1, (20_000, 3)), rng.uniform(0.002, 0.02, 20_000)
+    shapes = [pyclray.Spheres(centres, radii)]
+    away = rng.normal(size=(2000, 3))
+    on = centres[:2000] + radii[:2000, None] * away / np.linalg.norm(away, axis=1)[:, None]
+    points = np.concatenate([points_around(shapes, 3000, rng), centres[::10], on])
+    one = assert_closest_same_at_widths(monkeypatch, scene_of(shapes), "fp32", points)
+    assert len(np.unique(one["closest primitive"])) > 1000 and one["occupancy parity"].any()
+
+
+@pytest.mark.parametrize("precision", ["fp32", "fp64"])
+def test_closest_queries_far_away_give_the_same_bits(monkeypatch, scenes_dir, precision):
+    """The bunny and a sphere 1e6 from the origin, points near them (the box distances' margins at
+    their largest), and points 1e6 from the bunny at the origin (far outside the scene's box)."""
+    need(precision)
+    rng = np.random.default_rng(24)
+    base = bunny(scenes_dir)
+    offset = np.array([1e6, -1e6, 1e6])
+    moved = [pyclray.Mesh(base.vertices, base.faces, translate=tuple(offset)), pyclray.Sphere(tuple(offset + 0.6), 0.1)]
+    points = np.concatenate([points_around(moved, 2000, rng), surface_points(moved[0], 1e-3, rng)[::8]])
+    one = assert_closest_same_at_widths(monkeypatch, scene_of(moved), precision, points)
+    assert (one["distance"] < 1.0).mean() > 0.9
+    away = rng.normal(size=(1000, 3))
+    far = 1e6 * away / np.linalg.norm(away, axis=1)[:, None]
+    one = assert_closest_same_at_widths(monkeypatch, scene_of([base]), precision, far)
+    assert (one["distance"] > 9e5).all()
+
+
+@pytest.mark.parametrize("meshes", [1, 2])
+def test_closest_ties_give_the_same_bits(monkeypatch, meshes):
+    """Two parallel grids (y = 1 and y = -1, coordinates multiples of 1/8: every point below exact,
+    the tree's leaves split between them). Points midway (y = 0): every one inside is as near to a
+    triangle of each, and to several at a vertex or an edge; the tie rule keeps the lower id (two
+    meshes), then the lower primitive (one mesh: the upper grid's triangles come first), whatever
+    order either traversal visits them in. Points exactly on the upper grid: on its vertices, its
+    edges (their midpoints, the cells' diagonals included) and its faces, at distance 0."""
+    v, f = grid(8, 8, 2.0)
+    top, bottom = v + [0.0, 1.0, 0.0], v - [0.0, 1.0, 0.0]
+    if meshes == 2:
+        shapes = [pyclray.Mesh(top, f), pyclray.Mesh(bottom, f.copy())]
+    else:
+        shapes = [pyclray.Mesh(np.concatenate([top, bottom]), np.concatenate([f, f + len(v)]))]
+    rng = np.random.default_rng(25)
+    corners = v[f][:, :, [0, 2]]  # (F, 3, 2): each triangle's corners' x, z
+    edges = np.concatenate([(corners[:, k] + corners[:, (k + 1) % 3]) / 2 for k in range(3)])
+    xz = np.concatenate([v[:, [0, 2]], edges, rng.uniform(-1.2, 1.2, (3000, 2))])
+    midway = np.stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]], axis=1)
+    on = np.stack([xz[:, 0], np.ones(len(xz)), xz[:, 1]], axis=1)
+    one = assert_closest_same_at_widths(monkeypatch, scene_of(shapes), "fp32", np.concatenate([midway, on]))
+    inside = np.all(np.abs(xz) <= 1.0, axis=1)
+    assert (one["distance"][: len(xz)][inside] == 1.0).all() and (one["distance"][len(xz):][inside] == 0.0).all()
+    if meshes == 2:
+        assert (one["closest id"][: len(xz)][inside] == 0).all()
+    else:
+        assert (one["closest primitive"][: len(xz)][inside] < len(f)).all()
+
+
+def test_the_gpu_class_host_path_gives_the_same_closest_bits(monkeypatch, scenes_dir):
+    """A GPU's whole path on PoCL for the closest-point queries: one lane and the GPU class's host
+    path ($PYCLRAY_GPU_CLASS=1: no Morton order, the parity rays through count_hits' device path)
+    against the CPU's 8 lanes and host path; a batch the CPU orders."""
+    scene = scene_of(mixed(scenes_dir) + instances()[:2])
+    rng = np.random.default_rng(26)
+    points = points_around(scene.shapes, 5000, rng)
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_GPU_CLASS", "1")
+        one = at_width(monkeypatch, 1, lambda: closest_queries(scene, "fp32", points, ("parity", "winding")))
+    eight = at_default_width(monkeypatch, lambda: closest_queries(scene, "fp32", points, ("parity", "winding")))
+    same_bits(one, eight, "closest")
+
+
+def test_the_lane_width_one_closest_programs_search_the_pair_nodes(monkeypatch, scenes_dir):
+    """At a lane width of 1 the closest-point query's programs (the nearest point, the distance, the
+    inside test) search the pair nodes (PYCLRAY_PAIRS: bvh_pairs.h's PAIR_CLOSEST_TRAVERSE, PairNode
+    nodes), but the winding number's, which keeps the wide nodes; at 8, and with
+    PYCLRAY_TRAVERSAL=wide, none does."""
+    scene = scene_of(mixed(scenes_dir) + [pyclray.Mesh(*grid(4, 4, 0.2))])  # an open mesh: the winding number's kernel
+    points = points_around(scene.shapes, 100, np.random.default_rng(27))
+    built = []
+    original = programs._build
+
+    def recording(ctx, variant):
+        built.append((variant, variant.source()))
+        return original(ctx, variant)
+
+    monkeypatch.setattr(programs, "_build", recording)
+
+    def run():
+        programs.clear()
+        built.clear()
+        closest_queries(scene, "fp32", points, ("parity", "winding"))
+        return {v.aovs: source for v, source in built if v.query == "closest"}
+
+    one = at_width(monkeypatch, 1, run)
+    assert ("distance",) in one and ("inside",) in one and ("winding",) in one and len(one) >= 4
+    for aovs, source in one.items():
+        pairs = "winding" not in aovs
+        assert ("#define PYCLRAY_PAIRS 1" in source and "#define PAIR_CLOSEST_TRAVERSE" in source) == pairs, aovs
+        assert ("PairNode* nodes" in source) == pairs and ("WideNode* nodes" in source) != pairs, aovs
+    for aovs, source in at_default_width(monkeypatch, run).items():
+        assert "#define PYCLRAY_PAIRS" not in source and "PairNode" not in source, aovs
+    with monkeypatch.context() as patch:
+        patch.setenv("PYCLRAY_TRAVERSAL", "wide")
+        for aovs, source in at_width(monkeypatch, 1, run).items():
+            assert "#define PYCLRAY_PAIRS" not in source and "WideNode* nodes" in source, aovs
+    programs.clear()
+
+
+def test_a_one_lane_handle_holds_the_closest_querys_pair_nodes_alone(monkeypatch, scenes_dir):
+    """The closest-point query's nodes are made when first asked: at one lane its pair nodes (the
+    bytes of its own BVH's pair nodes), at 8 its wide nodes; neither handle holds the other's."""
+    scene = scene_of([bunny(scenes_dir)])
+    points = points_around(scene.shapes, 200, np.random.default_rng(28))
+
+    def held():
+        with pyclray.prepare(scene) as tracer:
+            tracer.closest_inputs()
+            before = tracer.nbytes
+            tracer.distance(points)
+            inputs = tracer.closest_inputs()
+            return tracer.nbytes - before, inputs.bvh.pair_nodes(inputs.anchor).nbytes, inputs.bvh.nodes(inputs.anchor).nbytes
+
+    one, pairs, wide = at_width(monkeypatch, 1, held)
+    eight = at_width(monkeypatch, 8, held)[0]
+    assert one == pairs and eight == wide and pairs != wide

@@ -73,6 +73,7 @@ inline float pair_entry(const float4 low, const float4 high, const BoxRay* b, co
 /* PYCLRAY_TRAVERSE (kernels/bvh_ray.h) runs these steps: its macro names PYCLRAY_TRAVERSE_STEP and
  * BVH_STACK, expanded where it is used, so it takes the pair nodes' step and stack above. */
 #endif
+#ifndef PYCLRAY_CLOSEST  /* (the closest-point query's search: below) */
 /* A render's camera ray (a packet of one: LANES 1) through the pair nodes: every leaf whose box it
  * enters before its best (a real variable VISIT lowers), nearest first; each child's box tested by
  * box_entries_of (kernels/bvh_packet.h), the test the wide traversal gives a child it pops. Its
@@ -127,3 +128,66 @@ inline realv pair_box_entries(const float4 lo, const float4 hi, const BoxPacket*
             code = stack_child[--top];                                                  \
         }                                                                               \
     }
+#endif
+
+#ifdef PYCLRAY_CLOSEST
+/* The closest-point query's search (kernels/closest.cl; a point per work-item, float64) through the
+ * pair nodes: its stack a binary level per entry. A child's box is kept while its distance from the
+ * point can still beat or tie the best (the wide search's pruning, the same bound), so the same
+ * shapes can win, and closest_take's tie rule picks the same one whatever the order of the visit. */
+#undef BVH_STACK
+#define BVH_STACK BVH_BINARY_STACK
+
+/* A lower bound of the distance from the point pf (float, from the scene's anchor; margin: over
+ * pf's rounding) to a child's float box (lo, hi: a pair node's corners), +inf for an empty box:
+ * kernels/closest.cl's closest_box_distances for one box, the same operations in the same order. */
+inline float pair_box_distance(const float4 lo, const float4 hi, const float3 pf, const float margin)
+{
+    const float3 gap = fmax(fmax(lo.xyz - pf, pf - hi.xyz) - margin, (float3)(0.0f));
+    /* the sum's and the root's rounding: a few float ulps, taken off */
+    const float distance = sqrt(gap.x * gap.x + gap.y * gap.y + gap.z * gap.z) * (1.0f - 0x1p-20f);
+    return lo.x <= hi.x ? distance : INFINITY;
+}
+
+/* Every leaf of the pair nodes whose box lies within BOUND of the point (a float expression, read
+ * again after each leaf: the best distance so far can only shrink), VISIT(first, count) each, until
+ * none is left or DONE: down from a node, both children's boxes measured, into the nearer one kept
+ * (the first on a tie), the other pushed with its distance; then the last pushed child still within
+ * BOUND popped (the others beyond it dropped). stack_child and stack_entry: the caller's stack. */
+#define PAIR_CLOSEST_TRAVERSE(nodes, pf, margin, BOUND, DONE, VISIT)                    \
+    {                                                                                   \
+        int top = 0;                                                                    \
+        int code = 0;  /* the root */                                                   \
+        float bound = (BOUND);                                                          \
+        for (;;) {                                                                      \
+            while (code >= 0) {  /* down: a node per level */                           \
+                const PairNode node = nodes[code];                                      \
+                const int left = PAIR_CODE(node.left_lo), right = PAIR_CODE(node.right_lo); \
+                const float left_distance = pair_box_distance(node.left_lo, node.left_hi, pf, margin); \
+                const float right_distance = pair_box_distance(node.right_lo, node.right_hi, pf, margin); \
+                /* (code 0, the root, is never a child: no second child) */             \
+                const bool in_left = left_distance <= bound, in_right = right != 0 && right_distance <= bound; \
+                if (in_left && in_right) {                                              \
+                    const bool right_first = right_distance < left_distance;            \
+                    stack_child[top] = right_first ? left : right;                      \
+                    stack_entry[top++] = right_first ? left_distance : right_distance;  \
+                    code = right_first ? right : left;                                  \
+                } else if (in_left || in_right) {                                       \
+                    code = in_left ? left : right;                                      \
+                } else {                                                                \
+                    break;  /* neither kept: code stays a node's, no leaf */            \
+                }                                                                       \
+            }                                                                           \
+            if (code < 0) {  /* a leaf: its shapes, which may lower the bound */        \
+                const int first = (~code) >> 3, count = (~code) & 7;                    \
+                VISIT(first, count)                                                     \
+                bound = (BOUND);                                                        \
+            }                                                                           \
+            if (DONE) break;                                                            \
+            /* up: the last pushed child still within the bound */                      \
+            while (top > 0 && stack_entry[top - 1] > bound) --top;                      \
+            if (top == 0) break;                                                        \
+            code = stack_child[--top];                                                  \
+        }                                                                               \
+    }
+#endif

@@ -6,9 +6,12 @@
  * file of each shape type present (their type_closest, type_inside: kernels/closest.h).
  *
  * One point per work-item, in float64 from the point as given and the shapes' float64 world
- * entries: no lanes (the same code at every lane width). The bounded shapes are found through the
+ * entries: no lanes (a point's code whatever the lane width). The bounded shapes are found through the
  * wide BVH (its float boxes around the scene's anchor), nearest box first, pruned by the best
- * distance so far: a box is skipped only where even its float lower bound is beyond that distance. */
+ * distance so far: a box is skipped only where even its float lower bound is beyond that distance.
+ * With PYCLRAY_PAIRS (a lane width of 1: GPUs) the same search and the inside test go through the
+ * BVH's pair nodes instead (kernels/bvh_pairs.h: the same boxes, bounds and leaves; the same bits);
+ * the winding number's program keeps the wide nodes (its expansions are per wide child). */
 
 /* the best candidate so far: an exact tie of distances keeps the lower id, then the lower primitive
  * (the same winner whatever the traversal's order) */
@@ -51,8 +54,25 @@ inline float closest_float_above(const double x)
 #define CLOSEST_INSIDE_LINEAR(Type, type)                                                       \
     for (int k = 0; k < n_##type##s && !inside; ++k) inside = type##_inside(&type##_worlds[k], p);
 #define CLOSEST_WINDING_KIND(Type, type) if (kind == KIND_##type) omega += type##_solid_angle(&type##_worlds[k], p);
+#ifdef PYCLRAY_PAIRS
+#ifdef PYCLRAY_AOV_WINDING
+#error "the winding number's expansions are per wide child: its program traverses the wide nodes"
+#endif
+/* a leaf's shapes (PAIR_CLOSEST_TRAVERSE's VISIT): as candidates of the nearest point; as solids
+ * that may hold the point */
+#define CLOSEST_VISIT_LEAF(first, count)                                                \
+    for (int q = first; q < first + count; ++q) {                                       \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                         \
+        PYCLRAY_BOUNDED(CLOSEST_VISIT_KIND)                                             \
+    }
+#define CLOSEST_INSIDE_LEAF(first, count)                                               \
+    for (int q = first; q < first + count && !inside; ++q) {                            \
+        const int ref = refs[q], kind = ref & 15, k = ref >> 4;                         \
+        PYCLRAY_SOLID(CLOSEST_INSIDE_KIND)                                              \
+    }
+#endif
 
-#ifdef PYCLRAY_HAS_BOUNDED
+#if defined(PYCLRAY_HAS_BOUNDED) && !defined(PYCLRAY_PAIRS)
 /* Per child of a wide node, a lower bound of the float box's distance to the point pf (float, from
  * the scene's anchor; margin: over pf's rounding), +inf for an empty slot. */
 inline float8 closest_box_distances(__global const WideNode* node, const float3 pf, const float margin)
@@ -89,7 +109,9 @@ PYCLRAY_WORK_ITEM_FUNCTION void closest_point(const int i, PYCLRAY_PARAMETERS)
     best.kind = KIND_NONE;
     best.k = best.id = best.primitive = -1;
     PYCLRAY_UNBOUNDED(CLOSEST_LINEAR)
-#ifdef PYCLRAY_HAS_BOUNDED
+#if defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_PAIRS)
+    PAIR_CLOSEST_TRAVERSE(nodes, pf, margin, closest_float_above(sqrt(best.point.d2)), 0, CLOSEST_VISIT_LEAF)
+#elif defined(PYCLRAY_HAS_BOUNDED)
     {
         int top = 0;
         stack_child[top] = 0;
@@ -143,7 +165,9 @@ PYCLRAY_WORK_ITEM_FUNCTION void closest_point(const int i, PYCLRAY_PARAMETERS)
         /* -- inside an analytic solid (any whose box holds the point), or on a surface */
         int inside = best.kind != KIND_NONE && best.point.d2 == 0.0;
         PYCLRAY_UNBOUNDED(CLOSEST_INSIDE_LINEAR)
-#if defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_HAS_SOLID)  /* (bounded solids present: PYCLRAY_SOLID) */
+#if defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_HAS_SOLID) && defined(PYCLRAY_PAIRS)
+        if (!inside) PAIR_CLOSEST_TRAVERSE(nodes, pf, margin, 0.0f, inside, CLOSEST_INSIDE_LEAF)
+#elif defined(PYCLRAY_HAS_BOUNDED) && defined(PYCLRAY_HAS_SOLID)  /* (bounded solids present: PYCLRAY_SOLID) */
         int top = 0;
         stack_child[top] = 0;
         stack_entry[top++] = 0.0f;

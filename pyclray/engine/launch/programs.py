@@ -149,7 +149,7 @@ class Variant:
     # coordinates: every ray ahead of the eye's plane) or "sphere" (unit directions); None: a pinhole
     camera_table: str | None = None
     # the BVH's pair nodes, one ray per work-item (pairs_for: a lane width of 1), instead of the wide
-    # tree: a render through the BVH, and the ray queries (kernels/bvh_pairs.h)
+    # tree: a render through the BVH, the ray queries and the closest-point query's search (kernels/bvh_pairs.h)
     pairs: bool = False
 
     def bounded_types(self) -> tuple[str, ...]:
@@ -157,8 +157,8 @@ class Variant:
 
     def through_pairs(self) -> bool:
         """Whether the program traverses the pair nodes (kernels/bvh_pairs.h): asked for, and a BVH
-        to traverse (a render through it, or a ray query, over some bounded type)."""
-        tree = (self.query == "render" and self.bvh) or self.query in RAY_QUERIES
+        to traverse (a render through it, a ray query or the closest-point query, over some bounded type)."""
+        tree = (self.query == "render" and self.bvh) or self.query in RAY_QUERIES or self.query == "closest"
         return self.pairs and tree and bool(self.bounded_types())
 
     def defines(self) -> list[str]:
@@ -331,8 +331,12 @@ class Variant:
         parts = ["\n".join(["/* pyclray program variant */"] + defines), _read("common.h")]
         if inline_builtins:  # popped where the query's kernels begin (PYCLRAY_KERNELS_BEGIN)
             parts.append("#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)")
-        structs = _unique([WIDE_NODE] + [s.world for s in shapes] + ([WINDING_SLOT] if "winding" in self.aovs else []))
+        pairs = self.through_pairs()  # the search through the pair nodes (a lane width of 1) in place of the wide tree's
+        structs = _unique([PAIR_NODE if pairs else WIDE_NODE] + [s.world for s in shapes]
+                          + ([WINDING_SLOT] if "winding" in self.aovs else []))
         parts += [_read("lanes.h"), c_header(structs, self.precision), _read("shapes.h"), _read("bvh.h"), _read("closest.h")]
+        if pairs:
+            parts.append(_read("bvh_pairs.h"))
         parts += [_read(name) for name in _kernel_files(shapes)]
         parts.append(_read(QUERY_FILES[self.query]))
         return "\n".join(parts)

@@ -239,8 +239,8 @@ OCCLUDED = (*RAYS, Parameter("occluded_out", "__global char*"))
 
 # the closest-point query (kernels/closest.cl): the points (3 doubles each, in the order given, read
 # in order where ordered is 1), the squared distance a surface point must be within (inf: the
-# nearest; 0: only whether the point lies on a surface), the wide BVH around the scene's anchor and
-# its refs, per type its float64 world entries, ids, primitive indices and count; the winding
+# nearest; 0: only whether the point lies on a surface), the wide BVH (or its pair nodes) around the
+# scene's anchor and its refs, per type its float64 world entries, ids, primitive indices and count; the winding
 # number's expansions per wide child slot; the outputs asked for (distance alone, or with the
 # nearest point's position, normal, id, primitive and barycentrics; inside an analytic solid; the
 # meshes' winding number)
@@ -251,7 +251,8 @@ CLOSEST = (
     Parameter("points", "__global const double*"),
     Parameter("within", "const double"),
     Parameter("scene_anchor", "const double4"),
-    Parameter("nodes", "__global const WideNode*", (_bounded,)),
+    Parameter("nodes", "__global const WideNode*", (_bounded, _wide)),
+    Parameter("nodes", "__global const PairNode*", (_bounded, _pairs)),  # one point per work-item (GPUs)
     Parameter("refs", "__global const int*", (_bounded,)),
     EachType((
         Parameter("{type}_worlds", "__global const {World}*"),

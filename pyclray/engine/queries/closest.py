@@ -12,6 +12,7 @@ also gives open, self-intersecting and multi-part meshes an inside. A point on a
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -21,7 +22,7 @@ from ...model.errors import RequestError
 from ...model.shapes import REGISTRY
 from ..bvh.scene import primitives_bvh
 from ..bvh.winding import winding_slots
-from ..launch.programs import Variant, kernel_for
+from ..launch.programs import Variant, kernel_for, lanes_for, pairs_for
 from ..launch.run import REAL, input_buffer
 from ..launch.signatures import arguments
 from ..opencl.device import gpu_class, launch
@@ -88,8 +89,9 @@ def check_sign(sign) -> str:
 class ClosestInputs:
     """What the closest-point query needs of a scene, made at its first call and kept by the handle
     until its shapes change: per type its world entries (float64), ids and primitive indices in the
-    BVH's leaf order, the wide BVH around the scene's anchor and its refs, on the device; the winding
-    number's expansions when first asked for."""
+    BVH's leaf order and its refs, on the device; its nodes around the scene's anchor (the wide ones,
+    or the pair nodes at a lane width of 1: one point per work-item) and the winding number's
+    expansions when first asked for."""
 
     def __init__(self, prepared, shapes: tuple):
         ctx = self.ctx = prepared.ctx
@@ -108,7 +110,7 @@ class ClosestInputs:
             self.anchor = np.zeros(3)
         self.args = {"scene_anchor": np.append(self.anchor, 0.0).view(cl.cltypes.double4)[0]}
         if tree.types:
-            self.args.update(nodes=input_buffer(ctx, tree.nodes(self.anchor)), refs=input_buffer(ctx, tree.refs(self.types)))
+            self.args.update(refs=input_buffer(ctx, tree.refs(self.types)))
         for t in self.types:
             world = worlds[t] if len(worlds[t]) else np.zeros(1, worlds[t].dtype)
             self.args.update({f"{t}_worlds": input_buffer(ctx, np.ascontiguousarray(world)),
@@ -117,9 +119,25 @@ class ClosestInputs:
                               f"n_{t}s": np.int32(len(worlds[t]))})
         self.nbytes = sum(a.size for a in self.args.values() if isinstance(a, cl.MemoryObjectHolder))
         self._winding = None
+        self._nodes: dict = {}  # pairs (bool) -> the BVH's nodes on the device (see nodes)
+        self._lock = threading.Lock()
         # occupancy's grid of a closed mesh (engine/queries/parity_grid.py) and the count kernel's
         # arguments of its surface test, where asked for
         self.parity_grid = self.surface_arguments = None
+
+    def nodes(self, pairs: bool):
+        """This query's BVH's nodes around its anchor on the device, made when first asked: the wide
+        nodes, or with pairs (a lane width of 1) its pair nodes (engine/bvh/pairs.py: the binary
+        tree's boxes, rounded as the wide nodes' are, and the same leaves). The BVH is the prepared
+        scene's where the query shares it (no mesh instance among the shapes), else the tree of the
+        shapes' own entries (_own_entries)."""
+        with self._lock:
+            if pairs not in self._nodes:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    nodes = self.bvh.pair_nodes(self.anchor) if pairs else self.bvh.nodes(self.anchor)
+                self._nodes[pairs] = input_buffer(self.ctx, nodes)
+                self.nbytes += self._nodes[pairs].size
+            return self._nodes[pairs]
 
     def winding(self):
         """The winding number's expansion per wide child slot (engine/bvh/winding.py), on the device."""
@@ -186,7 +204,10 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         outputs = tuple(k for k in outputs if k != "winding")
         if not outputs:
             return results
-    variant = Variant("closest", inputs.types, tuple(outputs), precision)
+    # through the pair nodes at a lane width of 1 (a GPU's: programs.pairs_for), but for the winding
+    # number, whose expansions are the wide nodes' children's
+    pairs = "winding" not in outputs and pairs_for(lanes_for(ctx.device, precision))
+    variant = Variant("closest", inputs.types, tuple(outputs), precision, pairs=pairs)
     order = None
     if count >= COHERENT_FROM and not gpu_class(ctx.device):  # numba's code, imported for large batches only
         from .point_passes import coherent_order
@@ -198,6 +219,8 @@ def run_closest(tracer, points: np.ndarray, outputs: tuple, within: float = np.i
         points = points[order]
     args = {"n_points": np.int32(count), "order": input_buffer(ctx, np.zeros(1, np.int32)), "ordered": np.int32(0),
             "points": input_buffer(ctx, points), "within": np.float64(within), **inputs.args}
+    if inputs.bvh.types:
+        args["nodes"] = inputs.nodes(variant.through_pairs())
     if "winding" in outputs:
         args["winding_slots"] = inputs.winding()
     flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
