@@ -79,10 +79,15 @@ def lanes_for(device: cl.Device, precision: str) -> int:
     widths = [w for w in LANE_WIDTHS if w * bits <= MAX_LANE_BITS]
     value = os.environ.get("PYCLRAY_LANES", "").strip()
     if value:
-        if not value.isdigit() or int(value) not in widths:
-            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, widths))} for {precision} "
-                              f"(vectors of at most {MAX_LANE_BITS} bits), got {value!r}")
-        return int(value)
+        # a width of fp32's; fp64 takes the widest of its own up to it (8 -> 4): one setting serves
+        # both precisions, as a handle of one precision may run the other's kernels (occupancy's fp32
+        # count narrows its undecided points in fp64: engine/queries/closest.py). Every width gives
+        # the same bits.
+        allowed = [w for w in LANE_WIDTHS if w * _REAL_BITS["fp32"] <= MAX_LANE_BITS]
+        if not value.isdigit() or int(value) not in allowed:
+            raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, allowed))} "
+                              f"(vectors of at most {MAX_LANE_BITS} bits; fp64 at most {max(widths)}), got {value!r}")
+        return max(w for w in widths if w <= int(value))
     preferred = device.preferred_vector_width_double if precision == "fp64" else device.preferred_vector_width_float
     if device.type & cl.device_type.CPU and int(preferred) <= 1:
         # a CPU runtime that vectorizes across work-items itself reports 1 (Intel's): the traversal's
