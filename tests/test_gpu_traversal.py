@@ -139,6 +139,20 @@ def assert_same_at_widths(monkeypatch, scene, precision, origins, directions, hi
     return one
 
 
+def recorded_builds(monkeypatch) -> list:
+    """The (variant, source) of each program built from now on in this test (programs._build
+    recorded, then called as ever)."""
+    built = []
+    original = programs._build
+
+    def recording(ctx, variant):
+        built.append((variant, variant.source()))
+        return original(ctx, variant)
+
+    monkeypatch.setattr(programs, "_build", recording)
+    return built
+
+
 @pytest.mark.parametrize("precision", ["fp32", "fp64"])
 def test_a_mesh_gives_the_same_bits(monkeypatch, scenes_dir, precision):
     """The bunny (its triangles cast in blocks): every image of a render, cast, occluded and the hit counts."""
@@ -383,14 +397,7 @@ def test_the_lane_width_one_programs_traverse_the_pair_nodes(monkeypatch, scenes
     lights = (PointLight(position=(3.0, 4.0, 3.0), intensity=(20.0, 20.0, 20.0)),)
     shaded = scene_of([bunny(scenes_dir)], lights=lights, shading=Shading(shadows=True))
     origins, directions = rays_at(scene, 100)
-    built = []
-    original = programs._build
-
-    def recording(ctx, variant):
-        built.append((variant, variant.source()))
-        return original(ctx, variant)
-
-    monkeypatch.setattr(programs, "_build", recording)
+    built = recorded_builds(monkeypatch)
 
     def run():
         programs.clear()
@@ -426,14 +433,7 @@ def test_the_lane_width_one_programs_traverse_the_instances_pair_nodes(monkeypat
     scene = lit(instances_of_meshes(scenes_dir)[8:])  # the one-triangle mesh's instances and the floor
     plain = scene_of([bunny(scenes_dir)])
     origins, directions = rays_at(scene, 100)
-    built = []
-    original = programs._build
-
-    def recording(ctx, variant):
-        built.append((variant, variant.source()))
-        return original(ctx, variant)
-
-    monkeypatch.setattr(programs, "_build", recording)
+    built = recorded_builds(monkeypatch)
 
     def run(target=scene):
         programs.clear()
@@ -716,14 +716,7 @@ def test_the_lane_width_one_closest_programs_search_the_pair_nodes(monkeypatch, 
     PYCLRAY_TRAVERSAL=wide, none does."""
     scene = scene_of(mixed(scenes_dir) + [pyclray.Mesh(*grid(4, 4, 0.2))])  # an open mesh: the winding number's kernel
     points = points_around(scene.shapes, 100, np.random.default_rng(27))
-    built = []
-    original = programs._build
-
-    def recording(ctx, variant):
-        built.append((variant, variant.source()))
-        return original(ctx, variant)
-
-    monkeypatch.setattr(programs, "_build", recording)
+    built = recorded_builds(monkeypatch)
 
     def run():
         programs.clear()

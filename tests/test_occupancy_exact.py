@@ -17,39 +17,13 @@ import pytest
 
 import pyclray
 from pyclray.model.shapes.mesh_shapes import perturbed_sphere
+from test_all_hits import icosphere  # an icosahedron subdivided onto the unit sphere (closed, outward faces)
 
 CAMERA = pyclray.Camera((0, 0, 10), (0, 0, 0))
 
 
 def scene_of(*meshes) -> pyclray.Scene:
     return pyclray.Scene(CAMERA, pyclray.Image(8, 8), tuple(meshes))
-
-
-def icosphere(levels):
-    """An icosahedron subdivided levels times onto the unit sphere (20 * 4^levels outward faces)."""
-    t = (1 + 5**0.5) / 2
-    v = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
-         [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
-    f = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6],
-         [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
-         [8, 6, 7], [9, 8, 1]]
-    v = [np.array(p, float) / np.linalg.norm(p) for p in v]
-    for _ in range(levels):
-        middle, faces = {}, []
-
-        def mid(i, j):
-            key = (min(i, j), max(i, j))
-            if key not in middle:
-                p = v[i] + v[j]
-                v.append(p / np.linalg.norm(p))
-                middle[key] = len(v) - 1
-            return middle[key]
-
-        for a, b, c in f:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            faces += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-        f = faces
-    return np.array(v), np.array(f)
 
 
 def split_cube():

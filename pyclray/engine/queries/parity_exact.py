@@ -161,25 +161,25 @@ def _tie_sign(f, px, py, qx, qy) -> int:
 
 def _plane_signs(a, b, c, p) -> np.ndarray:
     """Per triangle the exact sign of n . (p - a), n = (b - a) x (c - a)."""
-    p = np.broadcast_to(p, a.shape)
-    e, f, g = b - a, c - a, p - a
-    value = np.einsum("ij,ij->i", np.cross(e, f), g)
-    size = _size(e) * _size(f) * _size(g)
-    signs = np.sign(value)
-    for i in np.flatnonzero(~(np.abs(value) > SURE * size)):
-        signs[i] = _exact_triple(a[i], b[i], c[i], point=p[i])
-    return signs
+    return _triple_signs(a, b, c, point=np.broadcast_to(p, a.shape))
 
 
 def _normal_signs(a, b, c, d) -> np.ndarray:
     """Per triangle the exact sign of n . d."""
-    d = np.broadcast_to(d, a.shape)
+    return _triple_signs(a, b, c, direction=np.broadcast_to(d, a.shape))
+
+
+def _triple_signs(a, b, c, point=None, direction=None) -> np.ndarray:
+    """Per triangle the exact sign of n . (point - a), or n . direction: float64's where its value
+    is beyond its rounding (SURE of the terms' magnitudes), else in rational arithmetic."""
     e, f = b - a, c - a
-    value = np.einsum("ij,ij->i", np.cross(e, f), d)
-    size = _size(e) * _size(f) * _size(d)
+    g = direction if direction is not None else point - a
+    value = np.einsum("ij,ij->i", np.cross(e, f), g)
+    size = _size(e) * _size(f) * _size(g)
     signs = np.sign(value)
     for i in np.flatnonzero(~(np.abs(value) > SURE * size)):
-        signs[i] = _exact_triple(a[i], b[i], c[i], direction=d[i])
+        signs[i] = _exact_triple(a[i], b[i], c[i], point=None if point is None else point[i],
+                                 direction=None if direction is None else direction[i])
     return signs
 
 
