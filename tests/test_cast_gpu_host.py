@@ -32,6 +32,18 @@ def both(monkeypatch, call):
     return host, call()
 
 
+def lines_on_both(monkeypatch, call, pattern) -> list:
+    """The RequestError line of call() on the CPU's host path, then on the GPU class's: each must
+    raise, its line matching pattern."""
+    lines = []
+    for switch in ("0", "1"):
+        monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
+        with pytest.raises(pyclray.RequestError, match=pattern) as error:
+            call()
+        lines.append(str(error.value))
+    return lines
+
+
 @pytest.mark.parametrize("count", [1, 7, 1000, 5000])  # 5000: the host path's compiled checks (COHERENT_FROM)
 def test_the_gpu_class_gives_the_host_paths_bits(tracer, monkeypatch, count):
     origins, directions = rays(count, 20 + count)
@@ -88,12 +100,7 @@ def test_distances_shapes_and_one_origin(tracer, monkeypatch):
 def test_bad_rays_raise_the_host_paths_line(tracer, monkeypatch, count, bad, message):
     origins, directions = bad(*rays(count, 22))
     for query in (lambda: tracer.cast(origins, directions), lambda: tracer.occluded(origins, directions)):
-        errors = []
-        for switch in ("0", "1"):
-            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
-            with pytest.raises(pyclray.RequestError, match=message if "|" in message else message.replace("(", r"\(")) as error:
-                query()
-            errors.append(str(error.value))
+        errors = lines_on_both(monkeypatch, query, message if "|" in message else message.replace("(", r"\("))
         assert errors[0] == errors[1] and "\n" not in errors[0]
     # the handle's kept buffers, which the device's check repaired, serve the next cast as before
     good_origins, good_directions = rays(count, 23)
@@ -116,12 +123,7 @@ def test_bad_arguments_raise_the_host_paths_line(tracer, monkeypatch):
         (lambda: tracer.occluded(np.array([np.inf, 0.0, 0.0]), directions, tmin=np.inf), "origins: row 0 is not finite"),
     ]
     for call, message in cases:
-        errors = []
-        for switch in ("0", "1"):
-            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
-            with pytest.raises(pyclray.RequestError, match=message) as error:
-                call()
-            errors.append(str(error.value))
+        errors = lines_on_both(monkeypatch, call, message)
         assert errors[0] == errors[1]
 
 

@@ -16,6 +16,7 @@ from pyclray.engine.queries.hits import CAPACITY, HIT_AOVS
 
 from test_cast_blocks import rays
 from test_cast_device import labelled_scene, same
+from test_cast_gpu_host import both, lines_on_both
 
 
 def stacked_scene():
@@ -30,14 +31,6 @@ def stacked_scene():
 def tracer(request):
     with pyclray.prepare(stacked_scene(), precision=request.param) as handle:
         yield handle
-
-
-def both(monkeypatch, call):
-    """call() on the CPU's host path, then on the GPU class's."""
-    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "0")
-    host = call()
-    monkeypatch.setenv("PYCLRAY_GPU_CLASS", "1")
-    return host, call()
 
 
 def same_frames(got, expected):
@@ -96,12 +89,7 @@ def test_distances_shapes_and_one_origin(tracer, monkeypatch):
 def test_bad_rays_raise_the_host_paths_line(tracer, monkeypatch, count, bad, message):
     origins, directions = bad(*rays(count, 42))
     for query in (lambda: tracer.count_hits(origins, directions), lambda: tracer.all_hits(origins, directions)):
-        errors = []
-        for switch in ("0", "1"):
-            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
-            with pytest.raises(pyclray.RequestError, match=message) as error:
-                query()
-            errors.append(str(error.value))
+        errors = lines_on_both(monkeypatch, query, message)
         assert errors[0] == errors[1] and "\n" not in errors[0]
 
 
@@ -119,12 +107,7 @@ def test_bad_arguments_raise_the_host_paths_line(tracer, monkeypatch):
         (lambda: tracer.all_hits(np.array([np.inf, 0.0, 0.0]), directions, tmin=np.inf), "origins: row 0 is not finite"),
     ]
     for call, message in cases:
-        errors = []
-        for switch in ("0", "1"):
-            monkeypatch.setenv("PYCLRAY_GPU_CLASS", switch)
-            with pytest.raises(pyclray.RequestError, match=message) as error:
-                call()
-            errors.append(str(error.value))
+        errors = lines_on_both(monkeypatch, call, message)
         assert errors[0] == errors[1]
 
 
