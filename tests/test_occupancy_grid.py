@@ -25,60 +25,52 @@ def scene_of(*shapes) -> pyclray.Scene:
     return pyclray.Scene(CAMERA, pyclray.Image(8, 8), tuple(shapes))
 
 
+def welded(triangles, n: int, shift: float) -> pyclray.Mesh:
+    """The closed mesh of triangles given by their corners' integer keys (each key a vertex, its
+    coordinates key / n + shift)."""
+    index = {}
+    faces = [[index.setdefault(key, len(index)) for key in triangle] for triangle in triangles]
+    mesh = pyclray.Mesh(np.array(list(index), np.float64) / n + shift, np.array(faces))
+    assert mesh.closed
+    return mesh
+
+
 def octahedron(n: int, shift: float = 0.0) -> pyclray.Mesh:
     """|x| + |y| + |z| = 1 (+ shift), each face cut into n^2 triangles: every vertex's coordinates
     are multiples of 1/n, exact in float64 (n a power of two), the faces tilted to every axis."""
-    index, vertices, faces = {}, [], []
-
-    def vertex(key):
-        if key not in index:
-            index[key] = len(vertices)
-            vertices.append(key)
-        return index[key]
-
+    triangles = []
     for sx in (1, -1):
         for sy in (1, -1):
             for sz in (1, -1):
                 def at(i, j):  # the face's point (i, j, n - i - j) / n, signed
-                    return vertex((sx * i, sy * j, sz * (n - i - j)))
+                    return (sx * i, sy * j, sz * (n - i - j))
                 for i in range(n):
                     for j in range(n - i):
                         tri = [(at(i, j), at(i + 1, j), at(i, j + 1))]
                         if i + j < n - 1:
                             tri.append((at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)))
                         for a, b, c in tri:  # outward: the face's normal (sx, sy, sz)
-                            faces.append((a, b, c) if sx * sy * sz > 0 else (a, c, b))
-    mesh = pyclray.Mesh(np.array(vertices, np.float64) / n + shift, np.array(faces))
-    assert mesh.closed
-    return mesh
+                            triangles.append((a, b, c) if sx * sy * sz > 0 else (a, c, b))
+    return welded(triangles, n, shift)
 
 
 def cube(n: int, shift: float = 0.0) -> pyclray.Mesh:
     """The cube [0, 1]^3 (+ shift), each face cut into n x n squares of two triangles each (the
     vertices' coordinates multiples of 1/n, exact in float64 for n a power of two), outward."""
-    index, vertices, faces = {}, [], []
-
-    def vertex(key):
-        if key not in index:
-            index[key] = len(vertices)
-            vertices.append(key)
-        return index[key]
-
+    triangles = []
     for axis in range(3):
         u, w = (axis + 1) % 3, (axis + 2) % 3
         for side in (0, n):
             def at(i, j):
                 key = [0, 0, 0]
                 key[axis], key[u], key[w] = side, i, j
-                return vertex(tuple(key))
+                return tuple(key)
             for i in range(n):
                 for j in range(n):
                     quad = [(at(i, j), at(i + 1, j), at(i + 1, j + 1)), (at(i, j), at(i + 1, j + 1), at(i, j + 1))]
                     for a, b, c in quad:  # (u, w, axis) is right-handed: outward on the far side
-                        faces.append((a, b, c) if side else (a, c, b))
-    mesh = pyclray.Mesh(np.array(vertices, np.float64) / n + shift, np.array(faces))
-    assert mesh.closed
-    return mesh
+                        triangles.append((a, b, c) if side else (a, c, b))
+    return welded(triangles, n, shift)
 
 
 def on_surface_points(mesh: pyclray.Mesh, interior: bool) -> np.ndarray:
