@@ -108,7 +108,8 @@ def test_the_lane_width_follows_the_device_and_the_environment(monkeypatch):
     monkeypatch.setenv("PYCLRAY_LANES", "2")
     assert programs.lanes_for(ctx.device, "fp32") == 2
     monkeypatch.setenv("PYCLRAY_LANES", "3")
-    with pytest.raises(pyclray.DeviceError, match="PYCLRAY_LANES: expected one of 1, 2, 4, 8 "):
+    with pytest.raises(pyclray.DeviceError, match=r"PYCLRAY_LANES: expected one of 1, 2, 4, 8 \(vectors of at most "
+                       r"256 bits; fp64 at most 4\), got '3'"):
         programs.lanes_for(ctx.device, "fp32")
     # 512-bit lanes: PoCL 3.0's code generator aborts the process on them (device.py), so none is
     # built: fp32's 16 is refused, and fp64 takes 4 for 8 (one setting for both precisions: an fp32

@@ -84,9 +84,10 @@ def lanes_for(device: cl.Device, precision: str) -> int:
         # count narrows its undecided points in fp64: engine/queries/closest.py). Every width gives
         # the same bits.
         allowed = [w for w in LANE_WIDTHS if w * _REAL_BITS["fp32"] <= MAX_LANE_BITS]
+        widest_fp64 = max(w for w in LANE_WIDTHS if w * _REAL_BITS["fp64"] <= MAX_LANE_BITS)
         if not value.isdigit() or int(value) not in allowed:
             raise DeviceError(f"PYCLRAY_LANES: expected one of {', '.join(map(str, allowed))} "
-                              f"(vectors of at most {MAX_LANE_BITS} bits; fp64 at most {max(widths)}), got {value!r}")
+                              f"(vectors of at most {MAX_LANE_BITS} bits; fp64 at most {widest_fp64}), got {value!r}")
         return max(w for w in widths if w <= int(value))
     preferred = device.preferred_vector_width_double if precision == "fp64" else device.preferred_vector_width_float
     if device.type & cl.device_type.CPU and int(preferred) <= 1:
